@@ -1,0 +1,193 @@
+"""Fit and diagnose jobs on an uploaded campaign (a zip of the SPEC section 3 folder)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import stat
+import tempfile
+import zipfile
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+from fastapi import APIRouter, Depends, File, Form, Request, UploadFile
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
+
+from gisnoise import cards as gcards
+from gisnoise.errors import CampaignError
+
+from .deps import WRITE, State, get_state
+from .errors import ApiError
+from .jobs import JobContext
+from .models import JobInfo, PhaseName
+from .routes_jobs import job_info
+
+__all__ = ["router", "unpack_campaign", "run_fit_job", "run_diagnose_job"]
+
+router = APIRouter(prefix="/jobs", tags=["jobs"])
+
+_MAX_MEMBERS = 100_000
+
+
+def unpack_campaign(upload: Path, dest: Path, *, max_bytes: int, field: str = "campaign") -> Path:
+    """Unzip a campaign safely into ``dest``; returns the folder holding ``campaign.json``.
+
+    Refuses what is not a zip, paths leaving the folder, links, more than
+    ``max_bytes`` unzipped (413) and archives without ``campaign.json``.
+    """
+    try:
+        zf = zipfile.ZipFile(upload)
+    except (zipfile.BadZipFile, OSError):
+        raise ApiError(422, f"{field}: not a zip archive", field=field) from None
+    with zf:
+        infos = zf.infolist()
+        if len(infos) > _MAX_MEMBERS:
+            raise ApiError(413, f"{field}: {len(infos)} files exceed the limit of {_MAX_MEMBERS}", field=field)
+        total = sum(i.file_size for i in infos)
+        if total > max_bytes:
+            raise ApiError(413, f"{field}: {total} bytes unzipped exceed the limit of {max_bytes}", field=field)
+        for i in infos:
+            p = PurePosixPath(i.filename)
+            if p.is_absolute() or ".." in p.parts or "\\" in i.filename:
+                raise ApiError(422, f"{field}: member {i.filename!r} leaves the archive folder", field=field)
+            if stat.S_ISLNK(i.external_attr >> 16):
+                raise ApiError(422, f"{field}: member {i.filename!r} is a link", field=field)
+        try:
+            zf.extractall(dest)
+        except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError) as exc:
+            raise ApiError(422, f"{field}: cannot unzip: {exc}", field=field) from None
+    found = sorted(dest.rglob("campaign.json"), key=lambda p: len(p.parts))
+    found = [p for p in found if "__MACOSX" not in p.parts]
+    if not found:
+        raise ApiError(422, f"{field}: the archive has no campaign.json", field=field)
+    return found[0].parent
+
+
+async def _receive_campaign(state: State, campaign: UploadFile) -> Path:
+    """The upload unzipped into a fresh folder (moved into the job's input by ``submit``)."""
+    s = state.settings
+    tmp = Path(tempfile.mkdtemp(prefix="upload-", dir=s.jobs_dir))
+    try:
+        zpath = tmp / "campaign.zip"
+        n = 0
+        with zpath.open("wb") as f:
+            while chunk := await campaign.read(1 << 20):
+                n += len(chunk)
+                if n > s.max_upload_bytes:
+                    raise ApiError(413, f"campaign: upload exceeds the limit of {s.max_upload_bytes} bytes",
+                                   field="campaign")
+                f.write(chunk)
+        folder = await run_in_threadpool(unpack_campaign, zpath, tmp / "unzipped", max_bytes=s.max_unzipped_bytes)
+        zpath.unlink()
+        # keep only the campaign folder itself
+        final = tmp / "campaign"
+        shutil.move(str(folder), str(final))
+        shutil.rmtree(tmp / "unzipped", ignore_errors=True)
+        return final
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _submit(request: Request, state: State, kind: str, params: dict[str, Any], campaign_dir: Path,
+            extra: dict[str, bytes] | None = None) -> JSONResponse:
+    try:
+        job = state.jobs.submit(kind, params, {"campaign": campaign_dir, **(extra or {})})
+    finally:
+        shutil.rmtree(campaign_dir.parent, ignore_errors=True)
+    info = job_info(request, job)
+    return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
+
+
+@router.post("/fit", status_code=202, response_model=JobInfo, dependencies=WRITE,
+             summary="Fit a model card to an uploaded campaign (job)")
+async def fit_job(request: Request, state: State = Depends(get_state),
+                  campaign: UploadFile = File(description="Zipped campaign folder (campaign.json, flights/, mics/)."),
+                  phase: PhaseName = Form(description="Flight phase to fit."),
+                  ansatz: str = Form("paper-offset", max_length=100, description="Ansatz name."),
+                  card_id: str | None = Form(None, max_length=128, description="Id of the fitted card."),
+                  ) -> JSONResponse:
+    from gisnoise.model import get_ansatz
+
+    try:
+        get_ansatz(ansatz)
+    except Exception as exc:  # noqa: BLE001 - an unknown name, reported with the field
+        raise ApiError(422, f"ansatz: {exc}", field="ansatz") from None
+    if card_id is not None:
+        from .cardstore import check_id
+
+        check_id(card_id, "card_id")
+    folder = await _receive_campaign(state, campaign)
+    return _submit(request, state, "fit", {"phase": phase, "ansatz": ansatz, "card_id": card_id}, folder)
+
+
+@router.post("/diagnose", status_code=202, response_model=JobInfo, dependencies=WRITE,
+             summary="Diagnose a card against an uploaded campaign (job)")
+async def diagnose_job(request: Request, state: State = Depends(get_state),
+                       campaign: UploadFile = File(description="Zipped campaign folder."),
+                       card_id: str | None = Form(None, max_length=160,
+                                                  description="Card in the store ('id' or 'id@version')."),
+                       card: UploadFile | None = File(None, description="Or a card JSON file."),
+                       ) -> JSONResponse:
+    if (card_id is None) == (card is None):
+        raise ApiError(422, "card_id: give either card_id or a card file", field="card_id")
+    if card is not None:
+        text = await card.read(10_000_001)
+        if len(text) > 10_000_000:
+            raise ApiError(413, "card: card file exceeds 10 MB", field="card")
+        try:
+            mc = gcards.loads(text, source="card")
+        except gcards.CardError as exc:
+            raise ApiError(422, str(exc), field=f"card.{exc.field}" if exc.field else "card") from None
+    else:
+        assert card_id is not None
+        mc = state.cards.resolve(card_id, field="card_id")
+    folder = await _receive_campaign(state, campaign)
+    return _submit(request, state, "diagnose", {"card": mc.id}, folder,
+                   {"card.json": gcards.dumps(mc).encode()})
+
+
+# ------------------------------------------------------------------ handlers
+def run_fit_job(ctx: JobContext) -> dict[str, Any]:
+    """Fit the stored campaign; writes card.json (and the fit summary)."""
+    from gisnoise.fit import fit_campaign
+
+    p = ctx.params
+    result = fit_campaign(ctx.input_dir / "campaign", p["phase"], ansatz=p["ansatz"], progress=ctx.progress,
+                          cancel=ctx.cancel)
+    ctx.check_cancel()
+    kw: dict[str, Any] = {}
+    if p.get("card_id"):
+        kw["id"] = p["card_id"]
+    card = _to_card(result, p["phase"], kw)
+    gcards.save(card, ctx.output_dir / "card.json")
+    summary = {"card_id": card.id, "phase": card.phase, "ansatz": card.ansatz,
+               "parameters": dict(card.parameters), "std": card.std}
+    for k in ("success", "n", "cost", "aic", "bic", "message"):
+        v = getattr(result, k, None)
+        if isinstance(v, (bool, int, float, str)):
+            summary[k] = v
+    (ctx.output_dir / "fit.json").write_text(json.dumps(summary, indent=2, default=str) + "\n", encoding="utf-8")
+    return summary
+
+
+def _to_card(result: Any, phase: str, kw: dict[str, Any]) -> gcards.ModelCard:
+    card = result.to_card(**kw) if kw else result.to_card()
+    if not isinstance(card, gcards.ModelCard):
+        raise CampaignError("fit: the fitter returned no card", field="campaign")
+    return card
+
+
+def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
+    """Diagnose the stored card against the stored campaign; writes diagnosis.json and the report."""
+    from gisnoise.diagnose import diagnose
+
+    card = gcards.load(ctx.input_dir / "card.json")
+    diagnose(ctx.input_dir / "campaign", card, ctx.output_dir, progress=ctx.progress, cancel=ctx.cancel)
+    ctx.check_cancel()
+    path = ctx.output_dir / "diagnosis.json"
+    if not path.is_file():
+        raise CampaignError("diagnose: no diagnosis.json was written", field="campaign")
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    return {"card": card.id, "verdict": doc.get("verdict"), "baseline": doc.get("baseline")}

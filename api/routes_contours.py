@@ -1,0 +1,261 @@
+"""Contours: a noise map of one trajectory as GeoJSON or GeoTIFF; large maps become jobs.
+
+The request is turned into the core's objects (trajectory, cards, grid) once,
+here; the map is made by :func:`gisnoise.contour.make_map`, the same call the
+command line makes, so the HTTP result equals the CLI's for the same input.
+A job stores the request with its cards resolved to full documents, so a
+later change of the card store does not change a queued job's result.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import tempfile
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from fastapi import APIRouter, Depends, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
+
+from gisnoise import cards as gcards
+from gisnoise.cards import ModelCard
+from gisnoise.errors import GisnoiseError, GridTooLargeError, InputError, TrajectoryError
+from gisnoise.trajectory import Trajectory, from_columns, read_flight_csv
+
+from .cardstore import CardStore
+from .deps import WRITE, State, get_state
+from .errors import ApiError
+from .jobs import JobContext
+from .models import (
+    CardDocument,
+    ColumnsTrajectory,
+    ContourRequest,
+    CsvTrajectory,
+    GeoJSONTrajectory,
+    JobInfo,
+    MediaType,
+    OutputFormat,
+    RowsTrajectory,
+)
+from .routes_jobs import job_info
+
+__all__ = ["router", "run_contour_job", "build_trajectory", "resolve_cards", "make_map_files"]
+
+router = APIRouter(tags=["contours"])
+
+_sync_slots = threading.BoundedSemaphore(2)
+
+
+# ------------------------------------------------------------------ request -> core objects
+@contextmanager
+def _prefixed(prefix: str) -> Iterator[None]:
+    """Re-raise core errors with their field under ``prefix`` (``t`` -> ``trajectory.t``)."""
+    try:
+        yield
+    except GisnoiseError as exc:
+        fld = exc.field
+        exc.field = prefix if not fld else (fld if fld.startswith(prefix) else f"{prefix}.{fld}")
+        raise
+
+
+def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
+    """The trajectory of a request (csv text, columns, rows, GeoJSON or waypoints)."""
+    with _prefixed("trajectory"):
+        if isinstance(spec, CsvTrajectory):
+            traj = read_flight_csv(io.StringIO(spec.text), source="trajectory")
+        elif isinstance(spec, ColumnsTrajectory):
+            cols = spec.columns
+            lengths = {k: len(v) for k, v in cols.items()}
+            if len(set(lengths.values())) > 1:
+                k = next(k for k, n in lengths.items() if n != lengths.get("t", n))
+                raise TrajectoryError(f"trajectory: column '{k}' has {lengths[k]} values, column 't' has "
+                                      f"{lengths.get('t')}", field=f"columns.{k}")
+            traj = from_columns(_numeric_columns(cols), source="trajectory")
+        elif isinstance(spec, RowsTrajectory):
+            keys = list(spec.rows[0])
+            for i, row in enumerate(spec.rows):
+                if set(row) != set(keys):
+                    missing = sorted(set(keys) ^ set(row))
+                    raise TrajectoryError(f"trajectory: rows[{i}] has different fields than rows[0] "
+                                          f"({', '.join(missing)})", field=f"rows[{i}].{missing[0]}")
+            cols = {k: [r[k] for r in spec.rows] for k in keys}
+            traj = from_columns(_numeric_columns(cols), source="trajectory")
+        elif isinstance(spec, GeoJSONTrajectory):
+            from gisnoise import routes
+
+            traj = routes.read_trajectory(spec.data)
+        else:  # pragma: no cover - the request model admits no other
+            raise InputError("trajectory: unknown format", field="format")
+    if len(traj) > max_samples:
+        raise ApiError(413, f"trajectory: {len(traj)} samples exceed the limit of {max_samples}",
+                       field="trajectory")
+    return traj
+
+
+def _numeric_columns(cols: Mapping[str, list[Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, vals in cols.items():
+        if k == "phase":
+            if not all(isinstance(v, str) for v in vals):
+                raise TrajectoryError("trajectory: column 'phase' must hold strings", field="phase")
+            out[k] = list(vals)
+            continue
+        bad = next((i for i, v in enumerate(vals) if isinstance(v, str)), None)
+        if bad is not None:
+            raise TrajectoryError(f"trajectory: column '{k}' value {bad} is not a number: {vals[bad]!r}", field=k)
+        out[k] = vals
+    return out
+
+
+def resolve_cards(req: ContourRequest, store: CardStore) -> list[ModelCard]:
+    """The request's cards: ids from the store, inline documents validated, ``phase_cards`` bound to a phase."""
+    out: list[ModelCard] = []
+    for i, ref in enumerate(req.cards):
+        fld = f"cards[{i}]"
+        if isinstance(ref, str):
+            out.append(store.resolve(ref, field=fld))
+        else:
+            with _prefixed(fld):
+                out.append(gcards.from_dict(ref.model_dump(by_alias=True), source=fld))
+    for phase, ref in req.phase_cards.items():
+        card = store.resolve(ref, field=f"phase_cards.{phase}")
+        out.append(dataclasses.replace(card, phase=phase, phases=()))
+    if not out:
+        raise ApiError(422, "cards: give at least one card (id or inline document) or phase_cards", field="cards")
+    return out
+
+
+def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
+    from gisnoise.grid import grid_for_trajectory
+
+    with _prefixed("grid"):
+        try:
+            grid = grid_for_trajectory(traj, req.grid.resolution_m, req.grid.margin_m, crs=req.grid.crs)
+        except GridTooLargeError as exc:
+            raise GridTooLargeError(str(exc), field="grid.resolution_m") from None
+    cells = int(grid.width) * int(grid.height)
+    if cells > max_cells:
+        raise GridTooLargeError(f"grid.resolution_m: the grid has {cells} cells ({grid.width} x {grid.height}), "
+                                f"more than the limit of {max_cells}; use a coarser resolution_m or a smaller "
+                                f"margin_m", field="grid.resolution_m")
+    return cells
+
+
+def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path, *,
+                   progress: Callable[..., None] | None = None,
+                   cancel: Callable[[], bool] | None = None) -> dict[str, Path]:
+    """Write levels.tif and contours.geojson for a request with the core's ``make_map``."""
+    from gisnoise.contour import make_map
+
+    kw: dict[str, Any] = {}
+    for name in ("period_s", "threshold_db", "snapshot_t"):
+        v = getattr(req, name)
+        if v is not None:
+            kw[name] = v
+    if req.background:
+        kw["background"] = True
+    if req.substeps != 1:
+        kw["substeps"] = req.substeps
+    with _prefixed("body"):
+        paths = make_map(traj, cards, out_dir, resolution_m=req.grid.resolution_m, margin_m=req.grid.margin_m,
+                         levels=tuple(req.levels), metrics=tuple(req.metrics), crs=req.grid.crs, dem=None,
+                         receiver_height=req.receiver_height_m, uncertainty=req.uncertainty, plot=False,
+                         progress=progress, cancel=cancel, **kw)
+    return {k: Path(v) for k, v in paths.items() if isinstance(v, (str, Path))}
+
+
+def _want_tiff(req: ContourRequest, accept: str) -> bool:
+    if req.output is not None:
+        return req.output == OutputFormat.geotiff
+    return "image/tiff" in accept and "geo+json" not in accept
+
+
+def _job_request(req: ContourRequest, cards: list[ModelCard]) -> dict[str, Any]:
+    doc = req.model_dump(mode="json", by_alias=True)
+    doc["cards"] = [c.to_dict() for c in cards]
+    doc["phase_cards"] = {}
+    return doc
+
+
+# ------------------------------------------------------------------ routes
+_CONTOUR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    200: {"description": "The map: GeoJSON contours (isobands and isolines, WGS84) or a GeoTIFF, one band per metric.",
+          "content": {MediaType.geojson.value: {"schema": {"type": "object"}}, MediaType.geotiff.value: {}}},
+    202: {"model": JobInfo, "description": "The map is large: a job was queued (see Location)."},
+}
+
+
+@router.post("/contours", response_class=Response, responses=_CONTOUR_RESPONSES,
+             summary="Noise map of a trajectory (small at once, large as a job)")
+async def contours(req: ContourRequest, request: Request, state: State = Depends(get_state),
+                   job: bool = Query(False, description="Always answer with a job (202).")) -> Response:
+    s = state.settings
+    traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
+    cards = resolve_cards(req, state.cards)
+    cells = await run_in_threadpool(_grid_cells, traj, req, s.max_cells)
+    work = float(cells) * len(traj) * req.substeps
+    if job or work > s.sync_work_limit:
+        from .deps import require_key
+
+        require_key(request, request.headers.get("x-api-key"))
+        j = state.jobs.submit("contours", {"cells": cells, "samples": len(traj)},
+                              {"request.json": json.dumps(_job_request(req, cards)).encode()})
+        info = job_info(request, j)
+        return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
+    tiff = _want_tiff(req, request.headers.get("accept", ""))
+    data = await run_in_threadpool(_sync_map, traj, cards, req, tiff)
+    if tiff:
+        return Response(data, media_type=MediaType.geotiff.value,
+                        headers={"Content-Disposition": 'attachment; filename="levels.tif"'})
+    return Response(data, media_type=MediaType.geojson.value)
+
+
+def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool) -> bytes:
+    with _sync_slots, tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
+        paths = make_map_files(traj, cards, req, Path(tmp))
+        return paths["levels.tif" if tiff else "contours.geojson"].read_bytes() if _keyed(paths) else \
+            _by_suffix(paths, ".tif" if tiff else ".geojson").read_bytes()
+
+
+def _keyed(paths: Mapping[str, Path]) -> bool:
+    return "levels.tif" in paths and "contours.geojson" in paths
+
+
+def _by_suffix(paths: Mapping[str, Path], suffix: str) -> Path:
+    for p in paths.values():
+        if p.suffix == suffix:
+            return p
+    raise GisnoiseError(f"the map has no {suffix} output", field="output")  # pragma: no cover
+
+
+@router.post("/jobs/contours", status_code=202, response_model=JobInfo, dependencies=WRITE,
+             summary="Queue a noise map as a job")
+async def contour_job(req: ContourRequest, request: Request, state: State = Depends(get_state)) -> JSONResponse:
+    s = state.settings
+    traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
+    cards = resolve_cards(req, state.cards)
+    cells = await run_in_threadpool(_grid_cells, traj, req, s.max_cells)
+    j = state.jobs.submit("contours", {"cells": cells, "samples": len(traj)},
+                          {"request.json": json.dumps(_job_request(req, cards)).encode()})
+    info = job_info(request, j)
+    return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
+
+
+# ------------------------------------------------------------------ job handler
+def run_contour_job(ctx: JobContext) -> dict[str, Any]:
+    """Job handler: the stored request -> levels.tif and contours.geojson in the result folder."""
+    doc = json.loads((ctx.input_dir / "request.json").read_text(encoding="utf-8"))
+    req = ContourRequest.model_validate(doc)
+    traj = build_trajectory(req.trajectory, max_samples=10**9)
+    cards = [gcards.from_dict(c.model_dump(by_alias=True) if isinstance(c, CardDocument) else c)
+             for c in req.cards if not isinstance(c, str)]
+    ctx.progress(0.0, "evaluating the grid")
+    paths = make_map_files(traj, cards, req, ctx.output_dir, progress=ctx.progress, cancel=ctx.cancel)
+    return {"files": sorted(p.name for p in paths.values()), "samples": len(traj),
+            "metrics": list(req.metrics), "levels": list(req.levels)}

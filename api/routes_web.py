@@ -1,0 +1,61 @@
+"""The web page at ``/`` (Leaflet map), its static files, its config, the sample route and health."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from fastapi import APIRouter, Depends, FastAPI, Response
+from fastapi.responses import FileResponse, HTMLResponse
+from fastapi.staticfiles import StaticFiles
+
+from gisnoise import __version__
+
+from .deps import State, get_state
+from .errors import ApiError
+from .models import Health, MediaType
+
+router = APIRouter()
+
+SAMPLE_ROUTE = Path(__file__).resolve().parent.parent / "sample_data" / "route"
+
+
+@router.get("/", response_class=HTMLResponse, include_in_schema=False)
+def index() -> FileResponse:
+    return FileResponse(Path(__file__).resolve().parent / "static" / "index.html", media_type=MediaType.html.value)
+
+
+@router.get("/health", response_model=Health, tags=["service"], summary="Liveness and queue length")
+def health(state: State = Depends(get_state)) -> Health:
+    return Health(status="ok", version=__version__, queued=state.jobs.count(status="queued"),
+                  running=state.jobs.count(status="running"))
+
+
+@router.get("/config.json", tags=["service"], summary="Settings the web page needs",
+            responses={200: {"content": {MediaType.json.value: {"schema": {"type": "object"}}}}})
+def config(state: State = Depends(get_state)) -> Response:
+    s = state.settings
+    body = {"version": __version__, "tile_url": s.tile_url, "api_key_required": bool(s.api_keys),
+            "sample_route": _sample_route_path() is not None}
+    return Response(json.dumps(body), media_type=MediaType.json.value)
+
+
+def _sample_route_path() -> Path | None:
+    for name in ("delivery_route.geojson", "delivery_route.json"):
+        p = SAMPLE_ROUTE / name
+        if p.is_file():
+            return p
+    return None
+
+
+@router.get("/samples/route", tags=["service"], summary="The sample delivery route (waypoints GeoJSON)",
+            responses={200: {"content": {MediaType.geojson.value: {"schema": {"type": "object"}}}}})
+def sample_route() -> Response:
+    p = _sample_route_path()
+    if p is None:
+        raise ApiError(404, "path: this installation has no sample route", field="path")
+    return Response(p.read_bytes(), media_type=MediaType.geojson.value)
+
+
+def mount_static(app: FastAPI, folder: Path) -> None:
+    app.mount("/static", StaticFiles(directory=folder), name="static")
