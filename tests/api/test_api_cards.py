@@ -1,0 +1,119 @@
+"""Model-card endpoints: list, get, versioned upload that never overwrites, delete, API keys."""
+
+from __future__ import annotations
+
+import json
+
+from service_helpers import CARDS, KEY, assert_names_field
+
+
+def _doc(name: str = "demo_horizontal") -> dict:
+    return json.loads((CARDS / f"{name}.json").read_text())
+
+
+def test_seeded_store_lists_the_sample_cards(client):
+    r = client.get("/cards")
+    assert r.status_code == 200
+    ids = {c["id"] for c in r.json()["cards"]}
+    assert ids == {json.loads(p.read_text())["id"] for p in CARDS.glob("*.json")}
+    horiz = next(c for c in r.json()["cards"] if c["id"] == "demo-horizontal")
+    assert horiz["phases"] == ["horizontal", "transition"]
+    assert horiz["version"] == 1 and horiz["versions"] == [1]
+    assert {c["id"] for c in client.get("/cards", params={"phase": "climb"}).json()["cards"]} == {
+        "demo-climb", "published-climb"}
+
+
+def test_get_returns_the_card_document_unchanged(client):
+    r = client.get("/cards/demo-horizontal")
+    assert r.status_code == 200
+    assert r.headers["content-type"].startswith("application/json")
+    assert r.headers["x-card-version"] == "1"
+    assert r.json() == _doc()
+
+
+def test_upload_new_identical_conflict_and_new_version(client):
+    doc = _doc()
+    doc["id"] = "uploaded"
+    r = client.post("/cards", json=doc)
+    assert r.status_code == 201 and r.json()["version"] == 1
+    assert r.headers["location"].endswith("/cards/uploaded?version=1")
+    # identical re-upload: nothing new
+    r = client.post("/cards", json=doc)
+    assert r.status_code == 200 and r.json()["version"] == 1
+    # a different card under the same id is refused, the stored one kept
+    changed = dict(doc, parameters=dict(doc["parameters"], p0=70.0))
+    body = assert_names_field(client.post("/cards", json=changed), 409, "id")
+    assert "new_version" in body["detail"]
+    assert client.get("/cards/uploaded").json()["parameters"]["p0"] == 64.0
+    # asked for: a new version; both stay readable
+    r = client.post("/cards", params={"new_version": "true"}, json=changed)
+    assert r.status_code == 201 and r.json()["version"] == 2 and r.json()["versions"] == [1, 2]
+    assert client.get("/cards/uploaded").json()["parameters"]["p0"] == 70.0
+    assert client.get("/cards/uploaded", params={"version": 1}).json()["parameters"]["p0"] == 64.0
+    assert client.get("/cards/uploaded/versions").json() == {"id": "uploaded", "versions": [1, 2]}
+
+
+def test_invalid_uploads_name_the_field(client):
+    doc = _doc()
+    assert_names_field(client.post("/cards", json={k: v for k, v in doc.items() if k != "phase"}), 422, "phase")
+    assert_names_field(client.post("/cards", json=dict(doc, phase="cruise")), 422, "phase")
+    assert_names_field(client.post("/cards", json=dict(doc, schema="gisnoise/model-card/9")), 422, "schema")
+    assert_names_field(client.post("/cards", json=dict(doc, parameters={"p1": 1.0})), 422, "parameters")
+    assert_names_field(client.post("/cards", json=dict(doc, reference_power_w=-3)), 422, "reference_power_w")
+    assert_names_field(client.post("/cards", json=dict(doc, ansatz="nope")), 422, "ansatz")
+    assert_names_field(client.post("/cards", json=dict(doc, covariance=[[1.0]])), 422, "covariance")
+    assert_names_field(client.post("/cards", json=dict(doc, id="../evil")), 422, "id")
+    bad = dict(doc, parameters=dict(doc["parameters"], p0="loud"))
+    assert_names_field(client.post("/cards", json=bad), 422, "parameters.p0")
+    r = client.post("/cards", content=b"{not json", headers={"content-type": "application/json"})
+    assert_names_field(r, 422, "body")
+    assert client.get("/cards/evil").status_code == 404
+
+
+def test_get_and_delete_errors(client):
+    assert_names_field(client.get("/cards/nope"), 404, "id")
+    assert_names_field(client.get("/cards/demo-sink", params={"version": 7}), 404, "version")
+    assert_names_field(client.get("/cards/demo-sink", params={"version": 0}), 422, "version")
+    assert_names_field(client.get("/cards/bad id!"), 422, "id")
+    assert_names_field(client.delete("/cards/nope"), 404, "id")
+    assert_names_field(client.get("/cards/nope/versions"), 404, "id")
+
+
+def test_delete_one_version_then_all(client):
+    doc = _doc("demo_sink")
+    client.post("/cards", params={"new_version": "true"}, json=dict(doc, notes="second"))
+    assert client.get("/cards/demo-sink/versions").json()["versions"] == [1, 2]
+    assert client.delete("/cards/demo-sink", params={"version": 2}).status_code == 204
+    assert client.get("/cards/demo-sink").json()["notes"] == doc["notes"]
+    assert client.delete("/cards/demo-sink").status_code == 204
+    assert client.get("/cards/demo-sink").status_code == 404
+    assert "demo-sink" not in {c["id"] for c in client.get("/cards").json()["cards"]}
+
+
+def test_deleted_seed_cards_stay_deleted_after_restart(make_client):
+    c1 = make_client()
+    assert c1.delete("/cards/published-sink").status_code == 204
+    c2 = make_client()  # same data folder: the store exists, nothing is re-seeded
+    assert c2.get("/cards/published-sink").status_code == 404
+
+
+def test_writes_need_a_key_when_keys_are_configured(make_client):
+    c = make_client(api_keys=[KEY, "other"])
+    doc = dict(_doc(), id="keyed")
+    assert_names_field(c.post("/cards", json=doc), 401, "X-API-Key")
+    assert_names_field(c.post("/cards", json=doc, headers={"X-API-Key": "wrong"}), 403, "X-API-Key")
+    assert_names_field(c.delete("/cards/demo-sink"), 401, "X-API-Key")
+    assert c.post("/cards", json=doc, headers={"X-API-Key": KEY}).status_code == 201
+    assert c.delete("/cards/keyed", headers={"X-API-Key": "other"}).status_code == 204
+    # reads need no key
+    assert c.get("/cards").status_code == 200 and c.get("/cards/demo-sink").status_code == 200
+
+
+def test_keys_from_the_environment(monkeypatch, tmp_path):
+    from api import Settings
+
+    monkeypatch.setenv("GISNOISE_API_KEYS", " k1 ,k2,, ")
+    monkeypatch.setenv("GISNOISE_DATA_DIR", str(tmp_path / "d"))
+    monkeypatch.setenv("GISNOISE_WORKERS", "3")
+    s = Settings()
+    assert s.api_keys == ["k1", "k2"] and s.workers == 3 and s.data_dir == tmp_path / "d"
