@@ -55,6 +55,10 @@ class CampaignError(InputError):
     """A measurement campaign folder is incomplete or inconsistent."""
 
 
+class ScenarioError(InputError):
+    """A simulation scenario document is invalid."""
+
+
 class FitError(GisnoiseError, RuntimeError):
     """A fit failed to converge or is not identifiable."""
 
