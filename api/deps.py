@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hmac
 from dataclasses import dataclass
+from typing import Annotated
 
 from fastapi import Depends, Request, Security
 from fastapi.security import APIKeyHeader
@@ -13,7 +14,7 @@ from .errors import ApiError
 from .jobs import JobStore, WorkerPool
 from .settings import Settings
 
-__all__ = ["State", "get_state", "require_key", "WRITE"]
+__all__ = ["State", "StateDep", "get_state", "require_key", "WRITE"]
 
 _key_header = APIKeyHeader(name="X-API-Key", auto_error=False,
                            description="Needed for writes (uploads, jobs, deletes) when the service has keys.")
@@ -29,6 +30,9 @@ class State:
 
 def get_state(request: Request) -> State:
     return request.app.state.gisnoise
+
+
+StateDep = Annotated[State, Depends(get_state)]
 
 
 def require_key(request: Request, key: str | None = Security(_key_header)) -> None:

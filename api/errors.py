@@ -17,8 +17,8 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gisnoise.errors import (
-    Cancelled,
     CampaignError,
+    Cancelled,
     CardError,
     CRSError,
     DesignError,

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from enum import Enum
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -37,7 +37,7 @@ class OutputFormat(str, Enum):
 PhaseName = Literal["horizontal", "climb", "sink", "hover", "transition"]
 assert set(PhaseName.__args__) == set(PHASES)  # type: ignore[attr-defined]
 
-Metric = Literal["LAmax", "LAeq", "SEL", "time_above", "snapshot"]
+Metric = Literal["LAmax", "LAeq", "SEL"]
 
 
 # ---------------------------------------------------------------- errors
@@ -156,7 +156,7 @@ class ColumnsTrajectory(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     format: Literal["columns"]
-    columns: dict[str, list[Union[float, str]]] = Field(
+    columns: dict[str, list[float | str]] = Field(
         description="Column name (t, lat, lon, h, roll, pitch, yaw, power_w, phase, rpm, airspeed_m_s) -> values")
 
 
@@ -165,7 +165,7 @@ class RowsTrajectory(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     format: Literal["rows"]
-    rows: list[dict[str, Union[float, str]]] = Field(min_length=1, description="One object per log sample.")
+    rows: list[dict[str, float | str]] = Field(min_length=1, description="One object per log sample.")
 
 
 class GeoJSONTrajectory(BaseModel):
@@ -177,7 +177,7 @@ class GeoJSONTrajectory(BaseModel):
                                              "waypoint document, as read by gisnoise.routes.read_trajectory")
 
 
-TrajectoryInput = Annotated[Union[CsvTrajectory, ColumnsTrajectory, RowsTrajectory, GeoJSONTrajectory],
+TrajectoryInput = Annotated[CsvTrajectory | ColumnsTrajectory | RowsTrajectory | GeoJSONTrajectory,
                             Field(discriminator="format")]
 
 
@@ -196,7 +196,7 @@ class ContourRequest(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     trajectory: TrajectoryInput
-    cards: list[Union[CardRef, CardDocument]] = Field(
+    cards: list[CardRef | CardDocument] = Field(
         default_factory=list, max_length=32,
         description="Cards by id ('demo-horizontal', 'demo-horizontal@2') or inline documents; each serves "
                     "its phase and phases.")
@@ -204,16 +204,18 @@ class ContourRequest(BaseModel):
         default_factory=dict, description="Phase -> card id: the card serves exactly that phase "
                                           "(overrides the phases the card states).")
     grid: GridRequest = Field(default_factory=GridRequest)
-    metrics: list[Metric] = Field(default=["LAmax", "LAeq", "SEL"], min_length=1, max_length=5)
+    metrics: list[Metric] = Field(default=["LAmax", "LAeq", "SEL"], max_length=3,
+                                  description="Bands LAmax, LAeq, SEL (dB(A)); time above and snapshot are asked "
+                                              "for with threshold_db and snapshot_t.")
     levels: list[float] = Field(default=[45.0, 50.0, 55.0, 60.0], min_length=1, max_length=40,
                                 description="Contour levels, dB(A).")
     receiver_height_m: float = Field(default=1.5, ge=0, le=1000, description="Receiver height above ground, m.")
     background: bool = Field(default=False, description="Add the card's background level (Eq. 8).")
     period_s: float | None = Field(default=None, gt=0, le=1e7, description="LAeq period, s (default duration).")
-    threshold_db: float | None = Field(default=None, ge=-50, le=200,
-                                       description="Level for the time_above metric, dB(A).")
+    threshold_db: list[Annotated[float, Field(ge=-50, le=200)]] | None = Field(
+        default=None, max_length=10, description="Levels of time-above bands TA<level> (s), dB(A).")
     snapshot_t: float | None = Field(default=None, ge=-1e7, le=1e7,
-                                     description="Instant of the snapshot metric, s.")
+                                     description="Instant of a snapshot band LA@<t>s, s (within the trajectory).")
     substeps: int = Field(default=1, ge=1, le=50, description="Time steps per trajectory sample interval.")
     uncertainty: bool = Field(default=False, description="Add LAmax/LAeq standard-deviation bands "
                                                          "(cards need a covariance).")

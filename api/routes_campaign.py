@@ -8,16 +8,16 @@ import stat
 import tempfile
 import zipfile
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, File, Form, Request, UploadFile
+from fastapi import APIRouter, File, Form, Request, UploadFile
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
 from gisnoise import cards as gcards
 from gisnoise.errors import CampaignError
 
-from .deps import WRITE, State, get_state
+from .deps import WRITE, State, StateDep
 from .errors import ApiError
 from .jobs import JobContext
 from .models import JobInfo, PhaseName
@@ -102,11 +102,12 @@ def _submit(request: Request, state: State, kind: str, params: dict[str, Any], c
 
 @router.post("/fit", status_code=202, response_model=JobInfo, dependencies=WRITE,
              summary="Fit a model card to an uploaded campaign (job)")
-async def fit_job(request: Request, state: State = Depends(get_state),
-                  campaign: UploadFile = File(description="Zipped campaign folder (campaign.json, flights/, mics/)."),
-                  phase: PhaseName = Form(description="Flight phase to fit."),
-                  ansatz: str = Form("paper-offset", max_length=100, description="Ansatz name."),
-                  card_id: str | None = Form(None, max_length=128, description="Id of the fitted card."),
+async def fit_job(request: Request, state: StateDep,
+                  campaign: Annotated[UploadFile, File(description="Zipped campaign folder (campaign.json, "
+                                                                   "flights/, mics/).")],
+                  phase: Annotated[PhaseName, Form(description="Flight phase to fit.")],
+                  ansatz: Annotated[str, Form(max_length=100, description="Ansatz name.")] = "paper-offset",
+                  card_id: Annotated[str | None, Form(max_length=128, description="Id of the fitted card.")] = None,
                   ) -> JSONResponse:
     from gisnoise.model import get_ansatz
 
@@ -124,11 +125,11 @@ async def fit_job(request: Request, state: State = Depends(get_state),
 
 @router.post("/diagnose", status_code=202, response_model=JobInfo, dependencies=WRITE,
              summary="Diagnose a card against an uploaded campaign (job)")
-async def diagnose_job(request: Request, state: State = Depends(get_state),
-                       campaign: UploadFile = File(description="Zipped campaign folder."),
-                       card_id: str | None = Form(None, max_length=160,
-                                                  description="Card in the store ('id' or 'id@version')."),
-                       card: UploadFile | None = File(None, description="Or a card JSON file."),
+async def diagnose_job(request: Request, state: StateDep,
+                       campaign: Annotated[UploadFile, File(description="Zipped campaign folder.")],
+                       card_id: Annotated[str | None, Form(max_length=160, description="Card in the store "
+                                                                                       "('id' or 'id@version').")] = None,
+                       card: Annotated[UploadFile | None, File(description="Or a card JSON file.")] = None,
                        ) -> JSONResponse:
     if (card_id is None) == (card is None):
         raise ApiError(422, "card_id: give either card_id or a card file", field="card_id")

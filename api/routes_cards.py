@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Depends, Query, Request, Response
+from fastapi import APIRouter, Body, Query, Request, Response
 from fastapi.responses import JSONResponse
 
 from gisnoise import cards as gcards
 
 from .cardstore import StoredCard
-from .deps import WRITE, State, get_state
+from .deps import WRITE, State, StateDep
 from .models import CardDocument, CardInfo, CardList, CardVersions, MediaType
 
 router = APIRouter(prefix="/cards", tags=["cards"])
@@ -32,7 +32,7 @@ def _card_response(stored: StoredCard, status_code: int = 200) -> Response:
 
 
 @router.get("", response_model=CardList, summary="List the cards (latest versions)")
-def list_cards(request: Request, state: State = Depends(get_state),
+def list_cards(request: Request, state: StateDep,
                phase: str | None = Query(None, description="Only cards serving this phase.")) -> CardList:
     out = []
     for cid in state.cards.ids():
@@ -48,13 +48,13 @@ def list_cards(request: Request, state: State = Depends(get_state),
 @router.get("/{card_id}", response_model=CardDocument, summary="Get a card (latest version unless one is named)",
             responses={200: {"content": {MediaType.json.value: {}},
                              "headers": {"X-Card-Version": {"schema": {"type": "integer"}}}}})
-def get_card(card_id: str, state: State = Depends(get_state),
+def get_card(card_id: str, state: StateDep,
              version: int | None = Query(None, ge=1, description="Version; default the latest.")) -> Response:
     return _card_response(state.cards.get(card_id, version))
 
 
 @router.get("/{card_id}/versions", response_model=CardVersions, summary="The versions of a card")
-def card_versions(card_id: str, state: State = Depends(get_state)) -> CardVersions:
+def card_versions(card_id: str, state: StateDep) -> CardVersions:
     vs = state.cards.versions(card_id)
     if not vs:
         state.cards.get(card_id)  # raises the 404
@@ -65,7 +65,7 @@ def card_versions(card_id: str, state: State = Depends(get_state)) -> CardVersio
              summary="Upload a card (validated; never overwrites)",
              responses={200: {"model": CardInfo, "description": "Identical to the latest version: nothing stored."},
                         409: {"description": "A different card with this id exists (use new_version=true)."}})
-def upload_card(request: Request, doc: Annotated[CardDocument, Body()], state: State = Depends(get_state),
+def upload_card(request: Request, doc: Annotated[CardDocument, Body()], state: StateDep,
                 new_version: bool = Query(False, description="Store as the next version when the id exists.")
                 ) -> JSONResponse:
     card = gcards.from_dict(doc.model_dump(by_alias=True, exclude_unset=False), source="card")
@@ -77,7 +77,7 @@ def upload_card(request: Request, doc: Annotated[CardDocument, Body()], state: S
 
 @router.delete("/{card_id}", status_code=204, dependencies=WRITE, summary="Delete a card (all versions or one)",
                response_class=Response)
-def delete_card(card_id: str, state: State = Depends(get_state),
+def delete_card(card_id: str, state: StateDep,
                 version: int | None = Query(None, ge=1, description="Only this version.")) -> Response:
     state.cards.delete(card_id, version)
     return Response(status_code=204)

@@ -19,7 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, Depends, Query, Request, Response
+from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
@@ -29,7 +29,7 @@ from gisnoise.errors import GisnoiseError, GridTooLargeError, InputError, Trajec
 from gisnoise.trajectory import Trajectory, from_columns, read_flight_csv
 
 from .cardstore import CardStore
-from .deps import WRITE, State, get_state
+from .deps import WRITE, StateDep
 from .errors import ApiError
 from .jobs import JobContext
 from .models import (
@@ -150,24 +150,19 @@ def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
 def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path, *,
                    progress: Callable[..., None] | None = None,
                    cancel: Callable[[], bool] | None = None) -> dict[str, Path]:
-    """Write levels.tif and contours.geojson for a request with the core's ``make_map``."""
+    """Write levels.tif and contours.geojson for a request with the core's ``make_map``.
+
+    Returns the paths by file name.
+    """
     from gisnoise.contour import make_map
 
-    kw: dict[str, Any] = {}
-    for name in ("period_s", "threshold_db", "snapshot_t"):
-        v = getattr(req, name)
-        if v is not None:
-            kw[name] = v
-    if req.background:
-        kw["background"] = True
-    if req.substeps != 1:
-        kw["substeps"] = req.substeps
     with _prefixed("body"):
         paths = make_map(traj, cards, out_dir, resolution_m=req.grid.resolution_m, margin_m=req.grid.margin_m,
                          levels=tuple(req.levels), metrics=tuple(req.metrics), crs=req.grid.crs, dem=None,
                          receiver_height=req.receiver_height_m, uncertainty=req.uncertainty, plot=False,
-                         progress=progress, cancel=cancel, **kw)
-    return {k: Path(v) for k, v in paths.items() if isinstance(v, (str, Path))}
+                         period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
+                         substeps=req.substeps, background=req.background, progress=progress, cancel=cancel)
+    return {"levels.tif": Path(paths["levels"]), "contours.geojson": Path(paths["contours"])}
 
 
 def _want_tiff(req: ContourRequest, accept: str) -> bool:
@@ -193,7 +188,7 @@ _CONTOUR_RESPONSES: dict[int | str, dict[str, Any]] = {
 
 @router.post("/contours", response_class=Response, responses=_CONTOUR_RESPONSES,
              summary="Noise map of a trajectory (small at once, large as a job)")
-async def contours(req: ContourRequest, request: Request, state: State = Depends(get_state),
+async def contours(req: ContourRequest, request: Request, state: StateDep,
                    job: bool = Query(False, description="Always answer with a job (202).")) -> Response:
     s = state.settings
     traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
@@ -219,24 +214,12 @@ async def contours(req: ContourRequest, request: Request, state: State = Depends
 def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool) -> bytes:
     with _sync_slots, tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
         paths = make_map_files(traj, cards, req, Path(tmp))
-        return paths["levels.tif" if tiff else "contours.geojson"].read_bytes() if _keyed(paths) else \
-            _by_suffix(paths, ".tif" if tiff else ".geojson").read_bytes()
-
-
-def _keyed(paths: Mapping[str, Path]) -> bool:
-    return "levels.tif" in paths and "contours.geojson" in paths
-
-
-def _by_suffix(paths: Mapping[str, Path], suffix: str) -> Path:
-    for p in paths.values():
-        if p.suffix == suffix:
-            return p
-    raise GisnoiseError(f"the map has no {suffix} output", field="output")  # pragma: no cover
+        return paths["levels.tif" if tiff else "contours.geojson"].read_bytes()
 
 
 @router.post("/jobs/contours", status_code=202, response_model=JobInfo, dependencies=WRITE,
              summary="Queue a noise map as a job")
-async def contour_job(req: ContourRequest, request: Request, state: State = Depends(get_state)) -> JSONResponse:
+async def contour_job(req: ContourRequest, request: Request, state: StateDep) -> JSONResponse:
     s = state.settings
     traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
     cards = resolve_cards(req, state.cards)
@@ -257,5 +240,5 @@ def run_contour_job(ctx: JobContext) -> dict[str, Any]:
              for c in req.cards if not isinstance(c, str)]
     ctx.progress(0.0, "evaluating the grid")
     paths = make_map_files(traj, cards, req, ctx.output_dir, progress=ctx.progress, cancel=ctx.cancel)
-    return {"files": sorted(p.name for p in paths.values()), "samples": len(traj),
+    return {"files": sorted(paths), "samples": len(traj),
             "metrics": list(req.metrics), "levels": list(req.levels)}

@@ -5,10 +5,10 @@ from __future__ import annotations
 import mimetypes
 from pathlib import Path
 
-from fastapi import APIRouter, Depends, Query, Request, Response
+from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import FileResponse
 
-from .deps import WRITE, State, get_state
+from .deps import WRITE, State, StateDep
 from .errors import ApiError
 from .jobs import Job
 from .models import JobError, JobInfo, JobList, MediaType
@@ -45,7 +45,7 @@ def _get(state: State, job_id: str) -> Job:
 
 
 @router.get("", response_model=JobList, summary="List jobs, newest first")
-def list_jobs(request: Request, state: State = Depends(get_state),
+def list_jobs(request: Request, state: StateDep,
               status: str | None = Query(None, pattern="^(queued|running|succeeded|failed|cancelled)$"),
               kind: str | None = Query(None, pattern="^(contours|fit|diagnose)$"),
               limit: int = Query(50, ge=1, le=1000), offset: int = Query(0, ge=0, le=10**9)) -> JobList:
@@ -54,7 +54,7 @@ def list_jobs(request: Request, state: State = Depends(get_state),
 
 
 @router.get("/{job_id}", response_model=JobInfo, summary="A job's status and progress")
-def get_job(job_id: str, request: Request, state: State = Depends(get_state)) -> JobInfo:
+def get_job(job_id: str, request: Request, state: StateDep) -> JobInfo:
     return job_info(request, _get(state, job_id))
 
 
@@ -83,7 +83,7 @@ _RESULT_RESPONSES = {200: {"content": {m.value: {} for m in (MediaType.geojson, 
 
 @router.get("/{job_id}/result", summary="Download a job's main result", responses=_RESULT_RESPONSES,
             response_class=Response)
-def job_result(job_id: str, request: Request, state: State = Depends(get_state),
+def job_result(job_id: str, request: Request, state: StateDep,
                format: str | None = Query(None, pattern="^(geojson|geotiff)$",
                                           description="Contour jobs: geojson (default) or geotiff.")) -> Response:
     job = _get(state, job_id)
@@ -96,12 +96,12 @@ def job_result(job_id: str, request: Request, state: State = Depends(get_state),
 
 @router.get("/{job_id}/files/{name:path}", summary="Download one result file", responses=_RESULT_RESPONSES,
             response_class=Response)
-def job_file(job_id: str, name: str, state: State = Depends(get_state)) -> Response:
+def job_file(job_id: str, name: str, state: StateDep) -> Response:
     return _file_response(_result_path(state, _get(state, job_id), name))
 
 
 @router.post("/{job_id}/cancel", response_model=JobInfo, dependencies=WRITE, summary="Cancel a queued or running job")
-def cancel_job(job_id: str, request: Request, state: State = Depends(get_state)) -> JobInfo:
+def cancel_job(job_id: str, request: Request, state: StateDep) -> JobInfo:
     job = _get(state, job_id)
     if job.done:
         raise ApiError(409, f"job_id: job {job.id} is already {job.status}", field="job_id")
@@ -111,7 +111,7 @@ def cancel_job(job_id: str, request: Request, state: State = Depends(get_state))
 
 @router.delete("/{job_id}", status_code=204, dependencies=WRITE, response_class=Response,
                summary="Delete a finished job and its files")
-def delete_job(job_id: str, state: State = Depends(get_state)) -> Response:
+def delete_job(job_id: str, state: StateDep) -> Response:
     job = _get(state, job_id)
     if not job.done:
         raise ApiError(409, f"job_id: job {job.id} is {job.status}; cancel it first", field="job_id")

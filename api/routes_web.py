@@ -5,13 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from fastapi import APIRouter, Depends, FastAPI, Response
+from fastapi import APIRouter, FastAPI, Response
 from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
 from gisnoise import __version__
 
-from .deps import State, get_state
+from .deps import StateDep
 from .errors import ApiError
 from .models import Health, MediaType
 
@@ -26,14 +26,14 @@ def index() -> FileResponse:
 
 
 @router.get("/health", response_model=Health, tags=["service"], summary="Liveness and queue length")
-def health(state: State = Depends(get_state)) -> Health:
+def health(state: StateDep) -> Health:
     return Health(status="ok", version=__version__, queued=state.jobs.count(status="queued"),
                   running=state.jobs.count(status="running"))
 
 
 @router.get("/config.json", tags=["service"], summary="Settings the web page needs",
             responses={200: {"content": {MediaType.json.value: {"schema": {"type": "object"}}}}})
-def config(state: State = Depends(get_state)) -> Response:
+def config(state: StateDep) -> Response:
     s = state.settings
     body = {"version": __version__, "tile_url": s.tile_url, "api_key_required": bool(s.api_keys),
             "sample_route": _sample_route_path() is not None}

@@ -1,0 +1,317 @@
+// gisnoise web page: draw or load a route, ask the service for contours, list the jobs.
+// Plain JavaScript on Leaflet; every call goes to the service's own JSON API.
+"use strict";
+
+const PALETTE = ["#1a9850", "#91cf60", "#d9ef8b", "#fee08b", "#fdae61", "#f46d43", "#d73027", "#a50026",
+                 "#762a83", "#40004b"];
+
+const app = {
+  config: null,
+  map: null,
+  routeLayer: null,
+  contourLayer: null,
+  drawing: false,
+  drawn: [],          // [lat, lng] of clicked waypoints
+  trajectory: null,   // the request's trajectory object
+  lastContours: null, // the last GeoJSON drawn
+  shownJob: null,
+  jobs: [],
+};
+window.gisnoise = app;  // for the browser test and the curious
+
+const $ = (id) => document.getElementById(id);
+
+function setStatus(text, error = false) {
+  const el = $("status");
+  el.textContent = text;
+  el.classList.toggle("error", error);
+}
+
+function headers(extra = {}) {
+  const h = Object.assign({}, extra);
+  const key = $("api-key").value.trim();
+  if (key) h["X-API-Key"] = key;
+  return h;
+}
+
+async function errorText(resp) {
+  try {
+    const body = await resp.json();
+    return `${resp.status}: ${body.detail}`;
+  } catch (e) {
+    return `${resp.status} ${resp.statusText}`;
+  }
+}
+
+// ------------------------------------------------------------------ start-up
+async function init() {
+  app.config = await (await fetch("/config.json")).json();
+  $("version").textContent = "gisnoise " + app.config.version;
+  $("key-label").hidden = !app.config.api_key_required;
+  $("btn-sample").disabled = !app.config.sample_route;
+  app.map = L.map("map", { doubleClickZoom: false }).setView([51.0, 10.0], 6);
+  if (app.config.tile_url) {
+    L.tileLayer(app.config.tile_url, {
+      maxZoom: 19, attribution: "&copy; OpenStreetMap contributors",
+    }).addTo(app.map);
+  }
+  L.control.scale({ imperial: false }).addTo(app.map);
+  app.map.on("click", onMapClick);
+  $("btn-sample").onclick = loadSample;
+  $("btn-draw").onclick = toggleDraw;
+  $("btn-clear").onclick = clearAll;
+  $("btn-compute").onclick = compute;
+  $("metric").onchange = () => app.lastContours && drawContours(app.lastContours);
+  await loadCards();
+  await refreshJobs();
+  setInterval(refreshJobs, 1500);
+  app.ready = true;
+}
+
+async function loadCards() {
+  const resp = await fetch("/cards");
+  const box = $("cards");
+  box.textContent = "";
+  if (!resp.ok) { box.textContent = await errorText(resp); return; }
+  const { cards } = await resp.json();
+  for (const c of cards) {
+    const label = document.createElement("label");
+    const cb = document.createElement("input");
+    cb.type = "checkbox";
+    cb.value = c.id;
+    cb.checked = c.id.startsWith("demo-");
+    label.append(cb, ` ${c.id} `);
+    const small = document.createElement("span");
+    small.className = "hint";
+    small.textContent = `(${c.phases.join(", ")})`;
+    label.append(small);
+    box.append(label);
+  }
+}
+
+// ------------------------------------------------------------------ route
+async function loadSample() {
+  const resp = await fetch("/samples/route");
+  if (!resp.ok) { setStatus(await errorText(resp), true); return; }
+  const geo = await resp.json();
+  stopDrawing();
+  app.drawn = [];
+  app.trajectory = { format: "geojson", data: geo };
+  showRoute(L.geoJSON(geo, { pointToLayer: (f, ll) => L.circleMarker(ll, { radius: 4, color: "#0047ab" }),
+                             style: { color: "#0047ab", weight: 3 } }));
+  $("route-info").textContent = "Sample route loaded.";
+}
+
+function showRoute(layer) {
+  if (app.routeLayer) app.routeLayer.remove();
+  app.routeLayer = layer.addTo(app.map);
+  const b = layer.getBounds();
+  if (b.isValid()) app.map.fitBounds(b.pad(0.4));
+}
+
+function toggleDraw() {
+  if (app.drawing) { finishDrawing(); return; }
+  app.drawing = true;
+  app.drawn = [];
+  app.trajectory = null;
+  $("btn-draw").textContent = "Finish";
+  $("btn-draw").classList.add("active");
+  $("route-info").textContent = "Click waypoints on the map, then Finish.";
+  redrawDrawn();
+}
+
+function stopDrawing() {
+  app.drawing = false;
+  $("btn-draw").textContent = "Draw route";
+  $("btn-draw").classList.remove("active");
+}
+
+function onMapClick(ev) {
+  if (!app.drawing) return;
+  app.drawn.push([ev.latlng.lat, ev.latlng.lng]);
+  redrawDrawn();
+}
+
+function redrawDrawn() {
+  const g = L.featureGroup();
+  if (app.drawn.length > 1) L.polyline(app.drawn, { color: "#0047ab", weight: 3, dashArray: "6 4" }).addTo(g);
+  app.drawn.forEach((ll) => L.circleMarker(ll, { radius: 4, color: "#0047ab" }).addTo(g));
+  if (app.routeLayer) app.routeLayer.remove();
+  app.routeLayer = g.addTo(app.map);
+}
+
+function waypointsDocument(points, altitude, speed) {
+  // GeoJSON waypoints (SPEC section 7): one Point per waypoint, altitude above ground and speed.
+  return {
+    type: "FeatureCollection",
+    features: points.map(([lat, lng]) => ({
+      type: "Feature",
+      geometry: { type: "Point", coordinates: [lng, lat] },
+      properties: { alt: altitude, alt_ref: "agl", speed: speed },
+    })),
+  };
+}
+
+function finishDrawing() {
+  stopDrawing();
+  if (app.drawn.length < 2) {
+    $("route-info").textContent = "A route needs at least two waypoints.";
+    app.trajectory = null;
+    return;
+  }
+  const alt = Number($("alt").value), speed = Number($("speed").value);
+  app.trajectory = { format: "waypoints", data: waypointsDocument(app.drawn, alt, speed) };
+  $("route-info").textContent = `${app.drawn.length} waypoints at ${alt} m, ${speed} m/s.`;
+}
+
+function clearAll() {
+  stopDrawing();
+  app.drawn = [];
+  app.trajectory = null;
+  if (app.routeLayer) app.routeLayer.remove();
+  if (app.contourLayer) app.contourLayer.remove();
+  app.routeLayer = app.contourLayer = app.lastContours = null;
+  $("legend").textContent = "";
+  setStatus("");
+}
+
+// ------------------------------------------------------------------ contours
+function request() {
+  const cards = [...document.querySelectorAll("#cards input:checked")].map((cb) => cb.value);
+  const levels = $("levels").value.split(",").map((s) => s.trim()).filter((s) => s).map(Number);
+  return {
+    trajectory: app.trajectory,
+    cards,
+    grid: { resolution_m: Number($("resolution").value), margin_m: Number($("margin").value) },
+    metrics: [$("metric").value],
+    levels,
+  };
+}
+
+async function compute() {
+  if (app.drawing) finishDrawing();
+  if (!app.trajectory) { setStatus("Load or draw a route first.", true); return; }
+  const asJob = $("as-job").checked;
+  setStatus("Computing…");
+  const t0 = performance.now();
+  const resp = await fetch("/contours" + (asJob ? "?job=true" : ""), {
+    method: "POST",
+    headers: headers({ "Content-Type": "application/json", Accept: "application/geo+json" }),
+    body: JSON.stringify(request()),
+  });
+  if (resp.status === 202) {
+    const job = await resp.json();
+    app.shownJob = job.id;
+    app.shownDone = false;
+    setStatus(`Queued as job ${job.id.slice(0, 8)}; the map appears when it is done.`);
+    refreshJobs();
+    return;
+  }
+  if (!resp.ok) { setStatus(await errorText(resp), true); return; }
+  const geo = await resp.json();
+  drawContours(geo);
+  setStatus(`Contours in ${((performance.now() - t0) / 1000).toFixed(1)} s: ${geo.features.length} features.`);
+}
+
+function colourFor(level, levels) {
+  const i = Math.max(0, levels.indexOf(level));
+  return PALETTE[Math.min(i, PALETTE.length - 1)];
+}
+
+function drawContours(geo) {
+  app.lastContours = geo;
+  const metric = $("metric").value;
+  const mine = geo.features.filter((f) => !f.properties.metric || f.properties.metric === metric);
+  const feats = mine.length ? mine : geo.features;
+  const levels = [...new Set(feats.map((f) => f.properties.level))].sort((a, b) => a - b);
+  if (app.contourLayer) app.contourLayer.remove();
+  app.contourLayer = L.geoJSON({ type: "FeatureCollection", features: feats }, {
+    style: (f) => {
+      const c = colourFor(f.properties.level, levels);
+      return f.properties.kind === "isoline"
+        ? { color: "#333", weight: 1, opacity: 0.8, fill: false }
+        : { color: c, weight: 0.5, fillColor: c, fillOpacity: 0.55 };
+    },
+    onEachFeature: (f, layer) => layer.bindTooltip(
+      `${f.properties.metric || ""} ${f.properties.level}${f.properties.level_max != null ? "–" + f.properties.level_max : ""} dB(A)`),
+  }).addTo(app.map);
+  if (app.routeLayer) app.routeLayer.bringToFront();
+  const b = app.contourLayer.getBounds();
+  if (b.isValid()) app.map.fitBounds(b.pad(0.05));
+  const legend = $("legend");
+  legend.textContent = "";
+  for (const lv of levels) {
+    const item = document.createElement("span");
+    item.className = "item";
+    const sw = document.createElement("span");
+    sw.className = "swatch";
+    sw.style.background = colourFor(lv, levels);
+    item.append(sw, `≥ ${lv}`);
+    legend.append(item);
+  }
+  app.contourCount = feats.length;
+}
+
+// ------------------------------------------------------------------ jobs
+async function refreshJobs() {
+  let resp;
+  try { resp = await fetch("/jobs?limit=20"); } catch (e) { return; }
+  if (!resp.ok) return;
+  const { jobs } = await resp.json();
+  app.jobs = jobs;
+  const tbody = document.querySelector("#jobs tbody");
+  tbody.textContent = "";
+  for (const j of jobs) {
+    const tr = document.createElement("tr");
+    tr.dataset.job = j.id;
+    tr.dataset.status = j.status;
+    const cells = [j.id.slice(0, 8), j.kind, j.status];
+    for (const text of cells) {
+      const td = document.createElement("td");
+      td.textContent = text;
+      tr.append(td);
+    }
+    const tdp = document.createElement("td");
+    const bar = document.createElement("progress");
+    bar.max = 1;
+    bar.value = j.progress;
+    bar.title = `${Math.round(j.progress * 100)} % ${j.message}`;
+    tdp.append(bar);
+    tr.append(tdp);
+    const tda = document.createElement("td");
+    if (j.status === "queued" || j.status === "running") {
+      const b = document.createElement("button");
+      b.textContent = "cancel";
+      b.onclick = () => fetch(`/jobs/${j.id}/cancel`, { method: "POST", headers: headers() }).then(refreshJobs);
+      tda.append(b);
+    } else if (j.status === "succeeded" && j.kind === "contours") {
+      const b = document.createElement("button");
+      b.textContent = "show";
+      b.onclick = () => showJob(j.id);
+      tda.append(b);
+    } else if (j.status === "succeeded") {
+      const a = document.createElement("a");
+      a.href = j.result_url;
+      a.textContent = "result";
+      tda.append(a);
+    } else if (j.error) {
+      tda.textContent = j.error.detail.slice(0, 60);
+    }
+    tr.append(tda);
+    tbody.append(tr);
+    if (j.id === app.shownJob && j.status === "succeeded" && !app.shownDone) {
+      app.shownDone = true;
+      showJob(j.id);
+    }
+  }
+}
+
+async function showJob(id) {
+  const resp = await fetch(`/jobs/${id}/result`, { headers: { Accept: "application/geo+json" } });
+  if (!resp.ok) { setStatus(await errorText(resp), true); return; }
+  const geo = await resp.json();
+  drawContours(geo);
+  setStatus(`Job ${id.slice(0, 8)}: ${geo.features.length} features.`);
+}
+
+init().catch((e) => setStatus(String(e), true));
