@@ -115,8 +115,12 @@ class Effect:
     bounds : tuple of (float, float)
         Physical bounds of each extension parameter.
     needs : tuple of (str, str)
-        Input keys the extension reads and, for each, what is missing in words
-        (e.g. ``("rpm", "no rpm column in the flight logs")``).
+        Inputs the effect needs to be testable and, for each, what is missing in
+        words (e.g. ``("rpm", "no rpm column in the flight logs")``).
+    reads : tuple of str
+        Per-row numeric inputs the extension term reads (they become part of the
+        extended ansatz's ``inputs``; covariates attached by :func:`bind` and the
+        ``meta`` mapping are not listed).
     apply : callable
         ``apply(base_kernel, p_base, q, x, d_ref, want_jac) -> (L_uav, J_base, J_q)``.
         Use :func:`additive` for an additive term.
@@ -144,6 +148,7 @@ class Effect:
     start: tuple[float, ...]
     bounds: tuple[tuple[float, float], ...]
     needs: tuple[tuple[str, str], ...]
+    reads: tuple[str, ...]
     apply: Apply = field(repr=False)
     description: str = ""
     check: Callable[[Mapping[str, Any]], str | None] | None = field(default=None, repr=False)
@@ -162,10 +167,6 @@ class Effect:
     @property
     def n_params(self) -> int:
         return len(self.params)
-
-    @property
-    def inputs(self) -> tuple[str, ...]:
-        return tuple(k for k, _ in self.needs)
 
 
 # --------------------------------------------------------------------------- registry
@@ -246,7 +247,7 @@ def extend(base: Ansatz | str, *effects: Effect | str, register: bool = False) -
         a = Ansatz(
             name=f"{a.name}+{eff.name}",
             params=a.params + eff.params,
-            inputs=a.inputs + tuple(k for k in eff.inputs if k not in a.inputs),
+            inputs=a.inputs + tuple(k for k in eff.reads if k not in a.inputs),
             kernel=_extended_kernel(a, eff),
             background=a.background,
             description=f"{a.description or a.name}; + {eff.description}",
@@ -370,6 +371,14 @@ def speed_of_sound(meta: Mapping[str, Any] | None) -> float | None:
     return float(331.3 * np.sqrt(1.0 + float(t) / 273.15))
 
 
+def _c(x: Mapping[str, Any]) -> float:
+    c = speed_of_sound(x.get("meta"))
+    if c is None:
+        raise InputError("speed of sound unknown: give meta speed_of_sound_m_s or weather temperature_c",
+                         field="meta")
+    return c
+
+
 def _unit_to_mic(x: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors UAV -> microphone (n, 3) and path lengths (n,), from the ENU positions."""
     r = np.asarray(x["mic_enu"], dtype=float) - np.asarray(x["uav_enu"], dtype=float)
@@ -460,6 +469,7 @@ BANK_ANGLE = Effect(
     start=(0.0,),
     bounds=((-20.0, 40.0),),
     needs=(("bank", "no roll angle in the flight logs"),),
+    reads=("bank",),
     apply=additive(_bank_term),
     description="interaction noise in turning flight: k_bank |sin(bank)| (paper 5.3.1)",
     check=_bank_check,
@@ -492,6 +502,7 @@ ATMOSPHERIC_ABSORPTION = Effect(
     start=(0.0,),
     bounds=((0.0, 100.0),),
     needs=(("d", "no distance"), ("bands", "no one-third-octave band levels in the microphone files")),
+    reads=("d",),
     apply=additive(_absorption_term),
     description="uncorrected atmospheric absorption: -a_abs (d - d_ref)/1000 dB (paper 5.3.3, ISO 9613-1)",
     check=_absorption_check,
@@ -521,7 +532,10 @@ def _band_cos(u, want_deriv):
 def _reflection_delay(x):
     """Delay of the ground-reflected path behind the direct one, s (flat ground under the microphone)."""
     h_m = mic_height_agl(x)
-    c = speed_of_sound(x.get("meta"))
+    if h_m is None:
+        raise InputError("microphone heights above ground unknown: give input mic_agl or meta microphones "
+                         "height_agl_m", field="mic_agl")
+    c = _c(x)
     mic = np.asarray(x["mic_enu"], dtype=float)
     uav = np.asarray(x["uav_enu"], dtype=float)
     ground = mic[..., 2] - h_m
@@ -581,6 +595,7 @@ GROUND_REFLECTION = Effect(
     bounds=((0.0, 1.0), (20.0, 8000.0)),
     needs=(("mic_enu", "no microphone positions"), ("uav_enu", "no UAV positions"),
            ("meta", "no campaign facts (weather, microphone heights)")),
+    reads=("mic_enu", "uav_enu"),
     apply=additive(_ground_term),
     description="ground reflection at elevated microphones: 10 log10(1 + R^2 + 2R C(f_g tau)), comb in tau",
     check=_ground_check,
@@ -593,7 +608,7 @@ GROUND_REFLECTION = Effect(
 def _mach_towards(x):
     e, _ = _unit_to_mic(x)
     v = np.asarray(x["vel_enu"], dtype=float)
-    return np.sum(v * e, axis=-1) / speed_of_sound(x.get("meta"))
+    return np.sum(v * e, axis=-1) / _c(x)
 
 
 def _doppler_term(q, x, d_ref, want_jac):
@@ -619,6 +634,7 @@ DOPPLER = Effect(
     bounds=((0.0, 20.0),),
     needs=(("vel_enu", "no UAV velocity"), ("uav_enu", "no UAV positions"), ("mic_enu", "no microphone positions"),
            ("meta", "no campaign facts (speed of sound)")),
+    reads=("vel_enu", "uav_enu", "mic_enu"),
     apply=additive(_doppler_term),
     description="convective (Doppler) amplification: -q_doppler 10 log10(1 - M_r)",
     check=_doppler_check,
@@ -638,7 +654,7 @@ def _emission_covariates(x):
         if k == "phi":
             v = _unwrap_series(v, t, sid)
         out[f"rate_{k}"] = _series_gradient(v, t, sid)
-    out["t_prop"] = np.broadcast_to(np.asarray(x["d"], dtype=float), t.shape) / speed_of_sound(x.get("meta"))
+    out["t_prop"] = np.broadcast_to(np.asarray(x["d"], dtype=float), t.shape) / _c(x)
     return out
 
 
@@ -694,6 +710,7 @@ EMISSION_TIME = Effect(
     bounds=((-5.0, 5.0), (-2.0, 2.0)),
     needs=(("t_e", "no emission times"), ("mic_enu", "no microphone positions"), ("uav_enu", "no UAV positions"),
            ("meta", "no campaign facts (speed of sound)")),
+    reads=("t_e", "mic_enu", "uav_enu"),
     apply=_emission_apply,
     description="time-base error: model at t_e + dt_clock + k_delay d/c (first order in the input rates)",
     check=_emission_check,
@@ -730,6 +747,7 @@ WIND = Effect(
     start=(0.0, 0.0),
     bounds=((-30.0, 30.0), (-30.0, 30.0)),
     needs=(("mic_enu", "no microphone positions"), ("uav_enu", "no UAV positions")),
+    reads=("mic_enu", "uav_enu"),
     apply=additive(_wind_term),
     description="wind refraction and convection: (d/100 m) (w_east e_east + w_north e_north)",
     check=_wind_check,
@@ -769,6 +787,7 @@ RPM = Effect(
     start=(0.0, 3000.0),
     bounds=((-10.0, 10.0), (1.0, 1e6)),
     needs=(("rpm", "no rpm column in the flight logs"),),
+    reads=("rpm",),
     apply=additive(_rpm_term),
     description="propeller speed beyond power: k_rpm 20 log10(rpm / rpm_ref) (rpm_ref held fixed)",
     check=_rpm_check,
@@ -816,6 +835,7 @@ BACKGROUND_EVENT = Effect(
     start=(),
     bounds=(),
     needs=(("event_window", "no event windows detected"),),
+    reads=("t_e", "mic_enu", "uav_enu"),
     apply=_event_apply,
     description="transient background events: model energetically summed with a level ev_j in window j",
     covariates=_event_covariates,

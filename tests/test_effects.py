@@ -232,7 +232,7 @@ def test_new_effect_registers_by_name():
         s = np.asarray(x["d"], dtype=float) / 100.0
         return q[0] * s, (s[..., None] if want_jac else None)
 
-    eff = effects.Effect(name="test_linear_d", params=("k_lin",), units=("dB",), start=(0.0,),
+    eff = effects.Effect(name="test_linear_d", params=("k_lin",), units=("dB",), start=(0.0,), reads=("d",),
                          bounds=((-5.0, 5.0),), needs=(("d", "no distance"),), apply=effects.additive(term))
     try:
         effects.register_effect(eff)
