@@ -134,5 +134,12 @@ def install_handlers(app: FastAPI) -> None:
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         fld = {404: "path", 405: "method", 413: "body", 401: "X-API-Key", 403: "X-API-Key"}.get(exc.status_code)
-        return JSONResponse(error_body(str(exc.detail), fld), status_code=exc.status_code,
+        detail = str(exc.detail)
+        if exc.status_code == 404 and detail == "Not Found":
+            detail = f"path: no such resource {request.url.path!r}"
+        elif exc.status_code == 405:
+            detail = f"method: {request.method} is not allowed on {request.url.path!r}"
+        elif fld and not detail.startswith(fld):
+            detail = f"{fld}: {detail}"
+        return JSONResponse(error_body(detail, fld or "request"), status_code=exc.status_code,
                             headers=getattr(exc, "headers", None))

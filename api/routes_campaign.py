@@ -151,33 +151,32 @@ async def diagnose_job(request: Request, state: StateDep,
 
 # ------------------------------------------------------------------ handlers
 def run_fit_job(ctx: JobContext) -> dict[str, Any]:
-    """Fit the stored campaign; writes card.json (and the fit summary)."""
+    """Fit the stored campaign; writes card.json (the fitted card) and fit.json (a summary)."""
     from gisnoise.fit import fit_campaign
 
     p = ctx.params
-    result = fit_campaign(ctx.input_dir / "campaign", p["phase"], ansatz=p["ansatz"], progress=ctx.progress,
-                          cancel=ctx.cancel)
+    max_iter = 100
+
+    def progress(iteration: int, cost: float) -> None:
+        ctx.progress(min(0.1 + 0.85 * iteration / max_iter, 0.95), f"iteration {iteration}, cost {cost:.6g}")
+
+    ctx.progress(0.0, "reading the campaign")
+    result = fit_campaign(ctx.input_dir / "campaign", p["phase"], ansatz=p["ansatz"], max_iter=max_iter,
+                          progress=progress, cancel=ctx.cancel)
     ctx.check_cancel()
-    kw: dict[str, Any] = {}
-    if p.get("card_id"):
-        kw["id"] = p["card_id"]
-    card = _to_card(result, p["phase"], kw)
+    data = result.info.get("data")
+    if isinstance(data, dict):  # the server's folder means nothing to the client
+        data["campaign"] = f"uploaded campaign (job {ctx.job.id})"
+    card = result.to_card(id=p.get("card_id") or None, phase=p["phase"])
     gcards.save(card, ctx.output_dir / "card.json")
-    summary = {"card_id": card.id, "phase": card.phase, "ansatz": card.ansatz,
-               "parameters": dict(card.parameters), "std": card.std}
+    summary: dict[str, Any] = {"card_id": card.id, "phase": card.phase, "ansatz": card.ansatz,
+                               "parameters": dict(card.parameters), "std": card.std}
     for k in ("success", "n", "cost", "aic", "bic", "message"):
         v = getattr(result, k, None)
         if isinstance(v, (bool, int, float, str)):
             summary[k] = v
-    (ctx.output_dir / "fit.json").write_text(json.dumps(summary, indent=2, default=str) + "\n", encoding="utf-8")
+    (ctx.output_dir / "fit.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
-
-
-def _to_card(result: Any, phase: str, kw: dict[str, Any]) -> gcards.ModelCard:
-    card = result.to_card(**kw) if kw else result.to_card()
-    if not isinstance(card, gcards.ModelCard):
-        raise CampaignError("fit: the fitter returned no card", field="campaign")
-    return card
 
 
 def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:

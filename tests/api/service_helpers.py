@@ -11,7 +11,7 @@ CARDS = REPO / "sample_data" / "cards"
 KEY = "test-key-0123456789"
 
 
-def wait_job(client: TestClient, job_id: str, timeout: float = 60.0, until: tuple[str, ...] = (
+def wait_job(client: Any, job_id: str, timeout: float = 60.0, until: tuple[str, ...] = (
         "succeeded", "failed", "cancelled"), headers: dict[str, str] | None = None) -> dict[str, Any]:
     """Poll a job until it reaches one of ``until``; returns its last JobInfo."""
     t_end = time.monotonic() + timeout
@@ -34,3 +34,74 @@ def assert_names_field(resp: Any, status: int, field: str | None = None) -> dict
         assert body["field"] == field, body
         assert field.split(".")[-1].split("[")[0] in body["detail"], body
     return body
+
+
+# ---------------------------------------------------------------- a real server on loopback
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Server:
+    """``gisnoise serve`` in a subprocess on 127.0.0.1 (killed by ``kill()`` or ``stop()``)."""
+
+    def __init__(self, data_dir: Path, *, port: int | None = None, env: dict[str, str] | None = None,
+                 workers: int = 1, log: Path | None = None) -> None:
+        import os
+        import subprocess
+        import sys
+
+        self.port = port or free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        e = {k: v for k, v in os.environ.items() if not k.startswith("GISNOISE_")}
+        e.update({"GISNOISE_SEED_CARDS_DIR": str(CARDS), "GISNOISE_TILE_URL": ""})
+        e.update(env or {})
+        self.log = log or (Path(data_dir).parent / f"server-{self.port}.log")
+        self._logf = open(self.log, "ab")  # noqa: SIM115 - closed in stop/kill
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "gisnoise.cli.main", "serve", "--host", "127.0.0.1", "--port", str(self.port),
+             "--data-dir", str(data_dir), "--workers", str(workers), "--log-level", "warning"],
+            env=e, stdout=self._logf, stderr=subprocess.STDOUT, cwd=str(REPO))
+        self.wait_up()
+
+    def wait_up(self, timeout: float = 30.0) -> None:
+        import httpx
+
+        end = time.monotonic() + timeout
+        while True:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"server exited with {self.proc.returncode}: {self.log.read_text()[-2000:]}")
+            try:
+                if httpx.get(self.url + "/health", timeout=1.0).status_code == 200:
+                    return
+            except httpx.HTTPError:
+                pass
+            if time.monotonic() > end:
+                raise RuntimeError(f"server not up after {timeout} s: {self.log.read_text()[-2000:]}")
+            time.sleep(0.1)
+
+    def kill(self) -> None:
+        """SIGKILL: the process dies at once, as in a crash or a power cut."""
+        import signal
+
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL)
+        self.proc.wait(10)
+        self._logf.close()
+
+    def stop(self) -> None:
+        """SIGTERM: a graceful stop."""
+        import signal
+        import subprocess
+
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(10)
+        self._logf.close()
