@@ -33,8 +33,9 @@ Forward propagation
    block, the same in every band so LA and bands stay consistent) is added.
    Level CSVs are free-field.  WAV files are synthesized block by block as
    random-phase multisines on the block's FFT grid, so every block holds exactly
-   the target energy in every band; ground-plate microphones get +6.02 dB
-   (pressure doubling) so that the reader's free-field correction recovers it.
+   the target energy in every band; the microphone's mount correction
+   (:func:`gisnoise.acoustics.mount_correction`, ground plate: -6 dB) is undone
+   in the pressure so that the reader's free-field correction recovers the level.
 5. The flight log (``output.log_rate_hz``) is the true state sampled, with the
    log noise of ``vehicle.log_noise`` added.
 
@@ -51,7 +52,7 @@ Injected effects (``effects`` object; each key turns one on, ``{}`` takes defaul
     (The card is the absorption-free emission, which the reader's per-band
     correction recovers.)
 ``ground_reflection``
-    Microphones above ground (``height_m > 0``, not ground-plate) receive an image
+    Microphones above ground (``height_m > 0``, mount ``free_field``) receive an image
     source: band energy factor ``1 + (r1/r2)^2 q^2 + 2 (r1/r2) q gamma <cos k dr>``
     with the band average of ``cos(2 pi f dr / c)`` over the band edges, path
     difference ``dr = r2 - r1``, reflection coefficient ``q`` (real) and coherence
@@ -154,6 +155,7 @@ __all__ = [
     "simulate_samples",
     "run",
     "load_scenario",
+    "dumps_truth",
     "resolve_scenario",
     "coordinated_bank",
     "speed_of_sound",
@@ -165,8 +167,7 @@ SCHEMA = "gisnoise/scenario/1"
 TRUTH_SCHEMA = "gisnoise/simulation-truth/1"
 EFFECTS = ("bank_angle", "atmospheric_absorption", "ground_reflection", "doppler", "emission_time", "wind",
            "rpm", "background_event")
-MOUNTS = ("ground_plate", "tripod")
-_GROUND_PLATE_GAIN = 2.0  # pressure doubling on a ground plate (+6.02 dB)
+MOUNTS = ("ground_plate", "free_field")
 _NOMINAL = (25, 31.5, 40, 50, 63, 80, 100, 125, 160, 200, 250, 315, 400, 500, 630, 800, 1000, 1250, 1600, 2000,
             2500, 3150, 4000, 5000, 6300, 8000, 10000, 12500, 16000, 20000)
 
@@ -773,7 +774,7 @@ def _pattern(p: Any, fld: str, veh: Mapping[str, Any]) -> dict[str, Any]:
 
 # =========================================================================== flying
 
-_MAX_CLIMB_ANGLE = math.radians(12.0)
+_MAX_CLIMB_ANGLE = math.radians(6.0)
 
 
 def _fly(fl: Mapping[str, Any], dt: float) -> PathBuilder:
@@ -848,9 +849,10 @@ def _state(sc: Scenario, fl: Mapping[str, Any], index: int) -> _Flight:
     pw = veh["power"]
     vr = np.maximum(airspeed, 0.3 * veh["cruise_speed_m_s"]) / veh["cruise_speed_m_s"]
     nload2 = 1.0 / np.cos(bank) ** 2
-    climb_w = veh["mass_kg"] * G * p["vz"] / pw["efficiency"]
+    # climbing costs m g vz / efficiency; descending gives back only part of m g |vz| (throttle reduced)
+    climb_w = veh["mass_kg"] * G * p["vz"] * np.where(p["vz"] > 0, 1.0 / pw["efficiency"], 0.5 * pw["efficiency"])
     cruise = pw["cruise_w"] * (pw["parasitic_fraction"] * vr ** 3 + (1 - pw["parasitic_fraction"]) * nload2 / vr)
-    vert = pw["hover_w"] + np.where(p["vz"] > 0, climb_w, 0.3 * climb_w)
+    vert = pw["hover_w"] + climb_w
     frac = np.clip(p["speed"] / veh["cruise_speed_m_s"], 0.0, 1.0)
     power = np.select([phase == "horizontal", phase == "transition"],
                       [cruise + climb_w, frac * (cruise + climb_w) + (1 - frac) * pw["hover_w"]], vert)
@@ -1062,7 +1064,7 @@ class SimulationResult:
                 "phases": [{"t0": a, "t1": b, "phase": ph} for a, b, ph in fl.phases],
                 "events": [{"t0": e["t_s"], "t1": e["t_s"] + e["duration_s"], "peak_dba": e["peak_dba"]}
                            for e in fl.events],
-                "blocks": {mid: {"t": _r(mf.t, 4), "LA": _r(mf.la, 3), "LA_clean": _r(mf.la_clean, 3),
+                "blocks": {mid: {"t": _r(mf.t, 4), "LA": _r(mf.la, 2), "LA_clean": _r(mf.la_clean, 3),
                                  "LA_uav": _r(mf.la_uav, 3)} for mid, mf in self.levels[fl.id].items()},
             }
         return {"schema": TRUTH_SCHEMA, "software": f"gisnoise {__version__}",
@@ -1075,6 +1077,22 @@ class SimulationResult:
                                           "height_m": m["height_m"], "mount": m["mount"]}
                                 for m in doc["microphones"]},
                 "effects": eff, "flights": flights}
+
+
+def dumps_truth(truth: Mapping[str, Any]) -> str:
+    """``truth.json`` text: indented, with each block-level array on one line."""
+    doc = copy.deepcopy(dict(truth))
+    arrays: dict[str, str] = {}
+    for fid, fl in doc.get("flights", {}).items():
+        for mid, blk in fl.get("blocks", {}).items():
+            for k, v in blk.items():
+                key = f"@@{fid}/{mid}/{k}@@"
+                arrays[key] = json.dumps(v, separators=(",", ":"), allow_nan=False)
+                blk[k] = key
+    text = json.dumps(doc, indent=1, allow_nan=False)
+    for key, v in arrays.items():
+        text = text.replace(json.dumps(key), v)
+    return text + "\n"
 
 
 def _r(a: np.ndarray, nd: int) -> list[float | None]:
@@ -1118,7 +1136,8 @@ def _campaign_doc(res: SimulationResult) -> dict[str, Any]:
     for m in doc["microphones"]:
         lat, lon, h = sc.frame.to_wgs84(m["e"], m["n"], m["height_m"])
         mics.append({"id": m["id"], "lat": round(float(lat), 9), "lon": round(float(lon), 9),
-                     "h": round(float(h), 4), "mount": m["mount"], "sensitivity_v_per_pa": m["sensitivity_v_per_pa"]})
+                     "h": round(float(h), 4), "height_agl_m": m["height_m"], "mount": m["mount"],
+                     "sensitivity_v_per_pa": m["sensitivity_v_per_pa"]})
     return {"schema": "gisnoise/campaign/1", "name": doc["name"],
             "origin": dict(doc["origin"]), "speed_of_sound_m_s": doc["speed_of_sound_m_s"],
             "weather": dict(doc["weather"]),
@@ -1140,7 +1159,7 @@ def _log_trajectory(res: SimulationResult, fl: _Flight) -> Any:
 def _write_levels_csv(path: Path, mf: _MicFlight, labels: list[str], with_bands: bool) -> None:
     cols = ["t", "LA"] + ([f"L_{lb}" for lb in labels] if with_bands else [])
     data = np.column_stack([mf.t, mf.la] + ([mf.bands] if with_bands else []))
-    fmt = ["%.4f"] + ["%.2f"] * (data.shape[1] - 1)
+    fmt = ["%.4f", "%.2f"] + ["%.1f"] * (data.shape[1] - 2)
     np.savetxt(path, data, fmt=fmt, delimiter=",", header=",".join(cols), comments="")
 
 
@@ -1270,13 +1289,14 @@ def simulate(scenario: Mapping[str, Any] | str | os.PathLike[str], out_dir: str 
             m = mics[mid]
             pr = synthesize_wav(mf.bands, res.band_f, op["block_s"], op["fs_hz"],
                                 _rng(sc.seed, fi, 5000 + list(mics).index(mid)))
-            gain = (_GROUND_PLATE_GAIN if m["mount"] == "ground_plate" else 1.0) * m["sensitivity_v_per_pa"]
+            # undo the reader's mount correction (ground plate: pressure doubling) and calibrate to volts
+            gain = 10.0 ** (-float(_acoustics().mount_correction(m["mount"])) / 20.0) * m["sensitivity_v_per_pa"]
             _write_wav(d / f"{fl.id}.wav", pr, op["fs_hz"], gain)
         else:
             _write_levels_csv(d / f"{fl.id}.csv", mf, res.band_labels, op["bands"])
         if progress:
             progress((0.5 if wav else 0.9) + (0.45 if wav else 0.05) * (k + 1) / len(items))
-    (out / "truth.json").write_text(json.dumps(res.truth(), indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    (out / "truth.json").write_text(dumps_truth(res.truth()), encoding="utf-8")
     if progress:
         progress(1.0)
     return out
@@ -1299,17 +1319,19 @@ def _solve_emission(t_r: np.ndarray, tl: np.ndarray, pos: np.ndarray, mic: np.nd
 
 
 def simulate_samples(scenario: Mapping[str, Any] | str | os.PathLike[str] | SimulationResult, *,
-                     base_dir: str | os.PathLike[str] | None = None) -> Samples:
+                     base_dir: str | os.PathLike[str] | None = None, snr_db: float = 3.0) -> Samples:
     """The :class:`~gisnoise.samples.Samples` table of a simulated campaign, without files.
 
     Same physics and random draws as :func:`simulate`; the table is built the way
     the campaign reader builds it from the written files: the emission time of each
     block centre is solved against the *logged* trajectory (so log noise and an
     injected clock offset act as they would), the logged state is interpolated at
-    it (angles on the circle), distance and emission angles follow.  Rows whose
-    emission time falls outside the log are left out.  ``level`` is the measured
-    (noisy) free-field LA, not absorption-corrected; ``bands`` the measured band
-    levels; ``background_db`` the scenario's background level; every row is valid.
+    it (angles on the circle), distance and emission angles follow.  ``level`` is the
+    measured (noisy) free-field LA, not absorption-corrected; ``bands`` the measured
+    band levels; ``background_db`` the scenario's background level (known here, not
+    estimated).  Masks as the reader sets them: ``outside_flight`` (emission time
+    outside the log) and ``low_snr`` (level below background + ``snr_db``); transient
+    events are *not* flagged (finding them is the reader's and the diagnosis' job).
 
     Parameters
     ----------
@@ -1317,6 +1339,8 @@ def simulate_samples(scenario: Mapping[str, Any] | str | os.PathLike[str] | Simu
         Scenario document, its JSON file, or the result of :func:`run`.
     base_dir : path, optional
         Folder card paths are relative to.
+    snr_db : float
+        Margin of the ``low_snr`` mask above the background, dB.
     """
     if isinstance(scenario, (str, os.PathLike)):
         scenario = load_scenario(scenario)
@@ -1338,35 +1362,40 @@ def simulate_samples(scenario: Mapping[str, Any] | str | os.PathLike[str] | Simu
             mf = res.levels[fl.id][m["id"]]
             mic = np.array([m["e"], m["n"], m["height_m"]])
             te = _solve_emission(mf.t, tl, pos, mic, sc.c)
-            keep = (te >= tl[0]) & (te <= tl[-1])
-            te, t_r = te[keep], mf.t[keep]
+            t_r = mf.t
             x = np.stack([np.interp(te, tl, pos[:, k]) for k in range(3)], axis=1)
             yaw, pitch, roll = (_interp_angle(te, tl, lg[k]) for k in ("yaw", "pitch", "roll"))
             r = mic - x
             d, phi, theta = emission_angles(r[:, 0], r[:, 1], r[:, 2], yaw, pitch, roll)
             idx = np.clip(np.searchsorted(tl, te, side="right") - 1, 0, len(tl) - 1)
             n = len(te)
+            bg = doc["background"]["level_dba"]
+            reason = np.where(mf.la < bg + snr_db, "low_snr", "")
+            reason = np.where((te < tl[0]) | (te > tl[-1]), "outside_flight", reason)
             put(mic=np.full(n, m["id"], dtype=object), flight=np.full(n, fl.id, dtype=object), t_r=t_r, t_e=te,
-                level=mf.la[keep], d=d, phi=phi, theta=theta, power_w=np.interp(te, tl, lg["power_w"]),
+                level=mf.la, d=d, phi=phi, theta=theta, power_w=np.interp(te, tl, lg["power_w"]),
                 phase=lg["phase"][idx], roll=np.degrees(roll), pitch=np.degrees(pitch), yaw=np.degrees(yaw),
                 uav_enu=x, mic_enu=np.broadcast_to(mic, (n, 3)),
                 vel_enu=np.stack([np.interp(te, tl, vel[:, k]) for k in range(3)], axis=1),
                 rpm=np.interp(te, tl, lg["rpm"]), airspeed_m_s=np.interp(te, tl, lg["airspeed_m_s"]),
-                bands=mf.bands[keep], background_db=np.full(n, doc["background"]["level_dba"]))
+                bands=mf.bands, background_db=np.full(n, bg), reason=reason)
     cat = {k: np.concatenate(v) for k, v in rows.items()}
-    n = len(cat["level"])
+    reason = cat["reason"].astype(str)
+    cdoc = _campaign_doc(res)
     meta = {"source": "simulate", "scenario": doc["name"], "origin": dict(doc["origin"]),
-            "weather": dict(doc["weather"]), "speed_of_sound_m_s": sc.c,
-            "reference_power_w": doc["vehicle"]["reference_power_w"], "block_s": doc["output"]["block_s"],
-            "noise_std_db": {m["id"]: m["noise_std_db"] for m in doc["microphones"]},
-            "mount": {m["id"]: m["mount"] for m in doc["microphones"]}}
+            "weather": dict(doc["weather"]), "vehicle": dict(cdoc["vehicle"]),
+            "reference_power_w": doc["vehicle"]["reference_power_w"], "speed_of_sound_m_s": sc.c,
+            "absorption_corrected": False, "snr_db": snr_db, "block_s": doc["output"]["block_s"],
+            "flights": {f["id"]: {"start_utc": f["start_utc"]} for f in cdoc["flights"]},
+            "microphones": {m["id"]: {k: m[k] for k in ("lat", "lon", "h", "mount", "height_agl_m")}
+                            for m in cdoc["microphones"]},
+            "noise_std_db": {m["id"]: m["noise_std_db"] for m in doc["microphones"]}}
     return Samples(mic=cat["mic"].astype(str), flight=cat["flight"].astype(str), t_r=cat["t_r"], t_e=cat["t_e"],
                    level=cat["level"], d=cat["d"], phi=cat["phi"], theta=cat["theta"], power_w=cat["power_w"],
                    phase=cat["phase"].astype(str), roll=cat["roll"], pitch=cat["pitch"], yaw=cat["yaw"],
                    uav_enu=cat["uav_enu"], mic_enu=np.array(cat["mic_enu"]), vel_enu=cat["vel_enu"],
-                   valid=np.ones(n, dtype=bool), mask_reason=np.full(n, "", dtype=object).astype(str),
-                   rpm=cat["rpm"], airspeed_m_s=cat["airspeed_m_s"], band_f=res.band_f.copy(), bands=cat["bands"],
-                   background_db=cat["background_db"], meta=meta)
+                   valid=reason == "", mask_reason=reason, rpm=cat["rpm"], airspeed_m_s=cat["airspeed_m_s"],
+                   band_f=res.band_f.copy(), bands=cat["bands"], background_db=cat["background_db"], meta=meta)
 
 
 def scenario_copy(scenario: Mapping[str, Any], **changes: Any) -> dict[str, Any]:
