@@ -1,0 +1,138 @@
+"""Access to the gisnoise core from inside QGIS.
+
+The built plugin carries the core in the folder ``ext`` next to this file and,
+in ``vendor/<module>``, the packages the core needs that QGIS's Python may lack
+or have too old (``vendor/bundled.json`` lists them with the minimum version the
+core needs).  :func:`ensure_core` puts ``ext`` first on ``sys.path`` (the core
+the plugin was built with wins over any other), puts a bundled package on the
+path only when QGIS's own copy is missing or too old, and checks the compiled
+packages QGIS must provide, so that an algorithm fails with one message naming
+each missing package instead of an ImportError deep inside the core.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+import importlib.util
+import json
+import os
+import sys
+
+from qgis.core import QgsMessageLog, QgsProcessingException
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+EXT_DIR = os.path.join(HERE, "ext")
+VENDOR_DIR = os.path.join(HERE, "vendor")
+
+#: Compiled packages QGIS's Python must provide: module, minimum version, Debian package.
+REQUIRED = (
+    ("numpy", "1.24", "python3-numpy"),
+    ("scipy", "1.10", "python3-scipy"),
+    ("pyproj", "3.4", "python3-pyproj"),
+    ("rasterio", "1.3", "python3-rasterio"),
+    ("contourpy", "1.0", "python3-contourpy"),
+)
+
+_ready = False
+
+
+def version_tuple(text: str) -> tuple[int, ...]:
+    """``"2.0.1"`` -> ``(2, 0, 1)``; stops at the first part without digits."""
+    out = []
+    for part in str(text).split(".")[:3]:
+        digits = ""
+        for ch in part:
+            if not ch.isdigit():
+                break
+            digits += ch
+        if not digits:
+            break
+        out.append(int(digits))
+    return tuple(out)
+
+
+def installed_version(module: str) -> str | None:
+    """Version of ``module`` in this Python without importing it; None when absent."""
+    loaded = sys.modules.get(module)
+    if loaded is not None:
+        return str(getattr(loaded, "__version__", "0"))
+    if importlib.util.find_spec(module) is None:
+        return None
+    for dist in importlib.metadata.packages_distributions().get(module, ()):
+        try:
+            return importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    return str(getattr(importlib.import_module(module), "__version__", "0"))
+
+
+def bundled() -> list[dict]:
+    """The packages the built plugin bundles (empty when running from the sources)."""
+    path = os.path.join(VENDOR_DIR, "bundled.json")
+    if not os.path.exists(path):
+        return []
+    with open(path, encoding="utf-8") as fh:
+        return json.load(fh)
+
+
+def _use_bundled(problems: list[str]) -> None:
+    for item in bundled():
+        module, minimum = item["module"], item["minimum"]
+        have = installed_version(module)
+        if have is not None and version_tuple(have) >= version_tuple(minimum):
+            continue
+        folder = os.path.join(VENDOR_DIR, module)
+        if module in sys.modules:
+            problems.append(f"{module} {have} is already loaded in this QGIS but the core needs >= {minimum}; "
+                            f"the plugin bundles {item['version']}: restart QGIS to use it")
+            continue
+        if folder not in sys.path:
+            sys.path.insert(0, folder)
+        QgsMessageLog.logMessage(f"using the bundled {module} {item['version']} (QGIS has "
+                                 f"{have or 'none'}, the core needs >= {minimum})", "gisnoise")
+
+
+def missing_requirements() -> list[str]:
+    """One line per compiled requirement that is absent or too old in this Python."""
+    problems = []
+    for module, minimum, debian in REQUIRED:
+        have = installed_version(module)
+        if have is None:
+            problems.append(f"{module} >= {minimum} is not installed (Debian/Ubuntu: {debian})")
+        elif version_tuple(have) < version_tuple(minimum):
+            problems.append(f"{module} {have} is older than {minimum} (Debian/Ubuntu: {debian})")
+    return problems
+
+
+def ensure_core():
+    """Make ``gisnoise`` importable and check what it needs.
+
+    Returns
+    -------
+    module
+        The ``gisnoise`` package.
+
+    Raises
+    ------
+    QgsProcessingException
+        Naming every missing or too old package, or the core itself.
+    """
+    global _ready
+    if not _ready:
+        if os.path.isdir(EXT_DIR) and EXT_DIR not in sys.path:
+            sys.path.insert(0, EXT_DIR)
+        problems = missing_requirements()
+        _use_bundled(problems)
+        if problems:
+            raise QgsProcessingException("gisnoise needs these Python packages in QGIS's Python: "
+                                         + "; ".join(problems))
+    try:
+        gisnoise = importlib.import_module("gisnoise")
+        importlib.import_module("gisnoise.contour")
+    except ImportError as exc:
+        raise QgsProcessingException(
+            f"the gisnoise core is not importable in QGIS's Python ({exc}); install the plugin from the zip "
+            "made by scripts/build-plugin, which bundles it") from None
+    _ready = True
+    return gisnoise

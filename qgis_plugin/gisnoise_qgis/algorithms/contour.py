@@ -1,0 +1,296 @@
+"""Noise grid and contours of a trajectory: ``gisnoise.contour.make_map`` in QGIS."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+
+from qgis.core import (
+    QgsCoordinateReferenceSystem,
+    QgsFeature,
+    QgsFeatureSink,
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterCrs,
+    QgsProcessingParameterDefinition,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterFile,
+    QgsProcessingParameterMultipleLayers,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterDestination,
+    QgsProcessingParameterRasterLayer,
+    QgsProcessingParameterString,
+    QgsProcessingUtils,
+    QgsVectorLayer,
+    QgsWkbTypes,
+)
+
+from . import styles
+from .base import FeedbackProgress, GisnoiseAlgorithm
+from .layers import trajectory_columns
+
+METRICS = ("LAmax", "LAeq", "SEL")
+
+
+class NoiseMapAlgorithm(GisnoiseAlgorithm):
+    """Noise grid (GeoTIFF, one band per metric) and contours (isobands, isolines)."""
+
+    TRAJECTORY = "TRAJECTORY"
+    TRAJECTORY_FILE = "TRAJECTORY_FILE"
+    TIME_FIELD = "TIME_FIELD"
+    ALTITUDE_FIELD = "ALTITUDE_FIELD"
+    ROLL_FIELD = "ROLL_FIELD"
+    PITCH_FIELD = "PITCH_FIELD"
+    YAW_FIELD = "YAW_FIELD"
+    POWER_FIELD = "POWER_FIELD"
+    PHASE_FIELD = "PHASE_FIELD"
+    CARDS = "CARDS"
+    RESOLUTION = "RESOLUTION"
+    MARGIN = "MARGIN"
+    LEVELS = "LEVELS"
+    METRICS = "METRICS"
+    CONTOUR_METRIC = "CONTOUR_METRIC"
+    RECEIVER_HEIGHT = "RECEIVER_HEIGHT"
+    DEM = "DEM"
+    CRS = "CRS"
+    BACKGROUND = "BACKGROUND"
+    GROUND_HEIGHT = "GROUND_HEIGHT"
+    PERIOD = "PERIOD"
+    THRESHOLD = "THRESHOLD"
+    SNAPSHOT_T = "SNAPSHOT_T"
+    OUTPUT_RASTER = "OUTPUT_RASTER"
+    OUTPUT_BANDS = "OUTPUT_BANDS"
+    OUTPUT_LINES = "OUTPUT_LINES"
+
+    GROUP = "Noise maps"
+    GROUP_ID = "maps"
+
+    def name(self):
+        return "noisemap"
+
+    def displayName(self):  # noqa: N802 - QGIS API
+        return "Noise grid and contours of a trajectory"
+
+    def shortHelpString(self):  # noqa: N802 - QGIS API
+        return (
+            "A-weighted levels of a drone flying a trajectory, from model cards (one per flight phase), "
+            "on a grid of receivers around it.\n\n"
+            "Trajectory: a point layer (one feature per log sample with time in s, height in m (WGS84 "
+            "ellipsoidal; a field or the points' Z), roll, pitch, yaw in deg, electric power in W, phase), "
+            "a line layer (one sample per vertex: Z = height, M = time; attitude, power and phase from the "
+            "feature's fields; yaw along the line unless a yaw field is given), or a flight CSV / GeoJSON "
+            "trajectory file as the gisnoise command line reads it.\n\n"
+            "Outputs: a GeoTIFF with one band per metric (LAmax, LAeq over the flight, SEL), "
+            "isobands and isolines of the chosen levels (properties metric and level), "
+            "styled with graduated colours by level."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802 - QGIS API
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            self.TRAJECTORY, "Trajectory layer (points or lines)",
+            [QgsProcessing.TypeVectorPoint, QgsProcessing.TypeVectorLine], optional=True))
+        self.addParameter(QgsProcessingParameterFile(
+            self.TRAJECTORY_FILE, "or a trajectory file (flight CSV or GeoJSON)",
+            behavior=QgsProcessingParameterFile.File, optional=True,
+            fileFilter="Trajectories (*.csv *.geojson *.json);;All files (*)"))
+        for key, label, default, ftype in (
+            (self.TIME_FIELD, "Time field (s; empty for lines: M values)", "t", QgsProcessingParameterField.Numeric),
+            (self.ALTITUDE_FIELD, "Height field (m, ellipsoidal; empty: geometry Z)", "h",
+             QgsProcessingParameterField.Numeric),
+            (self.ROLL_FIELD, "Roll field (deg; empty: 0)", "roll", QgsProcessingParameterField.Numeric),
+            (self.PITCH_FIELD, "Pitch field (deg; empty: 0)", "pitch", QgsProcessingParameterField.Numeric),
+            (self.YAW_FIELD, "Yaw field (deg from north; empty for lines: along the line)", "yaw",
+             QgsProcessingParameterField.Numeric),
+            (self.POWER_FIELD, "Electric power field (W)", "power_w", QgsProcessingParameterField.Numeric),
+            (self.PHASE_FIELD, "Flight phase field (empty: horizontal)", "phase", QgsProcessingParameterField.Any),
+        ):
+            self.addParameter(QgsProcessingParameterField(
+                key, label, defaultValue=default, parentLayerParameterName=self.TRAJECTORY, type=ftype,
+                optional=True))
+        self.addParameter(QgsProcessingParameterMultipleLayers(
+            self.CARDS, "Model cards (JSON, one per phase)", layerType=QgsProcessing.TypeFile))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.RESOLUTION, "Cell size (m)", QgsProcessingParameterNumber.Double, 10.0, minValue=0.01))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MARGIN, "Margin around the trajectory (m)", QgsProcessingParameterNumber.Double, 500.0,
+            minValue=0.0))
+        self.addParameter(QgsProcessingParameterString(
+            self.LEVELS, "Contour levels (dB(A), comma separated)", "45,50,55,60,65"))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.METRICS, "Metrics (raster bands)", options=list(METRICS), allowMultiple=True,
+            defaultValue=[0, 1, 2]))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.RECEIVER_HEIGHT, "Receiver height above ground (m)", QgsProcessingParameterNumber.Double, 1.5,
+            minValue=0.0))
+        self.addParameter(QgsProcessingParameterRasterLayer(
+            self.DEM, "Ground elevation (DEM; empty: flat ground at the trajectory's lowest point)", optional=True))
+        self.addParameter(QgsProcessingParameterCrs(
+            self.CRS, "Grid CRS (projected, metres; empty: local UTM zone)", optional=True))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.BACKGROUND, "Add the cards' background level", False))
+        for key, label in ((self.GROUND_HEIGHT, "Flat ground height without a DEM (m, ellipsoidal; empty: the "
+                                                "trajectory's lowest point)"),
+                           (self.PERIOD, "LAeq period (s; empty: the trajectory's duration)"),
+                           (self.THRESHOLD, "Time above this level (dB(A); empty: none)"),
+                           (self.SNAPSHOT_T, "Snapshot at this time (s; empty: none)")):
+            param = QgsProcessingParameterNumber(key, label, QgsProcessingParameterNumber.Double, optional=True)
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+            self.addParameter(param)
+        self.addParameter(QgsProcessingParameterRasterDestination(
+            self.OUTPUT_RASTER, "Noise grid"))
+        self.addParameter(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_BANDS, "Noise contours (isobands)", QgsProcessing.TypeVectorPolygon))
+        self.addParameter(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_LINES, "Noise contours (isolines)", QgsProcessing.TypeVectorLine, optional=True,
+            createByDefault=True))
+
+    # ------------------------------------------------------------------ inputs
+    def _trajectory(self, parameters, context, feedback):
+        from gisnoise import trajectory as gtraj
+
+        source = self.parameterAsSource(parameters, self.TRAJECTORY, context)
+        path = self.parameterAsFile(parameters, self.TRAJECTORY_FILE, context)
+        if source is not None and path:
+            raise QgsProcessingException("give either a trajectory layer (TRAJECTORY) or a trajectory file "
+                                         "(TRAJECTORY_FILE), not both")
+        if source is None and not path:
+            raise QgsProcessingException("no trajectory: give a trajectory layer (TRAJECTORY) or a trajectory "
+                                         "file (TRAJECTORY_FILE)")
+        if path:
+            from gisnoise.routes import read_trajectory
+
+            return read_trajectory(path)
+        fields = {col: self.parameterAsString(parameters, key, context)
+                  for col, key in (("t", self.TIME_FIELD), ("h", self.ALTITUDE_FIELD), ("roll", self.ROLL_FIELD),
+                                   ("pitch", self.PITCH_FIELD), ("yaw", self.YAW_FIELD),
+                                   ("power_w", self.POWER_FIELD), ("phase", self.PHASE_FIELD))}
+        layer = self.parameterAsVectorLayer(parameters, self.TRAJECTORY, context)
+        name = layer.name() if layer is not None else "trajectory"
+        cols = trajectory_columns(source, context, feedback, fields=fields, layer_name=name)
+        return gtraj.from_columns(cols, source=f"trajectory layer '{name}'")
+
+    def _cards(self, parameters, context):
+        from gisnoise import cards as gcards
+
+        paths = self.parameterAsFileList(parameters, self.CARDS, context)
+        if not paths:
+            raise QgsProcessingException("no model card given (parameter CARDS)")
+        return [gcards.load(p) for p in paths]
+
+    # ------------------------------------------------------------------ run
+    def compute(self, parameters, context, feedback):
+        from gisnoise.contour import make_map
+        from gisnoise.contours import parse_levels
+
+        levels = parse_levels(self.parameterAsString(parameters, self.LEVELS, context), field="LEVELS")
+        traj = self._trajectory(parameters, context, feedback)
+        cards = self._cards(parameters, context)
+        metric_idx = self.parameterAsEnums(parameters, self.METRICS, context)
+        metrics = tuple(METRICS[i] for i in metric_idx) or METRICS
+        crs = self.parameterAsCrs(parameters, self.CRS, context)
+        crs_text = None
+        if crs.isValid():
+            if crs.isGeographic():
+                raise QgsProcessingException(f"grid CRS (parameter CRS) must be projected in metres, "
+                                             f"got {crs.authid() or crs.description()}")
+            crs_text = crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED)
+        dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
+        dem = dem_layer.source() if dem_layer is not None else None
+        feedback.pushInfo(f"trajectory: {len(traj)} samples over {traj.duration_s:.1f} s; "
+                          f"cards: {', '.join(c.id for c in cards)}")
+
+        steps = FeedbackProgress(feedback, 10.0, 90.0)
+        work = tempfile.mkdtemp(prefix="gisnoise_", dir=QgsProcessingUtils.tempFolder())
+        kw = {"background": True} if self.parameterAsBoolean(parameters, self.BACKGROUND, context) else {}
+        for key, name in ((self.GROUND_HEIGHT, "ground_h"), (self.PERIOD, "period_s"), (self.THRESHOLD, "threshold_db"),
+                          (self.SNAPSHOT_T, "snapshot_t")):
+            if parameters.get(key) not in (None, ""):
+                kw[name] = self.parameterAsDouble(parameters, key, context)
+        paths = make_map(
+            traj, cards, work,
+            resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
+            margin_m=self.parameterAsDouble(parameters, self.MARGIN, context),
+            levels=levels, metrics=metrics, crs=crs_text, dem=dem,
+            receiver_height=self.parameterAsDouble(parameters, self.RECEIVER_HEIGHT, context),
+            uncertainty=False, plot=False, progress=steps.progress, cancel=steps.cancel, **kw)
+        tif, geojson = os.fspath(paths["levels"]), os.fspath(paths["contours"])
+
+        raster_out = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)
+        _write_raster(tif, raster_out)
+        feedback.setProgress(92.0)
+        results = {self.OUTPUT_RASTER: raster_out}
+        bands, lines = _contour_layers(geojson)
+        for key, layer in ((self.OUTPUT_BANDS, bands), (self.OUTPUT_LINES, lines)):
+            dest = self._copy_to_sink(parameters, key, layer, context, feedback)
+            if dest:
+                results[key] = dest
+        feedback.setProgress(98.0)
+        self._style_outputs(results, context, levels, metrics)
+        return results
+
+    def _copy_to_sink(self, parameters, key, layer, context, feedback):
+        sink, dest = self.parameterAsSink(parameters, key, context, layer.fields(),
+                                          QgsWkbTypes.multiType(layer.wkbType()), layer.crs())
+        if sink is None and key == self.OUTPUT_LINES and not dest:
+            return None  # optional output not wanted
+        if sink is None:
+            raise QgsProcessingException(self.invalidSinkError(parameters, key))
+        for feat in layer.getFeatures():
+            if feedback.isCanceled():
+                raise QgsProcessingException("cancelled by the user")
+            out = QgsFeature(feat)
+            if not sink.addFeature(out, QgsFeatureSink.FastInsert):
+                raise QgsProcessingException(f"cannot write a contour feature to {dest}: {sink.lastError()}")
+        return dest
+
+    def _style_outputs(self, results, context, levels, metrics):
+        for key, post in ((self.OUTPUT_RASTER, styles.RasterStyle(levels, metrics)),
+                          (self.OUTPUT_BANDS, styles.ContourStyle(levels, polygons=True)),
+                          (self.OUTPUT_LINES, styles.ContourStyle(levels, polygons=False))):
+            dest = results.get(key)
+            if dest and context.willLoadLayerOnCompletion(dest):
+                details = context.layerToLoadOnCompletionDetails(dest)
+                details.setPostProcessor(styles.keep(post))
+
+
+def _write_raster(tif, dest):
+    """Copy the core's GeoTIFF to ``dest``; other formats through GDAL."""
+    folder = os.path.dirname(dest)
+    if folder:
+        os.makedirs(folder, exist_ok=True)
+    if dest.lower().endswith((".tif", ".tiff")):
+        shutil.copyfile(tif, dest)
+        return
+    from osgeo import gdal
+
+    from qgis.core import QgsRasterFileWriter
+
+    driver = QgsRasterFileWriter.driverForExtension(os.path.splitext(dest)[1])
+    if not driver:
+        raise QgsProcessingException(f"no raster format for the output {dest!r} (parameter OUTPUT_RASTER)")
+    out = gdal.Translate(dest, tif, format=driver)
+    if out is None:
+        raise QgsProcessingException(f"GDAL could not write {dest!r} as {driver}")
+    out = None
+
+
+def _contour_layers(geojson):
+    """The core's contours as two memory-free OGR layers: isobands (polygons) and isolines (lines)."""
+    layers = []
+    for geometry in ("Polygon", "LineString"):
+        layer = QgsVectorLayer(f"{geojson}|geometrytype={geometry}", f"contours {geometry}", "ogr")
+        if not layer.isValid():
+            raise QgsProcessingException(f"cannot read the contours the core wrote ({geojson})")
+        layers.append(layer)
+    bands, lines = layers
+    if QgsWkbTypes.geometryType(bands.wkbType()) != QgsWkbTypes.PolygonGeometry:
+        raise QgsProcessingException("the core's contours hold no isobands")
+    return bands, lines
+
+
+__all__ = ["NoiseMapAlgorithm"]

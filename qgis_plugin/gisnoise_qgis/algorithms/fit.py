@@ -1,0 +1,92 @@
+"""Fit a model card to a measurement campaign: ``gisnoise.fit.fit_campaign`` in QGIS."""
+
+from __future__ import annotations
+
+from qgis.core import (
+    QgsProcessingException,
+    QgsProcessingOutputNumber,
+    QgsProcessingOutputString,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFile,
+    QgsProcessingParameterFileDestination,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterString,
+)
+
+from .base import GisnoiseAlgorithm, output_path
+
+#: Flight phases (SPEC section 1); the core checks them again.
+PHASES = ("horizontal", "climb", "sink", "hover", "transition")
+
+
+class FitCardAlgorithm(GisnoiseAlgorithm):
+    """Output-error maximum-likelihood fit of one flight phase; writes a model card."""
+
+    CAMPAIGN = "CAMPAIGN"
+    PHASE = "PHASE"
+    ANSATZ = "ANSATZ"
+    MAX_ITER = "MAX_ITER"
+    OUTPUT_CARD = "OUTPUT_CARD"
+    RMS_DB = "RMS_DB"
+    N_SAMPLES = "N_SAMPLES"
+    CARD_ID = "CARD_ID"
+
+    GROUP = "Model cards"
+    GROUP_ID = "cards"
+
+    def name(self):
+        return "fitcard"
+
+    def displayName(self):  # noqa: N802 - QGIS API
+        return "Fit a model card to a campaign"
+
+    def shortHelpString(self):  # noqa: N802 - QGIS API
+        return (
+            "Identifies the emission model of one flight phase from a measurement campaign folder "
+            "(campaign.json, flights/, mics/) with the output-error method and a maximum-likelihood "
+            "estimator (one noise variance per microphone), and writes a model card (JSON) holding the "
+            "parameters, their covariance, the fit statistics and the provenance.\n\n"
+            "Outputs: the card file, the rms residual (dB) and the number of samples used."
+        )
+
+    def initAlgorithm(self, config=None):  # noqa: N802 - QGIS API
+        self.addParameter(QgsProcessingParameterFile(
+            self.CAMPAIGN, "Campaign folder", behavior=QgsProcessingParameterFile.Folder))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.PHASE, "Flight phase", options=list(PHASES), defaultValue=0))
+        self.addParameter(QgsProcessingParameterString(
+            self.ANSATZ, "Ansatz (registry name)", defaultValue="paper-offset"))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_ITER, "Maximum Gauss-Newton iterations", QgsProcessingParameterNumber.Integer, 100,
+            minValue=1, maxValue=10000))
+        self.addParameter(QgsProcessingParameterFileDestination(
+            self.OUTPUT_CARD, "Model card", fileFilter="Model card (*.json)"))
+        self.addOutput(QgsProcessingOutputNumber(self.RMS_DB, "rms residual (dB)"))
+        self.addOutput(QgsProcessingOutputNumber(self.N_SAMPLES, "samples used"))
+        self.addOutput(QgsProcessingOutputString(self.CARD_ID, "card id"))
+
+    def compute(self, parameters, context, feedback):
+        from gisnoise import cards as gcards
+        from gisnoise.fit import fit_campaign
+
+        folder = self.parameterAsFile(parameters, self.CAMPAIGN, context)
+        if not folder:
+            raise QgsProcessingException("no campaign folder given (parameter CAMPAIGN)")
+        phase = PHASES[self.parameterAsEnum(parameters, self.PHASE, context)]
+        ansatz = self.parameterAsString(parameters, self.ANSATZ, context).strip()
+        max_iter = self.parameterAsInt(parameters, self.MAX_ITER, context)
+        dest = output_path(self, parameters, self.OUTPUT_CARD, context)
+
+        def progress(iteration, cost):
+            feedback.setProgress(min(100.0 * iteration / max_iter, 99.0))
+            feedback.pushDebugInfo(f"iteration {iteration}: negative log-likelihood {cost:.4f}")
+
+        feedback.pushInfo(f"fitting ansatz {ansatz!r} to the {phase} samples of {folder}")
+        result = fit_campaign(folder, phase, ansatz=ansatz, max_iter=max_iter, progress=progress,
+                              cancel=feedback.isCanceled)
+        feedback.pushInfo(result.summary())
+        card = result.to_card()
+        gcards.save(card, dest)
+        feedback.setProgress(100.0)
+        return {self.OUTPUT_CARD: dest, self.RMS_DB: result.rms_db, self.N_SAMPLES: int(result.n),
+                self.CARD_ID: card.id}

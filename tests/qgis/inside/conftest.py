@@ -1,0 +1,158 @@
+"""A headless QGIS with the plugin installed from the built zip into a fresh profile.
+
+Runs in QGIS's own Python (started by tests/qgis/test_qgis_plugin.py).  The
+session builds the zip with scripts/build-plugin, unzips it into a new profile
+folder, starts QGIS offscreen with that profile, initialises Processing and
+registers the provider through the plugin's own ``classFactory``.
+"""
+
+import csv
+import math
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+REPO = Path(os.environ.get("GISNOISE_REPO") or Path(__file__).resolve().parents[3])
+CARDS = REPO / "sample_data" / "cards"
+PLUGIN = "gisnoise_qgis"
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+
+@pytest.fixture(scope="session")
+def plugin_zip(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dist")
+    r = subprocess.run([sys.executable, str(REPO / "scripts" / "build-plugin"), "--out", str(out)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return Path(r.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(scope="session")
+def profile(tmp_path_factory, plugin_zip):
+    """A fresh QGIS settings folder whose default profile has the plugin installed from the zip."""
+    root = tmp_path_factory.mktemp("qgis_settings")
+    plugins = root / "profiles" / "default" / "python" / "plugins"
+    plugins.mkdir(parents=True)
+    with zipfile.ZipFile(plugin_zip) as zf:
+        zf.extractall(plugins)
+    return root
+
+
+@pytest.fixture(scope="session")
+def qgis_app(profile):
+    from qgis.core import QgsApplication
+
+    QgsApplication.setPrefixPath("/usr", True)
+    app = QgsApplication([], False, str(profile / "profiles" / "default"))
+    app.initQgis()
+    plugins = os.path.join(QgsApplication.pkgDataPath(), "python", "plugins")
+    if plugins not in sys.path:
+        sys.path.append(plugins)
+    from processing.core.Processing import Processing
+
+    Processing.initialize()
+    yield app
+
+
+@pytest.fixture(scope="session")
+def plugin(qgis_app, profile):
+    """The plugin loaded from the installed zip, its provider registered."""
+    folder = str(profile / "profiles" / "default" / "python" / "plugins")
+    sys.path.insert(0, folder)
+    import gisnoise_qgis
+
+    assert Path(gisnoise_qgis.__file__).resolve().parent == (Path(folder) / PLUGIN).resolve()
+    instance = gisnoise_qgis.classFactory(None)
+    instance.initProcessing()
+    yield instance
+    instance.unload()
+
+
+@pytest.fixture(scope="session")
+def cli():
+    """Runs the gisnoise command line of the project's environment."""
+    exe = os.environ.get("GISNOISE_CLI") or str(REPO / ".venv" / "bin" / "gisnoise")
+
+    def run(*args):
+        r = subprocess.run([exe, "-q", *map(str, args)], capture_output=True, text=True, timeout=300)
+        assert r.returncode == 0, f"gisnoise {' '.join(map(str, args))}: {r.stdout}{r.stderr}"
+        return r
+
+    return run
+
+
+# ---------------------------------------------------------------------- a flight
+LAT0, LON0, H_GROUND = 52.3130, 10.5600, 80.0
+ALT_M = 60.0
+SPEED = 20.0
+POWER_W = 3000.0
+
+
+def straight_flight(n=31, dt=1.0):
+    """A level flight due east at 60 m over flat ground, 20 m/s, 3 kW, phase horizontal.
+
+    Returns the flight-CSV columns (positions from the local ENU frame of the core).
+    """
+    from pyproj import Geod
+
+    geod = Geod(ellps="WGS84")
+    t = [i * dt for i in range(n)]
+    lons, lats, _ = geod.fwd([LON0] * n, [LAT0] * n, [90.0] * n, [SPEED * ti for ti in t])
+    return {"t": t, "lat": list(lats), "lon": list(lons), "h": [H_GROUND + ALT_M] * n, "roll": [0.0] * n,
+            "pitch": [2.0] * n, "yaw": [90.0] * n, "power_w": [POWER_W] * n, "phase": ["horizontal"] * n}
+
+
+def write_csv(path, cols):
+    keys = list(cols)
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(keys)
+        for i in range(len(cols["t"])):
+            w.writerow([cols[k][i] if k == "phase" else repr(float(cols[k][i])) for k in keys])
+    return path
+
+
+@pytest.fixture(scope="session")
+def flight():
+    return straight_flight()
+
+
+@pytest.fixture(scope="session")
+def flight_csv(tmp_path_factory, flight):
+    return write_csv(tmp_path_factory.mktemp("flight") / "flight.csv", flight)
+
+
+MAP_OPTIONS = {"RESOLUTION": 20.0, "MARGIN": 200.0, "LEVELS": "50,55,60,65"}
+
+
+def read_raster(path):
+    """(bands as a float64 array, band descriptions, geotransform, WKT, nodata) through GDAL."""
+    import numpy as np
+    from osgeo import gdal
+
+    ds = gdal.Open(str(path))
+    assert ds is not None, path
+    bands = np.stack([ds.GetRasterBand(i + 1).ReadAsArray().astype(float) for i in range(ds.RasterCount)])
+    names = [ds.GetRasterBand(i + 1).GetDescription() for i in range(ds.RasterCount)]
+    nodata = ds.GetRasterBand(1).GetNoDataValue()
+    out = bands, names, ds.GetGeoTransform(), ds.GetProjection(), nodata
+    ds = None
+    return out
+
+
+def bilinear(array, geotransform, x, y):
+    """Value of a north-up raster at map coordinates, interpolated between cell centres."""
+    x0, dx, _, y0, _, dy = geotransform
+    c = (x - x0) / dx - 0.5
+    r = (y - y0) / dy - 0.5
+    c0, r0 = math.floor(c), math.floor(r)
+    fc, fr = c - c0, r - r0
+    c1, r1 = min(c0 + 1, array.shape[1] - 1), min(r0 + 1, array.shape[0] - 1)
+    top = array[r0, c0] * (1 - fc) + array[r0, c1] * fc
+    bottom = array[r1, c0] * (1 - fc) + array[r1, c1] * fc
+    return top * (1 - fr) + bottom * fr

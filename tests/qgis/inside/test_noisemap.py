@@ -1,0 +1,161 @@
+"""Noise grid and contours through processing.run: the same map as the command line."""
+
+import numpy as np
+import pytest
+from conftest import CARDS, MAP_OPTIONS, bilinear, read_raster
+
+pytestmark = pytest.mark.qgis
+
+CARD = str(CARDS / "demo_horizontal.json")
+LEVELS = [50.0, 55.0, 60.0, 65.0]
+
+
+def run_map(tmp_path, name, **params):
+    import processing
+
+    out = tmp_path / name
+    out.mkdir()
+    return processing.run("gisnoise:noisemap", {
+        "CARDS": [CARD], **MAP_OPTIONS,
+        "OUTPUT_RASTER": str(out / "grid.tif"), "OUTPUT_BANDS": str(out / "bands.gpkg"),
+        "OUTPUT_LINES": str(out / "lines.geojson"), **params})
+
+
+@pytest.fixture(scope="module")
+def csv_map(plugin, flight_csv, tmp_path_factory):
+    return run_map(tmp_path_factory.mktemp("csv_map"), "map", TRAJECTORY_FILE=str(flight_csv))
+
+
+def assert_same_raster(a_path, b_path, atol):
+    from osgeo import osr
+
+    a, names_a, gt_a, wkt_a, nd_a = read_raster(a_path)
+    b, names_b, gt_b, wkt_b, nd_b = read_raster(b_path)
+    assert names_a == names_b == ["LAmax", "LAeq", "SEL"]
+    assert a.shape == b.shape
+    np.testing.assert_allclose(gt_a, gt_b, rtol=0, atol=1e-6)
+    sa, sb = osr.SpatialReference(wkt=wkt_a), osr.SpatialReference(wkt=wkt_b)
+    assert sa.IsSame(sb)
+    assert nd_a == nd_b
+    valid = a != nd_a
+    assert np.array_equal(valid, b != nd_b)
+    assert valid.mean() > 0.9
+    np.testing.assert_allclose(a[valid], b[valid], rtol=0, atol=atol)
+
+
+def test_raster_equals_the_command_line(csv_map, cli, flight_csv, tmp_path):
+    cli("contour", flight_csv, "--card", CARD, "--out", tmp_path / "cli", "--resolution", MAP_OPTIONS["RESOLUTION"],
+        "--margin", MAP_OPTIONS["MARGIN"], "--levels", MAP_OPTIONS["LEVELS"])
+    # same input, same core; only numpy/scipy versions differ between QGIS's Python and the project's
+    assert_same_raster(csv_map["OUTPUT_RASTER"], tmp_path / "cli" / "levels.tif", atol=1e-4)
+
+
+def test_point_layer_in_another_crs_gives_the_csv_map(csv_map, flight, tmp_path):
+    from qgis.core import (
+        QgsCoordinateReferenceSystem,
+        QgsCoordinateTransform,
+        QgsFeature,
+        QgsField,
+        QgsGeometry,
+        QgsPoint,
+        QgsProject,
+        QgsVectorLayer,
+    )
+    from qgis.PyQt.QtCore import QVariant
+
+    layer = QgsVectorLayer("PointZ?crs=EPSG:3857", "flight", "memory")
+    fields = [QgsField(k, QVariant.Double) for k in ("time_s", "roll", "pitch", "yaw", "power_w")]
+    layer.dataProvider().addAttributes(fields + [QgsField("phase", QVariant.String)])
+    layer.updateFields()
+    xform = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:4326"), layer.crs(), QgsProject.instance())
+    feats = []
+    for i in reversed(range(len(flight["t"]))):  # any feature order: the algorithm sorts by time
+        p = xform.transform(flight["lon"][i], flight["lat"][i])
+        f = QgsFeature(layer.fields())
+        f.setGeometry(QgsGeometry(QgsPoint(p.x(), p.y(), flight["h"][i])))
+        f.setAttributes([flight["t"][i], flight["roll"][i], flight["pitch"][i], flight["yaw"][i],
+                         flight["power_w"][i], flight["phase"][i]])
+        feats.append(f)
+    assert layer.dataProvider().addFeatures(feats)[0]
+    res = run_map(tmp_path, "points", TRAJECTORY=layer, TIME_FIELD="time_s", ALTITUDE_FIELD="")
+    # lon/lat through Web Mercator and back: sub-millimetre, far below a hundredth of a decibel
+    assert_same_raster(res["OUTPUT_RASTER"], csv_map["OUTPUT_RASTER"], atol=1e-3)
+
+
+def test_line_layer_with_time_in_m_gives_the_csv_map(csv_map, flight, tmp_path):
+    from qgis.core import QgsFeature, QgsField, QgsGeometry, QgsLineString, QgsPoint, QgsVectorLayer, QgsWkbTypes
+    from qgis.PyQt.QtCore import QVariant
+
+    layer = QgsVectorLayer("LineStringZM?crs=EPSG:4326", "route", "memory")
+    layer.dataProvider().addAttributes([QgsField("roll", QVariant.Double), QgsField("pitch", QVariant.Double),
+                                        QgsField("power_w", QVariant.Double), QgsField("phase", QVariant.String)])
+    layer.updateFields()
+    line = QgsLineString([QgsPoint(flight["lon"][i], flight["lat"][i], flight["h"][i], flight["t"][i],
+                                   QgsWkbTypes.PointZM) for i in range(len(flight["t"]))])
+    f = QgsFeature(layer.fields())
+    f.setGeometry(QgsGeometry(line))
+    f.setAttributes([0.0, 2.0, 3000.0, "horizontal"])
+    assert layer.dataProvider().addFeatures([f])[0]
+    res = run_map(tmp_path, "line", TRAJECTORY=layer, TIME_FIELD="", ALTITUDE_FIELD="", YAW_FIELD="",
+                  ROLL_FIELD="roll", PITCH_FIELD="pitch")
+    # yaw from the track: the geodesic due east turns by 0.007 deg over 600 m at 52 N
+    assert_same_raster(res["OUTPUT_RASTER"], csv_map["OUTPUT_RASTER"], atol=0.01)
+
+
+def _features(path):
+    from qgis.core import QgsVectorLayer
+
+    layer = QgsVectorLayer(str(path), "c", "ogr")
+    assert layer.isValid(), path
+    return layer, list(layer.getFeatures())
+
+
+def test_contours_carry_metric_and_level_and_follow_the_raster(csv_map):
+    from qgis.core import QgsCoordinateReferenceSystem, QgsCoordinateTransform, QgsProject
+
+    grid, names, gt, wkt, nodata = read_raster(csv_map["OUTPUT_RASTER"])
+    bands_layer, bands = _features(csv_map["OUTPUT_BANDS"])
+    lines_layer, lines = _features(csv_map["OUTPUT_LINES"])
+    assert bands_layer.crs().authid() == lines_layer.crs().authid() == "EPSG:4326"
+    for f in bands + lines:
+        assert f["metric"] in names and f["level"] in LEVELS
+    assert {f["kind"] for f in bands} == {"isoband"} and {f["kind"] for f in lines} == {"isoline"}
+    xform = QgsCoordinateTransform(lines_layer.crs(), QgsCoordinateReferenceSystem.fromWkt(wkt),
+                                   QgsProject.instance())
+    for metric_i, metric in enumerate(names):
+        band = grid[metric_i]
+        valid = band[band != nodata]
+        # an isoline of level L exists exactly when the map spans L
+        expected = {lv for lv in LEVELS if valid.min() < lv < valid.max()}
+        got = {f["level"] for f in lines if f["metric"] == metric}
+        assert got == expected, metric
+        for f in lines:
+            if f["metric"] != metric:
+                continue
+            for v in f.geometry().vertices():
+                p = xform.transform(v.x(), v.y())
+                # vertices lie on cell-centre edges, where the grid interpolates linearly
+                assert bilinear(band, gt, p.x(), p.y()) == pytest.approx(f["level"], abs=0.02)
+
+
+def test_loaded_outputs_are_styled_by_level(plugin, flight_csv, tmp_path):
+    import processing
+    from qgis.core import QgsProject
+
+    res = processing.runAndLoadResults("gisnoise:noisemap", {
+        "TRAJECTORY_FILE": str(flight_csv), "CARDS": [CARD], **MAP_OPTIONS,
+        "OUTPUT_RASTER": str(tmp_path / "grid.tif"), "OUTPUT_BANDS": str(tmp_path / "bands.gpkg"),
+        "OUTPUT_LINES": str(tmp_path / "lines.gpkg")})
+    project = QgsProject.instance()
+    raster = project.mapLayer(res["OUTPUT_RASTER"]) or project.mapLayersByName("noise grid (LAmax)")[0]
+    assert raster.renderer().type() == "singlebandpseudocolor"
+    shader = raster.renderer().shader().rasterShaderFunction()
+    assert [round(i.value, 6) for i in shader.colorRampItemList()] == [50.0, 55.0, 60.0, 65.0, float("inf")]
+    vectors = [lyr for lyr in project.mapLayers().values() if lyr.type() == lyr.VectorLayer]
+    assert len(vectors) == 2
+    for lyr in vectors:
+        renderer = lyr.renderer()
+        assert renderer.type() == "graduatedSymbol"
+        assert renderer.classAttribute() == "level"
+        assert [r.lowerValue() for r in renderer.ranges()] == LEVELS
+    project.removeAllMapLayers()
