@@ -36,6 +36,9 @@ ResidualFun = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 VARIANCE_FLOOR_DB2 = 1e-12
 """Smallest noise variance (dB^2) a group may get: keeps weights finite on noise-free data."""
 
+RESIDUAL_FLOOR_DB = 1e-9
+"""Residuals this small (dB) count as zero in the convergence tests (noise-free data)."""
+
 HAC_WINDOW_FACTOR = 2
 """The Bartlett window of the autocorrelation correction reaches lag HAC_WINDOW_FACTOR * K."""
 
@@ -125,7 +128,8 @@ def levenberg_marquardt(
     if not np.isfinite(cost):
         return LMResult(q, r, jac, cost, 0, nfev, False, "the model is not finite at the start values")
     lam, nu = 1e-3, 2.0
-    floor = 1e-300 * max(len(r), 1)
+    # residuals of RESIDUAL_FLOOR_DB are numerically zero: below this cost nothing is left to gain
+    floor = 0.5 * float(np.sum(w)) * RESIDUAL_FLOOR_DB ** 2
     it = 0
     while True:
         _check_cancel(cancel)

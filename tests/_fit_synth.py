@@ -71,10 +71,12 @@ def racetrack(altitudes=(40.0, 90.0, 150.0), speeds=(22.0, 26.0, 30.0), leg_m=70
 
 
 def synthetic_samples(seed=0, truth=None, noise=None, ansatz="paper-offset", ar=0.0, mics=None,
-                      altitudes=(40.0, 90.0, 150.0), speeds=(22.0, 26.0, 30.0), flights=1, **kw):
+                      altitudes=(40.0, 90.0, 150.0), speeds=(22.0, 26.0, 30.0), flights=1, ref_w=REF_W,
+                      p_el_scale=1.0, **kw):
     """Samples of ``flights`` identical racetrack flights with levels from ``truth`` + noise.
 
-    ``ar`` is the AR(1) coefficient of the noise of each microphone (0: white);
+    ``p_el_scale`` multiplies the nondimensional power (with ``ref_w`` the reference
+    power, W).  ``ar`` is the AR(1) coefficient of the noise of each microphone (0: white);
     the marginal standard deviation equals ``noise[mic]``.
     """
     truth = dict(TRUTH if truth is None else truth)
@@ -85,6 +87,7 @@ def synthetic_samples(seed=0, truth=None, noise=None, ansatz="paper-offset", ar=
     seq_traj, seq_noise = np.random.SeedSequence(seed).spawn(2)
     rng = np.random.default_rng(seq_noise)
     traj = racetrack(altitudes=altitudes, speeds=speeds, seed=seq_traj, **kw)
+    traj["p_el"] = traj["p_el"] * p_el_scale
     cols = {k: [] for k in ("mic", "flight", "t", "level", "d", "phi", "theta", "p_el", "roll", "pitch", "yaw",
                             "uav", "mic_enu", "vel", "clean")}
     nt = len(traj["t"])
@@ -118,9 +121,9 @@ def synthetic_samples(seed=0, truth=None, noise=None, ansatz="paper-offset", ar=
     n = len(c["level"])
     samples = Samples(
         mic=c["mic"], flight=c["flight"], t_r=c["t"] + c["d"] / 340.0, t_e=c["t"], level=c["level"], d=c["d"],
-        phi=c["phi"], theta=c["theta"], power_w=c["p_el"] * REF_W, phase=np.full(n, "horizontal"),
+        phi=c["phi"], theta=c["theta"], power_w=c["p_el"] * ref_w, phase=np.full(n, "horizontal"),
         roll=np.degrees(c["roll"]), pitch=np.degrees(c["pitch"]), yaw=np.degrees(c["yaw"]), uav_enu=c["uav"],
         mic_enu=c["mic_enu"], vel_enu=c["vel"], valid=np.ones(n, dtype=bool), mask_reason=np.full(n, ""),
-        meta={"reference_power_w": REF_W},
+        meta={"reference_power_w": ref_w},
     )
     return samples, c["clean"]

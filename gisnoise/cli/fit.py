@@ -1,0 +1,77 @@
+"""``gisnoise fit``: identify a model card from a measurement campaign."""
+
+from __future__ import annotations
+
+import math
+
+import click
+
+from ..cards import PHASES, load, save
+from ..errors import InputError
+from .options import progress
+
+
+def _parse_fix(items: tuple[str, ...]) -> dict[str, float]:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            v = float(value)
+        except ValueError:
+            v = math.nan
+        if not sep or not name or not math.isfinite(v):
+            raise InputError(f"--fix expects NAME=VALUE with a finite number, got {item!r}", field="fix")
+        out[name.strip()] = v
+    return out
+
+
+@click.command("fit")
+@click.argument("campaign", type=click.Path(file_okay=False))
+@click.option("--phase", required=True, type=click.Choice(PHASES), help="Flight phase to fit.")
+@click.option("--ansatz", default=None,
+              help="Ansatz to fit (default: the --start card's, else paper-offset).")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Model card JSON to write.")
+@click.option("--report", "report", type=click.Path(file_okay=False), default=None,
+              help="Folder for the fit report (PNG, JSON numbers, report.html).")
+@click.option("--start", "start", type=click.Path(dir_okay=False), default=None,
+              help="Card with start values; also gives the new card's id, vehicle, served phases and notes.")
+@click.option("--id", "card_id", default=None, help="Card id (default: <vehicle>-<phase> or the --start card's).")
+@click.option("--serves", multiple=True, type=click.Choice(PHASES),
+              help="Further phase the card serves (repeat), e.g. --serves transition.")
+@click.option("--fix", multiple=True, metavar="NAME=VALUE", help="Hold a parameter at a value (repeat).")
+@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading.")
+@click.option("--max-iter", default=100, show_default=True, type=click.IntRange(1, 100000),
+              help="Maximum Gauss-Newton iterations.")
+@click.option("--covariance", type=click.Choice(["corrected", "cramer-rao"]), default="corrected", show_default=True,
+              help="Covariance written to the card: corrected for residual autocorrelation, or the Cramer-Rao bound.")
+@click.pass_context
+def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, out: str, report: str | None,
+            start: str | None, card_id: str | None, serves: tuple[str, ...], fix: tuple[str, ...], absorption: bool,
+            max_iter: int, covariance: str) -> None:
+    """Fit a model card to a measurement campaign (output-error maximum likelihood).
+
+    CAMPAIGN is a campaign folder (campaign.json, flights/, mics/).  The usable samples
+    of --phase are fitted with one noise variance per microphone; the card gets the
+    parameters, their covariance, fit statistics and provenance.  A fit that does not
+    converge, or whose parameters the data cannot tell apart, writes no card and
+    says why.
+    """
+    from ..fit import fit_campaign
+
+    quiet = bool((ctx.find_root().obj or {}).get("quiet"))
+    template = load(start) if start else None
+    name = ansatz or (template.ansatz if template else "paper-offset")
+    fixed = _parse_fix(fix)
+    with progress(ctx, f"fitting {phase}", float(max_iter)) as update:
+        res = fit_campaign(campaign, phase, name, p0=template, fixed=fixed or None, max_iter=max_iter,
+                           progress=lambda i, cost: update(float(i)), read_kw={"absorption": absorption})
+    card = res.to_card(template, id=card_id, phase=phase, phases=list(serves) if serves else None,
+                       covariance=covariance)
+    path = save(card, out)
+    if report:
+        from ..fitreport import write_report
+
+        write_report(res, report)
+    if not quiet:
+        click.echo(res.summary())
+        click.echo(f"wrote {path}" + (f" and the report in {report}" if report else ""))
