@@ -85,7 +85,7 @@ def error_body(message: str, field: str | None, errors: Sequence[dict[str, Any]]
 
 
 def _loc_field(loc: Sequence[Any]) -> str:
-    parts = [str(p) for p in loc]
+    parts = [str(p) for p in loc if p != "[key]"]
     if parts and parts[0] in ("body", "query", "path", "header", "cookie"):
         where, rest = parts[0], parts[1:]
         # a tagged union adds the tag name to the location; users know the field, not the tag

@@ -210,6 +210,9 @@ class ContourRequest(BaseModel):
     levels: list[float] = Field(default=[45.0, 50.0, 55.0, 60.0], min_length=1, max_length=40,
                                 description="Contour levels, dB(A).")
     receiver_height_m: float = Field(default=1.5, ge=0, le=1000, description="Receiver height above ground, m.")
+    ground_h_m: float | None = Field(default=None, ge=-1000, le=9000,
+                                     description="Flat ground's ellipsoidal height, m; default the trajectory's "
+                                                 "lowest point.")
     background: bool = Field(default=False, description="Add the card's background level (Eq. 8).")
     period_s: float | None = Field(default=None, gt=0, le=1e7, description="LAeq period, s (default duration).")
     threshold_db: list[Annotated[float, Field(ge=-50, le=200)]] | None = Field(

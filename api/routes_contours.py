@@ -64,6 +64,21 @@ def _prefixed(prefix: str) -> Iterator[None]:
         raise
 
 
+_CORE_FIELDS = {"resolution_m": "grid.resolution_m", "margin_m": "grid.margin_m", "crs": "grid.crs",
+                "ground_h": "ground_h_m", "receiver_height": "receiver_height_m", "card": "cards", "phase": "cards",
+                "trajectory": "trajectory", "out": "body"}
+"""Core argument names -> request fields, for the errors of ``make_map``."""
+
+
+@contextmanager
+def _core_fields() -> Iterator[None]:
+    try:
+        yield
+    except GisnoiseError as exc:
+        exc.field = _CORE_FIELDS.get(exc.field or "", exc.field or "body")
+        raise
+
+
 def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
     """The trajectory of a request (csv text, columns, rows, GeoJSON or waypoints)."""
     with _prefixed("trajectory"):
@@ -156,10 +171,11 @@ def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest
     """
     from gisnoise.contour import make_map
 
-    with _prefixed("body"):
+    with _core_fields():
         paths = make_map(traj, cards, out_dir, resolution_m=req.grid.resolution_m, margin_m=req.grid.margin_m,
                          levels=tuple(req.levels), metrics=tuple(req.metrics), crs=req.grid.crs, dem=None,
-                         receiver_height=req.receiver_height_m, uncertainty=req.uncertainty, plot=False,
+                         receiver_height=req.receiver_height_m, ground_h=req.ground_h_m,
+                         uncertainty=req.uncertainty, plot=False,
                          period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
                          substeps=req.substeps, background=req.background, progress=progress, cancel=cancel)
     return {"levels.tif": Path(paths["levels"]), "contours.geojson": Path(paths["contours"])}

@@ -141,14 +141,18 @@ function redrawDrawn() {
 }
 
 function waypointsDocument(points, altitude, speed) {
-  // GeoJSON waypoints (SPEC section 7): one Point per waypoint, altitude above ground and speed.
+  // GeoJSON waypoints (SPEC section 7, gisnoise.routes): vertical take-off at the first point, the drawn
+  // points at the cruise altitude above ground, vertical landing at the last point.
+  const point = ([lat, lng], alt) => ({
+    type: "Feature",
+    geometry: { type: "Point", coordinates: [lng, lat] },
+    properties: { alt: alt, speed: speed },
+  });
+  const first = points[0], last = points[points.length - 1];
   return {
     type: "FeatureCollection",
-    features: points.map(([lat, lng]) => ({
-      type: "Feature",
-      geometry: { type: "Point", coordinates: [lng, lat] },
-      properties: { alt: altitude, alt_ref: "agl", speed: speed },
-    })),
+    route: { altitude_reference: "agl" },
+    features: [point(first, 0), ...points.map((p) => point(p, altitude)), point(last, 0)],
   };
 }
 
