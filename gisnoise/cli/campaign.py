@@ -1,0 +1,107 @@
+"""``gisnoise campaign``: check a measurement campaign, turn its WAV files into levels."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+import click
+import numpy as np
+
+from ..campaign import DEFAULT_EVENT_DB, DEFAULT_SNR_DB, inspect_campaign, write_levels
+from .options import progress
+
+campaign_arg = click.argument("campaign", type=click.Path(file_okay=False))
+
+
+@click.group("campaign")
+def command() -> None:
+    """Measurement campaigns: check them, compute levels from audio."""
+
+
+@command.command("check")
+@campaign_arg
+@click.option("--absorption", is_flag=True, help="Apply the atmospheric-absorption correction (needs bands).")
+@click.option("--snr-db", type=float, default=DEFAULT_SNR_DB, show_default=True,
+              help="Rows below background + this (dB) are masked low_snr.")
+@click.option("--event-db", type=float, default=DEFAULT_EVENT_DB, show_default=True,
+              help="Joint rise on all microphones (dB) flagged as an event.")
+@click.pass_context
+def check(ctx: click.Context, campaign: str, absorption: bool, snr_db: float, event_db: float) -> None:
+    """Summary of CAMPAIGN and every problem found (exit status 2 if any).
+
+    \b
+    Example:
+      gisnoise campaign check campaign/
+    """
+    with progress(ctx, "reading campaign", 1.0) as update:
+        camp, problems = inspect_campaign(campaign, absorption=absorption, snr_db=snr_db, event_db=event_db,
+                                          progress=lambda done, total: update(done / max(total, 1.0)))
+    if camp is not None:
+        click.echo(f"Campaign {camp.folder}  origin {camp.origin.lat0:.6f}, {camp.origin.lon0:.6f}, "
+                   f"{camp.origin.h0:.1f} m  c = {camp.speed_of_sound_m_s:.1f} m/s  "
+                   f"reference power {camp.reference_power_w:g} W")
+        s = camp.samples() if camp.levels and not _samples_failed(problems) else None
+        click.echo("")
+        click.echo(f"{'flight':<16}{'log':<24}{'duration_s':>11}{'log_rows':>10}{'blocks':>9}{'valid':>9}  phases")
+        for f in camp.flights:
+            tr = camp.trajectories[f.id]
+            sel = s.flight == f.id if s is not None else np.zeros(0, bool)
+            phases = ", ".join(f"{p} {n}" for p, n in sorted(Counter(tr.phase.tolist()).items()))
+            click.echo(f"{f.id:<16}{_short(f.log):<24}{tr.duration_s:>11.1f}{len(tr):>10d}"
+                       f"{int(sel.sum()):>9d}{int((s.valid[sel]).sum()) if s is not None else 0:>9d}  {phases}")
+        click.echo("")
+        click.echo(f"{'microphone':<16}{'mount':<14}{'files':>6}{'blocks':>9}{'valid':>9}{'background_dB':>15}")
+        for m in camp.microphones:
+            nfiles = sum(1 for lv in camp.levels if lv.mic == m.id)
+            sel = s.mic == m.id if s is not None else np.zeros(0, bool)
+            bg = s.background_db[sel] if s is not None and s.background_db is not None and sel.any() else []
+            bgs = f"{float(bg[0]):.1f}" if len(bg) and np.isfinite(bg[0]) else "-"
+            click.echo(f"{m.id:<16}{m.mount:<14}{nfiles:>6d}{int(sel.sum()):>9d}"
+                       f"{int(s.valid[sel].sum()) if s is not None else 0:>9d}{bgs:>15}")
+        if s is not None:
+            counts = Counter(s.mask_reason[~s.valid].tolist())
+            click.echo("")
+            click.echo(f"samples {len(s)}, valid {int(s.valid.sum())}, masked {int((~s.valid).sum())}"
+                       + ("".join(f", {k} {v}" for k, v in sorted(counts.items())) if counts else ""))
+    if problems:
+        click.echo(f"{len(problems)} problem(s):", err=True)
+        for p in problems:
+            click.echo(f"Error: {p.message}", err=True)
+        ctx.exit(2)
+    click.echo("no problems found")
+
+
+def _samples_failed(problems: list) -> bool:
+    return any(p.field in ("t_e", "t_nodes", "speed_of_sound_m_s") for p in problems)
+
+
+def _short(path: str) -> str:
+    from pathlib import Path
+
+    return Path(path).name if path else "-"
+
+
+@command.command("levels")
+@campaign_arg
+@click.option("--block", "block_s", type=float, default=None,
+              help="Averaging block, s [default: campaign.json block_s or 0.125].")
+@click.option("--force", is_flag=True, help="Overwrite existing level CSVs.")
+@click.pass_context
+def levels(ctx: click.Context, campaign: str, block_s: float | None, force: bool) -> None:
+    """Compute level CSVs (LA and one-third-octave bands) from the WAV files of CAMPAIGN.
+
+    Each mics/<mic>/<flight>.wav becomes mics/<mic>/<flight>.csv beside it, free
+    field (mount correction applied), with columns t, LA and L_<nominal Hz>.
+
+    \b
+    Example:
+      gisnoise campaign levels campaign/ --block 0.125
+    """
+    if block_s is not None and not block_s > 0:
+        raise click.BadParameter(f"must be positive, got {block_s:g}", param_hint="--block")
+    with progress(ctx, "audio -> levels", 1.0) as update:
+        written = write_levels(campaign, block_s=block_s, force=force,
+                               progress=lambda done, total: update(done / max(total, 1e-12)))
+    for p in written:
+        click.echo(str(p))
+    click.echo(f"wrote {len(written)} level file(s)")

@@ -1,0 +1,424 @@
+"""The campaign reader: emission time against the closed form, samples against known
+geometry, masks against injected truth, and every problem named with file and field.
+
+Tiny campaigns are written into ``tmp_path`` by the helpers below (also used by
+``test_cli_campaign.py``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gisnoise import acoustics
+from gisnoise.campaign import (
+    Exclusion,
+    check_campaign,
+    emission_time,
+    read_campaign,
+    read_level_csv,
+    write_level_csv,
+)
+from gisnoise.errors import CampaignError
+from gisnoise.frames import LocalFrame
+
+ORIGIN = {"lat": 52.3, "lon": 10.4, "h": 80.0}
+FRAME = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"])
+C = 340.0            # speed of sound given in campaign.json, m/s
+V = np.array([30.0, 0.0, 0.0])   # straight level flight east, m/s
+X0 = np.array([-900.0, 0.0, 50.0])  # position at t = 0, m (ENU)
+L40 = 70.0           # UAV level at 40 m, dB(A)
+BG = 40.0            # background, dB(A)
+START = "2023-05-04T10:00:00Z"
+
+
+# ----------------------------------------------------------------------------- helpers
+def straight_track(t0: float = -10.0, t1: float = 60.0, dt: float = 0.5) -> dict[str, np.ndarray]:
+    """Flight-CSV columns of the straight constant-speed flyover (exact ENU line)."""
+    t = np.arange(t0, t1 + dt / 2, dt)
+    enu = X0 + t[:, None] * V
+    lat, lon, h = FRAME.to_wgs84(enu[:, 0], enu[:, 1], enu[:, 2])
+    n = len(t)
+    return {"t": t, "lat": lat, "lon": lon, "h": h, "roll": np.zeros(n), "pitch": np.zeros(n),
+            "yaw": np.full(n, 90.0), "power_w": np.full(n, 3000.0), "phase": np.full(n, "horizontal")}
+
+
+def closed_form_te(t_r: np.ndarray, mic: np.ndarray, c: float = C) -> np.ndarray:
+    """t_r - t_e = |x0 + v t_e - m| / c for x = x0 + v t: the positive root of a quadratic."""
+    a = X0 - mic + np.outer(t_r, V)               # x(t_r) - m
+    av = a @ V
+    vv = V @ V
+    tau = (-av + np.sqrt(av**2 + (c**2 - vv) * np.sum(a * a, axis=1))) / (c**2 - vv)
+    return t_r - tau
+
+
+def uav_level(d: np.ndarray, extra: np.ndarray | float = 0.0) -> np.ndarray:
+    """Spherical spreading from L40 at 40 m, power-summed with the background."""
+    return 10 * np.log10(10 ** ((L40 - 20 * np.log10(d / 40.0) + extra) / 10) + 10 ** (BG / 10))
+
+
+def write_flight_csv(path: Path, cols: dict[str, np.ndarray]) -> None:
+    names = list(cols)
+    lines = [",".join(names)]
+    for i in range(len(cols["t"])):
+        lines.append(",".join(str(cols[k][i]) if k == "phase" else repr(float(cols[k][i])) for k in names))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_levels(path: Path, t: np.ndarray, la: np.ndarray, bands: dict[str, np.ndarray] | None = None) -> None:
+    bands = bands or {}
+    lines = [",".join(["t", "LA", *bands])]
+    for i in range(len(t)):
+        lines.append(",".join([repr(float(t[i])), repr(float(la[i]))] + [repr(float(b[i])) for b in bands.values()]))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def mic_entry(mid: str, enu: np.ndarray, **kw) -> dict:
+    lat, lon, h = FRAME.to_wgs84(*enu)
+    return {"id": mid, "lat": float(lat), "lon": float(lon), "h": float(h), "mount": "free_field", **kw}
+
+
+MICS = {"m1": np.array([20.0, 35.0, 1.5]), "m2": np.array([-40.0, -60.0, 1.2]), "m3": np.array([150.0, 10.0, 1.5])}
+
+
+def make_campaign(root: Path, *, mics: dict[str, np.ndarray] | None = None, t_r: np.ndarray | None = None,
+                  level_fn=None, doc_changes: dict | None = None, track: dict | None = None) -> Path:
+    """A flyover campaign: levels from spherical spreading at the solved emission geometry."""
+    mics = MICS if mics is None else mics
+    t_r = np.arange(3.0, 58.0, 0.125) if t_r is None else t_r
+    doc = {"schema": "gisnoise/campaign/1", "origin": ORIGIN, "speed_of_sound_m_s": C,
+           "weather": {"temperature_c": 15.0, "humidity_pct": 50.0, "pressure_kpa": 101.325},
+           "vehicle": {"name": "test", "reference_power_w": 3000.0},
+           "microphones": [mic_entry(k, v) for k, v in mics.items()],
+           "flights": [{"id": "f1", "start_utc": START}]}
+    doc.update(doc_changes or {})
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "campaign.json").write_text(json.dumps(doc, indent=1))
+    write_flight_csv(root / "flights" / "f1.csv", track or straight_track())
+    for k, m in mics.items():
+        t_e = closed_form_te(t_r, m)
+        d = np.linalg.norm(X0 + np.outer(t_e, V) - m, axis=1)
+        la = uav_level(d) if level_fn is None else level_fn(k, t_r, d)
+        write_levels(root / "mics" / k / "f1.csv", t_r, la)
+    return root
+
+
+# ----------------------------------------------------------------------------- emission time
+def test_emission_time_equals_closed_form_straight_flyover(tmp_path):
+    camp = read_campaign(make_campaign(tmp_path / "c"))
+    s = camp.samples()
+    for k, m in MICS.items():
+        sel = s.mic == k
+        ref = closed_form_te(s.t_r[sel], m)
+        assert np.max(np.abs(s.t_e[sel] - ref)) < 1e-6
+    # the delay is d / c: up to 2.7 s at 900 m
+    assert np.max(s.t_r - s.t_e) > 2.5
+
+
+def test_emission_time_kernel_on_the_line_directly():
+    t_nodes = np.arange(-10.0, 61.0, 2.0)
+    enu = X0 + t_nodes[:, None] * V
+    t_r = np.linspace(3.0, 55.0, 400)
+    m = MICS["m3"]
+    t_e = emission_time(t_r, t_nodes, enu, m, C)
+    assert np.max(np.abs(t_e - closed_form_te(t_r, m))) < 1e-9
+    # the defining equation holds
+    x = X0 + np.outer(t_e, V)
+    np.testing.assert_allclose(t_e + np.linalg.norm(x - m, axis=1) / C, t_r, rtol=0, atol=1e-9)
+
+
+def test_emission_time_supersonic_track_is_refused():
+    with pytest.raises(CampaignError, match="speed of sound"):
+        emission_time([1.0], [0.0, 1.0], [[0, 0, 0], [400.0, 0, 0]], [0, 0, 0], 340.0)
+
+
+# ----------------------------------------------------------------------------- samples
+def test_samples_geometry_state_and_fields(tmp_path):
+    camp = read_campaign(make_campaign(tmp_path / "c"))
+    s = camp.samples()
+    n = len(MICS) * len(np.arange(3.0, 58.0, 0.125))
+    assert len(s) == n
+    x_true = X0 + s.t_e[:, None] * V
+    np.testing.assert_allclose(s.uav_enu, x_true, atol=1e-6)
+    for k, m in MICS.items():
+        np.testing.assert_allclose(s.mic_enu[s.mic == k], np.broadcast_to(m, ((s.mic == k).sum(), 3)), atol=1e-6)
+    r = s.mic_enu - s.uav_enu
+    np.testing.assert_allclose(s.d, np.linalg.norm(r, axis=1), rtol=1e-12)
+    # heading east, level: body x = east, y = south (right wing), z = down
+    phi = np.arctan2(-r[:, 1], r[:, 0])
+    theta = np.arctan2(r[:, 2], np.hypot(r[:, 0], r[:, 1]))
+    np.testing.assert_allclose(s.phi, phi, atol=1e-9)
+    np.testing.assert_allclose(s.theta, theta, atol=1e-9)
+    np.testing.assert_allclose(s.vel_enu, np.broadcast_to(V, (n, 3)), atol=1e-6)
+    np.testing.assert_allclose(s.yaw, 90.0, atol=1e-9)
+    np.testing.assert_allclose(s.power_w, 3000.0)
+    assert set(s.phase) == {"horizontal"}
+    assert s.meta["speed_of_sound_m_s"] == C and s.meta["reference_power_w"] == 3000.0
+    assert s.bands is None and s.rpm is None
+    inputs = s.inputs(camp.reference_power_w)
+    np.testing.assert_allclose(inputs["p_el"], 1.0)
+
+
+def test_speed_of_sound_from_temperature(tmp_path):
+    root = make_campaign(tmp_path / "c", doc_changes={"speed_of_sound_m_s": None})
+    camp = read_campaign(root)
+    # c = 331.3 sqrt(1 + T / 273.15) at 15 degC
+    assert abs(camp.speed_of_sound_m_s - 331.3 * np.sqrt(1 + 15.0 / 273.15)) < 0.05
+
+
+def test_low_snr_masks_where_the_uav_is_below_background(tmp_path):
+    # out to 2.9 km, where the UAV is 7 dB below the background
+    root = make_campaign(tmp_path / "c", track=straight_track(-10.0, 130.0), t_r=np.arange(3.0, 128.0, 0.125))
+    s = read_campaign(root).samples()
+    l_uav = L40 - 20 * np.log10(s.d / 40.0)
+    assert np.all(np.abs(s.background_db - BG) < 0.05)
+    assert (l_uav < BG - 1.0).sum() > 300
+    assert np.all(s.mask_reason[l_uav < BG - 1.0] == "low_snr")
+    assert np.all(s.valid[l_uav > BG + 0.5])   # level > background + 3.3 dB
+    assert set(s.mask_reason) == {"", "low_snr"}
+
+
+def test_background_is_found_even_when_never_reached(tmp_path):
+    """Within 900 m the UAV stays above the 40 dB background; the plateau fit still finds it."""
+    s = read_campaign(make_campaign(tmp_path / "c")).samples()
+    assert np.all(np.abs(s.background_db - BG) < 0.05)
+    assert np.all(s.valid)
+
+
+def test_joint_rise_on_all_mics_is_an_event_one_mic_is_not(tmp_path):
+    def levels(mic, t_r, d):
+        la = uav_level(d)
+        joint = (t_r >= 20.0) & (t_r < 22.0)                    # a passing aircraft: all mics, +15 dB
+        la = np.where(joint, 10 * np.log10(10 ** (la / 10) + 10 ** ((la + 15) / 10)), la)
+        if mic == "m2":                                          # a car near m2 only
+            one = (t_r >= 40.0) & (t_r < 42.0)
+            la = np.where(one, la + 15.0, la)
+        return la
+
+    s = read_campaign(make_campaign(tmp_path / "c", level_fn=levels)).samples()
+    inside = (s.t_r >= 20.3) & (s.t_r <= 21.7)
+    assert np.all(s.mask_reason[inside] == "event")
+    far = (s.t_r < 19.5) | (s.t_r > 22.5)
+    assert not np.any(s.mask_reason[far] == "event")
+    assert np.all(s.mask_reason[(s.mic == "m2") & (s.t_r > 40.3) & (s.t_r < 41.7)] != "event")
+
+
+def test_exclusions_from_file_and_argument(tmp_path):
+    root = make_campaign(tmp_path / "c", doc_changes={
+        "exclusions": [{"flight": "f1", "t0": 10.0, "t1": 11.0, "mic": "m1", "reason": "dog"}]})
+    camp = read_campaign(root, exclusions=[("f1", 30.0, 31.0), Exclusion("f1", 35.0, 35.5, "m3")])
+    s = camp.samples()
+    r = s.mask_reason
+    assert np.all(r[(s.mic == "m1") & (s.t_r >= 10.0) & (s.t_r <= 11.0)] == "excluded")
+    assert not np.any(r[(s.mic == "m2") & (s.t_r >= 10.0) & (s.t_r <= 11.0)] == "excluded")
+    assert np.all(r[(s.t_r >= 30.0) & (s.t_r <= 31.0)] == "excluded")
+    assert np.all(r[(s.mic == "m3") & (s.t_r >= 35.0) & (s.t_r <= 35.5)] == "excluded")
+    assert (r == "excluded").sum() == 9 + 3 * 9 + 5
+    assert np.array_equal(s.valid, r == "")
+
+
+def test_samples_outside_the_flight_log(tmp_path):
+    # log covers -10..60 s; reception times up to 64 s: emission after the log's end is masked
+    root = make_campaign(tmp_path / "c", t_r=np.arange(3.0, 64.0, 0.125))
+    s = read_campaign(root).samples()
+    t_end = 60.0
+    assert np.all(s.mask_reason[s.t_e > t_end] == "outside_flight")
+    assert np.all(s.mask_reason[s.t_e <= t_end] != "outside_flight")
+    assert (s.t_e > t_end).sum() > 10
+
+
+def test_absorption_corrects_signal_bands_only(tmp_path):
+    """One strong 4 kHz band plus background bands: only the 4 kHz energy is scaled by 10^(alpha d / 10)."""
+    f_sig, f_bg = 10 ** 3.6, 10 ** 2.0   # exact mid-band of the 4 kHz and 100 Hz bands
+
+    def bands_for(d):
+        l4k = 80.0 - 20 * np.log10(d / 40.0)
+        l4k = np.where(d > 400.0, 30.0, l4k)     # far: the band drops to its background
+        l100 = np.full_like(d, 45.0)
+        return l4k, l100
+
+    store = {}
+
+    def levels(mic, t_r, d):
+        l4k, l100 = bands_for(d)
+        la = 10 * np.log10(10 ** ((l4k + acoustics.a_weighting(f_sig)) / 10)
+                           + 10 ** ((l100 + acoustics.a_weighting(f_bg)) / 10))
+        store[mic] = (t_r, la, l4k, l100)
+        return la
+
+    root = make_campaign(tmp_path / "c", level_fn=levels)
+    for mic, (t_r, la, l4k, l100) in store.items():
+        write_levels(root / "mics" / mic / "f1.csv", t_r, la, {"L_100": l100, "L_4000": l4k})
+    plain = read_campaign(root).samples()
+    corr = read_campaign(root, absorption=True).samples()
+    alpha = float(acoustics.atmospheric_absorption(f_sig, 15.0, 50.0, 101.325))
+    assert 0.01 < alpha < 0.05   # dB/m at 4 kHz, 15 degC, 50 % (ISO 9613-1 order of magnitude)
+    l4k, l100 = bands_for(plain.d)
+    e4k = 10 ** ((l4k + acoustics.a_weighting(f_sig)) / 10)
+    e100 = 10 ** ((l100 + acoustics.a_weighting(f_bg)) / 10)
+    signal = plain.d <= 400.0
+    expected = np.where(signal, 10 * np.log10(e4k * 10 ** (alpha * plain.d / 10) + e100), plain.level)
+    np.testing.assert_allclose(corr.level, expected, atol=1e-6)
+    np.testing.assert_allclose(plain.level, 10 * np.log10(e4k + e100), atol=1e-9)
+    # bands are kept as measured, at the exact mid-band frequencies
+    np.testing.assert_allclose(corr.band_f, [f_bg, f_sig])
+    np.testing.assert_allclose(corr.bands[:, 1], l4k, atol=1e-9)
+    assert corr.meta["absorption_corrected"] is True
+
+
+def test_absorption_needs_humidity(tmp_path):
+    root = make_campaign(tmp_path / "c", doc_changes={"weather": {"temperature_c": 15.0}})
+    with pytest.raises(CampaignError, match=r"campaign\.json: field 'weather\.humidity_pct'"):
+        read_campaign(root, absorption=True)
+
+
+# ----------------------------------------------------------------------------- WAV input
+def write_wav(path: Path, x: np.ndarray, fs: int) -> None:
+    from scipy.io import wavfile
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    wavfile.write(str(path), fs, x)
+
+
+def sine_volts(fs: int, seconds: float, p_rms: float = 1.0, sens: float = 0.05, f: float = 1000.0) -> np.ndarray:
+    t = np.arange(int(fs * seconds)) / fs
+    return np.sqrt(2) * p_rms * sens * np.sin(2 * np.pi * f * t)
+
+
+def make_wav_campaign(root: Path, *, fs: dict[str, int] | None = None, mount: str = "ground_plate",
+                      int16: bool = True, seconds: float = 3.0) -> Path:
+    fs = fs or {"m1": 48000, "m2": 48000}
+    mics = {k: MICS[k] for k in fs}
+    make_campaign(root, mics=mics)
+    doc = json.loads((root / "campaign.json").read_text())
+    for m in doc["microphones"]:
+        m["mount"] = mount
+        m["sensitivity_v_per_pa"] = 0.05
+    (root / "campaign.json").write_text(json.dumps(doc))
+    for k, rate in fs.items():
+        (root / "mics" / k / "f1.csv").unlink()
+        v = sine_volts(rate, seconds)
+        write_wav(root / "mics" / k / "f1.wav", np.round(v * 32767).astype(np.int16) if int16 else
+                  v.astype(np.float32), rate)
+    return root
+
+
+@pytest.mark.parametrize("int16", [True, False])
+def test_wav_sine_94_db_on_a_ground_plate_reads_88_dba(tmp_path, int16):
+    """1 Pa RMS at 1 kHz is 94.0 dB; A(1 kHz) = 0; the ground plate's +6 dB is taken off."""
+    camp = read_campaign(make_wav_campaign(tmp_path / "c", int16=int16))
+    lv = camp.levels[0]
+    steady = (lv.t > 0.5) & (lv.t < 2.5)
+    np.testing.assert_allclose(lv.la[steady], 88.0, atol=0.1)
+    k1 = int(np.argmin(np.abs(lv.band_f - 1000.0)))
+    np.testing.assert_allclose(lv.bands[steady, k1], 88.0, atol=0.1)
+    assert abs(np.median(np.diff(lv.t)) - 0.125) < 1e-9
+
+
+# ----------------------------------------------------------------------------- problems
+def test_missing_microphone_file(tmp_path):
+    root = make_campaign(tmp_path / "c")
+    (root / "mics" / "m2" / "f1.csv").unlink()
+    with pytest.raises(CampaignError, match=r"mics/m2/f1\.wav: missing microphone file") as e:
+        read_campaign(root)
+    assert e.value.field == "mics"
+
+
+def test_unknown_mount(tmp_path):
+    root = make_campaign(tmp_path / "c")
+    doc = json.loads((root / "campaign.json").read_text())
+    doc["microphones"][1]["mount"] = "on_a_stick"
+    (root / "campaign.json").write_text(json.dumps(doc))
+    with pytest.raises(CampaignError, match=r"campaign\.json: field 'microphones\[1\]\.mount': unknown mount "
+                                            r"'on_a_stick'") as e:
+        read_campaign(root)
+    assert e.value.field == "microphones[1].mount"
+    assert "ground_plate" in str(e.value)
+
+
+def test_wav_of_the_wrong_sample_rate(tmp_path):
+    root = make_wav_campaign(tmp_path / "c", fs={"m1": 48000, "m2": 48000, "m3": 44100}, seconds=0.5)
+    with pytest.raises(CampaignError, match=r"mics/m3/f1\.wav: sample_rate_hz is 44100 Hz, the campaign's other "
+                                            r"WAV files have 48000 Hz") as e:
+        read_campaign(root)
+    assert e.value.field == "sample_rate_hz"
+    doc = json.loads((root / "campaign.json").read_text())
+    doc["sample_rate_hz"] = 44100
+    (root / "campaign.json").write_text(json.dumps(doc))
+    with pytest.raises(CampaignError, match=r"mics/m1/f1\.wav: sample_rate_hz is 48000 Hz, campaign\.json states "
+                                            r"44100 Hz"):
+        read_campaign(root)
+
+
+def test_flight_csv_without_power(tmp_path):
+    track = straight_track()
+    del track["power_w"]
+    root = make_campaign(tmp_path / "c", track=track)
+    with pytest.raises(CampaignError, match=r"flights/f1\.csv: missing column\(s\) power_w") as e:
+        read_campaign(root)
+    assert e.value.field == "power_w"
+
+
+def test_level_csv_problems(tmp_path):
+    p = tmp_path / "l.csv"
+    write_levels(p, np.array([0.0, 0.25, 0.125]), np.array([50.0, 51.0, 52.0]))
+    with pytest.raises(CampaignError, match=r"l\.csv: column 't' is not strictly increasing at line 4"):
+        read_level_csv(p)
+    p.write_text("t,LA\n0.0,50\n0.125,nan\n")
+    with pytest.raises(CampaignError, match=r"l\.csv: column 'LA' line 3: NaN"):
+        read_level_csv(p)
+    p.write_text("t,L_1000\n0.0,50\n")
+    with pytest.raises(CampaignError, match=r"l\.csv: missing column 'LA'"):
+        read_level_csv(p)
+    p.write_text("t,LA,L_1100\n0.0,50,40\n")
+    with pytest.raises(CampaignError, match=r"column 'L_1100' is not a one-third-octave band"):
+        read_level_csv(p)
+
+
+def test_level_csv_round_trip_with_bands(tmp_path):
+    f = np.array([10 ** 1.5, 10 ** 2.2, 10 ** 3.0, 10 ** 4.3])  # 31.5, 160, 1000, 20000 Hz bands
+    text = write_level_csv(tmp_path / "x.csv", [0.0625, 0.1875], [61.234, 62.0], f, [[1, 2, 3, 4], [5, 6, 7, 8]])
+    assert text.splitlines()[0] == "t,LA,L_31.5,L_160,L_1000,L_20000"
+    lv = read_level_csv(tmp_path / "x.csv")
+    np.testing.assert_allclose(lv.band_f, f, rtol=1e-12)
+    np.testing.assert_allclose(lv.bands, [[1, 2, 3, 4], [5, 6, 7, 8]])
+    np.testing.assert_allclose(lv.la, [61.234, 62.0])
+
+
+def test_check_campaign_collects_every_problem(tmp_path):
+    root = make_wav_campaign(tmp_path / "c", fs={"m1": 48000, "m2": 48000, "m3": 44100}, seconds=0.5)
+    doc = json.loads((root / "campaign.json").read_text())
+    doc["microphones"][0]["mount"] = "on_a_stick"
+    doc["microphones"].append(mic_entry("m4", np.array([0.0, 100.0, 1.5])))
+    (root / "campaign.json").write_text(json.dumps(doc))
+    track = straight_track()
+    del track["power_w"]
+    write_flight_csv(root / "flights" / "f1.csv", track)
+    problems = check_campaign(root)
+    fields = sorted(p.field for p in problems)
+    assert fields == ["microphones[0].mount", "mics", "power_w", "sample_rate_hz"]
+    # m1 is left out for its mount; m2 (48 kHz) against m3 (44.1 kHz) is still decided by all WAVs
+    rate = next(p for p in problems if p.field == "sample_rate_hz")
+    assert rate.file.endswith("mics/m3/f1.wav")
+    for p in problems:
+        assert "\n" not in p.message and p.file in p.message
+
+
+def test_check_campaign_clean(tmp_path):
+    assert check_campaign(make_campaign(tmp_path / "c")) == []
+
+
+def test_unknown_schema_and_missing_files(tmp_path):
+    root = make_campaign(tmp_path / "c", doc_changes={"schema": "gisnoise/campaign/9"})
+    with pytest.raises(CampaignError, match="unknown version 'gisnoise/campaign/9'"):
+        read_campaign(root)
+    with pytest.raises(CampaignError, match="no such campaign folder"):
+        read_campaign(tmp_path / "nowhere")
+    root = make_campaign(tmp_path / "d")
+    (root / "flights" / "f1.csv").unlink()
+    with pytest.raises(CampaignError, match=r"flights/f1\.csv: missing flight log for flight 'f1'"):
+        read_campaign(root)

@@ -1,0 +1,91 @@
+"""``gisnoise campaign check`` and ``gisnoise campaign levels`` on tiny campaigns."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from test_campaign import make_campaign, make_wav_campaign, straight_track, write_flight_csv
+
+from gisnoise.campaign import read_level_csv
+from gisnoise.cli.main import cli
+
+
+def run(*args: str):
+    return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
+
+
+def test_check_clean_campaign_summary(tmp_path):
+    root = make_campaign(tmp_path / "c")
+    res = run("campaign", "check", str(root))
+    assert res.exit_code == 0, res.output
+    out = res.stdout
+    n_blocks = len(np.arange(3.0, 58.0, 0.125))
+    assert f"samples {3 * n_blocks}, valid {3 * n_blocks}, masked 0" in out
+    flight_line = next(ln for ln in out.splitlines() if ln.startswith("f1 "))
+    assert "f1.csv" in flight_line and " 70.0 " in flight_line and "horizontal 141" in flight_line
+    assert sum(ln.startswith(("m1 ", "m2 ", "m3 ")) for ln in out.splitlines()) == 3
+    assert "no problems found" in out
+
+
+def test_check_reports_masked_counts_by_reason(tmp_path):
+    root = make_campaign(tmp_path / "c", doc_changes={"exclusions": [{"flight": "f1", "t0": 10.0, "t1": 11.0}]})
+    res = run("campaign", "check", str(root))
+    assert res.exit_code == 0, res.output
+    assert "masked 27, excluded 27" in res.stdout
+
+
+@pytest.mark.parametrize("fault, file, field", [
+    ("missing_mic", "mics/m2/f1.wav", "missing microphone file"),
+    ("unknown_mount", "campaign.json", "field 'microphones[0].mount'"),
+    ("sample_rate", "mics/m3/f1.wav", "sample_rate_hz is 44100 Hz"),
+    ("no_power", "flights/f1.csv", "missing column(s) power_w"),
+])
+def test_each_fault_is_one_line_naming_file_and_field_exit_2(tmp_path, fault, file, field):
+    root = make_wav_campaign(tmp_path / "c", fs={"m1": 48000, "m2": 48000,
+                                                 "m3": 44100 if fault == "sample_rate" else 48000}, seconds=0.5)
+    if fault == "missing_mic":
+        (root / "mics" / "m2" / "f1.wav").unlink()
+    elif fault == "unknown_mount":
+        doc = json.loads((root / "campaign.json").read_text())
+        doc["microphones"][0]["mount"] = "on_a_stick"
+        (root / "campaign.json").write_text(json.dumps(doc))
+    elif fault == "no_power":
+        track = straight_track()
+        del track["power_w"]
+        write_flight_csv(root / "flights" / "f1.csv", track)
+    res = run("campaign", "check", str(root))
+    assert res.exit_code == 2
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("Error: ")]
+    assert len(errors) == 1, res.stderr
+    assert str(root / file) in errors[0] and field in errors[0]
+
+
+def test_levels_writes_csv_beside_the_wav_and_refuses_to_overwrite(tmp_path):
+    root = make_wav_campaign(tmp_path / "c", fs={"m1": 48000, "m2": 48000}, seconds=2.0)
+    res = run("campaign", "levels", str(root), "--block", "0.25")
+    assert res.exit_code == 0, res.output
+    assert "wrote 2 level file(s)" in res.stdout
+    lv = read_level_csv(root / "mics" / "m1" / "f1.csv")
+    assert abs(np.median(np.diff(lv.t)) - 0.25) < 1e-6
+    steady = (lv.t > 0.4) & (lv.t < 1.6)
+    # 1 Pa RMS at 1 kHz on a ground plate: 94 - 6 = 88 dB(A), free field
+    np.testing.assert_allclose(lv.la[steady], 88.0, atol=0.1)
+    assert lv.band_f is not None and lv.band_f.min() < 30.0
+    again = run("campaign", "levels", str(root))
+    assert again.exit_code == 2
+    assert "exists; use --force" in again.stderr and "mics/m1/f1.csv" in again.stderr
+    forced = run("campaign", "levels", str(root), "--force")
+    assert forced.exit_code == 0
+    # the reader now takes the level CSVs (same levels, no mount correction again)
+    res = run("campaign", "check", str(root))
+    assert res.exit_code == 0, res.output
+
+
+def test_levels_without_wav_is_an_error(tmp_path):
+    root = make_campaign(tmp_path / "c")
+    res = run("campaign", "levels", str(root))
+    assert res.exit_code == 2
+    assert "no WAV file" in res.stderr
