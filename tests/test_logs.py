@@ -117,9 +117,9 @@ def test_dataflash_positions_attitude_power_equal_pymavlink(dataflash_raw):
     keep = (t_gps >= max(t_att[0], t_cur[0])) & (t_gps <= min(t_att[-1], t_cur[-1]))
     assert len(tr) == keep.sum() > 1000
     tb = t_gps[keep]
-    np.testing.assert_allclose(tr.lat, [g.Lat for g, k in zip(gps, keep) if k], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(tr.lon, [g.Lng for g, k in zip(gps, keep) if k], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(tr.h, np.array([g.Alt for g, k in zip(gps, keep) if k]) + n_geoid, atol=1e-9)
+    np.testing.assert_allclose(tr.lat, [g.Lat for g, k in zip(gps, keep, strict=True) if k], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(tr.lon, [g.Lng for g, k in zip(gps, keep, strict=True) if k], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(tr.h, np.array([g.Alt for g, k in zip(gps, keep, strict=True) if k]) + n_geoid, atol=1e-9)
     # attitude interpolated on the circle from ATT (deg); the log ends upside down (roll -181 deg)
     for name in ("Roll", "Pitch", "Yaw"):
         r = np.radians([getattr(a, name) for a in att])
@@ -134,7 +134,7 @@ def test_dataflash_positions_attitude_power_equal_pymavlink(dataflash_raw):
     # time: GPS week/ms minus 17 leap seconds (IERS Bulletin C, 2015-07-01 .. 2016-12-31);
     # pymavlink's own _timestamp subtracts a fixed 18 s, so it reads exactly 1 s early here
     # (boot and GPS clocks are tied by the median over all fixes; single fixes jitter by ~15 ms)
-    kept = [g for g, k in zip(gps, keep) if k]
+    kept = [g for g, k in zip(gps, keep, strict=True) if k]
     err = np.abs(tr.t + datetime(2015, 11, 21, 23, 44, tzinfo=timezone.utc).timestamp()
                  - gps_to_unix([g.Week for g in kept], [g.TimeMS for g in kept]))
     assert np.median(err) < 0.01 and np.percentile(err, 95) < 0.03
@@ -164,7 +164,7 @@ def _write_dataflash(path: Path, messages: dict[str, tuple[str, str, list[tuple]
         ids[name] = 129 + i
         out += _fmt(ids[name], name, fmt, cols, 3 + struct.calcsize("<" + "".join(_STRUCT[c] for c in fmt)))
     events = []
-    for name, (fmt, _, rows) in messages.items():
+    for name, (_, _, rows) in messages.items():
         for r in rows:
             events.append((r[0], name, r))
     for _, name, r in sorted(events, key=lambda e: e[0]):
@@ -180,7 +180,7 @@ def _synthetic(tmp_path: Path, *, power: str = "BAT") -> tuple[Path, dict]:
     lon = np.full_like(t, 10.0)
     alt = 100.0 + 0.5 * t
     gps = [(int(round(ti * 1e6)), 3, gms0 + int(round(ti * 1000)), week, int(round(la * 1e7)), int(round(lo * 1e7)), al)
-           for ti, la, lo, al in zip(t, lat, lon, alt)]
+           for ti, la, lo, al in zip(t, lat, lon, alt, strict=True)]
     ta = np.arange(0.0, 20.0, 0.05)
     att = [(int(round(ti * 1e6)), 10.0 * np.sin(ti), -3.0, (170.0 + 5.0 * ti) % 360.0) for ti in ta]
     msgs = {"GPS": ("QBIHLLf", "TimeUS,Status,GMS,GWk,Lat,Lng,Alt", gps),
