@@ -282,11 +282,16 @@ def null_directions(jw: np.ndarray, rcond: float) -> tuple[np.ndarray, np.ndarra
     the smallest ratio.  Directions with ``s < rcond`` are the ones the data
     cannot resolve; a zero column counts as a null direction on its own.
     """
-    norms = np.linalg.norm(jw, axis=0)
+    gram = jw.T @ jw
+    norms = np.sqrt(np.clip(np.diag(gram), 0.0, None))
     scale = np.where(norms > 0, norms, 1.0)
-    js = jw / scale
-    js[:, norms == 0] = 0.0
-    _, s, vt = np.linalg.svd(js, full_matrices=False)
+    gs = gram / np.outer(scale, scale)
+    gs[norms == 0, :] = 0.0
+    gs[:, norms == 0] = 0.0
+    # singular values of the scaled Jacobian from its k x k Gram matrix (ratios down to ~1e-7 are exact enough)
+    ev, vecs = np.linalg.eigh(gs)
+    s = np.sqrt(np.clip(ev[::-1], 0.0, None))
+    vt = vecs[:, ::-1].T
     s_rel = s / s[0] if s[0] > 0 else np.zeros_like(s)
     return s_rel, vt, float(s_rel[-1])
 
