@@ -89,8 +89,38 @@ def _use_bundled(problems: list[str]) -> None:
             continue
         if folder not in sys.path:
             sys.path.insert(0, folder)
+        if item.get("compiled"):
+            _load_isolated(folder, module)
         QgsMessageLog.logMessage(f"using the bundled {module} {item['version']} (QGIS has "
                                  f"{have or 'none'}, the core needs >= {minimum})", "gisnoise")
+
+
+def _load_isolated(folder: str, module: str) -> None:
+    """Import every extension module of a bundled compiled package, bound to its own libraries.
+
+    QGIS itself links the system's GEOS (and GDAL, PROJ); on Linux the dynamic
+    linker would resolve a bundled wheel's calls into its own copy of such a
+    library to the already loaded system copy wherever the names match, mixing
+    two versions in one call chain (a crash).  ``RTLD_DEEPBIND`` makes the
+    wheel's modules look up their own libraries first.
+    """
+    deepbind = getattr(os, "RTLD_DEEPBIND", None)
+    names = [module]
+    pkg = os.path.join(folder, module)
+    for dirpath, _dirs, files in os.walk(pkg):
+        for f in files:
+            if f.endswith((".so", ".pyd")):
+                rel = os.path.relpath(os.path.join(dirpath, f.split(".")[0]), folder)
+                names.append(rel.replace(os.sep, "."))
+    flags = sys.getdlopenflags() if hasattr(sys, "getdlopenflags") else None
+    if deepbind is not None and flags is not None:
+        sys.setdlopenflags(flags | deepbind)
+    try:
+        for name in names:
+            importlib.import_module(name)
+    finally:
+        if deepbind is not None and flags is not None:
+            sys.setdlopenflags(flags)
 
 
 def missing_requirements() -> list[str]:

@@ -60,6 +60,9 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
     CRS = "CRS"
     BACKGROUND = "BACKGROUND"
     GROUND_HEIGHT = "GROUND_HEIGHT"
+    DEM_OFFSET = "DEM_OFFSET"
+    SUBSTEPS = "SUBSTEPS"
+    UNCERTAINTY = "UNCERTAINTY"
     PERIOD = "PERIOD"
     THRESHOLD = "THRESHOLD"
     SNAPSHOT_T = "SNAPSHOT_T"
@@ -133,6 +136,16 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             self.CRS, "Grid CRS (projected, metres; empty: local UTM zone)", optional=True))
         self.addParameter(QgsProcessingParameterBoolean(
             self.BACKGROUND, "Add the cards' background level", False))
+        self.addParameter(QgsProcessingParameterBoolean(
+            self.UNCERTAINTY, "Add standard deviation and 95 % bands (cards need a covariance)", False))
+        advanced = [QgsProcessingParameterNumber(
+            self.DEM_OFFSET, "Added to DEM heights to reach the trajectory's ellipsoidal heights (m)",
+            QgsProcessingParameterNumber.Double, 0.0), QgsProcessingParameterNumber(
+            self.SUBSTEPS, "Time substeps between trajectory samples", QgsProcessingParameterNumber.Integer, 1,
+            minValue=1, maxValue=1000)]
+        for param in advanced:
+            param.setFlags(param.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+            self.addParameter(param)
         for key, label in ((self.GROUND_HEIGHT, "Flat ground height without a DEM (m, ellipsoidal; empty: the "
                                                 "trajectory's lowest point)"),
                            (self.PERIOD, "LAeq period (s; empty: the trajectory's duration)"),
@@ -206,7 +219,9 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
 
         steps = FeedbackProgress(feedback, 10.0, 90.0)
         work = tempfile.mkdtemp(prefix="gisnoise_", dir=QgsProcessingUtils.tempFolder())
-        kw = {"background": True} if self.parameterAsBoolean(parameters, self.BACKGROUND, context) else {}
+        kw = {"background": self.parameterAsBoolean(parameters, self.BACKGROUND, context),
+              "dem_offset_m": self.parameterAsDouble(parameters, self.DEM_OFFSET, context),
+              "substeps": self.parameterAsInt(parameters, self.SUBSTEPS, context)}
         for key, name in ((self.GROUND_HEIGHT, "ground_h"), (self.PERIOD, "period_s"), (self.THRESHOLD, "threshold_db"),
                           (self.SNAPSHOT_T, "snapshot_t")):
             if parameters.get(key) not in (None, ""):
@@ -217,7 +232,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             margin_m=self.parameterAsDouble(parameters, self.MARGIN, context),
             levels=levels, metrics=metrics, crs=crs_text, dem=dem,
             receiver_height=self.parameterAsDouble(parameters, self.RECEIVER_HEIGHT, context),
-            uncertainty=False, plot=False, progress=steps.progress, cancel=steps.cancel, **kw)
+            uncertainty=self.parameterAsBoolean(parameters, self.UNCERTAINTY, context), plot=False, progress=steps.progress, cancel=steps.cancel, **kw)
         tif, geojson = os.fspath(paths["levels"]), os.fspath(paths["contours"])
 
         raster_out = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)

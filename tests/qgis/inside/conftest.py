@@ -127,7 +127,45 @@ def flight_csv(tmp_path_factory, flight):
     return write_csv(tmp_path_factory.mktemp("flight") / "flight.csv", flight)
 
 
-MAP_OPTIONS = {"RESOLUTION": 20.0, "MARGIN": 200.0, "LEVELS": "50,55,60,65"}
+CARD = str(CARDS / "demo_horizontal.json")
+MAP_OPTIONS = {"RESOLUTION": 20.0, "MARGIN": 200.0, "LEVELS": "50,55,60,65", "GROUND_HEIGHT": H_GROUND}
+CLI_OPTIONS = ("--resolution", "20", "--margin", "200", "--levels", "50,55,60,65", "--ground-height", str(H_GROUND))
+
+
+def run_map(tmp_path, name, **params):
+    """processing.run of the noise map with the options above, outputs in ``tmp_path/name``."""
+    import processing
+
+    out = tmp_path / name
+    out.mkdir()
+    return processing.run("gisnoise:noisemap", {
+        "CARDS": [CARD], **MAP_OPTIONS,
+        "OUTPUT_RASTER": str(out / "grid.tif"), "OUTPUT_BANDS": str(out / "bands.gpkg"),
+        "OUTPUT_LINES": str(out / "lines.geojson"), **params})
+
+
+@pytest.fixture(scope="session")
+def csv_map(plugin, flight_csv, tmp_path_factory):
+    """The map of the flight CSV made by processing.run."""
+    return run_map(tmp_path_factory.mktemp("csv_map"), "map", TRAJECTORY_FILE=str(flight_csv))
+
+
+def assert_same_raster(a_path, b_path, atol):
+    """Same bands, grid, CRS and nodata; values within ``atol`` dB."""
+    import numpy as np
+    from osgeo import osr
+
+    a, names_a, gt_a, wkt_a, nd_a = read_raster(a_path)
+    b, names_b, gt_b, wkt_b, nd_b = read_raster(b_path)
+    assert names_a == names_b == ["LAmax", "LAeq", "SEL"]
+    assert a.shape == b.shape
+    np.testing.assert_allclose(gt_a, gt_b, rtol=0, atol=1e-6)
+    assert osr.SpatialReference(wkt=wkt_a).IsSame(osr.SpatialReference(wkt=wkt_b))
+    assert nd_a == nd_b
+    valid = a != nd_a
+    assert np.array_equal(valid, b != nd_b)
+    assert valid.mean() > 0.9
+    np.testing.assert_allclose(a[valid], b[valid], rtol=0, atol=atol)
 
 
 def read_raster(path):

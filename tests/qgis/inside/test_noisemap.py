@@ -1,51 +1,16 @@
 """Noise grid and contours through processing.run: the same map as the command line."""
 
-import numpy as np
 import pytest
-from conftest import CARDS, MAP_OPTIONS, bilinear, read_raster
+from conftest import CARD, CLI_OPTIONS, MAP_OPTIONS, assert_same_raster, bilinear, read_raster, run_map
 
 pytestmark = pytest.mark.qgis
 
-CARD = str(CARDS / "demo_horizontal.json")
 LEVELS = [50.0, 55.0, 60.0, 65.0]
 
 
-def run_map(tmp_path, name, **params):
-    import processing
-
-    out = tmp_path / name
-    out.mkdir()
-    return processing.run("gisnoise:noisemap", {
-        "CARDS": [CARD], **MAP_OPTIONS,
-        "OUTPUT_RASTER": str(out / "grid.tif"), "OUTPUT_BANDS": str(out / "bands.gpkg"),
-        "OUTPUT_LINES": str(out / "lines.geojson"), **params})
-
-
-@pytest.fixture(scope="module")
-def csv_map(plugin, flight_csv, tmp_path_factory):
-    return run_map(tmp_path_factory.mktemp("csv_map"), "map", TRAJECTORY_FILE=str(flight_csv))
-
-
-def assert_same_raster(a_path, b_path, atol):
-    from osgeo import osr
-
-    a, names_a, gt_a, wkt_a, nd_a = read_raster(a_path)
-    b, names_b, gt_b, wkt_b, nd_b = read_raster(b_path)
-    assert names_a == names_b == ["LAmax", "LAeq", "SEL"]
-    assert a.shape == b.shape
-    np.testing.assert_allclose(gt_a, gt_b, rtol=0, atol=1e-6)
-    sa, sb = osr.SpatialReference(wkt=wkt_a), osr.SpatialReference(wkt=wkt_b)
-    assert sa.IsSame(sb)
-    assert nd_a == nd_b
-    valid = a != nd_a
-    assert np.array_equal(valid, b != nd_b)
-    assert valid.mean() > 0.9
-    np.testing.assert_allclose(a[valid], b[valid], rtol=0, atol=atol)
-
 
 def test_raster_equals_the_command_line(csv_map, cli, flight_csv, tmp_path):
-    cli("contour", flight_csv, "--card", CARD, "--out", tmp_path / "cli", "--resolution", MAP_OPTIONS["RESOLUTION"],
-        "--margin", MAP_OPTIONS["MARGIN"], "--levels", MAP_OPTIONS["LEVELS"])
+    cli("contour", flight_csv, "--card", CARD, "--out", tmp_path / "cli", *CLI_OPTIONS)
     # same input, same core; only numpy/scipy versions differ between QGIS's Python and the project's
     assert_same_raster(csv_map["OUTPUT_RASTER"], tmp_path / "cli" / "levels.tif", atol=1e-4)
 
