@@ -136,7 +136,12 @@ class Effect:
         ``fixed(x) -> {param: value}``: data-dependent constants a refit holds fixed.
     initial : callable, optional
         ``initial(x, residual_db) -> {param: value}``: start values from the data
-        (``residual_db`` is measured minus base model).
+        (``residual_db`` is measured minus base model); a grid search adds
+        ``"__trials__"``, the number of alternatives it tried (the significance
+        test pays for them).
+    tested : tuple of str, optional
+        Parameters whose joint null value means "no effect" (the significance
+        test is on these); default all parameters not held ``fixed``.
     dynamic : (str, float, float), optional
         For effects whose parameter list depends on the data (``covariates``
         returns ``"__params__"``): unit, lower and upper bound of each parameter.
@@ -155,6 +160,7 @@ class Effect:
     covariates: Callable[[Mapping[str, Any]], dict[str, np.ndarray]] | None = field(default=None, repr=False)
     fixed: Callable[[Mapping[str, Any]], dict[str, float]] | None = field(default=None, repr=False)
     initial: Callable[[Mapping[str, Any], np.ndarray], dict[str, float]] | None = field(default=None, repr=False)
+    tested: tuple[str, ...] | None = None
     dynamic: tuple[str, float, float] | None = None
     bound_rows: _RowTable | None = field(default=None, repr=False, compare=False)
 
@@ -584,7 +590,7 @@ def _ground_initial(x, resid):
             s = float(np.sum((rr - z) ** 2))
             if s < best:
                 best, arg = s, (r, f)
-    return {"r_ground": arg[0], "f_ground": arg[1]}
+    return {"r_ground": arg[0], "f_ground": arg[1], "__trials__": 90}
 
 
 GROUND_REFLECTION = Effect(
@@ -600,6 +606,7 @@ GROUND_REFLECTION = Effect(
     description="ground reflection at elevated microphones: 10 log10(1 + R^2 + 2R C(f_g tau)), comb in tau",
     check=_ground_check,
     initial=_ground_initial,
+    tested=("r_ground",),
 )
 
 # --------------------------------------------------------------------------- Doppler
@@ -792,6 +799,7 @@ RPM = Effect(
     description="propeller speed beyond power: k_rpm 20 log10(rpm / rpm_ref) (rpm_ref held fixed)",
     check=_rpm_check,
     fixed=_rpm_fixed,
+    tested=("k_rpm",),
 )
 
 # --------------------------------------------------------------------------- background events
