@@ -106,7 +106,8 @@ See ``sample_data/scenarios/`` for complete examples.  Top-level fields::
                    "fluctuation_db", "fluctuation_tau_s"}
     output        {"format": "levels" | "wav", "block_s", "bands", "band_min_hz", "band_max_hz",
                    "sim_rate_hz", "log_rate_hz", "subsamples", "fs_hz"}
-    flights       [{"id", "start_utc", "start": {"e", "n", "heading_deg"}, "patterns": [...]}]
+    flights       [{"id", "start_utc", "start": {"e", "n", "height_m", "heading_deg"}, "patterns": [...]}]
+                  (a flight starts at rest at ``start``; height 0: on the ground)
     effects       {name: {parameters}}
 
 Patterns (heights in m above ground, speeds m/s, headings deg from north)::
@@ -317,17 +318,20 @@ def ground_reflection_db(src_enu: np.ndarray, mic_enu: np.ndarray, mic_height: f
 
 
 def _ou(rng: np.random.Generator, t: np.ndarray, std: float, tau: float) -> np.ndarray:
-    """Stationary Ornstein-Uhlenbeck process (std, correlation time tau s) sampled at times ``t``."""
-    x = np.empty(len(t))
+    """Slow random process sampled at times ``t`` (s): a stationary Ornstein-Uhlenbeck
+    process (standard deviation ``std``, correlation time ``tau`` s) drawn every ``tau / 10``
+    and interpolated linearly, so it is smooth at the scale a 10 Hz log resolves."""
     if std == 0 or len(t) == 0:
         return np.zeros(len(t))
+    step = tau / 10.0
+    tk = np.arange(t[0], t[-1] + step, step)
+    x = np.empty(len(tk))
     x[0] = rng.normal(0.0, std)
-    if len(t) > 1:
-        a = np.exp(-np.diff(t) / tau)
-        w = rng.normal(0.0, 1.0, len(t) - 1) * std * np.sqrt(1.0 - a * a)
-        for i in range(1, len(t)):
-            x[i] = a[i - 1] * x[i - 1] + w[i - 1]
-    return x
+    a = math.exp(-step / tau)
+    w = rng.normal(0.0, std * math.sqrt(1.0 - a * a), len(tk))
+    for i in range(1, len(tk)):
+        x[i] = a * x[i - 1] + w[i]
+    return np.interp(t, tk, x)
 
 
 def _interp_angle(t: np.ndarray, tp: np.ndarray, a_rad: np.ndarray) -> np.ndarray:
@@ -662,8 +666,9 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
             datetime.fromisoformat(start_utc.replace("Z", "+00:00"))
         except ValueError:
             fo._fail("start_utc", "an ISO 8601 time such as 2024-05-04T10:00:00Z", start_utc)
-        so = _Obj(fo.get("start", {}), f"flights[{i}].start", ("e", "n", "heading_deg"))
-        start = {"e": so.num("e", 0.0), "n": so.num("n", 0.0), "heading_deg": so.num("heading_deg", 0.0)}
+        so = _Obj(fo.get("start", {}), f"flights[{i}].start", ("e", "n", "height_m", "heading_deg"))
+        start = {"e": so.num("e", 0.0), "n": so.num("n", 0.0), "height_m": so.num("height_m", 0.0, lo=0.0, hi=2000.0),
+                 "heading_deg": so.num("heading_deg", 0.0)}
         pats = fo.get("patterns")
         if not isinstance(pats, list) or not pats:
             fo._fail("patterns", "a non-empty list", pats)
@@ -779,7 +784,7 @@ _MAX_CLIMB_ANGLE = math.radians(6.0)
 
 def _fly(fl: Mapping[str, Any], dt: float) -> PathBuilder:
     st = fl["start"]
-    b = PathBuilder(e=st["e"], n=st["n"], u=0.0, heading=math.radians(st["heading_deg"]), dt=dt)
+    b = PathBuilder(e=st["e"], n=st["n"], u=st["height_m"], heading=math.radians(st["heading_deg"]), dt=dt)
     for p in fl["patterns"]:
         t = p["type"]
         if t in ("climb", "sink"):
