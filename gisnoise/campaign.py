@@ -56,6 +56,7 @@ import logging
 import math
 import os
 import re
+import struct
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -109,7 +110,7 @@ SIGNAL_BAND_MARGIN_DB = 10.0
 """A band is absorption-corrected only when this far above its background, dB."""
 BACKGROUND_PERCENTILE = 10.0
 EVENT_SMOOTHING_S = 0.5
-_BAND_RE = re.compile(r"^L_(\d+(?:\.\d+)?)$")
+_BAND_RE = re.compile(r"^L_")
 ProgressFn = Callable[[float, float], None]
 
 
@@ -392,31 +393,19 @@ def _moving_mean(t: np.ndarray, v: np.ndarray, width: float) -> np.ndarray:
 
 # ======================================================================= level files
 def band_column(f_hz: float) -> str:
-    """Column name ``L_<nominal Hz>`` of the one-third-octave band at ``f_hz``.
+    """Column name ``L_<nominal Hz>`` of the one-third-octave band at ``f_hz`` (:func:`acoustics.band_name`).
 
     Examples
     --------
     >>> band_column(158.489), band_column(1258.9), band_column(31.62)
     ('L_160', 'L_1250', 'L_31.5')
     """
-    return f"L_{_nominal(f_hz):g}"
+    return str(acoustics.band_name(float(f_hz)))
 
 
-def _band_index(f_hz: float) -> int:
-    return int(round(10.0 * math.log10(float(f_hz) / 1000.0)))
-
-
-def _exact(index: int) -> float:
-    return 1000.0 * 10.0 ** (index / 10.0)
-
-
-_NOMINAL_MANTISSA = (10.0, 12.5, 16.0, 20.0, 25.0, 31.5, 40.0, 50.0, 63.0, 80.0)
-
-
-def _nominal(f_hz: float) -> float:
-    """Nominal frequency (IEC 61260-1 Annex E preferred numbers) of the band at ``f_hz``."""
-    dec, k = divmod(_band_index(f_hz), 10)
-    return round(_NOMINAL_MANTISSA[k] * 10.0 ** (dec + 2), 6)
+def _band_key(f_hz: Any) -> np.ndarray:
+    """Nominal frequency, Hz: the key that identifies a band across files."""
+    return np.asarray(acoustics.nominal_frequency(f_hz), dtype=float)
 
 
 def read_level_csv(path: str | os.PathLike[str], *, mic: str = "", flight: str = "") -> LevelSeries:
@@ -435,13 +424,10 @@ def read_level_csv(path: str | os.PathLike[str], *, mic: str = "", flight: str =
             raise CampaignError(f"{src}: missing column '{need}'", field=need)
     band_cols = []
     for j, h in enumerate(header):
-        mt = _BAND_RE.match(h)
-        if mt:
-            f_nom = float(mt.group(1))
-            idx = _band_index(f_nom)
-            if not (10.0 <= f_nom <= 20000.0) or abs(_nominal(_exact(idx)) - f_nom) > 1e-6 * f_nom:
+        if _BAND_RE.match(h):
+            if not acoustics.is_band_name(h) or not 10.0 <= float(h[2:]) <= 20000.0:
                 raise CampaignError(f"{src}: column '{h}' is not a one-third-octave band of 10 Hz-20 kHz", field=h)
-            band_cols.append((j, h, _exact(idx)))
+            band_cols.append((j, h, float(acoustics.band_frequency(h))))
     data = np.full((len(rows) - 1, len(header)), np.nan)
     used = [header.index("t"), header.index("LA")] + [j for j, _, _ in band_cols]
     for i, r in enumerate(rows[1:], start=2):
@@ -453,8 +439,10 @@ def read_level_csv(path: str | os.PathLike[str], *, mic: str = "", flight: str =
             except ValueError:
                 raise CampaignError(f"{src}: column '{header[j]}' line {i}: not a number: {r[j]!r}",
                                     field=header[j]) from None
-    for j in used:
-        bad = ~np.isfinite(data[:, j])
+    for k, j in enumerate(used):
+        col = data[:, j]
+        # a band may be -inf (digital silence); t, LA and everything else must be finite
+        bad = ~np.isfinite(col) if k < 2 else (np.isnan(col) | (col == np.inf))
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise CampaignError(f"{src}: column '{header[j]}' line {i + 2}: NaN or infinite value", field=header[j])
@@ -502,71 +490,64 @@ def write_level_csv(path: str | os.PathLike[str] | None, t: Any, la: Any, band_f
     return text
 
 
-def _wav_info(path: Path) -> tuple[int, np.ndarray]:
-    from scipy.io import wavfile
-
+def _wav_rate(path: Path) -> int:
+    """Sample rate of a WAV file from its ``fmt`` chunk (the data is not read)."""
     try:
-        with _quiet_wav():
-            fs, data = wavfile.read(str(path), mmap=True)
+        with open(path, "rb") as fh:
+            head = fh.read(12)
+            if len(head) < 12 or head[:4] not in (b"RIFF", b"RF64") or head[8:12] != b"WAVE":
+                raise CampaignError(f"{path}: not a WAV file (no RIFF/WAVE header)", field="path")
+            while True:
+                ch = fh.read(8)
+                if len(ch) < 8:
+                    raise CampaignError(f"{path}: WAV file without a 'fmt ' chunk", field="path")
+                cid, size = ch[:4], struct.unpack("<I", ch[4:])[0]
+                if cid == b"fmt ":
+                    body = fh.read(min(size, 16))
+                    if len(body) < 8:
+                        raise CampaignError(f"{path}: truncated WAV 'fmt ' chunk", field="path")
+                    return int(struct.unpack("<I", body[4:8])[0])
+                fh.seek(size + (size & 1), 1)
     except FileNotFoundError:
         raise CampaignError(f"{path}: missing microphone file", field="path") from None
-    except (ValueError, OSError) as exc:
-        raise CampaignError(f"{path}: not a readable WAV file ({exc})", field="path") from None
-    return int(fs), data
-
-
-class _quiet_wav:
-    """Turn scipy's WavFileWarning (unknown chunks) into nothing while reading."""
-
-    def __enter__(self) -> None:
-        import warnings
-
-        from scipy.io.wavfile import WavFileWarning
-
-        self._cm = warnings.catch_warnings()
-        self._cm.__enter__()
-        warnings.simplefilter("ignore", WavFileWarning)
-
-    def __exit__(self, *exc: Any) -> None:
-        self._cm.__exit__(*exc)
+    except OSError as exc:
+        raise CampaignError(f"{path}: cannot read WAV file ({exc})", field="path") from None
 
 
 def wav_levels(path: str | os.PathLike[str], mic: Microphone, *, block_s: float = DEFAULT_BLOCK_S,
                flight: str = "", sample_rate_hz: float | None = None) -> LevelSeries:
     """Levels of a WAV recording: bands, A-weighted level per block, mount correction.
 
-    Sample values (float, or integer PCM scaled to [-1, 1)) times ``mic.full_scale_v``
-    are volts; divided by ``mic.sensitivity_v_per_pa`` they are pascals.  The mount
-    correction of ``mic.mount`` is added to the bands and the overall level, so the
-    result is free field.
+    Sample values (float, or integer PCM with full scale 1) times ``mic.full_scale_v``
+    are volts; divided by ``mic.sensitivity_v_per_pa`` they are pascals
+    (:func:`gisnoise.acoustics.wav_band_levels`).  The mount correction of ``mic.mount``
+    is added to the bands, and the overall level is their A-weighted sum, so the result
+    is free field.
+
+    Parameters
+    ----------
+    path : path-like
+        Mono WAV file, first sample at the flight's ``start_utc``.
+    mic : Microphone
+        Its calibration and mount.
+    block_s : float
+        Averaging block, s.
+    flight : str
+        Flight id recorded in the result.
+    sample_rate_hz : float, optional
+        Required sample rate, Hz.
     """
     p = Path(path)
-    fs, data = _wav_info(p)
-    if sample_rate_hz is not None and fs != sample_rate_hz:
-        raise CampaignError(f"{p}: sample_rate_hz is {fs} Hz, the campaign states {sample_rate_hz:g} Hz",
+    rate = _wav_rate(p)
+    if sample_rate_hz is not None and rate != sample_rate_hz:
+        raise CampaignError(f"{p}: sample_rate_hz is {rate} Hz, the campaign states {sample_rate_hz:g} Hz",
                             field="sample_rate_hz")
-    if data.ndim != 1:
-        raise CampaignError(f"{p}: WAV has {data.shape[1]} channels, expected mono", field="channels")
     if mic.sensitivity_v_per_pa is None:
         raise CampaignError(f"microphone '{mic.id}': field 'sensitivity_v_per_pa' is needed for WAV input ({p})",
                             field="sensitivity_v_per_pa")
-    kind = data.dtype.kind
-    if kind == "f":
-        full = 1.0
-    elif kind == "i":
-        full = float(2 ** (8 * data.dtype.itemsize - 1))
-    elif kind == "u":
-        full = 128.0
-    else:
-        raise CampaignError(f"{p}: unsupported WAV sample type {data.dtype}", field="dtype")
-    x = data.astype(np.float64) - (128.0 if kind == "u" else 0.0)
-    pressure = x * (mic.full_scale_v / full / mic.sensitivity_v_per_pa)
-    if not np.all(np.isfinite(pressure)):
-        raise CampaignError(f"{p}: NaN or infinite samples", field="samples")
-    t, f, lev = acoustics.band_levels(pressure, float(fs), block_s=block_s)
-    corr = acoustics.mount_correction(mic.mount)
-    bands = np.asarray(lev, dtype=float) + corr
-    la = acoustics.overall_a_level(f, bands)
+    t, f, lev = acoustics.wav_band_levels(p, mic.sensitivity_v_per_pa / mic.full_scale_v, block_s)
+    bands = np.asarray(lev, dtype=float) + acoustics.mount_correction(mic.mount)
+    la = acoustics.overall_a_level(bands, f)
     return LevelSeries(mic=mic.id, flight=flight, source=str(p), t=np.asarray(t, dtype=float),
                        la=np.asarray(la, dtype=float), band_f=np.asarray(f, dtype=float), bands=bands)
 
@@ -684,6 +665,14 @@ def _load(folder: str | os.PathLike[str], *, strict: bool, exclusions: Iterable[
     excl = _parse_exclusions(cjs, doc.get("exclusions"), col, "exclusions")
     excl += _parse_exclusions("exclusions", list(exclusions) if exclusions is not None else None, col,
                               "exclusions")
+    fids, mids = {f.id for f in flights}, {m.id for m in mics}
+    raw_mids = {m.get("id") for m in doc.get("microphones", []) if isinstance(m, dict)} \
+        if isinstance(doc.get("microphones"), list) else set()
+    for i, e in enumerate(excl):
+        if e.flight not in fids:
+            col.add(cjs, "exclusions", f"{cjs}: exclusion {i} names unknown flight {e.flight!r}")
+        elif e.mic is not None and e.mic not in mids and e.mic not in raw_mids:
+            col.add(cjs, "exclusions", f"{cjs}: exclusion {i} names unknown microphone {e.mic!r}")
     rate = doc.get("sample_rate_hz")
     if rate is not None and not (_is_number(rate) and rate > 0):
         col.add(cjs, "sample_rate_hz", f"{cjs}: field 'sample_rate_hz' must be a positive number, got {rate!r}")
@@ -721,7 +710,7 @@ def _load(folder: str | os.PathLike[str], *, strict: bool, exclusions: Iterable[
         rates = {}
         for p in wavs:
             try:
-                rates[p] = _wav_info(p)[0]
+                rates[p] = _wav_rate(p)
             except GisnoiseError as exc:
                 col.error(str(p), exc)
                 bad_rate.add(p)
@@ -767,7 +756,7 @@ def _common_rate(root: Path, flight_ids: set[str], rates: Mapping[Path, int]) ->
     for p in sorted(root.glob("mics/*/*.wav")):
         if p.stem in flight_ids and p not in every:
             try:
-                every[p] = _wav_info(p)[0]
+                every[p] = _wav_rate(p)
             except GisnoiseError:
                 continue
     vals = list(every.values())
@@ -881,11 +870,9 @@ def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Micro
                 col.add(cjs, f"{where}.{k}", f"{cjs}: field '{where}.{k}' must be a number, got {m.get(k)!r}")
                 good = False
         mount = m.get("mount", "free_field")
-        try:
-            acoustics.mount_correction(mount)
-        except (GisnoiseError, KeyError, ValueError, TypeError):
+        if not isinstance(mount, str) or mount not in acoustics.MOUNT_CORRECTIONS_DB:
             col.add(cjs, f"{where}.mount", f"{cjs}: field '{where}.mount': unknown mount {mount!r}; known: "
-                    f"{', '.join(_known_mounts())}")
+                    f"{', '.join(acoustics.MOUNT_CORRECTIONS_DB)}")
             good = False
         extra: dict[str, Any] = {}
         for k in ("sensitivity_v_per_pa", "full_scale_v", "background_db"):
@@ -901,11 +888,6 @@ def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Micro
             out.append(Microphone(id=mid, lat=float(m["lat"]), lon=float(m["lon"]), h=float(m["h"]),
                                   mount=str(mount), **extra))
     return out
-
-
-def _known_mounts() -> list[str]:
-    names = getattr(acoustics, "MOUNTS", None) or getattr(acoustics, "MOUNT_CORRECTIONS_DB", None) or {}
-    return sorted(names)
 
 
 def _parse_flights(cjs: str, root: Path, doc: Mapping[str, Any], col: _Collector) -> list[Flight]:
@@ -1031,17 +1013,17 @@ def write_levels(folder: str | os.PathLike[str], *, block_s: float | None = None
                 jobs.append((m, str(fid), wav))
     if not jobs:
         raise CampaignError(f"{root / 'mics'}: no WAV file of a known microphone and flight", field="mics")
-    info = {wav: _wav_info(wav) for _, _, wav in jobs}
-    rates = [fs for fs, _ in info.values()]
+    info = {wav: _wav_rate(wav) for _, _, wav in jobs}
+    rates = list(info.values())
     common = float(rate) if _is_number(rate) else float(max(set(rates), key=lambda r: (rates.count(r), r)))
-    for wav, (fs, _) in info.items():
+    for wav, fs in info.items():
         if fs != common:
             which = "campaign.json states" if _is_number(rate) else "the campaign's other WAV files have"
             raise CampaignError(f"{wav}: sample_rate_hz is {fs} Hz, {which} {common:g} Hz", field="sample_rate_hz")
         target = wav.with_suffix(".csv")
         if target.exists() and not force:
             raise CampaignError(f"{target}: exists; use --force to overwrite", field="force")
-    durations = {wav: len(data) / fs for wav, (fs, data) in info.items()}
+    durations = {wav: max(wav.stat().st_size, 1) / fs for wav, fs in info.items()}  # proportional to seconds
     total = float(sum(durations.values()))
     done = 0.0
     written = []
@@ -1060,8 +1042,9 @@ def write_levels(folder: str | os.PathLike[str], *, block_s: float | None = None
 def _build_samples(camp: Campaign) -> Samples:
     c = camp.speed_of_sound_m_s
     parts: list[dict[str, Any]] = []
-    band_set = sorted({_band_index(f) for lv in camp.levels if lv.band_f is not None for f in lv.band_f})
-    band_f = np.array([_exact(i) for i in band_set]) if band_set else None
+    band_set = np.unique(np.concatenate([_band_key(lv.band_f) for lv in camp.levels if lv.band_f is not None]
+                                        or [np.zeros(0)]))
+    band_f = np.asarray(acoustics.exact_frequency(band_set), dtype=float) if band_set.size else None
     mic_pos = {m.id: camp.mic_enu(m.id) for m in camp.microphones}
     tracks = {}
     for fid, tr in camp.trajectories.items():
@@ -1083,7 +1066,7 @@ def _build_samples(camp: Campaign) -> Samples:
         if band_f is not None:
             bands = np.full((n, len(band_f)), np.nan)
             if lv.bands is not None:
-                cols = np.searchsorted(band_set, [_band_index(f) for f in lv.band_f])
+                cols = np.searchsorted(band_set, _band_key(lv.band_f))
                 bands[:, cols] = lv.bands
         parts.append({
             "mic": np.full(n, lv.mic, dtype=object), "flight": np.full(n, lv.flight, dtype=object),
@@ -1105,33 +1088,30 @@ def _build_samples(camp: Campaign) -> Samples:
     level = cat["level"]
     outside = cat["outside"]
 
-    # absorption (band-wise, signal bands only), on the measured level
+    # absorption (band-wise, bands clear of their background only), on the measured level
     meta_uncorrected = []
     if camp.absorption:
         level = level.copy()
-        alpha = None
-        if band_f is not None:
-            w = camp.weather
-            alpha = np.asarray(acoustics.atmospheric_absorption(band_f, w["temperature_c"], w["humidity_pct"],
-                                                                w.get("pressure_kpa", 101.325)), dtype=float)
-            a_w = np.asarray(acoustics.a_weighting(band_f), dtype=float)
+        w = camp.weather
         start = 0
         for p in parts:
             k = len(p["t_r"])
             sl = slice(start, start + k)
             start += k
-            if not p["has_bands"] or alpha is None or bands_all is None:
+            if not p["has_bands"] or bands_all is None or band_f is None:
                 meta_uncorrected.append((str(p["mic"][0]), str(p["flight"][0])))
                 continue
             b = bands_all[sl]
+            d = cat["d"][sl]
             far = ~outside[sl]
-            far &= cat["d"][sl] >= np.percentile(cat["d"][sl][far], 75.0) if far.any() else far
-            bg_b = np.nanpercentile(b[far], BACKGROUND_PERCENTILE, axis=0) if far.any() else \
-                np.full(b.shape[1], -np.inf)
-            signal = np.isfinite(b) & (b >= bg_b[None, :] + SIGNAL_BAND_MARGIN_DB)
-            extra = np.where(signal, 10.0 ** ((b + a_w[None, :]) / 10.0)
-                             * (10.0 ** (alpha[None, :] * cat["d"][sl][:, None] / 10.0) - 1.0), 0.0)
-            level[sl] = 10.0 * np.log10(10.0 ** (level[sl] / 10.0) + extra.sum(axis=1))
+            if far.any():
+                far &= d >= np.percentile(d[far], 75.0)
+            bg_b = acoustics.background_levels(b[far], BACKGROUND_PERCENTILE) if far.any() else \
+                np.full(b.shape[1], np.inf)
+            bg_b = np.where(np.isnan(bg_b), np.inf, bg_b)  # a band absent here is never corrected
+            level[sl] = acoustics.absorption_corrected_level(
+                level[sl], b, band_f, d, w["temperature_c"], w["humidity_pct"], w.get("pressure_kpa", 101.325),
+                background_db=bg_b, min_snr_db=SIGNAL_BAND_MARGIN_DB)
 
     # masks
     reason = np.full(n, "", dtype=object)

@@ -221,6 +221,16 @@ def test_exclusions_from_file_and_argument(tmp_path):
     assert np.array_equal(s.valid, r == "")
 
 
+def test_exclusion_of_unknown_flight_or_mic(tmp_path):
+    root = make_campaign(tmp_path / "c")
+    with pytest.raises(CampaignError, match="exclusion 0 names unknown flight 'f9'"):
+        read_campaign(root, exclusions=[("f9", 1.0, 2.0)])
+    with pytest.raises(CampaignError, match="exclusion 0 names unknown microphone 'm9'"):
+        read_campaign(root, exclusions=[("f1", 1.0, 2.0, "m9")])
+    with pytest.raises(CampaignError, match=r"needs flight \(name\) and t0 <= t1"):
+        read_campaign(root, exclusions=[("f1", 2.0, 1.0)])
+
+
 def test_samples_outside_the_flight_log(tmp_path):
     # log covers -10..60 s; reception times up to 64 s: emission after the log's end is masked
     root = make_campaign(tmp_path / "c", t_r=np.arange(3.0, 64.0, 0.125))
@@ -374,6 +384,11 @@ def test_level_csv_problems(tmp_path):
     p.write_text("t,L_1000\n0.0,50\n")
     with pytest.raises(CampaignError, match=r"l\.csv: missing column 'LA'"):
         read_level_csv(p)
+    p.write_text("t,LA,L_1000\n0.0,inf,40\n")
+    with pytest.raises(CampaignError, match=r"l\.csv: column 'LA' line 2: NaN or infinite"):
+        read_level_csv(p)
+    p.write_text("t,LA,L_1000,L_25\n0.0,50,40,-inf\n")   # digital silence in a band is a level
+    assert read_level_csv(p).bands[0, 0] == -np.inf
     p.write_text("t,LA,L_1100\n0.0,50,40\n")
     with pytest.raises(CampaignError, match=r"column 'L_1100' is not a one-third-octave band"):
         read_level_csv(p)
