@@ -115,3 +115,28 @@ class ContourStyle(QgsProcessingLayerPostProcessorInterface):
             return
         layer.setRenderer(graduated_renderer(self.levels, polygons=self.polygons))
         layer.triggerRepaint()
+
+
+#: Classes of residual levels, dB: the measurement noise of a good campaign is about 1 dB.
+RESIDUAL_CLASSES = (0.0, 1.0, 2.0, 3.0, 5.0)
+
+
+class ResidualStyle(QgsProcessingLayerPostProcessorInterface):
+    """Graduated colours on a residual field (dB), thick lines: where the card misses."""
+
+    def __init__(self, field):
+        super().__init__()
+        self.field = field
+
+    def postProcessLayer(self, layer, context, feedback):  # noqa: N802 - QGIS API
+        if not layer.isValid():
+            return
+        levels = list(RESIDUAL_CLASSES)
+        ranges = []
+        for i, colour in enumerate(level_colours(levels)):
+            hi = levels[i + 1] if i + 1 < len(levels) else TOP_DB
+            symbol = QgsLineSymbol.createSimple({"color": colour.name(), "width": "1.2"})
+            label = f">= {levels[i]:g} dB" if i == len(levels) - 1 else f"{levels[i]:g} - {hi:g} dB"
+            ranges.append(QgsRendererRange(QgsClassificationRange(label, levels[i], hi), symbol))
+        layer.setRenderer(QgsGraduatedSymbolRenderer(self.field, ranges))
+        layer.triggerRepaint()

@@ -69,6 +69,9 @@ def plugin(qgis_app, profile):
     assert Path(gisnoise_qgis.__file__).resolve().parent == (Path(folder) / PLUGIN).resolve()
     instance = gisnoise_qgis.classFactory(None)
     instance.initProcessing()
+    from gisnoise_qgis._core import ensure_core
+
+    ensure_core()  # the tests import the core the plugin bundles
     yield instance
     instance.unload()
 

@@ -1,0 +1,90 @@
+"""Fit and diagnose through processing.run on simulated campaigns with a known truth."""
+
+import json
+
+import pytest
+from conftest import REPO
+
+pytestmark = pytest.mark.qgis
+
+SCENARIOS = REPO / "sample_data" / "scenarios"
+TRUTH_CARD = REPO / "sample_data" / "cards" / "demo_horizontal.json"
+
+
+@pytest.fixture(scope="module")
+def control_campaign(cli, tmp_path_factory):
+    """Two short flights, no unmodelled effect injected: the truth is the demo card."""
+    out = tmp_path_factory.mktemp("control") / "campaign"
+    cli("simulate", SCENARIOS / "diagnosis_base.json", "--out", out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def bank_campaign(cli, tmp_path_factory):
+    """The sample campaign: turning-flight noise (3 dB at 30 deg bank) injected in the turns."""
+    out = tmp_path_factory.mktemp("bank") / "campaign"
+    cli("simulate", SCENARIOS / "sample_campaign.json", "--out", out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def control_fit(plugin, control_campaign, tmp_path_factory):
+    import processing
+
+    card = tmp_path_factory.mktemp("fit") / "card.json"
+    res = processing.run("gisnoise:fitcard", {"CAMPAIGN": str(control_campaign), "PHASE": 0,
+                                              "ANSATZ": "paper-offset", "OUTPUT_CARD": str(card)})
+    return res, card
+
+
+def test_fit_recovers_the_simulated_truth(control_fit):
+    from gisnoise import cards
+
+    res, path = control_fit
+    card, truth = cards.load(path), cards.load(TRUTH_CARD)
+    assert card.phase == "horizontal" and card.ansatz == truth.ansatz
+    for name, value in truth.parameters.items():
+        assert abs(card.parameters[name] - value) < 4.0 * card.std[name], name
+    assert res["N_SAMPLES"] == card.statistics["n_samples"] > 1000
+    assert res["RMS_DB"] == pytest.approx(card.statistics["rms_db"])
+    # the simulated microphones' noise is 0.8-1.2 dB, so the residual cannot be much smaller or larger
+    assert 0.6 < res["RMS_DB"] < 2.0
+    assert res["CARD_ID"] == card.id
+
+
+def test_fit_of_a_folder_that_is_no_campaign_names_the_file(plugin, tmp_path):
+    import processing
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException) as err:
+        processing.run("gisnoise:fitcard", {"CAMPAIGN": str(tmp_path), "PHASE": 0,
+                                            "OUTPUT_CARD": str(tmp_path / "card.json")})
+    assert "campaign.json" in str(err.value)
+
+
+def test_diagnose_names_bank_angle_and_maps_the_flagged_segments(plugin, bank_campaign, tmp_path):
+    import processing
+    from gisnoise.campaign import read_campaign
+    from qgis.core import QgsVectorLayer
+
+    res = processing.run("gisnoise:diagnose", {
+        "CAMPAIGN": str(bank_campaign), "CARD": str(TRUTH_CARD), "OUTPUT_JSON": str(tmp_path / "diagnosis.json"),
+        "OUTPUT_SEGMENTS": str(tmp_path / "segments.gpkg"), "OUTPUT_MICS": str(tmp_path / "mics.geojson")})
+    doc = json.loads((tmp_path / "diagnosis.json").read_text(encoding="utf-8"))
+    assert res["VERDICT"] == doc["verdict"]["effect"] == "bank_angle"
+    assert res["BASELINE_RMS_DB"] == pytest.approx(doc["baseline"]["rms_db"])
+    segments = QgsVectorLayer(str(tmp_path / "segments.gpkg"), "s", "ogr")
+    assert segments.featureCount() == len(doc["segments"]) > 0
+    campaign = read_campaign(bank_campaign)
+    by_key = {(g["flight"], g["mic"], g["t0"]): g for g in doc["segments"]}
+    for f in segments.getFeatures():
+        seg = by_key[(f["flight"], f["mic"], f["t0"])]
+        assert f["t1"] == seg["t1"] and f["rms_db"] == pytest.approx(seg["rms_db"])
+        # the line runs along the flight track from t0 to t1
+        line = f.geometry().constGet()
+        state = campaign.trajectories[f["flight"]].interpolate([seg["t0"], seg["t1"]])
+        for vertex, i in ((line.startPoint(), 0), (line.endPoint(), 1)):
+            assert (vertex.x(), vertex.y(), vertex.z()) == pytest.approx(
+                (state["lon"][i], state["lat"][i], state["h"][i]), abs=1e-7)
+    mics = QgsVectorLayer(str(tmp_path / "mics.geojson"), "m", "ogr")
+    assert sorted(f["id"] for f in mics.getFeatures()) == ["m1", "m2", "m3"]
