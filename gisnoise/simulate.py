@@ -105,7 +105,10 @@ See ``sample_data/scenarios/`` for complete examples.  Top-level fields::
     background    {"level_dba", "spectrum": "ambient" | "pink" | {"<nominal Hz>": dB},
                    "fluctuation_db", "fluctuation_tau_s"}
     output        {"format": "levels" | "wav", "block_s", "bands", "band_min_hz", "band_max_hz",
-                   "sim_rate_hz", "log_rate_hz", "subsamples", "fs_hz"}
+                   "sim_rate_hz", "log_rate_hz", "subsamples", "fs_hz", "background_in_campaign"}
+                  (``background_in_campaign``, default true: write each microphone's
+                  ``background_db`` into campaign.json, as a background measurement
+                  before the flights would give it; false lets the reader estimate it)
     flights       [{"id", "start_utc", "start": {"e", "n", "height_m", "heading_deg"}, "patterns": [...]}]
                   (a flight starts at rest at ``start``; height 0: on the ground)
     effects       {name: {parameters}}
@@ -140,7 +143,7 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
+from . import __version__, acoustics
 from . import cards as _cards
 from ._patterns import G, PathBuilder
 from .errors import InputError, ScenarioError
@@ -159,7 +162,6 @@ __all__ = [
     "dumps_truth",
     "resolve_scenario",
     "coordinated_bank",
-    "speed_of_sound",
     "SimulationResult",
     "ScenarioError",
 ]
@@ -168,9 +170,7 @@ SCHEMA = "gisnoise/scenario/1"
 TRUTH_SCHEMA = "gisnoise/simulation-truth/1"
 EFFECTS = ("bank_angle", "atmospheric_absorption", "ground_reflection", "doppler", "emission_time", "wind",
            "rpm", "background_event")
-MOUNTS = ("ground_plate", "free_field")
-_NOMINAL = (25, 31.5, 40, 50, 63, 80, 100, 125, 160, 200, 250, 315, 400, 500, 630, 800, 1000, 1250, 1600, 2000,
-            2500, 3150, 4000, 5000, 6300, 8000, 10000, 12500, 16000, 20000)
+MOUNTS = tuple(acoustics.MOUNT_CORRECTIONS_DB)
 
 
 Progress = Callable[[float], None]
@@ -193,28 +193,9 @@ def coordinated_bank(speed_m_s: Any, radius_m: Any) -> np.ndarray:
     return np.arctan(v * v / (G * np.asarray(radius_m, dtype=float)))
 
 
-def speed_of_sound(temperature_c: Any) -> np.ndarray:
-    """Speed of sound in air, ``331.3 sqrt(1 + T / 273.15)`` m/s.  Float or array_like in deg C.
-
-    >>> round(float(speed_of_sound(20.0)), 2)
-    343.21
-    """
-    return 331.3 * np.sqrt(1.0 + np.asarray(temperature_c, dtype=float) / 273.15)
-
-
-def _acoustics() -> Any:
-    try:
-        from . import acoustics
-    except ImportError as exc:  # pragma: no cover - the module ships with the package
-        raise InputError(f"the simulator needs gisnoise.acoustics: {exc}", field="acoustics") from None
-    return acoustics
-
-
 def nominal_label(f_exact: float) -> str:
     """Nominal one-third-octave label (``'160'``, ``'31.5'``) of an exact mid-band frequency, Hz."""
-    nom = np.asarray(_NOMINAL, dtype=float)
-    v = nom[int(np.argmin(np.abs(np.log(nom / f_exact))))]
-    return f"{v:g}"
+    return str(acoustics.band_name(f_exact))[2:]
 
 
 def band_edges(f_mid: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -525,7 +506,7 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
                       "wind_from_deg": w.num("wind_from_deg", 270.0, lo=-360.0, hi=360.0)}
     c_given = top.num("speed_of_sound_m_s", None, lo=250.0, hi=400.0, allow_none=True)
     out["speed_of_sound_m_s"] = c_given
-    c = c_given if c_given is not None else float(speed_of_sound(out["weather"]["temperature_c"]))
+    c = c_given if c_given is not None else float(acoustics.speed_of_sound(out["weather"]["temperature_c"]))
 
     # ---------------------------------------------------------------- vehicle and cards
     v = _Obj(top.get("vehicle", {}), "vehicle", ("name", "reference_power_w", "mass_kg", "cruise_speed_m_s",
@@ -625,7 +606,8 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
                          "fluctuation_db": b.num("fluctuation_db", 0.0, lo=0.0, hi=20.0),
                          "fluctuation_tau_s": b.num("fluctuation_tau_s", 10.0, lo=0.01)}
     op = _Obj(top.get("output", {}), "output", ("format", "block_s", "bands", "band_min_hz", "band_max_hz",
-                                               "sim_rate_hz", "log_rate_hz", "subsamples", "fs_hz"))
+                                               "sim_rate_hz", "log_rate_hz", "subsamples", "fs_hz",
+                                               "background_in_campaign"))
     outp = {"format": op.str("format", "levels", ("levels", "wav")),
             "block_s": op.num("block_s", 0.125, lo=0.01, hi=10.0),
             "bands": op.get("bands", True),
@@ -634,9 +616,11 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
             "sim_rate_hz": op.num("sim_rate_hz", 50.0, lo=5.0, hi=1000.0),
             "log_rate_hz": op.num("log_rate_hz", 10.0, lo=1.0, hi=1000.0),
             "subsamples": op.num("subsamples", 8, lo=1, hi=256, integer=True),
-            "fs_hz": op.num("fs_hz", 48000, lo=8000, hi=192000, integer=True)}
-    if not isinstance(outp["bands"], bool):
-        op._fail("bands", "true or false", outp["bands"])
+            "fs_hz": op.num("fs_hz", 48000, lo=8000, hi=192000, integer=True),
+            "background_in_campaign": op.get("background_in_campaign", True)}
+    for k in ("bands", "background_in_campaign"):
+        if not isinstance(outp[k], bool):
+            op._fail(k, "true or false", outp[k])
     if outp["band_max_hz"] < outp["band_min_hz"]:
         op._fail("band_max_hz", f"at least band_min_hz ({outp['band_min_hz']:g})", outp["band_max_hz"])
     if outp["format"] == "wav":
@@ -896,7 +880,6 @@ def _state(sc: Scenario, fl: Mapping[str, Any], index: int) -> _Flight:
     log["phase"] = phase[idx]
     if "emission_time" in doc["effects"]:
         log["t"] = log["t"] + doc["effects"]["emission_time"]["offset_s"]
-    del n
     return _Flight(id=fl["id"], start_utc=fl["start_utc"], true=true, log=log, turns=list(b.turns),
                    phases=list(b.phases))
 
@@ -931,7 +914,7 @@ class _Bands:
 
 
 def _bands(sc: Scenario) -> _Bands:
-    ac = _acoustics()
+    ac = acoustics
     op = sc.doc["output"]
     f = np.asarray(ac.third_octave_centres(op["band_min_hz"], op["band_max_hz"]), dtype=float)
     aw = np.asarray(ac.a_weighting(f), dtype=float)
@@ -1143,6 +1126,9 @@ def _campaign_doc(res: SimulationResult) -> dict[str, Any]:
         mics.append({"id": m["id"], "lat": round(float(lat), 9), "lon": round(float(lon), 9),
                      "h": round(float(h), 4), "height_agl_m": m["height_m"], "mount": m["mount"],
                      "sensitivity_v_per_pa": m["sensitivity_v_per_pa"]})
+        if doc["output"]["background_in_campaign"]:
+            # as measured before the flights; the reader then uses it in place of its own estimate
+            mics[-1]["background_db"] = doc["background"]["level_dba"]
     return {"schema": "gisnoise/campaign/1", "name": doc["name"],
             "origin": dict(doc["origin"]), "speed_of_sound_m_s": doc["speed_of_sound_m_s"],
             "weather": dict(doc["weather"]),
@@ -1237,12 +1223,6 @@ def synthesize_wav(bands_db: np.ndarray, f_mid: np.ndarray, block_s: float, fs_h
     return out
 
 
-def _write_wav(path: Path, pressure: np.ndarray, fs: int, gain: float) -> None:
-    from scipy.io import wavfile
-
-    wavfile.write(path, fs, (pressure * gain).astype(np.float32))
-
-
 def simulate(scenario: Mapping[str, Any] | str | os.PathLike[str], out_dir: str | os.PathLike[str], *,
              progress: Progress | None = None, base_dir: str | os.PathLike[str] | None = None,
              overwrite: bool = False) -> Path:
@@ -1295,8 +1275,8 @@ def simulate(scenario: Mapping[str, Any] | str | os.PathLike[str], out_dir: str 
             pr = synthesize_wav(mf.bands, res.band_f, op["block_s"], op["fs_hz"],
                                 _rng(sc.seed, fi, 5000 + list(mics).index(mid)))
             # undo the reader's mount correction (ground plate: pressure doubling) and calibrate to volts
-            gain = 10.0 ** (-float(_acoustics().mount_correction(m["mount"])) / 20.0) * m["sensitivity_v_per_pa"]
-            _write_wav(d / f"{fl.id}.wav", pr, op["fs_hz"], gain)
+            gain = 10.0 ** (-acoustics.mount_correction(m["mount"]) / 20.0)
+            acoustics.write_wav(d / f"{fl.id}.wav", pr * gain, op["fs_hz"], m["sensitivity_v_per_pa"])
         else:
             _write_levels_csv(d / f"{fl.id}.csv", mf, res.band_labels, op["bands"])
         if progress:
@@ -1308,19 +1288,6 @@ def simulate(scenario: Mapping[str, Any] | str | os.PathLike[str], out_dir: str 
 
 
 # =========================================================================== samples
-
-
-def _solve_emission(t_r: np.ndarray, tl: np.ndarray, pos: np.ndarray, mic: np.ndarray, c: float) -> np.ndarray:
-    """Emission times ``t_e`` with ``t_r = t_e + |x(t_e) - mic| / c`` (x linear in the log), s."""
-    te = t_r.copy()
-    for _ in range(50):
-        x = np.stack([np.interp(te, tl, pos[:, k]) for k in range(3)], axis=1)
-        new = t_r - np.linalg.norm(x - mic, axis=1) / c
-        if np.max(np.abs(new - te), initial=0.0) < 1e-10:
-            te = new
-            break
-        te = new
-    return te
 
 
 def simulate_samples(scenario: Mapping[str, Any] | str | os.PathLike[str] | SimulationResult, *,
@@ -1349,6 +1316,8 @@ def simulate_samples(scenario: Mapping[str, Any] | str | os.PathLike[str] | Simu
     """
     if isinstance(scenario, (str, os.PathLike)):
         scenario = load_scenario(scenario)
+    from .campaign import emission_time  # the reader's solver: one definition
+
     res = scenario if isinstance(scenario, SimulationResult) else run(scenario, base_dir=base_dir)
     sc = res.scenario
     doc = sc.doc
@@ -1366,7 +1335,7 @@ def simulate_samples(scenario: Mapping[str, Any] | str | os.PathLike[str] | Simu
         for m in doc["microphones"]:
             mf = res.levels[fl.id][m["id"]]
             mic = np.array([m["e"], m["n"], m["height_m"]])
-            te = _solve_emission(mf.t, tl, pos, mic, sc.c)
+            te = emission_time(mf.t, tl, pos, mic, sc.c)
             t_r = mf.t
             x = np.stack([np.interp(te, tl, pos[:, k]) for k in range(3)], axis=1)
             yaw, pitch, roll = (_interp_angle(te, tl, lg[k]) for k in ("yaw", "pitch", "roll"))

@@ -441,7 +441,7 @@ def test_wav_campaign_recovers_true_block_la(tmp_path):
     r = CliRunner().invoke(cli, ["-q", "campaign", "levels", str(out)])
     assert r.exit_code == 0, r.output
     truth = json.loads((out / "truth.json").read_text())
-    samples = campaign.read_campaign(out)
+    samples = campaign.read_campaign(out).samples()
     for mic in ("m1", "m2"):
         blk = truth["flights"]["f1"]["blocks"][mic]
         rows = samples.mic == mic
