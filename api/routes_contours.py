@@ -87,10 +87,11 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
         elif isinstance(spec, ColumnsTrajectory):
             cols = spec.columns
             lengths = {k: len(v) for k, v in cols.items()}
-            if len(set(lengths.values())) > 1:
-                k = next(k for k, n in lengths.items() if n != lengths.get("t", n))
-                raise TrajectoryError(f"trajectory: column '{k}' has {lengths[k]} values, column 't' has "
-                                      f"{lengths.get('t')}", field=f"columns.{k}")
+            ref = "t" if "t" in cols else next(iter(cols), None)
+            bad = [k for k, n in lengths.items() if ref is not None and n != lengths[ref]]
+            if bad:
+                raise TrajectoryError(f"trajectory: column '{bad[0]}' has {lengths[bad[0]]} values, column "
+                                      f"'{ref}' has {lengths[ref]}", field=f"columns.{bad[0]}")
             traj = from_columns(_numeric_columns(cols), source="trajectory")
         elif isinstance(spec, RowsTrajectory):
             keys = list(spec.rows[0])

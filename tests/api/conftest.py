@@ -15,9 +15,9 @@ with warnings.catch_warnings():  # starlette's notice about its httpx-based clie
     warnings.simplefilter("ignore")
     from fastapi.testclient import TestClient
 
-from api import Settings, create_app  # noqa: E402
-
 from service_helpers import CARDS  # noqa: E402
+
+from api import Settings, create_app  # noqa: E402
 
 
 def make_settings(tmp_path: Path, **kw: Any) -> Settings:

@@ -49,7 +49,7 @@ class Server:
     """``gisnoise serve`` in a subprocess on 127.0.0.1 (killed by ``kill()`` or ``stop()``)."""
 
     def __init__(self, data_dir: Path, *, port: int | None = None, env: dict[str, str] | None = None,
-                 workers: int = 1, log: Path | None = None) -> None:
+                 workers: int = 1, log: Path | None = None, cli: bool = False) -> None:
         import os
         import subprocess
         import sys
@@ -61,10 +61,14 @@ class Server:
         e.update(env or {})
         self.log = log or (Path(data_dir).parent / f"server-{self.port}.log")
         self._logf = open(self.log, "ab")  # noqa: SIM115 - closed in stop/kill
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "gisnoise.cli.main", "serve", "--host", "127.0.0.1", "--port", str(self.port),
-             "--data-dir", str(data_dir), "--workers", str(workers), "--log-level", "warning"],
-            env=e, stdout=self._logf, stderr=subprocess.STDOUT, cwd=str(REPO))
+        if cli:  # the product's command
+            args = [sys.executable, "-m", "gisnoise.cli.main", "serve", "--host", "127.0.0.1", "--port",
+                    str(self.port), "--data-dir", str(data_dir), "--workers", str(workers), "--log-level", "warning"]
+        else:  # uvicorn itself on the app factory (settings from the environment, as `serve` does)
+            e.update({"GISNOISE_DATA_DIR": str(data_dir), "GISNOISE_WORKERS": str(workers)})
+            args = [sys.executable, "-m", "uvicorn", "api.app:create_app", "--factory", "--host", "127.0.0.1",
+                    "--port", str(self.port), "--log-level", "warning"]
+        self.proc = subprocess.Popen(args, env=e, stdout=self._logf, stderr=subprocess.STDOUT, cwd=str(REPO))
         self.wait_up()
 
     def wait_up(self, timeout: float = 30.0) -> None:
