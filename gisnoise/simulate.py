@@ -1361,8 +1361,9 @@ def simulate_samples(scenario: Mapping[str, Any] | str | os.PathLike[str] | Simu
             "reference_power_w": doc["vehicle"]["reference_power_w"], "speed_of_sound_m_s": sc.c,
             "absorption_corrected": False, "snr_db": snr_db, "block_s": doc["output"]["block_s"],
             "flights": {f["id"]: {"start_utc": f["start_utc"]} for f in cdoc["flights"]},
-            "microphones": {m["id"]: {k: m[k] for k in ("lat", "lon", "h", "mount", "height_agl_m")}
-                            for m in cdoc["microphones"]},
+            "microphones": {m["id"]: {**{k: m[k] for k in ("lat", "lon", "h", "mount", "height_agl_m")},
+                                      "enu": [s_["e"], s_["n"], s_["height_m"]]}
+                            for m, s_ in zip(cdoc["microphones"], doc["microphones"], strict=True)},
             "noise_std_db": {m["id"]: m["noise_std_db"] for m in doc["microphones"]}}
     return Samples(mic=cat["mic"].astype(str), flight=cat["flight"].astype(str), t_r=cat["t_r"], t_e=cat["t_e"],
                    level=cat["level"], d=cat["d"], phi=cat["phi"], theta=cat["theta"], power_w=cat["power_w"],
