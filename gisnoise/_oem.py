@@ -254,8 +254,11 @@ def relaxation(
         nfev += res.nfev
         q, r, jac = res.q, res.r, res.jac
         if not res.converged:
+            msg = res.message
+            if msg.startswith("did not converge in"):
+                msg = f"did not converge in {max_iter} iterations" + msg[msg.index(" iterations") + 11:]
             return LMResult(q, r, jac, res.cost, used, nfev, False,
-                            f"{res.message}; {cycle} relaxation cycle(s)",
+                            f"{msg}; {cycle} relaxation cycle(s)",
                             variances=var, nll=negative_log_likelihood(r, var, groups), cycles=cycle)
         var_new = group_variances(r, groups, n_groups)
         nll_new = negative_log_likelihood(r, var_new, groups)

@@ -59,7 +59,7 @@ import numpy as np
 
 from . import __version__, _oem
 from .cards import PHASES, ModelCard
-from .errors import FitError, InputError, NotIdentifiableError
+from .errors import Cancelled, FitError, InputError, NotIdentifiableError
 from .model import Ansatz, get_ansatz
 from .samples import Samples
 
@@ -656,7 +656,15 @@ def fit_arrays(
     var = res.variances if res.variances is not None else var0
     w = 1.0 / var[noise_groups]
     jw = res.jac * np.sqrt(w)[:, None]
-    ratio = _identifiability(jw, free_names, rcond, "at the optimum") if res.converged else float("nan")
+    if res.converged:
+        ratio = _identifiability(jw, free_names, rcond, "at the optimum")
+    else:  # an ill-posed problem is the likelier reason; say so rather than only "no convergence"
+        try:
+            ratio = _identifiability(jw, free_names, rcond, f"where the fit stopped ({res.message})")
+        except NotIdentifiableError:
+            if raise_on_failure:
+                raise
+            ratio = float("nan")
 
     kf = len(free_names)
     cov = np.zeros((len(names), len(names)))
@@ -846,7 +854,15 @@ def fit_campaign(
     source = None
     if isinstance(campaign, (str, os.PathLike)):
         source = os.fspath(campaign)
-        camp = _campaign.read_campaign(campaign, **dict(read_kw or {}))
+        rk = dict(read_kw or {})
+        cancel = kw.get("cancel")
+        if cancel is not None and "progress" not in rk:
+            def _reading(done: float, total: float) -> None:
+                if cancel():
+                    raise Cancelled("fit cancelled while reading the campaign", field="cancel")
+
+            rk["progress"] = _reading
+        camp = _campaign.read_campaign(campaign, **rk)
     else:
         camp = campaign
     all_samples = camp.samples()

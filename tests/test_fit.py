@@ -11,7 +11,7 @@ from scipy.optimize import least_squares
 
 from gisnoise import cards
 from gisnoise.errors import Cancelled, FitError, InputError, NotIdentifiableError
-from gisnoise.fit import fit, fit_arrays
+from gisnoise.fit import fit, fit_arrays, fit_campaign
 from gisnoise.model import get_ansatz
 
 MODEL = get_ansatz("paper-offset")
@@ -255,3 +255,163 @@ def test_fit_arrays_without_samples():
     res = fit_arrays(y, x)
     assert res.noise_std == {"all": pytest.approx(1.0, rel=0.05)}
     assert np.all(np.abs(res.p - P_TRUE) < 3.5 * res.std_array)
+
+
+# --------------------------------------------------------------------------- campaign folders and the CLI
+
+ORIGIN = {"lat": 52.3186, "lon": 10.5564, "h": 125.0}
+
+
+def _write_csv(path, cols):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    names = list(cols)
+    rows = [",".join(names)]
+    for i in range(len(cols[names[0]])):
+        rows.append(",".join(str(cols[k][i]) if k == "phase" else repr(float(cols[k][i])) for k in names))
+    path.write_text("\n".join(rows) + "\n")
+
+
+def make_campaign_folder(root, *, seed=0, truth=None):
+    """A campaign folder (SPEC 3) whose levels are the truth model at the reader's own emission geometry.
+
+    The flight CSV is a racetrack at 10 Hz; the level CSVs are written twice: first
+    with placeholder levels to let the campaign reader solve the emission geometry,
+    then with ``truth`` at that geometry + seeded noise per microphone (NOISE).
+    """
+    from _fit_synth import MICS, racetrack
+
+    from gisnoise.campaign import read_campaign
+    from gisnoise.frames import LocalFrame
+
+    truth = TRUTH if truth is None else truth
+    frame = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"])
+    tr = racetrack(altitudes=(40.0, 120.0), speeds=(22.0, 30.0), dt=0.1, seed=seed)
+    lat, lon, h = frame.to_wgs84(tr["e"], tr["n"], tr["u"])
+    _write_csv(root / "flights" / "f1.csv", {
+        "t": tr["t"], "lat": lat, "lon": lon, "h": h, "roll": np.degrees(tr["roll"]),
+        "pitch": np.degrees(tr["pitch"]), "yaw": np.degrees(tr["yaw"]), "power_w": tr["p_el"] * REF_W,
+        "phase": np.full(len(tr["t"]), "horizontal")})
+    mics = []
+    for m, enu in MICS.items():
+        mlat, mlon, mh = frame.to_wgs84(*enu)
+        mics.append({"id": m, "lat": float(mlat), "lon": float(mlon), "h": float(mh), "mount": "free_field",
+                     "background_db": truth["p7"]})
+    doc = {"schema": "gisnoise/campaign/1", "origin": ORIGIN, "speed_of_sound_m_s": 340.0,
+           "weather": {"temperature_c": 15.0, "humidity_pct": 50.0, "pressure_kpa": 101.325},
+           "vehicle": {"name": "test eVTOL", "reference_power_w": REF_W}, "microphones": mics,
+           "flights": [{"id": "f1", "start_utc": "2024-05-04T10:00:00Z"}]}
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "campaign.json").write_text(__import__("json").dumps(doc, indent=1))
+    t_r = np.arange(5.0, tr["t"][-1] - 1.0, 0.125)
+    t_r = t_r[np.all(np.abs(t_r[:, None] - tr["t"][np.nonzero(np.diff(tr["t"]) > 1.0)[0]]) > 8.0, axis=1)]
+    for m in MICS:
+        _write_csv(root / "mics" / m / "f1.csv", {"t": t_r, "LA": np.full(len(t_r), 60.0)})
+    s = read_campaign(root).samples()
+    x = s.inputs(REF_W)
+    clean = get_ansatz("paper-offset").level(np.array([truth[k] for k in MODEL.params]), x)
+    rng = np.random.default_rng(seed)
+    for m, sd in NOISE.items():
+        sel = s.mic == m
+        order = np.argsort(s.t_r[sel])
+        la = (clean[sel] + rng.normal(0.0, sd, int(sel.sum())))[order]
+        _write_csv(root / "mics" / m / "f1.csv", {"t": s.t_r[sel][order], "LA": la})
+    return root
+
+
+@pytest.fixture(scope="module")
+def campaign_folder(tmp_path_factory):
+    return make_campaign_folder(tmp_path_factory.mktemp("camp") / "campaign")
+
+
+def test_fit_campaign_recovers_the_truth_through_the_reader(campaign_folder):
+    res = fit_campaign(campaign_folder, "horizontal")
+    assert res.reference_power_w == REF_W and res.phase == "horizontal"
+    z = (res.p - P_TRUE) / res.std_array
+    assert np.all(np.abs(z) < 3.0), dict(zip(res.param_names, z.round(2), strict=True))
+    for mic, sd in NOISE.items():
+        assert res.noise_std[mic] == pytest.approx(sd, rel=0.10)
+    card = res.to_card()
+    assert card.vehicle == "test eVTOL" and card.id == "test-evtol-horizontal"
+    assert card.provenance["data"]["flights"] == ["f1"]
+    assert card.provenance["data"]["microphones"] == ["m1", "m2", "m3"]
+
+
+def test_fit_campaign_refuses_a_phase_without_samples(campaign_folder):
+    with pytest.raises(InputError, match="no usable samples of phase 'climb'.*horizontal") as e:
+        fit_campaign(campaign_folder, "climb")
+    assert e.value.field == "phase"
+
+
+def _run(*args):
+    from click.testing import CliRunner
+
+    from gisnoise.cli.main import cli
+
+    return CliRunner().invoke(cli, ["-q", *map(str, args)], catch_exceptions=False)
+
+
+def test_cli_writes_a_card_with_covariance_and_a_report(campaign_folder, tmp_path):
+    out = tmp_path / "card.json"
+    r = _run("fit", campaign_folder, "--phase", "horizontal", "--out", out, "--report", tmp_path / "rep",
+             "--serves", "transition", "--id", "demo-horizontal")
+    assert r.exit_code == 0, r.output
+    card = cards.load(out)
+    assert card.id == "demo-horizontal" and card.phases == ("transition",) and card.ansatz == "paper-offset"
+    assert card.cov.shape == (8, 8) and np.all(np.diag(card.cov) > 0)
+    z = (card.p - P_TRUE) / np.sqrt(np.diag(card.cov))
+    assert np.all(np.abs(z) < 3.0)
+    assert card.statistics["n_samples"] > 5000
+    for name in ("report.html", "timeseries.png", "directivity.png", "correlation.png", "residuals_f1.png"):
+        assert (tmp_path / "rep" / name).is_file()
+
+
+def test_cli_start_card_and_fixed_parameter(campaign_folder, tmp_path):
+    start = tmp_path / "start.json"
+    cards.save(cards.load(__import__("pathlib").Path(__file__).parents[1] / "sample_data/cards/demo_horizontal.json"),
+               start)
+    out = tmp_path / "card.json"
+    r = _run("fit", campaign_folder, "--phase", "horizontal", "--out", out, "--start", start, "--fix", "p7=40")
+    assert r.exit_code == 0, r.output
+    card = cards.load(out)
+    assert card.id == "demo-horizontal" and card.phases == ("transition",)  # kept from the start card
+    assert card.parameters["p7"] == 40.0 and card.statistics["fixed"] == {"p7": 40.0}
+
+
+def test_cli_non_convergence_writes_no_card_and_says_why(campaign_folder, tmp_path):
+    out = tmp_path / "card.json"
+    r = _run("fit", campaign_folder, "--phase", "horizontal", "--out", out, "--max-iter", "1")
+    assert r.exit_code == 2
+    assert "did not converge in 1 iterations" in r.output
+    assert not out.exists()
+
+
+def test_cli_bad_fix_names_the_option(campaign_folder, tmp_path):
+    r = _run("fit", campaign_folder, "--phase", "horizontal", "--out", tmp_path / "c.json", "--fix", "p7")
+    assert r.exit_code == 2 and "--fix expects NAME=VALUE" in r.output
+    r = _run("fit", campaign_folder, "--phase", "horizontal", "--out", tmp_path / "c.json", "--fix", "q1=3")
+    assert r.exit_code == 2 and "unknown parameter(s) q1" in r.output
+
+
+def test_fit_campaign_can_be_cancelled_while_reading(campaign_folder):
+    with pytest.raises(Cancelled, match="reading the campaign"):
+        fit_campaign(campaign_folder, "horizontal", cancel=lambda: True)
+
+
+def test_simulated_sample_campaign_without_effects_recovers_the_truth_card():
+    # the simulator's sample campaign with no injected effect, no log noise and a steady background:
+    # the model is then exactly right, and the ML estimate must sit within 3 std of the truth card
+    from gisnoise.simulate import load_scenario, scenario_copy, simulate_samples
+
+    root = __import__("pathlib").Path(__file__).parents[1]
+    sc = load_scenario(root / "sample_data/scenarios/sample_campaign.json")
+    veh = dict(sc["vehicle"], log_noise={"position_m": 0.0, "attitude_deg": 0.0, "power_pct": 0.0})
+    doc = scenario_copy(sc, effects={}, vehicle=veh, background=dict(sc["background"], fluctuation_db=0.0))
+    samples = simulate_samples(doc, base_dir=root / "sample_data/scenarios")
+    truth = cards.load(root / "sample_data/cards/demo_horizontal.json")
+    from gisnoise.fit import usable_rows
+
+    res = fit(usable_rows(samples, "horizontal"), reference_power_w=samples.meta["reference_power_w"])
+    z = (res.p - truth.p) / res.std_array
+    assert np.all(np.abs(z) < 3.0), dict(zip(res.param_names, z.round(2), strict=True))
+    for mic, sd in samples.meta["noise_std_db"].items():
+        assert res.noise_std[mic] == pytest.approx(sd, rel=0.10)
