@@ -126,6 +126,9 @@ def _load_isolated(folder: str, module: str) -> None:
 def missing_requirements() -> list[str]:
     """One line per compiled requirement that is absent or too old in this Python."""
     problems = []
+    if sys.version_info < (3, 10):
+        problems.append(f"Python >= 3.10 (QGIS runs Python {sys.version.split()[0]}; use a QGIS built with a newer "
+                        "Python)")
     for module, minimum, debian in REQUIRED:
         have = installed_version(module)
         if have is None:

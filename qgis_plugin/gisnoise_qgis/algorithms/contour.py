@@ -246,6 +246,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
                 results[key] = dest
         feedback.setProgress(98.0)
         self._style_outputs(results, context, levels, metrics)
+        feedback.setProgress(100.0)
         return results
 
     def _copy_to_sink(self, parameters, key, layer, context, feedback):
@@ -282,7 +283,6 @@ def _write_raster(tif, dest):
         shutil.copyfile(tif, dest)
         return
     from osgeo import gdal
-
     from qgis.core import QgsRasterFileWriter
 
     driver = QgsRasterFileWriter.driverForExtension(os.path.splitext(dest)[1])

@@ -164,7 +164,7 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
             times = [t0, *inner, t1]
             state = traj.interpolate(times)
             line = QgsLineString([QgsPoint(float(lon), float(lat), float(h))
-                                  for lon, lat, h in zip(state["lon"], state["lat"], state["h"])])
+                                  for lon, lat, h in zip(state["lon"], state["lat"], state["h"], strict=True)])
             f = QgsFeature(_fields(SEGMENT_FIELDS))
             f.setGeometry(QgsGeometry(line))
             f.setAttributes([seg.get(name) for name, _ in SEGMENT_FIELDS])

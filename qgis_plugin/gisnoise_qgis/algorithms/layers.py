@@ -204,9 +204,9 @@ def track_heading_deg(lat, lon):
     moving = [float(d) > 1e-6 for d in dist]
     if not any(moving):
         raise QgsProcessingException("a line trajectory without a yaw field must move to give a heading")
-    first = next(a for a, m in zip(az, moving) if m)
+    first = next(a for a, m in zip(az, moving, strict=True) if m)
     out, last = [], first
-    for a, m in zip(az, moving):
+    for a, m in zip(az, moving, strict=True):
         if m:
             last = a
         out.append(last)

@@ -58,7 +58,7 @@ def class_label(levels, i):
 def graduated_renderer(levels, *, polygons, field="level"):
     """A graduated renderer on ``field`` with one class per level."""
     ranges = []
-    for i, (lo, colour) in enumerate(zip(levels, level_colours(levels))):
+    for i, (lo, colour) in enumerate(zip(levels, level_colours(levels), strict=True)):
         hi = levels[i + 1] if i + 1 < len(levels) else TOP_DB
         if polygons:
             symbol = QgsFillSymbol.createSimple({"color": colour.name(), "outline_color": "#404040",

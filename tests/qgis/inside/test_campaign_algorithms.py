@@ -64,8 +64,9 @@ def test_fit_of_a_folder_that_is_no_campaign_names_the_file(plugin, tmp_path):
 
 def test_diagnose_names_bank_angle_and_maps_the_flagged_segments(plugin, bank_campaign, tmp_path):
     import processing
-    from gisnoise.campaign import read_campaign
     from qgis.core import QgsVectorLayer
+
+    from gisnoise.campaign import read_campaign
 
     res = processing.run("gisnoise:diagnose", {
         "CAMPAIGN": str(bank_campaign), "CARD": str(TRUTH_CARD), "OUTPUT_JSON": str(tmp_path / "diagnosis.json"),

@@ -124,3 +124,24 @@ def test_loaded_outputs_are_styled_by_level(plugin, flight_csv, tmp_path):
         assert renderer.classAttribute() == "level"
         assert [r.lowerValue() for r in renderer.ranges()] == LEVELS
     project.removeAllMapLayers()
+
+
+def test_progress_reaches_the_end_and_cancel_stops(plugin, flight_csv, tmp_path):
+    import processing
+    from qgis.core import QgsProcessingException, QgsProcessingFeedback
+
+    feedback = QgsProcessingFeedback()
+    seen = []
+    feedback.progressChanged.connect(seen.append)
+    processing.run("gisnoise:noisemap", {
+        "TRAJECTORY_FILE": str(flight_csv), "CARDS": [CARD], **MAP_OPTIONS,
+        "OUTPUT_RASTER": str(tmp_path / "p.tif"), "OUTPUT_BANDS": str(tmp_path / "p.gpkg")}, feedback=feedback)
+    assert seen and seen == sorted(seen) and seen[-1] == pytest.approx(100.0)
+
+    cancelled = QgsProcessingFeedback()
+    cancelled.cancel()
+    with pytest.raises(QgsProcessingException, match="cancelled"):
+        processing.run("gisnoise:noisemap", {
+            "TRAJECTORY_FILE": str(flight_csv), "CARDS": [CARD], **MAP_OPTIONS,
+            "OUTPUT_RASTER": str(tmp_path / "c.tif"), "OUTPUT_BANDS": str(tmp_path / "c.gpkg")}, feedback=cancelled)
+    assert not (tmp_path / "c.tif").exists()
