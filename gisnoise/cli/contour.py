@@ -1,0 +1,96 @@
+"""``gisnoise contour``: the noise map of a trajectory (GeoTIFF levels, GeoJSON contours, PNG map)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from ..contours import parse_levels
+from ..errors import InputError
+from .options import card_option, out_dir_option, progress
+
+
+def _levels(ctx: click.Context, param: click.Parameter, value: Any) -> list[float] | None:
+    if value is None:
+        return None
+    try:
+        return parse_levels(value, field=param.opts[0] if param.opts else "levels")
+    except InputError as exc:
+        raise click.BadParameter(str(exc).split(": ", 1)[-1]) from None
+
+
+def _metrics(ctx: click.Context, param: click.Parameter, value: str) -> list[str]:
+    return [m.strip() for m in value.split(",") if m.strip()]
+
+
+@click.command("contour")
+@click.argument("trajectory", type=click.Path(dir_okay=False))
+@card_option
+@out_dir_option
+@click.option("--resolution", "resolution", type=float, default=10.0, show_default=True,
+              help="Cell size of the receiver grid, m.")
+@click.option("--margin", "margin", type=float, default=500.0, show_default=True,
+              help="Margin around the track, m.")
+@click.option("--levels", "levels", default="45,50,55,60", show_default=True, callback=_levels,
+              help="Contour levels, dB(A), comma-separated.")
+@click.option("--dem", "dem", type=click.Path(dir_okay=False), default=None,
+              help="DEM GeoTIFF: receivers stand on it (heights in the trajectory's vertical datum, "
+                   "see --dem-offset).")
+@click.option("--dem-offset", "dem_offset", type=float, default=0.0, show_default=True,
+              help="Added to DEM heights (e.g. the geoid undulation for an orthometric DEM), m.")
+@click.option("--receiver-height", "receiver_height", type=float, default=1.5, show_default=True,
+              help="Receiver height above ground, m.")
+@click.option("--ground-height", "ground_h", type=float, default=None,
+              help="Ellipsoidal height of flat ground without --dem, m "
+                   "[default: stated by the route, else the track's lowest point].")
+@click.option("--crs", "crs", default=None, help="Projected CRS of the grid, e.g. EPSG:25832 [default: local UTM].")
+@click.option("--metrics", "metrics", default="LAmax,LAeq,SEL", show_default=True, callback=_metrics,
+              help="Metrics: any of LAmax, LAeq, SEL.")
+@click.option("--period", "period", type=float, default=None,
+              help="LAeq period, s [default: the trajectory's duration].")
+@click.option("--threshold", "threshold", default=None, callback=_levels,
+              help="Levels for time-above bands TA<level> (s), dB(A), comma-separated.")
+@click.option("--snapshot", "snapshot", type=float, default=None,
+              help="Add the level at this instant (s) as band LA@<t>s.")
+@click.option("--substeps", "substeps", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Sub-intervals per sample interval for time integration.")
+@click.option("--background", "background", is_flag=True, help="Include the cards' background level.")
+@click.option("--uncertainty", "uncertainty", is_flag=True,
+              help="Add LAmax_std, LAeq_std and the 95 %-confidence levels LAmax_p95, LAeq_p95 "
+                   "(cards need a covariance).")
+@click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png.")
+@click.pass_context
+def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float,
+            levels: list[float], dem: str | None, dem_offset: float, receiver_height: float, ground_h: float | None,
+            crs: str | None, metrics: list[str], period: float | None, threshold: list[float] | None,
+            snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool) -> None:
+    """Noise map of TRAJECTORY: DIR/levels.tif, DIR/contours.geojson (and DIR/map.png).
+
+    TRAJECTORY is a flight CSV (t, lat, lon, h, roll, pitch, yaw, power_w, phase), a GeoJSON
+    LineString with times, or waypoints (JSON or GeoJSON points).  Give one --card per flight
+    phase; a card serves its phase and the phases it lists.
+    """
+    import numpy as np
+
+    from ..contour import make_map
+
+    with progress(ctx, "evaluating", 1.0) as update:
+        paths = make_map(
+            trajectory, list(cards), out, resolution_m=resolution, margin_m=margin, levels=levels,
+            metrics=metrics, crs=crs, dem=dem, receiver_height=receiver_height, ground_h=ground_h,
+            dem_offset_m=dem_offset, uncertainty=uncertainty, plot=plot, period_s=period,
+            threshold_db=threshold, snapshot_t=snapshot, substeps=substeps, background=background,
+            progress=update)
+    res = paths["result"]
+    g = res.grid
+    auth = g.crs.to_authority()
+    click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m in "
+               f"{':'.join(auth) if auth else g.crs.name}; {res.metadata['evaluation_instants']} instants")
+    for name in res.bands:
+        a = res.bands[name]
+        if np.isfinite(a).any():
+            click.echo(f"{name}: max {np.nanmax(a):.1f} {res.units.get(name, '')}")
+    for key in ("levels", "contours", "map"):
+        if key in paths:
+            click.echo(f"wrote {paths[key]}")

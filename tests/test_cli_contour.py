@@ -1,0 +1,163 @@
+"""``gisnoise contour``: outputs a GIS opens, and one-line errors that name the field (SPEC section 5)."""
+
+import json
+
+import numpy as np
+import pytest
+import rasterio
+from click.testing import CliRunner
+
+from gisnoise.cards import ModelCard, save
+from gisnoise.cli.main import cli
+from gisnoise.frames import LocalFrame
+from gisnoise.trajectory import Trajectory
+
+FRAME = LocalFrame(52.27, 10.52, 80.0)
+G0 = 70.0
+
+
+@pytest.fixture()
+def card_path(tmp_path):
+    card = ModelCard(id="omni", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0, phases=("hover", "transition"))
+    return str(save(card, tmp_path / "omni.json"))
+
+
+def write_csv(path, traj):
+    traj.to_csv(path)
+    return str(path)
+
+
+def flyover(n=41, height=60.0):
+    t = np.linspace(0.0, 40.0, n)
+    lat, lon, h = FRAME.to_wgs84(-200.0 + 10.0 * t, np.zeros(n), np.full(n, height))  # eastwards
+    return Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=np.full(n, 90.0),
+                      power_w=np.full(n, 3000.0), phase=np.full(n, "horizontal"))
+
+
+def run(*args, env=None):
+    return CliRunner().invoke(cli, ["-q", *args], env=env, catch_exceptions=False)
+
+
+def test_contour_writes_a_geotiff_and_geojson_a_gis_opens(tmp_path, card_path):
+    csv = write_csv(tmp_path / "flight.csv", flyover())
+    out = tmp_path / "map"
+    r = run("contour", csv, "--card", card_path, "--out", str(out), "--resolution", "20", "--margin", "200",
+            "--levels", "55,60,65", "--ground-height", "80", "--threshold", "60")
+    assert r.exit_code == 0, r.output
+    with rasterio.open(out / "levels.tif") as ds:
+        assert ds.crs.to_epsg() == 32632  # the local UTM zone of 10.5 E
+        assert ds.descriptions == ("LAmax", "LAeq", "SEL", "TA60")
+        assert ds.nodata == -9999.0
+        assert ds.transform.a == 20.0 and ds.transform.e == -20.0
+        assert ds.transform.c % 20.0 == 0 and ds.transform.f % 20.0 == 0  # snapped to the resolution
+        lamax = ds.read(1)
+        # the pixel centre is the receiver: LAmax at each centre equals the closed form for its
+        # distance to the straight track (closest approach within the track)
+        rows, cols = np.mgrid[0:ds.height, 0:ds.width]
+        x, y = rasterio.transform.xy(ds.transform, rows.ravel(), cols.ravel(), offset="center")
+        from pyproj import Transformer
+
+        lon, lat = Transformer.from_crs(ds.crs.to_wkt(), "EPSG:4326", always_xy=True).transform(x, y)
+        e, n, u = FRAME.to_enu(lat, lon, np.full(len(lat), 80.0 + 1.5))
+        inside = np.abs(e) < 150.0
+        d = np.sqrt(n ** 2 + (60.0 - u) ** 2)
+        expected = G0 - 20 * np.log10(d / 40.0)
+        np.testing.assert_allclose(lamax.ravel()[inside], expected[inside], atol=0.02)
+    doc = json.loads((out / "contours.geojson").read_text())
+    assert doc["type"] == "FeatureCollection"
+    kinds = {(f["properties"]["metric"], f["properties"]["kind"], f["properties"]["level"]) for f in doc["features"]}
+    assert ("LAmax", "isoband", 60.0) in kinds and ("LAmax", "isoline", 60.0) in kinds
+    assert not any(m == "TA60" for m, _, _ in kinds)  # seconds are not contoured with dB levels
+    assert "wrote" in r.output
+
+
+def test_contour_plot_and_waypoints(tmp_path, card_path):
+    route = {"schema": "gisnoise/waypoints/1", "sample_dt_s": 1.0, "waypoints": [
+        {"lon": 10.52, "lat": 52.27, "alt": 60, "speed": 20},
+        {"lon": 10.53, "lat": 52.27, "alt": 60, "speed": 20}]}
+    p = tmp_path / "route.json"
+    p.write_text(json.dumps(route))
+    r = run("contour", str(p), "--card", card_path, "--out", str(tmp_path / "o"), "--resolution", "25",
+            "--margin", "150", "--plot", "--ground-height", "0")
+    assert r.exit_code == 0, r.output
+    png = (tmp_path / "o" / "map.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+
+
+def one_line_error(r, field):
+    assert r.exit_code == 2, r.output
+    err = r.stderr if hasattr(r, "stderr") else r.output
+    lines = [ln for ln in err.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("Error:") and field in lines[0], lines[0]
+    assert "Traceback" not in r.output
+
+
+def test_missing_column(tmp_path, card_path):
+    csv = tmp_path / "f.csv"
+    text = flyover().to_csv()
+    header, *rows = text.splitlines()
+    cols = header.split(",")
+    i = cols.index("power_w")
+    csv.write_text("\n".join(",".join(c for j, c in enumerate(line.split(",")) if j != i)
+                             for line in text.splitlines()) + "\n")
+    one_line_error(run("contour", str(csv), "--card", card_path, "--out", str(tmp_path / "o")), "power_w")
+
+
+def test_nan_in_a_column(tmp_path, card_path):
+    csv = tmp_path / "f.csv"
+    lines = flyover().to_csv().splitlines()
+    cols = lines[0].split(",")
+    row = lines[5].split(",")
+    row[cols.index("h")] = "nan"
+    lines[5] = ",".join(row)
+    csv.write_text("\n".join(lines) + "\n")
+    one_line_error(run("contour", str(csv), "--card", card_path, "--out", str(tmp_path / "o")), "'h'")
+
+
+def test_times_not_increasing(tmp_path, card_path):
+    csv = tmp_path / "f.csv"
+    lines = flyover().to_csv().splitlines()
+    lines[3], lines[4] = lines[4], lines[3]
+    csv.write_text("\n".join(lines) + "\n")
+    one_line_error(run("contour", str(csv), "--card", card_path, "--out", str(tmp_path / "o")), "'t'")
+
+
+def test_unknown_crs(tmp_path, card_path):
+    csv = write_csv(tmp_path / "f.csv", flyover())
+    one_line_error(run("contour", csv, "--card", card_path, "--out", str(tmp_path / "o"), "--crs", "EPSG:999999"),
+                   "crs")
+    one_line_error(run("contour", csv, "--card", card_path, "--out", str(tmp_path / "o"), "--crs", "EPSG:4326"),
+                   "crs")
+
+
+def test_empty_trajectory(tmp_path, card_path):
+    csv = tmp_path / "f.csv"
+    csv.write_text(flyover().to_csv().splitlines()[0] + "\n")
+    one_line_error(run("contour", str(csv), "--card", card_path, "--out", str(tmp_path / "o")), "empty")
+
+
+def test_grid_over_the_cell_limit(tmp_path, card_path):
+    csv = write_csv(tmp_path / "f.csv", flyover())
+    r = run("contour", csv, "--card", card_path, "--out", str(tmp_path / "o"), "--resolution", "1",
+            env={"GISNOISE_MAX_CELLS": "10000"})
+    one_line_error(r, "resolution")
+    assert "GISNOISE_MAX_CELLS" in (r.stderr if hasattr(r, "stderr") else r.output)
+    assert not (tmp_path / "o").exists()
+
+
+def test_phase_without_card_and_bad_levels(tmp_path, card_path):
+    traj = flyover()
+    traj = traj.with_(phase=np.where(traj.t > 20, "sink", "horizontal"))
+    csv = write_csv(tmp_path / "f.csv", traj)
+    one_line_error(run("contour", csv, "--card", card_path, "--out", str(tmp_path / "o")), "'sink'")
+    r = run("contour", csv, "--card", card_path, "--out", str(tmp_path / "o"), "--levels", "55,loud")
+    assert r.exit_code == 2 and "--levels" in (r.stderr if hasattr(r, "stderr") else r.output)
+
+
+def test_missing_card_file(tmp_path):
+    csv = write_csv(tmp_path / "f.csv", flyover())
+    one_line_error(run("contour", csv, "--card", str(tmp_path / "nope.json"), "--out", str(tmp_path / "o")),
+                   "nope.json")

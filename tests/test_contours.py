@@ -1,0 +1,106 @@
+"""GeoJSON contours: RFC 7946 structure and analytic isobands."""
+
+import json
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import LinearRing, shape
+
+from gisnoise.cards import ModelCard
+from gisnoise.contours import contours_geojson, isobands, isolines, parse_levels, write_geojson
+from gisnoise.errors import InputError
+from gisnoise.evaluate import evaluate_grid
+from gisnoise.frames import LocalFrame
+from gisnoise.grid import grid_for_trajectory
+from gisnoise.trajectory import Trajectory
+
+LAT0, LON0 = 48.137, 11.575  # lat and lon far apart: a swapped order cannot pass
+
+
+@pytest.fixture(scope="module")
+def hover_map():
+    f = LocalFrame(LAT0, LON0, 500.0)
+    lat, lon, h = f.to_wgs84(np.zeros(2), np.zeros(2), np.full(2, 40.0))
+    traj = Trajectory(t=np.array([0.0, 30.0]), lat=lat, lon=lon, h=h, roll=np.zeros(2), pitch=np.zeros(2),
+                      yaw=np.zeros(2), power_w=np.full(2, 3000.0), phase=np.full(2, "hover"))
+    card = ModelCard(id="omni", vehicle="t", phase="hover", ansatz="paper-offset",
+                     parameters=dict(p0=70.0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0)
+    grid = grid_for_trajectory(traj, 10.0, 400.0)
+    return evaluate_grid(traj, [card], grid, ground_h=500.0, metrics=("LAmax", "LAeq"))
+
+
+def test_geojson_is_rfc7946(hover_map, tmp_path):
+    path = write_geojson(hover_map, tmp_path / "c.geojson", [45, 50, 55, 60])
+    doc = json.loads(path.read_text())
+    assert doc["type"] == "FeatureCollection" and "crs" not in doc
+    assert doc["features"]
+    holes = 0
+    for feat in doc["features"]:
+        props = feat["properties"]
+        assert props["metric"] in ("LAmax", "LAeq") and props["kind"] in ("isoband", "isoline")
+        assert isinstance(props["level"], float) and "level_max" in props
+        geom = feat["geometry"]
+        if props["kind"] == "isoband":
+            assert geom["type"] == "MultiPolygon"
+            for poly in geom["coordinates"]:
+                for k, ring in enumerate(poly):
+                    assert ring[0] == ring[-1] and len(ring) >= 4  # closed
+                    lon, lat = np.array(ring).T
+                    assert np.all(np.abs(lon - LON0) < 0.01) and np.all(np.abs(lat - LAT0) < 0.01)  # lon, lat
+                    ccw = LinearRing(ring).is_ccw
+                    assert ccw if k == 0 else not ccw  # right-hand rule: exterior CCW, holes CW
+                    holes += k > 0
+            assert shape(geom).is_valid
+        else:
+            assert geom["type"] == "MultiLineString"
+            for line in geom["coordinates"]:
+                lon, lat = np.array(line).T
+                assert np.all(np.abs(lon - LON0) < 0.01) and np.all(np.abs(lat - LAT0) < 0.01)
+    assert holes > 0  # bands around a loud centre have holes; their orientation was checked
+
+
+def test_bands_are_nested_and_open_at_the_top(hover_map):
+    doc = contours_geojson(hover_map, "50,55,60", metrics=["LAmax"])
+    bands = {f["properties"]["level"]: f for f in doc["features"] if f["properties"]["kind"] == "isoband"}
+    assert bands[60.0]["properties"]["level_max"] is None
+    assert bands[55.0]["properties"]["level_max"] == 60.0
+    outer55 = shapely.union_all([shape(bands[55.0]["geometry"]), shape(bands[60.0]["geometry"])])
+    # bands tile the plane without overlap: the union of [55,60) and [60,inf) is the disc L >= 55
+    assert shape(bands[55.0]["geometry"]).intersection(shape(bands[60.0]["geometry"])).area < 1e-12
+    assert len(outer55.geoms if hasattr(outer55, "geoms") else [outer55]) == 1
+
+
+def test_isoband_area_of_a_cone_is_the_disc():
+    x = y = np.linspace(-100.0, 100.0, 201)
+    z = 70.0 - 0.1 * np.hypot(*np.meshgrid(x, y))  # L = 65 at r = 50, L = 62 at r = 80
+    (band,) = isobands(x, y, z, [62.0, 65.0])  # annulus 50 <= r <= 80
+    assert band.area == pytest.approx(np.pi * (80 ** 2 - 50 ** 2), rel=2e-3)
+    assert len(band.interiors) == 1
+    (ring,) = isolines(x, y, z, 65.0)
+    assert ring.is_closed and shapely.Polygon(ring).area == pytest.approx(np.pi * 50 ** 2, rel=2e-3)
+
+
+def test_nan_cells_are_left_out():
+    x = y = np.linspace(0.0, 10.0, 11)
+    z = np.full((11, 11), 60.0)
+    z[:, :5] = np.nan
+    polys = isobands(x, y, z, [55.0, 65.0])
+    assert sum(p.area for p in polys) == pytest.approx(50.0)  # x from 5 to 10, y from 0 to 10
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(20, 120, allow_nan=False), min_size=1, max_size=6))
+def test_parse_levels_sorts_and_dedups(levels):
+    out = parse_levels(",".join(repr(v) for v in levels))
+    assert out == sorted(set(levels))
+
+
+def test_parse_levels_errors():
+    for bad in ("", "55,abc", "inf"):
+        with pytest.raises(InputError) as exc:
+            parse_levels(bad)
+        assert exc.value.field == "levels"

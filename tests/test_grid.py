@@ -1,0 +1,146 @@
+"""Receiver grids, UTM choice, cell limit, DEM resampling and the GeoTIFF writer."""
+
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gisnoise.errors import CRSError, GridTooLargeError, InvalidGridError
+from gisnoise.evaluate import MapResult
+from gisnoise.grid import GridSpec, apply_affine, grid_for_trajectory, parse_crs, resample_dem, utm_crs
+from gisnoise.raster import NODATA, read_dem, sample_dem, write_geotiff
+from gisnoise.trajectory import Trajectory
+
+
+def track(lon, lat):
+    lon = np.asarray(lon, float)
+    lat = np.asarray(lat, float)
+    n = lon.size
+    return Trajectory(t=np.arange(n, dtype=float), lat=lat, lon=lon, h=np.full(n, 100.0), roll=np.zeros(n),
+                      pitch=np.zeros(n), yaw=np.zeros(n), power_w=np.full(n, 3000.0), phase=np.full(n, "horizontal"))
+
+
+@pytest.mark.parametrize("lon, lat, epsg", [(10.52, 52.27, 32632), (13.4, 52.5, 32633), (-0.12, 51.5, 32630),
+                                            (151.2, -33.9, 32756), (-179.9, 0.0, 32601), (179.9, 0.0, 32660)])
+def test_utm_zone(lon, lat, epsg):
+    assert utm_crs(lon, lat).to_epsg() == epsg
+
+
+def test_grid_covers_track_plus_margin_snapped_to_resolution():
+    traj = track([10.50, 10.53], [52.26, 52.28])
+    g = grid_for_trajectory(traj, 10.0, 250.0)
+    x, y = g.from_wgs84(traj.lon, traj.lat)
+    left, bottom, right, top = g.bounds
+    assert left <= x.min() - 250 and right >= x.max() + 250 and bottom <= y.min() - 250 and top >= y.max() + 250
+    assert left > x.min() - 260 and top < y.max() + 260  # not more than one cell extra
+    for v in (left, bottom, right, top):
+        assert v % 10.0 == pytest.approx(0.0, abs=1e-6)
+    assert g.n_cells == g.width * g.height
+
+
+def test_given_crs_and_crs_errors():
+    traj = track([10.50, 10.51], [52.26, 52.27])
+    assert grid_for_trajectory(traj, 20, 100, crs="EPSG:25832").crs.to_epsg() == 25832
+    for bad in ("EPSG:999999", "not a crs", "EPSG:4326", "+proj=longlat +datum=WGS84", "EPSG:2263"):
+        with pytest.raises(CRSError) as exc:
+            grid_for_trajectory(traj, 20, 100, crs=bad)
+        assert exc.value.field == "crs"
+
+
+def test_cell_limit_from_environment(monkeypatch):
+    traj = track([10.50, 10.51], [52.26, 52.27])
+    monkeypatch.setenv("GISNOISE_MAX_CELLS", "1000")
+    with pytest.raises(GridTooLargeError, match="exceeds the limit of 1,000 cells") as exc:
+        grid_for_trajectory(traj, 10, 100)
+    assert exc.value.field == "resolution_m"
+    monkeypatch.setenv("GISNOISE_MAX_CELLS", "lots")
+    with pytest.raises(InvalidGridError) as exc:
+        grid_for_trajectory(traj, 10, 100)
+    assert exc.value.field == "GISNOISE_MAX_CELLS"
+    monkeypatch.delenv("GISNOISE_MAX_CELLS")
+    assert grid_for_trajectory(traj, 10, 100).n_cells < 25_000_000
+
+
+@pytest.mark.parametrize("kw, field", [({"resolution_m": 0}, "resolution_m"), ({"resolution_m": float("nan")},
+                                       "resolution_m"), ({"margin_m": -1}, "margin_m")])
+def test_bad_resolution_or_margin(kw, field):
+    traj = track([10.50], [52.26])
+    args = {"resolution_m": 10.0, "margin_m": 100.0, **kw}
+    with pytest.raises(InvalidGridError) as exc:
+        grid_for_trajectory(traj, **args)
+    assert exc.value.field == field
+
+
+@settings(max_examples=40, deadline=None)
+@given(res=st.floats(0.5, 50), w=st.integers(1, 40), h=st.integers(1, 40), x0=st.floats(-1e5, 1e5),
+       y0=st.floats(-1e5, 1e5))
+def test_cell_centres_are_transform_of_half_pixels(res, w, h, x0, y0):
+    g = GridSpec("EPSG:32632", Affine(res, 0, 500000 + x0, 0, -res, 5.8e6 + y0), w, h)
+    x, y = g.centres()
+    rows, cols = np.mgrid[0:h, 0:w]
+    ex, ey = apply_affine(g.transform, cols + 0.5, rows + 0.5)
+    np.testing.assert_allclose(x, ex, atol=1e-6)
+    np.testing.assert_allclose(y, ey, atol=1e-6)
+    fx, fy = g.flat_centres(0, g.n_cells)
+    np.testing.assert_allclose(fx, x.ravel())
+    np.testing.assert_allclose(fy, y.ravel())
+
+
+def test_rotated_or_south_up_transforms_are_refused():
+    with pytest.raises(InvalidGridError):
+        GridSpec("EPSG:32632", Affine(10, 1, 0, 0, -10, 0), 3, 3)
+    with pytest.raises(InvalidGridError):
+        GridSpec("EPSG:32632", Affine(10, 0, 0, 0, 10, 0), 3, 3)
+
+
+def write_plane_dem(path, crs="EPSG:32632", res=30.0, x0=600000.0, y0=5795000.0, n=60):
+    """h = 0.01 x' + 0.02 y' + 100 (x', y' from the DEM's corner): a plane, so bilinear is exact."""
+    tr = Affine(res, 0, x0, 0, -res, y0)
+    rows, cols = np.mgrid[0:n, 0:n]
+    xs, ys = apply_affine(tr, cols + 0.5, rows + 0.5)
+    z = 0.01 * (xs - x0) + 0.02 * (ys - y0) + 100.0
+    z[0, 0] = -32768.0
+    with rasterio.open(path, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32", crs=crs,
+                       transform=tr, nodata=-32768.0) as ds:
+        ds.write(z.astype(np.float32), 1)
+    return lambda x, y: 0.01 * (x - x0) + 0.02 * (y - y0) + 100.0
+
+
+def test_dem_resampled_bilinear_to_the_grid(tmp_path):
+    plane = write_plane_dem(tmp_path / "dem.tif")
+    dem = read_dem(tmp_path / "dem.tif")
+    assert np.isnan(dem.heights[0, 0])  # nodata -> NaN
+    g = GridSpec("EPSG:32632", Affine(10.0, 0, 600300.0, 0, -10.0, 5794700.0), 50, 40)
+    z = resample_dem(dem, g)
+    x, y = g.centres()
+    np.testing.assert_allclose(z, plane(x, y), atol=2e-3)  # float32 storage
+    outside = GridSpec("EPSG:32632", Affine(10.0, 0, 590000.0, 0, -10.0, 5794700.0), 5, 5)
+    assert np.isnan(resample_dem(dem, outside)).all()
+    lon, lat = g.to_wgs84(x[5, 7], y[5, 7])
+    assert float(sample_dem(dem, lon, lat)) == pytest.approx(plane(x[5, 7], y[5, 7]), abs=2e-3)
+
+
+def test_geotiff_bands_crs_transform_nodata(tmp_path):
+    g = GridSpec("EPSG:25832", Affine(5.0, 0, 604000.0, 0, -5.0, 5793000.0), 7, 4)
+    a = np.arange(28, dtype=float).reshape(4, 7)
+    b = a * 0.5
+    b[1, 2] = np.nan
+    res = MapResult(bands={"LAmax": a, "TA55": b}, grid=g, metadata={"units": {"LAmax": "dB(A)", "TA55": "s"}})
+    p = write_geotiff(res, tmp_path / "levels.tif")
+    with rasterio.open(p) as ds:
+        assert ds.crs.to_epsg() == 25832
+        assert ds.transform == g.transform
+        assert ds.descriptions == ("LAmax", "TA55")
+        assert ds.nodata == NODATA and ds.dtypes == ("float32", "float32")
+        assert ds.tags(2)["unit"] == "s"
+        np.testing.assert_array_equal(ds.read(1), a.astype(np.float32))
+        m = ds.read(2, masked=True)
+        assert m.mask[1, 2] and m.mask.sum() == 1
+        # pixel (row 1, col 2) centre: the receiver of that cell
+        assert ds.xy(1, 2) == pytest.approx(tuple(v[1, 2] for v in g.centres()))
+
+
+def test_parse_crs_accepts_projected_metre_crs():
+    assert parse_crs("EPSG:3035").to_epsg() == 3035
