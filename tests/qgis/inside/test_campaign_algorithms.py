@@ -8,7 +8,15 @@ from conftest import REPO
 pytestmark = pytest.mark.qgis
 
 SCENARIOS = REPO / "sample_data" / "scenarios"
-TRUTH_CARD = REPO / "sample_data" / "cards" / "demo_horizontal.json"
+SAMPLE_CAMPAIGN = REPO / "sample_data" / "campaign"
+
+
+def truth_card(campaign, tmp_path):
+    """The horizontal card the campaign was simulated with (from its truth.json), as a file."""
+    from gisnoise import cards
+
+    doc = json.loads((campaign / "truth.json").read_text(encoding="utf-8"))["cards"]["horizontal"]
+    return cards.save(cards.from_dict(doc), tmp_path / "truth_horizontal.json")
 
 
 @pytest.fixture(scope="module")
@@ -16,14 +24,6 @@ def control_campaign(cli, tmp_path_factory):
     """Two short flights, no unmodelled effect injected: the truth is the demo card."""
     out = tmp_path_factory.mktemp("control") / "campaign"
     cli("simulate", SCENARIOS / "diagnosis_base.json", "--out", out)
-    return out
-
-
-@pytest.fixture(scope="module")
-def bank_campaign(cli, tmp_path_factory):
-    """The sample campaign: turning-flight noise (3 dB at 30 deg bank) injected in the turns."""
-    out = tmp_path_factory.mktemp("bank") / "campaign"
-    cli("simulate", SCENARIOS / "sample_campaign.json", "--out", out)
     return out
 
 
@@ -37,11 +37,11 @@ def control_fit(plugin, control_campaign, tmp_path_factory):
     return res, card
 
 
-def test_fit_recovers_the_simulated_truth(control_fit):
+def test_fit_recovers_the_simulated_truth(control_fit, control_campaign, tmp_path):
     from gisnoise import cards
 
     res, path = control_fit
-    card, truth = cards.load(path), cards.load(TRUTH_CARD)
+    card, truth = cards.load(path), cards.load(truth_card(control_campaign, tmp_path))
     assert card.phase == "horizontal" and card.ansatz == truth.ansatz
     for name, value in truth.parameters.items():
         assert abs(card.parameters[name] - value) < 4.0 * card.std[name], name
@@ -62,21 +62,22 @@ def test_fit_of_a_folder_that_is_no_campaign_names_the_file(plugin, tmp_path):
     assert "campaign.json" in str(err.value)
 
 
-def test_diagnose_names_bank_angle_and_maps_the_flagged_segments(plugin, bank_campaign, tmp_path):
+def test_diagnose_names_bank_angle_and_maps_the_flagged_segments(plugin, tmp_path):
+    """The sample campaign has turning-flight noise (3 dB at 30 deg bank) injected in the turns."""
     import processing
     from qgis.core import QgsVectorLayer
 
     from gisnoise.campaign import read_campaign
 
     res = processing.run("gisnoise:diagnose", {
-        "CAMPAIGN": str(bank_campaign), "CARD": str(TRUTH_CARD), "OUTPUT_JSON": str(tmp_path / "diagnosis.json"),
+        "CAMPAIGN": str(SAMPLE_CAMPAIGN), "CARD": str(truth_card(SAMPLE_CAMPAIGN, tmp_path)), "OUTPUT_JSON": str(tmp_path / "diagnosis.json"),
         "OUTPUT_SEGMENTS": str(tmp_path / "segments.gpkg"), "OUTPUT_MICS": str(tmp_path / "mics.geojson")})
     doc = json.loads((tmp_path / "diagnosis.json").read_text(encoding="utf-8"))
     assert res["VERDICT"] == doc["verdict"]["effect"] == "bank_angle"
     assert res["BASELINE_RMS_DB"] == pytest.approx(doc["baseline"]["rms_db"])
     segments = QgsVectorLayer(str(tmp_path / "segments.gpkg"), "s", "ogr")
     assert segments.featureCount() == len(doc["segments"]) > 0
-    campaign = read_campaign(bank_campaign)
+    campaign = read_campaign(SAMPLE_CAMPAIGN)
     by_key = {(g["flight"], g["mic"], g["t0"]): g for g in doc["segments"]}
     for f in segments.getFeatures():
         seg = by_key[(f["flight"], f["mic"], f["t0"])]
