@@ -63,8 +63,7 @@ async function init() {
   $("btn-compute").onclick = compute;
   $("metric").onchange = () => app.lastContours && drawContours(app.lastContours);
   await loadCards();
-  await refreshJobs();
-  setInterval(refreshJobs, 1500);
+  pollJobs();
   app.ready = true;
 }
 
@@ -257,6 +256,12 @@ function drawContours(geo) {
 }
 
 // ------------------------------------------------------------------ jobs
+async function pollJobs() {
+  await refreshJobs();
+  const busy = app.jobs.some((j) => j.status === "queued" || j.status === "running");
+  setTimeout(pollJobs, busy ? 400 : 2000);
+}
+
 async function refreshJobs() {
   let resp;
   try { resp = await fetch("/jobs?limit=20"); } catch (e) { return; }

@@ -1,0 +1,103 @@
+"""The web page in headless Chromium: draw a route, get contours drawn, follow a job's progress."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+from cdp_pipe import Browser, find_chromium
+from service_helpers import Server
+
+pytestmark = [pytest.mark.browser, pytest.mark.server]
+
+CHROMIUM = find_chromium()
+if CHROMIUM is None:
+    pytest.skip("headless Chromium is not installed (scripts/install-system-deps installs it on CI)",
+                allow_module_level=True)
+
+Image = pytest.importorskip("PIL.Image")
+
+# the page's palette (api/static/app.js) drawn at fill-opacity 0.55 over the map background #e8eef2
+PALETTE = ["#1a9850", "#91cf60", "#d9ef8b", "#fee08b", "#fdae61", "#f46d43", "#d73027", "#a50026"]
+BACKGROUND = (0xE8, 0xEE, 0xF2)
+PANEL_WIDTH = 360
+
+
+def _blend(hex_colour: str, alpha: float = 0.55) -> tuple[int, ...]:
+    c = tuple(int(hex_colour[i:i + 2], 16) for i in (1, 3, 5))
+    return tuple(round(alpha * a + (1 - alpha) * b) for a, b in zip(c, BACKGROUND, strict=True))
+
+
+def contour_fraction(png: bytes) -> float:
+    """Fraction of the map's pixels that show one of the contour fills."""
+    img = Image.open(io.BytesIO(png)).convert("RGB")
+    w, h = img.size
+    targets = [_blend(c) for c in PALETTE]
+    px = img.load()
+    hits = total = 0
+    for y in range(0, h, 4):
+        for x in range(PANEL_WIDTH + 5, w, 4):
+            total += 1
+            r, g, b = px[x, y]
+            if any(abs(r - t[0]) <= 6 and abs(g - t[1]) <= 6 and abs(b - t[2]) <= 6 for t in targets):
+                hits += 1
+    return hits / total
+
+
+@pytest.fixture
+def page(tmp_path):
+    srv = Server(tmp_path / "data")
+    browser = Browser(CHROMIUM)
+    try:
+        browser.navigate(srv.url + "/")
+        browser.wait_for("window.gisnoise && window.gisnoise.ready === true", 30)
+        yield browser
+    finally:
+        browser.close()
+        srv.stop()
+
+
+def _draw_route(b: Browser) -> None:
+    b.evaluate("gisnoise.map.setView([53.55, 10.0], 15); true")
+    b.evaluate("document.getElementById('btn-draw').click(); true")
+    for x, y in [(560, 300), (820, 360), (1000, 560)]:
+        b.click(x, y)
+    b.evaluate("document.getElementById('btn-draw').click(); true")
+    assert b.evaluate("gisnoise.trajectory.format") == "waypoints"
+    assert b.evaluate("gisnoise.trajectory.data.features.length") == 5  # take-off, 3 drawn, landing
+
+
+def test_draw_a_route_and_see_the_contours(page, tmp_path):
+    b = page
+    assert b.evaluate("document.querySelectorAll('#cards input:checked').length") == 3  # the demo cards
+    _draw_route(b)
+    before = contour_fraction(b.screenshot())
+    b.evaluate("document.getElementById('btn-compute').click(); true")
+    b.wait_for("gisnoise.contourCount > 0 || document.getElementById('status').classList.contains('error')", 60)
+    assert not b.evaluate("document.getElementById('status').classList.contains('error')"), \
+        b.evaluate("document.getElementById('status').textContent")
+    png = b.screenshot()
+    (tmp_path / "contours.png").write_bytes(png)
+    after = contour_fraction(png)
+    assert before < 0.005
+    assert after > 0.2, f"contour fills cover {after:.1%} of the map"
+    assert b.evaluate("document.querySelectorAll('#legend .item').length") == 5
+
+
+def test_a_job_shows_its_progress_then_its_contours(page):
+    b = page
+    _draw_route(b)
+    # a finer grid: a job of a few seconds
+    b.evaluate("document.getElementById('resolution').value = 5; document.getElementById('margin').value = 400;"
+               "document.getElementById('as-job').checked = true; document.getElementById('btn-compute').click();"
+               "true")
+    b.wait_for("gisnoise.shownJob != null", 20)
+    row = "document.querySelector('#jobs tr[data-job=\"' + gisnoise.shownJob + '\"]')"
+    b.wait_for(f"{row} !== null", 20)
+    seen = b.wait_for(f"(() => {{ const r = {row}; if (!r) return false; const p = r.querySelector('progress');"
+                      f"return r.dataset.status === 'running' && p.value > 0 && p.value < 1 ? p.value : false; }})()",
+                      60)
+    assert 0 < seen < 1
+    b.wait_for(f"{row}.dataset.status === 'succeeded'", 120)
+    b.wait_for("gisnoise.contourCount > 0", 30)
+    assert contour_fraction(b.screenshot()) > 0.2
