@@ -641,14 +641,14 @@ def fit_arrays(
         lvl = np.broadcast_to(lvl, (n,))
         return lvl - y, np.broadcast_to(jac, (n, len(names)))[:, free]
 
-    # identifiability of the design (at the start values)
+    # identifiability is judged where the fit ends: at the start a parameter may be idle only
+    # because of the start values (p3 when p2 starts at 0), which the solve repairs
     q0 = p_start[free]
     r0, j0 = fun(q0)
     if not (np.all(np.isfinite(r0)) and np.all(np.isfinite(j0))):
         raise FitError("the model is not finite at the start values; give p0", field="p0")
     var0 = _oem.group_variances(r0, noise_groups, n_noise)
     free_names = [k for k in names if k not in fixed_d]
-    _identifiability(j0 / np.sqrt(var0[noise_groups])[:, None], free_names, rcond * 1e-2, "at the start values")
 
     res = _oem.relaxation(fun, q0, noise_groups, n_noise, lower=lo[free], upper=hi[free], max_iter=int(max_iter),
                           tol=float(tol), progress=progress, cancel=cancel)
