@@ -649,7 +649,8 @@ def route_from_waypoints(waypoints: Sequence[Mapping[str, Any]], settings: Mappi
     ee, nn, uu = (np.interp(t_out, t, dense.cat(k)) for k in ("e", "n", "u"))
     yaw = dense.cat("yaw")
     yaw_o = np.arctan2(np.interp(t_out, t, np.sin(yaw)), np.interp(t_out, t, np.cos(yaw)))
-    idx = np.clip(np.searchsorted(t, t_out, side="right") - 1, 0, t.size - 1)
+    # a sample between two dense instants belongs to the motion ending at the later one
+    idx = np.clip(np.searchsorted(t, t_out, side="left"), 0, t.size - 1)
     lat_o, lon_o, h_o = frame.to_wgs84(ee, nn, uu)
     traj = Trajectory(
         t=t_out, lat=lat_o, lon=lon_o, h=h_o,
