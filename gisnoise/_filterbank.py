@@ -49,7 +49,7 @@ BETA = 0.5
 MAX_EDGE_FRACTION = 0.95
 """Highest usable upper band edge, as a fraction of the Nyquist frequency of the input."""
 
-CHUNK = 1 << 18
+CHUNK = 1 << 16
 """Input samples per processing chunk (rounded up to a multiple of 2**levels)."""
 
 
@@ -116,7 +116,7 @@ def _design_cached(fs_hz: float, f_key: tuple[float, ...]) -> FilterBank:
     aa_sos = signal.butter(AA_ORDER, 0.5, btype="lowpass", output="sos")
     band_sos = []
     delays = np.empty(f.size)
-    for j, (fm, k) in enumerate(zip(f, level)):
+    for j, (fm, k) in enumerate(zip(f, level, strict=True)):
         fs_k = fs_hz / 2.0**k
         lo, hi = band_edges(fm)
         sos = signal.butter(ORDER, [float(lo), float(hi)], btype="bandpass", fs=fs_k, output="sos")
@@ -145,7 +145,7 @@ def _fold(f: np.ndarray, fs: float) -> np.ndarray:
     return np.minimum(r, fs - r)
 
 
-def chain_response(bank: FilterBank, f_probe: Any) -> np.ndarray:
+def chain_response(bank: FilterBank, f_probe: Any, bands: Any = None) -> np.ndarray:
     """Gain of each band's whole chain to a sinusoid of the input, linear.
 
     A sinusoid at ``f`` passes each anti-alias stage at its current (folded)
@@ -158,14 +158,17 @@ def chain_response(bank: FilterBank, f_probe: Any) -> np.ndarray:
     bank : FilterBank
     f_probe : array_like
         Input frequencies, Hz, within ``[0, fs/2]``.
+    bands : array_like of int, optional
+        Indices of the bands to evaluate (default: all).
 
     Returns
     -------
-    ndarray, shape (n_probe, nb)
+    ndarray, shape (n_probe, n_bands)
         Amplitude gain (1 = unchanged).
     """
     f0 = np.atleast_1d(np.asarray(f_probe, dtype=float))
-    n_lev = bank.n_levels
+    sel = np.arange(bank.f_hz.size) if bands is None else np.atleast_1d(np.asarray(bands, dtype=int))
+    n_lev = int(bank.level[sel].max()) if sel.size else 0
     # gain and frequency entering each level
     gains = [np.ones_like(f0)]
     freqs = [f0]
@@ -177,38 +180,48 @@ def chain_response(bank: FilterBank, f_probe: Any) -> np.ndarray:
         f = _fold(f, fs_in / 2.0)
         gains.append(g)
         freqs.append(f)
-    out = np.empty((f0.size, bank.f_hz.size))
-    for j, (sos, k) in enumerate(zip(bank.band_sos, bank.level)):
-        _, h = signal.sosfreqz(sos, worN=freqs[k], fs=bank.fs_hz / 2.0**k)
-        out[:, j] = gains[k] * np.abs(h)
+    out = np.empty((f0.size, sel.size))
+    for i, j in enumerate(sel):
+        k = int(bank.level[j])
+        _, h = signal.sosfreqz(bank.band_sos[j], worN=freqs[k], fs=bank.fs_hz / 2.0**k)
+        out[:, i] = gains[k] * np.abs(h)
     return out
 
 
 class _BandAccumulator:
-    """Running block energies of one band from its squared output, chunk by chunk."""
+    """Block energies of one band from its squared output, chunk by chunk.
+
+    Band sample ``m`` holds its value over ``[m, m + 1)`` in the band's sample
+    units; block ``i`` spans ``[u[i], u[i + 1])``.  Whole samples are summed
+    straight into their block (no running total, so a block far quieter than
+    the start of the recording keeps its precision) and the fractions of the
+    samples cut by an edge are moved to the block before it.
+    """
 
     def __init__(self, u: np.ndarray) -> None:
-        self.u = u  # block edges in the band's sample units (sample m covers [m, m+1))
-        self.e = np.full(u.size, np.nan)  # energy integral at each edge
-        self.next = 0  # first edge not evaluated yet
-        self.total = 0.0  # energy of all samples before the current chunk
+        self.u = u
+        self.whole = np.floor(u).astype(np.int64)  # sample holding each edge
+        self.frac = u - self.whole  # part of that sample before the edge
+        self.energy = np.zeros(u.size + 1)  # [before the first edge, block 0, ..., after the last edge]
 
     def add(self, z: np.ndarray, m0: int) -> None:
         """Take the squared samples ``z`` covering band samples ``[m0, m0 + len(z))``."""
         m1 = m0 + z.size
-        i0 = self.next
-        i1 = int(np.searchsorted(self.u, m1, side="left"))
-        if i1 > i0:
-            uu = self.u[i0:i1]
-            idx = np.floor(uu).astype(np.int64) - m0
-            frac = uu - np.floor(uu)
-            bounds = np.unique(np.concatenate(([0], idx)))
-            seg = np.add.reduceat(z, bounds)
-            prefix = np.concatenate(([0.0], np.cumsum(seg)[:-1]))
-            pos = np.searchsorted(bounds, idx)
-            self.e[i0:i1] = self.total + prefix[pos] + frac * z[idx]
-            self.next = i1
-        self.total += float(z.sum())
+        lo = int(np.searchsorted(self.whole, m0, side="left"))
+        hi = int(np.searchsorted(self.whole, m1, side="left"))
+        cuts = self.whole[lo:hi] - m0
+        bounds = np.unique(np.concatenate(([0], cuts)))
+        seg = np.add.reduceat(z, bounds)
+        slot = np.searchsorted(self.whole, m0 + bounds, side="right")  # 0 = before the first edge
+        np.add.at(self.energy, slot, seg)
+        moved = self.frac[lo:hi] * z[cuts]
+        edge = np.arange(lo, hi)
+        np.add.at(self.energy, edge + 1, -moved)
+        np.add.at(self.energy, edge, moved)
+
+    def mean_square(self) -> np.ndarray:
+        """Mean square of each block (rounding below zero clipped)."""
+        return np.maximum(self.energy[1:-1], 0.0) / np.diff(self.u)
 
 
 def run(
@@ -220,6 +233,7 @@ def run(
     scale: float = 1.0,
     chunk: int = CHUNK,
     check: Callable[[np.ndarray, int], None] | None = None,
+    progress: Callable[[float], None] | None = None,
 ) -> np.ndarray:
     """Mean square of each band over consecutive blocks.
 
@@ -238,6 +252,8 @@ def run(
         Input samples per chunk.
     check : callable, optional
         ``check(chunk_float64, start_index)`` validates each converted chunk.
+    progress : callable, optional
+        ``progress(fraction_done)`` after each chunk (it may raise to cancel).
 
     Returns
     -------
@@ -293,7 +309,9 @@ def run(
                 np.square(y, out=y)
                 accs[j].add(y, m0)
         pos = stop
+        if progress is not None:
+            progress(pos / need)
     out = np.empty((n_blocks, nb))
     for j, acc in enumerate(accs):
-        out[:, j] = np.diff(acc.e) / np.diff(acc.u)
+        out[:, j] = acc.mean_square()
     return out

@@ -199,3 +199,243 @@ def test_overall_a_level_energy_sum_of_weighted_bands():
     assert np.isnan(acoustics.overall_a_level([60.0, np.nan], f[:2]))
     with pytest.raises(InputError):
         acoustics.overall_a_level(np.zeros((4, 3)), f[:2])
+
+
+# -------------------------------------------------------------------- filter bank
+
+G = 10.0 ** 0.3  # IEC 61260-1 base-10 octave ratio
+
+# IEC 61260-1:2014 Table 1, class 1 acceptance limits on relative attenuation (dB)
+# at the octave-band normalized frequencies Omega = G^x (x >= 0; the low side
+# mirrors at 1/Omega).  Pass band up to the edge: min -0.4, max as listed; just
+# outside the edge and beyond: min as listed, no max.
+IEC61260_CLASS1_PASS_MAX = [(0.0, 0.4), (1 / 8, 0.5), (1 / 4, 0.7), (3 / 8, 1.4), (1 / 2, 5.3)]
+IEC61260_CLASS1_PASS_MIN = -0.4
+IEC61260_CLASS1_STOP_MIN = [(1 / 2, 1.2), (1.0, 16.6), (2.0, 40.5), (3.0, 60.0), (4.0, 70.0)]
+
+
+def _third_octave_omega(x: float) -> float:
+    """IEC 61260-1:2014 Formula (9): octave breakpoint G^x -> one-third-octave breakpoint."""
+    return 1.0 + (G ** (1 / 6) - 1.0) / (G ** 0.5 - 1.0) * (G**x - 1.0)
+
+
+def _relative_attenuation(bank, f_probe, j):
+    """Relative attenuation (dB) of band j, whole decimation chain, re its mid-band attenuation."""
+    gain = _filterbank.chain_response(bank, f_probe, [j])[:, 0]
+    ref = _filterbank.chain_response(bank, bank.f_hz[j], [j])[0, 0]
+    with np.errstate(divide="ignore"):
+        return -20.0 * np.log10(gain / ref)
+
+
+@pytest.mark.parametrize("fs", [44100.0, 48000.0, 96000.0])
+def test_every_band_within_iec61260_class1_limits(fs):
+    f = acoustics.third_octave_centres()
+    f = f[f <= _filterbank.max_centre(fs)]
+    assert f.size >= 29  # 25 Hz - 16 kHz at 44.1 kHz, up to 20 kHz at 48 kHz and above
+    bank = _filterbank.design(fs, f)
+    eps = 1e-7
+    for j, fm in enumerate(f):
+        checks = []  # (Omega, min, max)
+        for x, mx in IEC61260_CLASS1_PASS_MAX:
+            om = _third_octave_omega(x) * (1 - eps if x == 0.5 else 1.0)
+            checks += [(om, IEC61260_CLASS1_PASS_MIN, mx), (1 / om, IEC61260_CLASS1_PASS_MIN, mx)]
+        for x, mn in IEC61260_CLASS1_STOP_MIN:
+            om = _third_octave_omega(x) * (1 + eps if x == 0.5 else 1.0)
+            checks += [(om, mn, np.inf), (1 / om, mn, np.inf)]
+        om = np.array([c[0] for c in checks])
+        inside = om * fm < fs / 2
+        att = _relative_attenuation(bank, om[inside] * fm, j)
+        lo = np.array([c[1] for c in checks])[inside]
+        hi = np.array([c[2] for c in checks])[inside]
+        assert np.all(att >= lo) and np.all(att <= hi), (fm, om[inside][(att < lo) | (att > hi)])
+        # beyond G^4: at least 70 dB everywhere up to Nyquist, aliasing of the decimation chain included
+        om4 = _third_octave_omega(4.0)
+        k = int(bank.level[j])
+        fs_k = fs / 2**k
+        alias = np.concatenate([m * fs_k + np.array([-fm, fm]) for m in range(1, int(fs / fs_k) + 1)])
+        grid = np.concatenate([np.geomspace(1.0, fs / 2, 20000), alias])
+        grid = grid[(grid > 0) & (grid < fs / 2) & ((grid >= om4 * fm) | (grid <= fm / om4))]
+        far = _relative_attenuation(bank, grid, j)
+        assert far.min() >= 70.0, (fm, grid[np.argmin(far)], far.min())
+
+
+def _sine(f, fs, seconds, rms=1.0):
+    t = np.arange(int(round(seconds * fs))) / fs
+    return rms * np.sqrt(2.0) * np.sin(2 * np.pi * f * t)
+
+
+def test_1khz_sine_of_1pa_reads_94db():
+    # 1 Pa RMS = 20 lg(1 / 20e-6) = 93.98 dB re 20 uPa
+    fs = 48000.0
+    t, f, L = acoustics.band_levels(_sine(1000.0, fs, 3.0), fs)
+    j = acoustics.band_name(f).index("L_1000")
+    assert t.size == 24 and t[0] == pytest.approx(0.0625) and np.allclose(np.diff(t), 0.125)
+    assert np.all(np.abs(L[1:, j] - 94.0) <= 0.1)
+    assert np.all(L[1:, j] - np.delete(L[1:], j, axis=1).max(axis=1) > 20.0)  # other bands far below
+    la = acoustics.overall_a_level(L[1:], f)
+    assert np.all(np.abs(la - 94.0) <= 0.1)  # A(1 kHz) = 0
+
+
+@pytest.mark.parametrize("fs, nominal", [(48000.0, 25), (48000.0, 160), (48000.0, 20000),
+                                         (44100.0, 100), (44100.0, 16000)])
+def test_sine_at_midband_reads_its_level_with_any_block_length(fs, nominal):
+    fm = float(acoustics.exact_frequency(nominal))
+    t, f, L = acoustics.band_levels(_sine(fm, fs, 4.0, rms=0.1), fs)  # 74 dB; 44.1 kHz: 5512.5-sample blocks
+    j = acoustics.band_name(f).index(f"L_{nominal}")
+    steady = L[8:-1, j]  # the filters settle at both ends of the recording
+    assert 10 * np.log10(np.mean(10 ** (steady / 10))) == pytest.approx(73.98, abs=0.05)
+    # a block holds 2 f block_s half periods of sin^2: mean square ripples by up to 1 / (4 pi f block_s)
+    ripple = 10 * np.log10(1 + 1 / (4 * np.pi * fm * 0.125))
+    assert np.all(np.abs(steady - 73.98) <= ripple + 0.05)
+
+
+def test_chain_response_is_what_band_levels_measures():
+    # sines at in-band, skirt and alias frequencies: measured relative levels equal the analytic chain gain
+    fs = 48000.0
+    f = acoustics.third_octave_centres()
+    bank = _filterbank.design(fs, f)
+    j = acoustics.band_name(f).index("L_100")  # decimated 64 times
+    fs_k = fs / 2 ** int(bank.level[j])
+    probes = np.array([100.0, 89.0, 112.0, 80.0, 125.0, 2 * fs_k - 100.0, fs_k + 100.0, 3 * fs_k - 112.0])
+    gain = _filterbank.chain_response(bank, probes)[:, j]
+    for fp, g in zip(probes, gain, strict=True):
+        t, _, L = acoustics.band_levels(_sine(fp, fs, 6.0), fs)
+        measured = 10 * np.log10(np.mean(10 ** (L[16:-1, j] / 10)))
+        assert measured == pytest.approx(93.98 + 20 * np.log10(g), abs=0.05), fp
+
+
+def _multisine(fs, period_s, psd, seed):
+    """Periodic random-phase noise with exact power spectral density psd(f) (Pa^2/Hz), three periods."""
+    n = int(round(period_s * fs))
+    k = np.arange(n // 2 + 1)
+    fk = k * fs / n
+    amp = np.zeros(fk.size)
+    amp[1:-1] = np.sqrt(psd(fk[1:-1]) * fs / n)  # power per bin = psd * df, one-sided
+    phase = np.random.default_rng(seed).uniform(0, 2 * np.pi, fk.size)
+    x = np.fft.irfft(amp * np.exp(1j * phase) * n / np.sqrt(2.0), n)
+    return np.tile(x, 3)
+
+
+def _steady_band_levels(x, fs, period_s):
+    t, f, L = acoustics.band_levels(x, fs)
+    second = (t >= period_s) & (t < 2 * period_s)  # the second of three periods: filters settled
+    return f, 10 * np.log10(np.mean(10 ** (L[second] / 10), axis=0))
+
+
+def test_pink_noise_gives_flat_band_levels():
+    fs, period = 48000.0, 8.0
+    x = _multisine(fs, period, lambda f: 1e-3 / f, seed=7)
+    f, L = _steady_band_levels(x, fs, period)
+    assert f.size == 30
+    assert L.max() - L.min() <= 0.3
+    assert np.max(np.abs(L - np.median(L))) <= 0.15
+
+
+def test_white_noise_band_levels_equal_butterworth_effective_bandwidth():
+    # white noise of PSD S in a Butterworth band-pass of order 2N and bandwidth B carries
+    # S * B * pi / (2N sin(pi / 2N)) (noise bandwidth of the N-th order prototype), N = 4: +0.112 dB
+    fs, period, S = 48000.0, 4.0, 1e-6
+    x = _multisine(fs, period, lambda f: np.full_like(f, S), seed=11)
+    f, L = _steady_band_levels(x, fs, period)
+    n = _filterbank.ORDER
+    bw = f * (G ** (1 / 6) - G ** (-1 / 6))
+    expect = 10 * np.log10(S * bw * np.pi / (2 * n * np.sin(np.pi / (2 * n))) / acoustics.P_REF**2)
+    low = f <= 10000.0  # above, the bilinear transform reshapes the skirts near Nyquist
+    assert np.max(np.abs(L[low] - expect[low])) <= 0.05
+    assert np.max(np.abs(L - expect)) <= 0.3
+
+
+def test_group_delay_compensation_centres_tone_bursts():
+    # energy centroid of each band's block levels for a 1 s tone burst at its mid-band frequency
+    # stays at the burst centre (1.5 s): the 25 Hz band alone delays by about 0.17 s uncompensated
+    fs = 48000.0
+    x = np.zeros(int(3.5 * fs))
+    t, f, _ = acoustics.band_levels(x[: int(fs)], fs)
+    for nominal in (25, 100, 1000, 10000):
+        fm = float(acoustics.exact_frequency(nominal))
+        x[:] = 0.0
+        x[int(fs): int(2 * fs)] = _sine(fm, fs, 1.0)
+        t, f, L = acoustics.band_levels(x, fs)
+        j = acoustics.band_name(f).index(f"L_{nominal}")
+        e = 10 ** (L[:, j] / 10)
+        assert np.sum(e * t) / np.sum(e) == pytest.approx(1.5, abs=0.01), nominal
+        if nominal >= 100:  # (a 1 s burst spreads over +-1 Hz: wider than the 25 Hz band's skirts allow)
+            assert np.sum(e) * 0.125 == pytest.approx(1.0 / 4e-10, rel=0.02)  # energy of 1 Pa RMS for 1 s
+
+
+def test_chunked_processing_equals_one_pass():
+    fs = 48000.0
+    x = np.random.default_rng(5).standard_normal(int(2.3 * fs))
+    f = acoustics.third_octave_centres(25, 20000)
+    bank = _filterbank.design(fs, f)
+    a = _filterbank.run(bank, x, 0.1 * fs, 23, chunk=1 << 12)
+    b = _filterbank.run(bank, x, 0.1 * fs, 23, chunk=1 << 22)
+    np.testing.assert_allclose(a, b, rtol=1e-9)
+
+
+def test_band_levels_inputs():
+    fs = 48000.0
+    x = np.zeros(4800)
+    t, f, L = acoustics.band_levels(x, fs)  # shorter than one block
+    assert t.size == 0 and L.shape == (0, 30)
+    t, f, L = acoustics.band_levels(np.zeros(int(fs)), fs, f_min=100, f_max=1000)
+    assert acoustics.band_name(f)[0] == "L_100" and acoustics.band_name(f)[-1] == "L_1000"
+    assert np.all(np.isneginf(L))  # digital silence
+    _, f441, _ = acoustics.band_levels(np.zeros(44100), 44100.0)
+    assert acoustics.band_name(f441)[-1] == "L_16000"
+    cases = [
+        ((np.zeros((10, 2)), fs), {}, "pressure_pa"),
+        ((np.r_[0.0, np.nan, 0.0], fs), {}, "pressure_pa"),
+        ((x, -1.0), {}, "fs_hz"),
+        ((x, fs), {"block_s": 0.0}, "block_s"),
+        ((x, 44100.0), {"f_max": 20000}, "fs_hz"),
+        ((x, 50.0), {}, "fs_hz"),
+    ]
+    for args, kwargs, field in cases:
+        with pytest.raises(InputError) as err:
+            acoustics.band_levels(*args, **kwargs)
+        assert err.value.field == field, (args, kwargs)
+
+
+# --------------------------------------------------------------------------- WAV
+
+
+@pytest.mark.parametrize("dtype", ["float32", "int16", "int32"])
+def test_wav_round_trip_and_calibration(tmp_path, dtype):
+    fs, sens = 48000.0, 0.05
+    p = _sine(1000.0, fs, 1.0, rms=2.0)  # 100 dB, 0.14 V peak
+    path = tmp_path / "m1.wav"
+    acoustics.write_wav(path, p, fs, sens, dtype=dtype)
+    volts, rate = acoustics.read_wav(path)
+    assert rate == fs
+    np.testing.assert_allclose(volts, p * sens, atol=2.0 ** -15)
+    pa, _ = acoustics.read_wav(path, sens)
+    np.testing.assert_allclose(pa, acoustics.calibrate(volts, sens))
+    t, f, L = acoustics.wav_band_levels(path, sens, expected_fs_hz=fs)
+    t2, f2, L2 = acoustics.band_levels(pa, fs)
+    np.testing.assert_allclose(L, L2, atol=1e-6)
+    j = acoustics.band_name(f).index("L_1000")
+    assert np.all(np.abs(L[1:, j] - 99.98) <= 0.1)
+
+
+def test_wav_errors_name_file_and_field(tmp_path):
+    from scipy.io import wavfile
+
+    stereo = tmp_path / "stereo.wav"
+    wavfile.write(stereo, 48000, np.zeros((100, 2), dtype=np.int16))
+    mono = tmp_path / "mono.wav"
+    wavfile.write(mono, 44100, np.zeros(100, dtype=np.float32))
+    cases = [
+        (lambda: acoustics.read_wav(stereo), "channels", "stereo.wav"),
+        (lambda: acoustics.read_wav(mono, expected_fs_hz=48000), "sample_rate", "mono.wav"),
+        (lambda: acoustics.wav_band_levels(mono, 0.05, expected_fs_hz=48000), "sample_rate", "mono.wav"),
+        (lambda: acoustics.read_wav(tmp_path / "missing.wav"), "path", "missing.wav"),
+        (lambda: acoustics.read_wav(mono, 0.0), "sensitivity_v_per_pa", ""),
+        (lambda: acoustics.write_wav(tmp_path / "c.wav", np.full(10, 100.0), 48000, 0.05, dtype="int16"),
+         "pressure_pa", ""),
+    ]
+    for call, field, name in cases:
+        with pytest.raises(InputError) as err:
+            call()
+        assert err.value.field == field
+        assert name in str(err.value) and "\n" not in str(err.value)
