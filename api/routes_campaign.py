@@ -15,7 +15,6 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
 from gisnoise import cards as gcards
-from gisnoise.errors import CampaignError
 
 from .deps import WRITE, State, StateDep
 from .errors import ApiError
@@ -180,14 +179,42 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
 
 
 def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
-    """Diagnose the stored card against the stored campaign; writes diagnosis.json and the report."""
+    """Diagnose the stored card against the stored campaign; writes diagnosis.json."""
     from gisnoise.diagnose import diagnose
 
     card = gcards.load(ctx.input_dir / "card.json")
-    diagnose(ctx.input_dir / "campaign", card, ctx.output_dir, progress=ctx.progress, cancel=ctx.cancel)
+    ctx.progress(0.0, "reading the campaign")
+    doc = diagnose(ctx.input_dir / "campaign", card, progress=ctx.progress, cancel=ctx.cancel)
     ctx.check_cancel()
-    path = ctx.output_dir / "diagnosis.json"
-    if not path.is_file():
-        raise CampaignError("diagnose: no diagnosis.json was written", field="campaign")
-    doc = json.loads(path.read_text(encoding="utf-8"))
+    _strip_server_paths(doc, str(ctx.input_dir))
+    text = json.dumps(doc, indent=2, allow_nan=False, default=_json_default)
+    (ctx.output_dir / "diagnosis.json").write_text(text + "\n", encoding="utf-8")
     return {"card": card.id, "verdict": doc.get("verdict"), "baseline": doc.get("baseline")}
+
+
+def _json_default(v: Any) -> Any:
+    import numpy as np
+
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, Path):
+        return str(v)
+    raise TypeError(f"not JSON serializable: {type(v).__name__}")
+
+
+def _strip_server_paths(doc: Any, prefix: str) -> None:
+    """Replace the server's job folder in strings of a result document (in place)."""
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            if isinstance(v, str) and prefix in v:
+                doc[k] = v.replace(prefix, "upload")
+            else:
+                _strip_server_paths(v, prefix)
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            if isinstance(v, str) and prefix in v:
+                doc[i] = v.replace(prefix, "upload")
+            else:
+                _strip_server_paths(v, prefix)

@@ -1,0 +1,78 @@
+"""Fit and diagnose jobs on an uploaded campaign: the library's result, the injected effect found."""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+
+import pytest
+from service_helpers import REPO, assert_names_field, wait_job
+
+CAMPAIGN = REPO / "sample_data" / "campaign"
+pytestmark = pytest.mark.skipif(not (CAMPAIGN / "campaign.json").is_file(), reason="no sample campaign")
+
+
+def _campaign_zip(flights: tuple[str, ...] = ("f1",)) -> bytes:
+    """The sample campaign (its simulated truth: a bank-angle effect) restricted to some flights, zipped."""
+    doc = json.loads((CAMPAIGN / "campaign.json").read_text())
+    doc["flights"] = [f for f in doc["flights"] if f["id"] in flights]
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        z.writestr("sample/campaign.json", json.dumps(doc))
+        for p in sorted(CAMPAIGN.rglob("*")):
+            rel = p.relative_to(CAMPAIGN)
+            if p.is_file() and rel.parts[0] in ("flights", "mics") and p.stem in flights:
+                z.write(p, f"sample/{rel}")
+    return buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def campaign_zip() -> bytes:
+    return _campaign_zip()
+
+
+def test_fit_job_returns_the_librarys_card(client, campaign_zip, tmp_path):
+    from gisnoise import cards as gcards
+    from gisnoise.fit import fit_campaign
+
+    r = client.post("/jobs/fit", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
+                    data={"phase": "horizontal", "card_id": "fitted-horizontal"})
+    assert r.status_code == 202, r.text
+    info = wait_job(client, r.json()["id"], timeout=300)
+    assert info["status"] == "succeeded", info
+    assert set(info["files"]) == {"card.json", "fit.json"}
+    card = gcards.loads(client.get(info["result_url"]).content)
+    assert card.id == "fitted-horizontal" and card.phase == "horizontal" and card.covariance is not None
+    assert str(tmp_path) not in client.get(info["result_url"]).text  # no server paths leak
+    with zipfile.ZipFile(io.BytesIO(campaign_zip)) as z:
+        z.extractall(tmp_path / "direct")
+    direct = fit_campaign(tmp_path / "direct" / "sample", "horizontal")
+    assert card.parameters == pytest.approx(direct.params, rel=1e-9, abs=1e-9)
+    # the fitted card can be published to the store as it is
+    assert client.post("/cards", content=client.get(info["result_url"]).content,
+                       headers={"content-type": "application/json"}).status_code == 201
+
+
+def test_fit_job_failing_in_the_core_reports_the_field(client, campaign_zip):
+    r = client.post("/jobs/fit", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
+                    data={"phase": "transition"})  # a few transition samples cannot identify the model
+    info = wait_job(client, r.json()["id"], timeout=120)
+    assert info["status"] == "failed" and info["error"]["status"] == 422, info
+    assert "cannot be told apart" in info["error"]["detail"]
+    assert info["error"]["field"] in ("p0", "p1", "p2", "p3", "p4", "p5", "p6", "p7")
+    assert_names_field(client.get(f"/jobs/{info['id']}/result"), 409, "job_id")
+
+
+def test_diagnose_job_finds_the_injected_effect(client, campaign_zip):
+    truth = json.loads((CAMPAIGN / "truth.json").read_text())
+    injected = [e["name"] for e in truth["effects"]]
+    r = client.post("/jobs/diagnose", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
+                    data={"card_id": "demo-horizontal"})
+    assert r.status_code == 202, r.text
+    info = wait_job(client, r.json()["id"], timeout=300)
+    assert info["status"] == "succeeded", info
+    doc = client.get(info["result_url"]).json()
+    assert {"baseline", "segments", "effects", "verdict"} <= set(doc)
+    assert doc["verdict"]["effect"] in injected
+    assert info["summary"]["verdict"]["effect"] == doc["verdict"]["effect"]
