@@ -337,7 +337,8 @@ def detect_events(t: Sequence[np.ndarray], excess_db: Sequence[np.ndarray], *, e
         Level minus the expectation (geometric trend and background) per block, dB;
         NaN where unknown.
     event_db : float
-        Joint rise that flags an event, dB.
+        Joint rise that flags an event, dB; the flag extends over the neighbouring
+        blocks while the joint rise stays above half of it.
     smoothing_s : float
         Width of the moving average applied to each excess first, s.
 
@@ -373,8 +374,19 @@ def detect_events(t: Sequence[np.ndarray], excess_db: Sequence[np.ndarray], *, e
                 break
             val = np.interp(ti, tj[ok], ej[ok], left=np.nan, right=np.nan)
             joint = np.fmin(joint, np.where(np.isnan(val), -np.inf, val))
-        out[i] = joint > event_db
+        out[i] = _hysteresis(joint, event_db, 0.5 * event_db)
     return out
+
+
+def _hysteresis(x: np.ndarray, high: float, low: float) -> np.ndarray:
+    """True on the runs of ``x > low`` that contain at least one ``x > high``."""
+    above = x > low
+    if not above.any():
+        return above
+    run = np.cumsum(np.diff(np.concatenate([[False], above])).astype(bool) & above)  # run id of each start
+    run = np.where(above, run, 0)
+    hit = np.unique(run[(x > high) & above])
+    return np.isin(run, hit[hit > 0])
 
 
 def _moving_mean(t: np.ndarray, v: np.ndarray, width: float) -> np.ndarray:
@@ -1121,7 +1133,7 @@ def _build_samples(camp: Campaign) -> Samples:
         if e.mic is not None:
             sel &= mic == e.mic
         excluded |= sel
-    background, excess = _background_and_excess(camp, mic, flight, cat, level, outside | excluded)
+    background, excess, bg_how = _background_and_excess(camp, mic, flight, cat, level, outside, excluded)
     with np.errstate(invalid="ignore"):
         low = level < background + camp.snr_db
     event = np.zeros(n, dtype=bool)
@@ -1147,6 +1159,7 @@ def _build_samples(camp: Campaign) -> Samples:
         "speed_of_sound_m_s": c,
         "absorption_corrected": bool(camp.absorption),
         "absorption_uncorrected_series": meta_uncorrected,
+        "background": bg_how,
         "snr_db": camp.snr_db,
         "event_db": camp.event_db,
         "flights": {f.id: {"start_utc": f.start_utc, "log": Path(f.log).name} for f in camp.flights},
@@ -1163,38 +1176,63 @@ def _build_samples(camp: Campaign) -> Samples:
 
 
 def _background_and_excess(camp: Campaign, mic: np.ndarray, flight: np.ndarray, cat: Mapping[str, np.ndarray],
-                           level: np.ndarray, skip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Background per row and level minus expectation per row, from one trend fit per mic and flight."""
+                           level: np.ndarray, outside: np.ndarray,
+                           excluded: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    """Background per row, level minus expectation per row, and how each background was found."""
     n = len(level)
     background = np.full(n, np.nan)
     excess = np.full(n, np.nan)
     given = {m.id: m.background_db for m in camp.microphones}
+    how: list[dict[str, Any]] = []
     for mid in np.unique(mic):
         for fid in np.unique(flight[mic == mid]):
             idx = np.flatnonzero((mic == mid) & (flight == fid))
-            use = ~skip[idx]
-            fit = fit_level_trend(level[idx], cat["d"][idx], cat["power_w"][idx], use=use,
-                                  background_db=given.get(mid))
+            use = ~(outside[idx] | excluded[idx])
+            bg, source = given.get(mid), "campaign.json"
+            if bg is None:
+                bg, source = _quiet_background(level[idx], outside[idx] & ~excluded[idx], use), "outside_flight"
+            fit = fit_level_trend(level[idx], cat["d"][idx], cat["power_w"][idx], phase=cat["phase"][idx],
+                                  use=use, background_db=bg)
             if fit is None:
-                if given.get(mid) is not None:
-                    background[idx] = given[mid]
+                background[idx] = np.nan if bg is None else bg
+                how.append({"mic": str(mid), "flight": str(fid), "background_db": background[idx[0]],
+                            "source": source if bg is not None else "none"})
                 continue
             expected, b = fit
+            if bg is None:
+                source = "plateau_fit" if np.isfinite(b) else "none"
             background[idx] = b
+            how.append({"mic": str(mid), "flight": str(fid), "background_db": float(b), "source": source})
             ex = level[idx] - expected
             ex[~use] = np.nan
             excess[idx] = ex - np.nanmedian(ex)
-    return background, excess
+    return background, excess, how
 
 
-def fit_level_trend(level: Any, d: Any, power_w: Any, *, use: Any = None,
+def _quiet_background(level: np.ndarray, quiet: np.ndarray, flying: np.ndarray) -> float | None:
+    """Median level of the blocks whose emission lies outside the flight log (at least 8 of them),
+    unless it is not below the quiet end of the in-flight levels (then the UAV was audible)."""
+    if quiet.sum() < 8:
+        return None
+    b = float(np.median(level[quiet]))
+    if flying.sum() >= 8 and b > float(np.percentile(level[flying], 5.0)) + 1.0:
+        return None
+    return b
+
+
+def fit_level_trend(level: Any, d: Any, power_w: Any, *, phase: Any = None, use: Any = None,
                     background_db: float | None = None) -> tuple[np.ndarray, float] | None:
-    """Robust fit of ``L = 10 log10(10^((a + b log10(d/40) + c log10 P)/10) + 10^(B/10))``.
+    """Robust fit of ``L = 10 log10(10^((a_phase + b log10(d/40) + c log10 P)/10) + 10^(B/10))``.
 
-    The geometric trend of one microphone during one flight (spreading with distance,
-    loudness with power) with its background plateau ``B``; soft-L1 loss (scale 1 dB)
-    so events and directivity do not drag it.  The power term is left out when the
-    power does not vary.
+    The trend of one microphone during one flight (spreading with distance, loudness
+    with power, one offset per flight phase) power-summed with a background plateau
+    ``B``; soft-L1 loss (scale 1 dB) so events and directivity do not drag it.  The
+    power term is left out when the power does not vary, a phase with fewer than 8
+    rows shares the offset of the most common phase.
+
+    The plateau is accepted only where the data show it: at least 10 % of the rows
+    within 2 dB above ``B`` and at most 2 % more than 3 dB below it.  Otherwise the
+    background is not determined (``B`` is NaN) and the trend is refitted alone.
 
     Parameters
     ----------
@@ -1204,6 +1242,8 @@ def fit_level_trend(level: Any, d: Any, power_w: Any, *, use: Any = None,
         Distances, m.
     power_w : array_like
         Electric power, W.
+    phase : array_like of str, optional
+        Flight phase of each row.
     use : array_like of bool, optional
         Rows to fit (default all).
     background_db : float, optional
@@ -1212,9 +1252,8 @@ def fit_level_trend(level: Any, d: Any, power_w: Any, *, use: Any = None,
     Returns
     -------
     (expected, B) or None
-        Expected level of every row, dB(A), and the background, dB(A) (NaN when the
-        levels never come within 10 dB of it, so it is not determined); None with
-        fewer than 8 rows to fit.
+        Expected level of every row, dB(A), and the background, dB(A) (NaN when not
+        determined); None with fewer than 8 rows to fit.
 
     Examples
     --------
@@ -1223,44 +1262,63 @@ def fit_level_trend(level: Any, d: Any, power_w: Any, *, use: Any = None,
     >>> expected, b = fit_level_trend(L, d, np.full(200, 1000.0))
     >>> round(b, 3), round(float(np.max(np.abs(expected - L))), 3)
     (40.0, 0.0)
+    >>> expected, b = fit_level_trend(L[:100], d[:100], np.full(100, 1000.0))  # never near 40 dB
+    >>> b
+    nan
     """
     from scipy.optimize import least_squares
 
     level = np.asarray(level, dtype=float)
+    n = len(level)
     ld = np.log10(np.maximum(np.asarray(d, dtype=float), 1e-3) / 40.0)
     p = np.maximum(np.asarray(power_w, dtype=float), 1e-9)
-    use = np.ones(len(level), dtype=bool) if use is None else np.asarray(use, dtype=bool)
+    use = np.ones(n, dtype=bool) if use is None else np.asarray(use, dtype=bool)
     if use.sum() < 8:
         return None
+    ph = np.full(n, "", dtype=object) if phase is None else np.asarray(phase, dtype=object)
+    names, counts = np.unique(ph[use].astype(str), return_counts=True)
+    main = names[int(np.argmax(counts))]
+    kept = [str(nm) for nm, c in zip(names, counts, strict=True) if c >= 8 and nm != main]
+    offsets = [np.ones(n)] + [(ph == nm).astype(float) for nm in kept]  # main phase + differences
     lp = np.log10(p / np.median(p[use]))
-    cols = [np.ones(len(level)), ld] + ([lp] if np.std(lp[use]) > 1e-3 else [])
+    cols = offsets + [ld] + ([lp] if np.std(lp[use]) > 1e-3 else [])
     a = np.column_stack(cols)
     k = a.shape[1]
+    i_b = len(offsets)  # column of log10(d / 40)
     lv, au = level[use], a[use]
     top = lv >= np.median(lv)
-    coef0, *_ = np.linalg.lstsq(au[top] if top.sum() >= k + 2 else au, lv[top] if top.sum() >= k + 2 else lv,
+    coef0, *_ = np.linalg.lstsq(au[top] if top.sum() >= 2 * k else au, lv[top] if top.sum() >= 2 * k else lv,
                                 rcond=None)
-    lo_b = float(lv.min()) - 30.0
-    fixed = background_db is not None
     ln10 = np.log(10.0) / 10.0
+    lower = [-np.inf] * k
+    upper = [np.inf] * k
+    lower[i_b], upper[i_b] = -60.0, 20.0
+    x0 = np.array(coef0, dtype=float)
+    x0[i_b] = float(np.clip(x0[i_b], -59.0, 19.0))
 
-    def model(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        bb = float(background_db) if fixed else x[k]
-        return np.logaddexp(rows @ x[:k] * ln10, bb * ln10) / ln10
+    def solve(bg: float | None) -> tuple[np.ndarray, float]:
+        if bg is not None:
+            def resid(x: np.ndarray) -> np.ndarray:
+                return np.logaddexp(au @ x * ln10, bg * ln10) / ln10 - lv
+            r = least_squares(resid, x0, bounds=(lower, upper), loss="soft_l1", f_scale=1.0)
+            return r.x, bg
+        lo_b = float(lv.min()) - 30.0
+        xb = np.append(x0, np.clip(np.percentile(lv, 5.0) - 1.0, lo_b + 1e-6, lv.max() - 1e-6))
 
-    lower = [-np.inf, -60.0] + [-np.inf] * (k - 2)
-    upper = [np.inf, 20.0] + [np.inf] * (k - 2)
-    x0 = list(coef0)
-    x0[1] = float(np.clip(x0[1], -59.0, 19.0))
-    if not fixed:
-        lower.append(lo_b)
-        upper.append(float(lv.max()))
-        x0.append(float(np.clip(np.percentile(lv, 5.0) - 1.0, lo_b + 1e-6, lv.max() - 1e-6)))
-    res = least_squares(lambda x: model(x, au) - lv, np.array(x0), bounds=(lower, upper), loss="soft_l1",
-                        f_scale=1.0, x_scale=1.0)
-    b = float(background_db) if fixed else float(res.x[k])
-    if not fixed and b < float(lv.min()) - 10.0:
-        b = float("nan")
-    return model(res.x, a), b
+        def resid_b(x: np.ndarray) -> np.ndarray:
+            return np.logaddexp(au @ x[:k] * ln10, x[k] * ln10) / ln10 - lv
+        r = least_squares(resid_b, xb, bounds=(lower + [lo_b], upper + [float(lv.max())]), loss="soft_l1",
+                          f_scale=1.0)
+        return r.x[:k], float(r.x[k])
+
+    if background_db is not None:
+        x, b = solve(float(background_db))
+    else:
+        x, b = solve(None)
+        if np.mean(lv < b + 2.0) < 0.10 or np.mean(lv < b - 3.0) > 0.02:
+            x, b = solve(-np.inf)
+            b = float("nan")
+    expected = np.logaddexp(a @ x * ln10, (b if np.isfinite(b) else -np.inf) * ln10) / ln10
+    return expected, b
 
 

@@ -182,11 +182,41 @@ def test_low_snr_masks_where_the_uav_is_below_background(tmp_path):
     assert set(s.mask_reason) == {"", "low_snr"}
 
 
-def test_background_is_found_even_when_never_reached(tmp_path):
-    """Within 900 m the UAV stays above the 40 dB background; the plateau fit still finds it."""
+def test_background_never_reached_is_not_guessed(tmp_path):
+    """Within 900 m the UAV stays 5 dB or more above the 40 dB background: not determined, nothing masked."""
     s = read_campaign(make_campaign(tmp_path / "c")).samples()
-    assert np.all(np.abs(s.background_db - BG) < 0.05)
+    assert np.all(np.isnan(s.background_db))
     assert np.all(s.valid)
+    assert {b["source"] for b in s.meta["background"]} == {"none"}
+
+
+def test_background_from_blocks_before_the_flight(tmp_path):
+    """Blocks whose emission precedes the log (UAV not yet flying) hold the background only."""
+    rng = np.random.default_rng(5)
+
+    def levels(mic, t_r, d):
+        before = closed_form_te(t_r, MICS[mic]) < -10.0       # the log starts at -10 s
+        return np.where(before, BG, uav_level(d)) + rng.normal(0.0, 0.5, len(t_r))
+
+    root = make_campaign(tmp_path / "c", t_r=np.arange(-12.0, 58.0, 0.125), level_fn=levels)
+    s = read_campaign(root).samples()
+    assert np.all(np.abs(s.background_db - BG) < 0.2)       # median of ~12 blocks of N(40, 0.5)
+    assert {b["source"] for b in s.meta["background"]} == {"outside_flight"}
+    assert set(s.mask_reason[s.t_e < -10.0]) == {"outside_flight"}
+    l_uav = L40 - 20 * np.log10(s.d / 40.0)
+    assert np.all(s.mask_reason[(s.t_e > -10.0) & (l_uav > BG + 5.0)] == "")  # 6 noise std clear
+
+
+def test_background_from_campaign_json(tmp_path):
+    root = make_campaign(tmp_path / "c")
+    doc = json.loads((root / "campaign.json").read_text())
+    doc["microphones"][0]["background_db"] = 47.0
+    (root / "campaign.json").write_text(json.dumps(doc))
+    s = read_campaign(root).samples()
+    m1 = s.mic == "m1"
+    np.testing.assert_allclose(s.background_db[m1], 47.0)
+    # rows of m1 within 3 dB of a 47 dB background are low_snr; there the UAV is below 49.3 dB
+    np.testing.assert_array_equal(s.mask_reason[m1] == "low_snr", s.level[m1] < 50.0)
 
 
 def test_joint_rise_on_all_mics_is_an_event_one_mic_is_not(tmp_path):
@@ -197,7 +227,8 @@ def test_joint_rise_on_all_mics_is_an_event_one_mic_is_not(tmp_path):
         if mic == "m2":                                          # a car near m2 only
             one = (t_r >= 40.0) & (t_r < 42.0)
             la = np.where(one, la + 15.0, la)
-        return la
+        turn = (t_r >= 45.0) & (t_r < 52.0)                      # louder UAV (a turn): +4 dB everywhere
+        return np.where(turn, la + 4.0, la)
 
     s = read_campaign(make_campaign(tmp_path / "c", level_fn=levels)).samples()
     inside = (s.t_r >= 20.3) & (s.t_r <= 21.7)
@@ -205,6 +236,7 @@ def test_joint_rise_on_all_mics_is_an_event_one_mic_is_not(tmp_path):
     far = (s.t_r < 19.5) | (s.t_r > 22.5)
     assert not np.any(s.mask_reason[far] == "event")
     assert np.all(s.mask_reason[(s.mic == "m2") & (s.t_r > 40.3) & (s.t_r < 41.7)] != "event")
+    assert not np.any(s.mask_reason[(s.t_r > 44.0) & (s.t_r < 53.0)] == "event")   # below event_db = 6 dB
 
 
 def test_exclusions_from_file_and_argument(tmp_path):
