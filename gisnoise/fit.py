@@ -18,9 +18,9 @@ flight-test residuals are coloured (model error lasting seconds), so the
 covariance is also given corrected for the residual autocorrelation with the
 method of Morelli & Klein (1997), see :func:`gisnoise._oem.hac_covariance`.
 
-Before and after the solve, the weighted Jacobian with unit-norm columns is
-checked by SVD: when its smallest singular value relative to the largest falls
-below ``rcond`` the fit is refused with :class:`NotIdentifiableError` naming the
+Where the solve ends, the weighted Jacobian with unit-norm columns is checked by
+its singular values: when the smallest relative to the largest falls below
+``rcond`` the fit is refused with :class:`NotIdentifiableError` naming the
 parameters of the near-null direction (data at one distance only cannot tell
 the level offset from the spreading exponent, data at one power cannot tell
 the offset from the power slope, ...).
@@ -210,7 +210,8 @@ class FitResult:
 
     def summary(self) -> str:
         """A few lines for a terminal: parameters with both standard deviations."""
-        lines = [f"ansatz {self.ansatz}, phase {self.phase}, n = {self.n}, {self.message}",
+        phases = self.phase or ", ".join(dict.fromkeys(self.samples.phase.tolist())) or "-"
+        lines = [f"ansatz {self.ansatz}, phase {phases}, n = {self.n}, {self.message}",
                  f"cost (neg. log-likelihood) {self.cost:.3f}, AIC {self.aic:.1f}, BIC {self.bic:.1f}, "
                  f"rms {self.rms_db:.2f} dB",
                  "param       value     std(CR)  std(corr.)"]
