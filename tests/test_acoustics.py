@@ -439,3 +439,19 @@ def test_wav_errors_name_file_and_field(tmp_path):
             call()
         assert err.value.field == field
         assert name in str(err.value) and "\n" not in str(err.value)
+
+
+def test_progress_reports_fractions_and_can_cancel():
+    from gisnoise.errors import Cancelled
+
+    fs = 48000.0
+    x = np.zeros(int(5 * fs))
+    seen = []
+    acoustics.band_levels(x, fs, progress=seen.append)
+    assert len(seen) > 1 and np.all(np.diff(seen) > 0) and seen[-1] == pytest.approx(1.0)
+
+    def stop(fraction):
+        raise Cancelled("stopped", field="progress")
+
+    with pytest.raises(Cancelled):
+        acoustics.band_levels(x, fs, progress=stop)
