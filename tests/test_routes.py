@@ -154,7 +154,7 @@ def test_linestring_with_times_round_trips_and_derives_the_bank():
     e, n = r * np.sin(ang), r * np.cos(ang)  # clockwise from north
     lat, lon, h = FRAME.to_wgs84(e, n, np.full_like(t, 60.0))
     feat = {"type": "Feature", "geometry": {"type": "LineString",
-                                            "coordinates": [[a, b, c] for a, b, c in zip(lon, lat, h)]},
+                                            "coordinates": np.column_stack([lon, lat, h]).tolist()},
             "properties": {"times": t.tolist()}}
     traj = read_trajectory(feat)
     np.testing.assert_allclose(traj.h, h, atol=1e-9)
@@ -166,7 +166,7 @@ def test_linestring_with_times_round_trips_and_derives_the_bank():
     np.testing.assert_allclose(((traj.yaw - course + 180) % 360 - 180)[mid], 0.0, atol=0.3)
     # [lon, lat, z, t] positions and an exported trajectory read back the same
     feat4 = {"type": "Feature", "geometry": {"type": "LineString",
-                                             "coordinates": [[a, b, c, d] for a, b, c, d in zip(lon, lat, h, t)]}}
+                                             "coordinates": np.column_stack([lon, lat, h, t]).tolist()}}
     np.testing.assert_allclose(read_trajectory(feat4).roll, traj.roll)
     back = read_trajectory(trajectory_to_geojson(traj))
     for k in ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w"):

@@ -1,0 +1,83 @@
+"""Model cards: load, save, validation, schema versions (SPEC section 4)."""
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gisnoise import cards
+from gisnoise.errors import CardError, SchemaVersionError
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE_CARDS = sorted((ROOT / "sample_data" / "cards").glob("*.json"))
+
+
+@pytest.mark.parametrize("path", SAMPLE_CARDS, ids=lambda p: p.name)
+def test_sample_cards_load_and_round_trip(path, tmp_path):
+    card = cards.load(path)
+    assert cards.loads(cards.dumps(card)) == card
+    out = cards.save(card, tmp_path / path.name)
+    assert cards.load(out) == card
+    assert card.p.shape == (card.model.n_params,)
+
+
+def test_published_cards_hold_table_1_verbatim():
+    h = cards.load(ROOT / "sample_data" / "cards" / "published_horizontal.json")
+    assert [h.parameters[k] for k in h.model.params] == [13.409, 0.176, -0.280, -0.365, 1.049, 0.939, 40.393]
+
+
+def doc():
+    return json.loads((ROOT / "sample_data" / "cards" / "published_horizontal.json").read_text())
+
+
+@pytest.mark.parametrize("schema", ["gisnoise/model-card/2", "gisnoise/model-card/x", "other/1", None])
+def test_unknown_schema_is_refused(schema):
+    d = doc()
+    d["schema"] = schema
+    with pytest.raises(SchemaVersionError) as exc:
+        cards.loads(json.dumps(d))
+    assert exc.value.field == "schema"
+
+
+def test_malformed_json_names_line_and_column(tmp_path):
+    p = tmp_path / "c.json"
+    p.write_text('{"schema": "gisnoise/model-card/1",\n  "id": }')
+    with pytest.raises(CardError, match=r"malformed JSON at line 2 column 9") as exc:
+        cards.load(p)
+    assert exc.value.field == "json" and str(p) in str(exc.value)
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda d: d.pop("parameters"), "parameters"),
+    (lambda d: d["parameters"].pop("p6"), "parameters"),
+    (lambda d: d["parameters"].update(p9=1.0), "parameters"),
+    (lambda d: d["parameters"].update(p2="big"), "parameters.p2"),
+    (lambda d: d.update(phase="cruise"), "phase"),
+    (lambda d: d.update(ansatz="nope"), "ansatz"),
+    (lambda d: d.update(reference_power_w=0), "reference_power_w"),
+    (lambda d: d.update(covariance=[[1.0, 0.0], [0.0, 1.0]]), "covariance"),
+    (lambda d: d.update(covariance=(-np.eye(7)).tolist()), "covariance"),
+    (lambda d: d.update(phases="hover"), "phases"),
+])
+def test_invalid_cards_name_the_field(change, field):
+    d = doc()
+    change(d)
+    with pytest.raises(CardError) as exc:
+        cards.from_dict(d)
+    assert exc.value.field == field
+
+
+def test_save_refuses_to_overwrite_when_asked(tmp_path):
+    card = cards.load(SAMPLE_CARDS[0])
+    p = cards.save(card, tmp_path / "c.json")
+    with pytest.raises(CardError, match="refusing to overwrite"):
+        cards.save(replace(card, notes="x"), p, overwrite=False)
+    assert cards.load(p) == card
+
+
+def test_missing_card_file(tmp_path):
+    with pytest.raises(CardError, match="no such card file") as exc:
+        cards.load(tmp_path / "none.json")
+    assert exc.value.field == "card"
