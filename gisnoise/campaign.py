@@ -43,8 +43,10 @@ background plateau ``B`` (robust loss).  ``B`` is the background (``background_d
 campaign.json replaces it; NaN, and no ``low_snr`` mask, when the levels never come
 within 10 dB of it).  The level minus this expectation, on every microphone at once,
 is what :func:`detect_events` examines.  Band backgrounds for the absorption
-correction are the 10th percentile of each band over the farthest quarter of the
-distances.
+correction are the median band levels of the blocks outside the flight log when
+there are 8 or more, else the 10th percentile of each band over the farthest quarter
+of the distances (which overstates it while the UAV is still audible there, so fewer
+bands are corrected: the correction errs towards too little).
 """
 
 from __future__ import annotations
@@ -1115,11 +1117,16 @@ def _build_samples(camp: Campaign) -> Samples:
                 continue
             b = bands_all[sl]
             d = cat["d"][sl]
-            far = ~outside[sl]
-            if far.any():
-                far &= d >= np.percentile(d[far], 75.0)
-            bg_b = acoustics.background_levels(b[far], BACKGROUND_PERCENTILE) if far.any() else \
-                np.full(b.shape[1], np.inf)
+            quiet = outside[sl]
+            if quiet.sum() >= 8:   # blocks before/after the flight: the background itself
+                bg_b = np.array([np.median(col[np.isfinite(col)]) if np.isfinite(col).any() else np.nan
+                                 for col in b[quiet].T])
+            else:                  # the quiet end of the farthest quarter (high while the UAV is audible)
+                far = ~quiet
+                if far.any():
+                    far &= d >= np.percentile(d[far], 75.0)
+                bg_b = acoustics.background_levels(b[far], BACKGROUND_PERCENTILE) if far.any() else \
+                    np.full(b.shape[1], np.inf)
             bg_b = np.where(np.isnan(bg_b), np.inf, bg_b)  # a band absent here is never corrected
             level[sl] = acoustics.absorption_corrected_level(
                 level[sl], b, band_f, d, w["temperature_c"], w["humidity_pct"], w.get("pressure_kpa", 101.325),

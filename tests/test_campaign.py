@@ -312,6 +312,34 @@ def test_absorption_corrects_signal_bands_only(tmp_path):
     assert corr.meta["absorption_corrected"] is True
 
 
+def test_absorption_band_background_from_blocks_before_the_flight(tmp_path):
+    """Before the log starts the 4 kHz band reads its 30 dB background; in flight it never drops below
+    48 dB, so every in-flight row is >= 10 dB clear and is corrected."""
+    f_sig, f_bg = 10 ** 3.6, 10 ** 2.0
+    store = {}
+
+    def levels(mic, t_r, d):
+        before = closed_form_te(t_r, MICS[mic]) < -10.0
+        l4k = np.where(before, 30.0, np.maximum(80.0 - 20 * np.log10(d / 40.0), 48.0))
+        l100 = np.full_like(d, 45.0)
+        la = 10 * np.log10(10 ** ((l4k + acoustics.a_weighting(f_sig)) / 10)
+                           + 10 ** ((l100 + acoustics.a_weighting(f_bg)) / 10))
+        store[mic] = (t_r, la, l4k, l100)
+        return la
+
+    root = make_campaign(tmp_path / "c", t_r=np.arange(-12.0, 58.0, 0.125), level_fn=levels)
+    for mic, (t_r, la, l4k, l100) in store.items():
+        write_levels(root / "mics" / mic / "f1.csv", t_r, la, {"L_100": l100, "L_4000": l4k})
+    plain = read_campaign(root).samples()
+    corr = read_campaign(root, absorption=True).samples()
+    alpha = float(acoustics.atmospheric_absorption(f_sig, 15.0, 50.0, 101.325))
+    flying = plain.mask_reason != "outside_flight"
+    e4k = 10 ** ((plain.bands[:, 1] + acoustics.a_weighting(f_sig)) / 10)
+    expected = 10 * np.log10(10 ** (plain.level / 10) + e4k * (10 ** (alpha * plain.d / 10) - 1))
+    np.testing.assert_allclose(corr.level[flying], expected[flying], atol=1e-6)
+    np.testing.assert_allclose(corr.level[~flying], plain.level[~flying], atol=1e-9)   # background: as is
+
+
 def test_absorption_needs_humidity(tmp_path):
     root = make_campaign(tmp_path / "c", doc_changes={"weather": {"temperature_c": 15.0}})
     with pytest.raises(CampaignError, match=r"campaign\.json: field 'weather\.humidity_pct'"):
