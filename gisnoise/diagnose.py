@@ -6,9 +6,9 @@ Given measured samples and a model card, :func:`diagnose` answers three question
 Localization
     The card's residual (measured minus model, dB) is smoothed per microphone
     and flight over a window of ``window_s`` seconds; where the smoothed residual
-    departs from its series median by more than the measurement noise explains
-    (``z`` times the larger of the white-noise standard error of the window mean
-    and the robust spread of the smoothed residual), the samples are flagged and
+    is larger than the measurement noise explains (``z`` standard errors of a
+    window mean, estimated from differences of adjacent window means so that
+    coloured noise counts with its correlation), the samples are flagged and
     joined into segments.  The measurement noise per microphone is the robust
     spread of first differences of the residual (``1.4826 MAD / sqrt 2``): fast
     scatter is noise, slow structure is model error.  Each segment carries its
@@ -26,9 +26,10 @@ Attribution
     ``alpha`` divided by the number of candidates tested (Bonferroni).
     Candidates are ranked by their held-out improvement of the mean squared
     residual; the verdict names the best significant candidate whose held-out
-    improvement is positive and significant in a paired test over time blocks,
-    with physical evidence (turn excess, band slopes, fore/aft asymmetry, ...)
-    breaking near ties.  Otherwise the verdict is null.
+    improvement reaches :data:`MIN_IMPROVEMENT_DB2` and is significant in a
+    paired test over time blocks, with physical evidence (turn excess, band
+    slopes, comb pattern, fore/aft asymmetry, ...) breaking near ties.
+    Otherwise the verdict is null.
 
 Shrinkage
     Baseline and extended RMS residual on the fitted data and on held-out data
@@ -55,7 +56,7 @@ from . import effects as _effects
 from .cards import ModelCard
 from .errors import Cancelled, FitError, GisnoiseError, InputError, NotIdentifiableError
 from .fit import FitResult, fit_arrays
-from .model import Ansatz
+from .model import Ansatz, level_sum
 from .samples import Samples
 
 __all__ = [
@@ -82,6 +83,11 @@ VERTICAL_SPEED_M_S = 1.5
 """Climb or sink when the vertical speed exceeds this, m/s."""
 HOVER_SPEED_M_S = 2.0
 """Hover when the ground speed is below this, m/s."""
+FIT_TOL = 1e-9
+"""Relative cost tolerance of the refits (a fit still creeping after 300 iterations is used as it stands)."""
+MIN_IMPROVEMENT_DB2 = 0.005
+"""Smallest held-out improvement of the mean squared residual (dB^2) a verdict needs: an effect
+whose removal takes less (an RMS contribution below about 0.07 dB) does not matter in practice."""
 
 
 # --------------------------------------------------------------------------- data
@@ -205,14 +211,14 @@ def _window_mean_error(r: np.ndarray, n_w: int, sigma_white: float) -> float:
     return max(white, float(1.4826 * np.median(np.abs(dm - np.median(dm))) / math.sqrt(2.0)))
 
 
-def _smoothed(resid, sid, t, mic, flight, noise, window_s, z):
+def _smoothed(resid, sid, t, mic, flight, noise, window_s, z, relative=False):
     out = []
     for idx in _runs(sid, t):
         tt = t[idx]
         dt = float(np.median(np.diff(tt))) if len(tt) > 1 else 1.0
         n_w = max(3, int(round(window_s / max(dt, 1e-6))))
         rm = _rolling_mean(resid[idx], n_w)
-        ex = rm - np.median(rm)
+        ex = rm - np.median(rm) if relative else rm
         thr = z * _window_mean_error(resid[idx], n_w, noise.get(str(mic[idx[0]]), 0.0))
         out.append(_Series(idx, str(mic[idx[0]]), str(flight[idx[0]]), tt, ex, thr, n_w))
     return out
@@ -259,7 +265,7 @@ def localize(
     z : float
         Threshold in standard errors.
     min_excess_db : float
-        Smallest flagged departure of the smoothed residual from its median, dB.
+        Smallest flagged smoothed residual, dB.
     regimes : ndarray of str, optional
         Regime per sample (default :func:`sample_regimes`).
 
@@ -267,7 +273,7 @@ def localize(
     -------
     segments : list of dict
         ``flight``, ``mic``, ``t0``, ``t1`` (emission time, s), ``rms_db``, ``mean_db``,
-        ``excess_db`` (mean departure from the series median), ``n``, ``regime``,
+        ``excess_db`` (mean smoothed residual), ``n``, ``regime``,
         ``range`` (near or far), ``d_median_m``, ``bank_abs_mean_deg``.
     flagged : ndarray of bool
         Samples inside a segment.
@@ -348,72 +354,162 @@ def _statistics(s: Samples, resid: np.ndarray, flagged: np.ndarray, reg: np.ndar
 # --------------------------------------------------------------------------- events
 
 
+def _best_level(meas: np.ndarray, add: Callable[[np.ndarray], np.ndarray], grid: np.ndarray) -> tuple[float, float]:
+    """Grid minimum of ``sum (meas - add(g))^2`` over ``g``: (SSE, g)."""
+    pred = add(grid[:, None])
+    sse = np.sum((meas[None, :] - pred) ** 2, axis=1)
+    i = int(np.argmin(sse))
+    return float(sse[i]), float(grid[i])
+
+
+def _explain_window(level, l_uav, bg, sub, mic_idx, flagged_mics):
+    """BIC of three explanations of a window's excess: UAV gain, area event, local event.
+
+    ``sub`` is the sub-window index of each row, ``mic_idx`` its microphone index.
+    Gain: one dB gain of the UAV level per sub-window, common to all microphones;
+    area event: one added level per sub-window, common to all microphones;
+    local event: one added level per sub-window on each flagged microphone only.
+    """
+    base = level_sum(l_uav, bg)
+    n = len(level)
+    g_grid = np.arange(-10.0, 25.01, 0.25)
+    b_lo = float(np.min(base)) - 30.0
+    b_grid = np.arange(b_lo, float(np.max(level)) + 5.0, 0.25)
+    sse = {"gain": 0.0, "area": 0.0, "local": 0.0}
+    k = {"gain": 0, "area": 0, "local": 0}
+    for j in np.unique(sub):
+        m = sub == j
+        sse_g, _ = _best_level(level[m], lambda g, m=m: level_sum(l_uav[m][None, :] + g, bg[m][None, :]), g_grid)
+        sse_a, _ = _best_level(level[m], lambda b, m=m: level_sum(base[m][None, :], b), b_grid)
+        sse["gain"] += sse_g
+        sse["area"] += sse_a
+        k["gain"] += 1
+        k["area"] += 1
+        for mi in np.unique(mic_idx[m]):
+            mm = m & (mic_idx == mi)
+            if mi in flagged_mics:
+                s_l, _ = _best_level(level[mm], lambda b, mm=mm: level_sum(base[mm][None, :], b), b_grid)
+                k["local"] += 1
+            else:
+                s_l = float(np.sum((level[mm] - base[mm]) ** 2))
+            sse["local"] += s_l
+    return {name: n * math.log(max(v, 1e-12) / n) + k[name] * math.log(n) for name, v in sse.items()}
+
+
 def detect_events(
     s: Samples,
     resid: np.ndarray,
     noise: Mapping[str, float],
+    l_uav: np.ndarray,
+    background_db: np.ndarray,
     *,
     window_s: float = 1.0,
     z: float = 5.0,
     min_db: float = 3.0,
-    max_s: float = 120.0,
-    coherence: float = 0.4,
+    max_s: float = 180.0,
+    sub_s: float = 5.0,
+    min_bic: float = 10.0,
 ) -> tuple[np.ndarray, list[dict[str, Any]]]:
-    """Windows of transient sound from other sources.
+    """Windows of transient sound from sources other than the UAV.
 
-    A window is a run (at least ``window_s / 2`` and at most ``max_s`` long) where
-    the smoothed residual of one microphone rises above its series median by
-    more than ``min_db`` and ``z`` white-noise standard errors, while no other
-    microphone of the same flight shows more than ``coherence`` times that rise
-    at the same emission time (an unmodelled UAV effect reaches every
-    microphone the UAV dominates; a local event reaches one).  Samples the
-    campaign reader masked as ``event`` form windows too.  With a single
-    microphone only the reader's events count.
+    Candidates are runs (``window_s / 2`` to ``max_s`` long) where the smoothed
+    residual of a microphone rises above its series median by more than
+    ``min_db`` and ``z`` standard errors of the window mean, and runs the campaign
+    reader masked as ``event``.  Overlapping candidates of one flight form a
+    window.  A detector window counts as an event only when added sound explains
+    it better than a louder UAV: within sub-windows of ``sub_s`` seconds the
+    measured levels of all microphones are fitted (a) with a gain of the UAV
+    level common to all microphones (an unmodelled UAV effect), (b) with a level
+    added energetically at every microphone (a distant source heard by all) and
+    (c) with a level added at the rising microphones only (a local source); the
+    window is an event when (b) or (c) beats (a) by ``min_bic`` in the Bayesian
+    information criterion.  Added sound lifts quiet microphones by more dB than
+    loud ones; a louder UAV lifts every microphone it dominates by the same dB.
+
+    Parameters
+    ----------
+    s : Samples
+        The samples.
+    resid : ndarray
+        Measured minus model level, dB.
+    noise : mapping
+        White measurement-noise standard deviation per microphone, dB.
+    l_uav, background_db : ndarray
+        Model UAV level and background level per sample, dB.
 
     Returns
     -------
     window : ndarray of int
-        Window index per sample, -1 outside.
+        Event parameter index per sample (one per window, sub-window and, for a
+        local event, microphone), -1 outside events.
     windows : list of dict
-        ``flight``, ``mic``, ``t0``, ``t1``, ``excess_db``, ``z``, ``source`` (detector or reader).
+        ``flight``, ``t0``, ``t1`` (emission time, s), ``mics``, ``kind`` (area or
+        local), ``source`` (detector or reader), ``excess_db`` (largest mean rise),
+        ``z``, ``bic_gain_minus_event``, ``parameters`` (indices).
     """
     sid = _series(s)
-    win = np.full(len(s), -1, dtype=int)
-    found: list[dict[str, Any]] = []
-    series = _smoothed(resid, sid, s.t_e, s.mic, s.flight, noise, window_s, z)
-    mics = set(s.mic.astype(str).tolist())
+    out = np.full(len(s), -1, dtype=int)
+    series = _smoothed(resid, sid, s.t_e, s.mic, s.flight, noise, window_s, z, relative=True)
+    cands: dict[str, list[tuple[float, float, str, str, float, float]]] = {}
     for ser in series:
-        cands = []
         reader = s.mask_reason[ser.idx] == "event"
         for a, b in _intervals(reader, ser.t, min_len_s=0.0, join_gap_s=window_s):
-            cands.append((a, b, "reader"))
-        if len(mics) > 1:
-            sig = noise.get(ser.mic, 0.0) / math.sqrt(ser.n_w)
-            mask = (ser.excess > max(min_db, z * sig)) & ~reader
-            for a, b in _intervals(mask, ser.t, min_len_s=window_s / 2, join_gap_s=window_s / 2):
-                if ser.t[b] - ser.t[a] > max_s:
-                    continue
-                ex = float(np.mean(ser.excess[a:b + 1]))
-                coherent = False
-                for other in series:
-                    if other.flight != ser.flight or other.mic == ser.mic:
-                        continue
-                    m = (other.t >= ser.t[a]) & (other.t <= ser.t[b])
-                    if m.any() and float(np.mean(other.excess[m])) > coherence * ex:
-                        coherent = True
-                        break
-                if not coherent:
-                    cands.append((a, b, "detector"))
-        for a, b, src in cands:
-            rows = ser.idx[a:b + 1]
-            j = len(found)
-            win[rows] = j
             ex = float(np.mean(ser.excess[a:b + 1]))
-            sig = noise.get(ser.mic, 0.0) / math.sqrt(max(len(rows), 1))
-            found.append({"flight": ser.flight, "mic": ser.mic, "t0": float(ser.t[a]), "t1": float(ser.t[b]),
-                          "excess_db": ex, "z": float(ex / sig) if sig > 0 else None, "source": src,
-                          "n": int(len(rows))})
-    return win, found
+            cands.setdefault(ser.flight, []).append((ser.t[a], ser.t[b], ser.mic, "reader", ex, np.inf))
+        mask = (ser.excess > max(min_db, ser.threshold)) & ~reader
+        for a, b in _intervals(mask, ser.t, min_len_s=window_s / 2, join_gap_s=window_s / 2):
+            if ser.t[b] - ser.t[a] > max_s:
+                continue
+            ex = float(np.mean(ser.excess[a:b + 1]))
+            zz = ex / (ser.threshold / z) if ser.threshold > 0 else np.inf
+            cands.setdefault(ser.flight, []).append((ser.t[a], ser.t[b], ser.mic, "detector", ex, zz))
+    mics_all = np.unique(s.mic.astype(str))
+    mic_idx = np.searchsorted(mics_all, s.mic.astype(str))
+    found: list[dict[str, Any]] = []
+    n_par = 0
+    for fl, runs in sorted(cands.items()):
+        runs.sort()
+        clusters: list[list[tuple]] = []
+        for r in runs:
+            if clusters and r[0] <= max(c[1] for c in clusters[-1]) + 2.0 * window_s:
+                clusters[-1].append(r)
+            else:
+                clusters.append([r])
+        in_flight = s.flight.astype(str) == fl
+        for cl in clusters:
+            t0, t1 = min(c[0] for c in cl), max(c[1] for c in cl)
+            rows = np.flatnonzero(in_flight & (s.t_e >= t0) & (s.t_e <= t1))
+            if len(rows) < 4:
+                continue
+            rising = {c[2] for c in cl}
+            src = "reader" if any(c[3] == "reader" for c in cl) else "detector"
+            sub = np.floor((s.t_e[rows] - t0) / sub_s).astype(int)
+            flagged = {int(np.searchsorted(mics_all, m)) for m in rising}
+            bic = _explain_window(s.level[rows], l_uav[rows], background_db[rows], sub, mic_idx[rows], flagged)
+            kind = "area" if bic["area"] <= bic["local"] else "local"
+            margin = bic["gain"] - bic[kind]
+            if src == "detector" and margin < min_bic:
+                continue
+            params = []
+            for j in np.unique(sub):
+                m = sub == j
+                if kind == "area":
+                    out[rows[m]] = n_par
+                    params.append(n_par)
+                    n_par += 1
+                else:
+                    for mi in sorted(flagged):
+                        mm = m & (mic_idx[rows] == mi)
+                        if mm.any():
+                            out[rows[mm]] = n_par
+                            params.append(n_par)
+                            n_par += 1
+            zs = [c[5] for c in cl if np.isfinite(c[5])]
+            found.append({"flight": fl, "t0": float(t0), "t1": float(t1), "mics": sorted(rising), "kind": kind,
+                          "source": src, "excess_db": float(max(c[4] for c in cl)),
+                          "z": float(max(zs)) if zs else None, "bic_gain_minus_event": float(margin),
+                          "parameters": params})
+    return out, found
 
 
 # --------------------------------------------------------------------------- folds
@@ -524,15 +620,21 @@ def _ev_ground(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
     if cand.fit is None:
         return {"supports": None, "summary": "not fitted"}
     p = cand.fit.params
-    x = ctx.x
-    tau = _effects._reflection_delay(x)
-    cb, _ = _effects._band_cos(2.0 * np.pi * p["f_ground"] * tau, False)
+    tau = _effects._reflection_delay(ctx.x)
+    up = np.isfinite(tau)
+    r = ctx.resid_base
+    cb, _ = _effects._band_cos(2.0 * np.pi * p["f_ground"] * tau[up], False)
     pattern = 10.0 * np.log10(1.0 + p["r_ground"] ** 2 + 2.0 * p["r_ground"] * cb)
-    c = _corr(pattern, ctx.resid_base)
-    return {"supports": None if c is None else bool(c > 0.1), "corr_residual_comb": c,
-            "r_ground": p["r_ground"], "f_ground_hz": p["f_ground"],
-            "summary": f"residual follows the interference comb at {p['f_ground']:.0f} Hz, R = {p['r_ground']:.2f} "
-                       f"(correlation {c:+.2f})" if c is not None else "no comb pattern to compare"}
+    c = _corr(pattern, r[up])
+    lift = float(np.mean(r[up]) - np.mean(r[~up])) if (~up).any() else None
+    sup = bool(p["r_ground"] > 0.1 and ((c is not None and c > 0.1) or (lift is not None and lift > 0.5)))
+    words = [f"R = {p['r_ground']:.2f} at {p['f_ground']:.0f} Hz"]
+    if c is not None:
+        words.append(f"elevated microphones' residual follows the interference comb with correlation {c:+.2f}")
+    if lift is not None:
+        words.append(f"they read {lift:+.2f} dB against microphones on the ground")
+    return {"supports": sup, "corr_residual_comb": c, "elevated_minus_ground_db": lift, "r_ground": p["r_ground"],
+            "f_ground_hz": p["f_ground"], "summary": "; ".join(words)}
 
 
 def _ev_doppler(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
@@ -601,13 +703,14 @@ def _ev_rpm(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
 def _ev_event(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
     wins = ctx.event_windows
     if not wins:
-        return {"supports": False, "summary": "no window with a rise on one microphone only"}
-    ex = [w["excess_db"] for w in wins]
-    mics = sorted({w["mic"] for w in wins})
-    return {"supports": bool(all(e > 0 for e in ex)), "windows": len(wins), "microphones": mics,
-            "mean_excess_db": float(np.mean(ex)),
-            "summary": f"{len(wins)} window(s) of positive excess on one microphone at a time "
-                       f"(mean {np.mean(ex):+.1f} dB; {', '.join(mics)})"}
+        return {"supports": False, "summary": "no window of added sound"}
+    kinds = sorted({w["kind"] for w in wins})
+    margins = [w["bic_gain_minus_event"] for w in wins]
+    return {"supports": bool(min(margins) > 0), "windows": len(wins), "kinds": kinds,
+            "bic_gain_minus_event_min": float(min(margins)),
+            "summary": f"{len(wins)} window(s) where sound added energetically ({', '.join(kinds)}) explains the rise "
+                       f"better than a louder UAV (BIC margin >= {min(margins):.0f}); largest rise "
+                       f"{max(w['excess_db'] for w in wins):+.1f} dB"}
 
 
 for _name, _fn in (("bank_angle", _ev_bank), ("atmospheric_absorption", _ev_absorption),
@@ -649,8 +752,13 @@ def _fit(level, x, model, s, rows, *, p0=None, fixed=None, bounds=None, cancel=N
            for k, v in x.items()}
     mic = s.mic[rows].astype(str)
     series = np.char.add(np.char.add(mic, "\x00"), s.flight[rows].astype(str))
-    return fit_arrays(level[rows], sub, model, mic=mic, series=series, time=s.t_e[rows], p0=p0, fixed=fixed,
-                      bounds=bounds, cancel=cancel, reference_power_w=1.0, max_iter=200)
+    res = fit_arrays(level[rows], sub, model, mic=mic, series=series, time=s.t_e[rows], p0=p0, fixed=fixed,
+                     bounds=bounds, cancel=cancel, reference_power_w=1.0, max_iter=300, tol=FIT_TOL,
+                     raise_on_failure=False)
+    if not res.success and not (np.isfinite(res.cost) and "did not converge" in res.message
+                                and res.iterations >= 300):
+        raise FitError(f"fit did not converge: {res.message}", field="fit")
+    return res
 
 
 def _predict(model: Ansatz, p: np.ndarray, x: Mapping[str, Any], rows: np.ndarray, n: int) -> np.ndarray:
@@ -772,6 +880,7 @@ def run_diagnosis(
     block_s: float = 30.0,
     bias_z: float = 3.0,
     include_events: bool = True,
+    min_improvement_db2: float = MIN_IMPROVEMENT_DB2,
     progress: ProgressFn | None = None,
     cancel: CancelFn | None = None,
 ) -> Diagnosis:
@@ -793,12 +902,15 @@ def run_diagnosis(
     include_events : bool
         Diagnose samples the campaign reader masked as ``event`` too (they are
         part of the gap and the evidence for ``background_event``).
+    min_improvement_db2 : float
+        Smallest held-out improvement of the mean squared residual a verdict needs, dB^2.
     """
     if not isinstance(card, ModelCard):
         raise InputError(f"card must be a ModelCard, got {type(card).__name__}", field="card")
     if not (0.0 < alpha < 1.0):
         raise InputError(f"alpha must be in (0, 1), got {alpha!r}", field="alpha")
-    for name, v in (("window_s", window_s), ("z", z), ("block_s", block_s), ("bias_z", bias_z)):
+    for name, v in (("window_s", window_s), ("z", z), ("block_s", block_s), ("bias_z", bias_z),
+                    ("min_improvement_db2", min_improvement_db2)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise InputError(f"{name} must be a positive number, got {v!r}", field=name)
     names = list(_effects.effect_names() if candidates is None else candidates)
@@ -867,7 +979,9 @@ def run_diagnosis(
     tick("baseline")
 
     # ---------------------------------------------------------------- events
-    ev_win, ev_list = detect_events(s, resid_card, noise)
+    l_uav_card = np.broadcast_to(base.level_uav(card.p, x, d_ref=card.reference_distance_m), (n,))
+    bg_rows = np.full(n, card.background_db if card.background_db is not None else -np.inf)
+    ev_win, ev_list = detect_events(s, resid_card, noise, l_uav_card, bg_rows)
     x_ev = dict(x, event_window=ev_win)
 
     bg = card.background_db
@@ -889,7 +1003,7 @@ def run_diagnosis(
             tick(nme)
             continue
         if nme == "background_event" and not ev_list:
-            cand.reason = "no window with a rise on one microphone only"
+            cand.reason = "no window of added sound found"
             cand.oof = oof_base.copy()
             tick(nme)
             continue
@@ -935,7 +1049,7 @@ def run_diagnosis(
                     key=lambda c: -c.summary.get("holdout_improvement_db2", -np.inf))
     for i, c in enumerate(ranked):
         c.summary["rank"] = i + 1
-    eligible = [c for c in ranked if c.summary["significant"] and c.summary["holdout_improvement_db2"] > 0
+    eligible = [c for c in ranked if c.summary["significant"] and c.summary["holdout_improvement_db2"] >= min_improvement_db2
                 and c.summary["p_holdout"] < 0.05]
     verdict_c = None
     if eligible:

@@ -395,9 +395,10 @@ def _unit_to_mic(x: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
 def mic_height_agl(x: Mapping[str, Any]) -> np.ndarray | None:
     """Microphone height above ground per row (m), or None when the data do not tell.
 
-    From the input ``mic_agl`` when given, else from ``meta["microphones"]``
-    entries with ``height_agl_m`` (or ``mount == "ground_plate"``: 0 m) matched
-    to the rows by microphone position.
+    From the input ``mic_agl`` when given, else from ``meta["microphones"]`` (a
+    list of objects with ``id``, or a mapping id -> object) with ``height_agl_m``
+    (or ``mount == "ground_plate"``: 0 m), matched to the rows by the input
+    ``mic`` (ids) or else by microphone position (``enu``).
     """
     v = x.get("mic_agl")
     if v is not None:
@@ -409,6 +410,8 @@ def mic_height_agl(x: Mapping[str, Any]) -> np.ndarray | None:
     mic_enu = np.asarray(x["mic_enu"], dtype=float)
     h = np.full(len(mic_enu), np.nan)
     ids = x.get("mic")
+    if isinstance(mics, Mapping):
+        mics = [{"id": k, **v} for k, v in mics.items()]
     for m in mics:
         hm = m.get("height_agl_m", m.get("height_m"))
         if hm is None and m.get("mount") == "ground_plate":
@@ -549,19 +552,27 @@ def _reflection_delay(x):
     r_h2 = np.sum((uav[..., :2] - mic[..., :2]) ** 2, axis=-1)
     direct = np.sqrt(r_h2 + (h_s - h_m) ** 2)
     reflected = np.sqrt(r_h2 + (h_s + h_m) ** 2)
-    return (reflected - direct) / c
+    tau = (reflected - direct) / c
+    # on the ground (plate) the reflection is the pressure doubling the mount correction removes
+    return np.where(h_m >= MIN_REFLECTION_HEIGHT_M, tau, np.nan)
+
+
+MIN_REFLECTION_HEIGHT_M = 0.3
+"""Microphones lower than this (m) count as on the ground: no interference term."""
 
 
 def _ground_term(q, x, d_ref, want_jac):
     r, f = q[0], q[1]
     tau = np.asarray(x["tau_ground"], dtype=float) if "tau_ground" in x else _reflection_delay(x)
+    off = np.isnan(tau)
+    tau = np.where(off, 0.0, tau)
     u = 2.0 * np.pi * f * tau
     cb, dcb = _band_cos(u, want_jac)
     g = 1.0 + r * r + 2.0 * r * cb
-    dl = 10.0 * np.log10(g)
+    dl = np.where(off, 0.0, 10.0 * np.log10(g))
     if not want_jac:
         return dl, None
-    k = 10.0 / (LN10 * g)
+    k = np.where(off, 0.0, 10.0 / (LN10 * g))
     return dl, np.stack([k * (2.0 * r + 2.0 * cb), k * 2.0 * r * dcb * 2.0 * np.pi * tau], axis=-1)
 
 
@@ -571,15 +582,16 @@ def _ground_check(x):
     h = mic_height_agl(x)
     if h is None or np.any(np.isnan(h)):
         return "microphone heights above ground unknown"
-    if not np.any(h >= 0.3):
-        return "all microphones on the ground (below 0.3 m): no reflected path to interfere"
+    if not np.any(h >= MIN_REFLECTION_HEIGHT_M):
+        return (f"all microphones on the ground (below {MIN_REFLECTION_HEIGHT_M:g} m): the mount correction "
+                "covers the reflection")
     return None
 
 
 def _ground_initial(x, resid):
     """Grid search of (R, f_g) on the residual (the offset is free), best least-squares match."""
     tau = _reflection_delay(x)
-    ok = np.isfinite(resid)
+    ok = np.isfinite(resid) & np.isfinite(tau)
     best, arg = np.inf, (0.0, 200.0)
     for f in np.geomspace(40.0, 4000.0, 90):
         cb, _ = _band_cos(2.0 * np.pi * f * tau[ok], False)
