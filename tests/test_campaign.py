@@ -346,6 +346,65 @@ def test_absorption_needs_humidity(tmp_path):
         read_campaign(root, absorption=True)
 
 
+# ----------------------------------------------------------------------------- flight logs
+DATA = Path(__file__).parent / "data"
+
+
+def test_campaign_with_a_px4_log_aligned_by_gps_time(tmp_path):
+    """flights/f1.ulg is read with the flight's start_utc: t = GPS UTC - start_utc."""
+    import shutil
+
+    root = tmp_path / "c"
+    (root / "flights").mkdir(parents=True)
+    shutil.copy(DATA / "pyulog_sample_log_small_vtol.ulg", root / "flights" / "f1.ulg")
+    frame = LocalFrame(63.4170, 10.4082, 100.0)   # the log's site
+    lat, lon, h = frame.to_wgs84(10.0, 0.0, 1.5)
+    doc = {"schema": "gisnoise/campaign/1", "origin": {"lat": 63.4170, "lon": 10.4082, "h": 100.0},
+           "speed_of_sound_m_s": 340.0, "weather": {"temperature_c": 10.0},
+           "vehicle": {"name": "vtol", "reference_power_w": 500.0},
+           "microphones": [{"id": "m1", "lat": float(lat), "lon": float(lon), "h": float(h), "mount": "free_field"}],
+           "flights": [{"id": "f1", "start_utc": "2021-04-21T06:30:58Z"}]}
+    (root / "campaign.json").write_text(json.dumps(doc))
+    t_r = np.arange(0.0, 7.0, 0.125)
+    write_levels(root / "mics" / "m1" / "f1.csv", t_r, np.full(len(t_r), 60.0))
+    camp = read_campaign(root)
+    tr = camp.trajectories["f1"]
+    # first GPS fix inside the attitude/battery span: 06:30:58.80 UTC (time_utc_usec of the log)
+    assert abs(tr.t[0] - 0.800) < 0.03 and abs(tr.t[-1] - 6.600) < 0.03
+    s = camp.samples()
+    assert np.all((s.t_r - s.t_e) > 0) and np.all((s.t_r - s.t_e) < 0.2)   # 10-60 m at 340 m/s
+    np.testing.assert_allclose(s.t_r - s.t_e, s.d / 340.0, atol=1e-9)
+    out = (s.t_e < tr.t[0]) | (s.t_e > tr.t[-1])
+    assert out.sum() >= 8 and set(s.mask_reason[out]) == {"outside_flight"}
+    assert not np.any(s.mask_reason[~out] == "outside_flight")
+    assert s.power_w.min() > 0.0 and s.power_w.max() > 100.0   # the hop, then idle after landing
+
+
+def test_campaign_with_an_ardupilot_log_needs_the_geoid_undulation(tmp_path):
+    import shutil
+
+    root = tmp_path / "c"
+    (root / "flights").mkdir(parents=True)
+    shutil.copy(DATA / "dronekit_la_testdata_log171_copter.bin", root / "flights" / "f1.bin")
+    doc = {"schema": "gisnoise/campaign/1", "origin": {"lat": -35.3623, "lon": 149.1659, "h": 600.0},
+           "speed_of_sound_m_s": 340.0, "weather": {},
+           "vehicle": {"name": "quad", "reference_power_w": 300.0},
+           "microphones": [{"id": "m1", "lat": -35.3623, "lon": 149.1659, "h": 600.0}],
+           "flights": [{"id": "f1", "start_utc": "2015-11-21T23:44:00Z"}]}
+    (root / "campaign.json").write_text(json.dumps(doc))
+    t_r = np.arange(30.0, 200.0, 0.125)
+    write_levels(root / "mics" / "m1" / "f1.csv", t_r, np.full(len(t_r), 60.0))
+    with pytest.raises(CampaignError, match=r"f1\.bin: message 'GPS' gives heights above mean sea level only") as e:
+        read_campaign(root)
+    assert e.value.field == "geoid_undulation_m"
+    doc["flights"][0]["geoid_undulation_m"] = 20.0
+    (root / "campaign.json").write_text(json.dumps(doc))
+    camp = read_campaign(root)
+    tr = camp.trajectories["f1"]
+    assert 20.0 < tr.t[0] < 30.0            # first 3D fix at 23:44:25.4 UTC
+    assert len(camp.samples()) == len(t_r)
+
+
 # ----------------------------------------------------------------------------- WAV input
 def write_wav(path: Path, x: np.ndarray, fs: int) -> None:
     from scipy.io import wavfile
