@@ -8,6 +8,8 @@ import click
 import numpy as np
 
 from ..campaign import DEFAULT_EVENT_DB, DEFAULT_SNR_DB, inspect_campaign, write_levels
+from ..errors import GisnoiseError
+from ..samples import Samples
 from .options import progress
 
 campaign_arg = click.argument("campaign", type=click.Path(file_okay=False))
@@ -40,7 +42,12 @@ def check(ctx: click.Context, campaign: str, absorption: bool, snr_db: float, ev
         click.echo(f"Campaign {camp.folder}  origin {camp.origin.lat0:.6f}, {camp.origin.lon0:.6f}, "
                    f"{camp.origin.h0:.1f} m  c = {camp.speed_of_sound_m_s:.1f} m/s  "
                    f"reference power {camp.reference_power_w:g} W")
-        s = camp.samples() if camp.levels and not _samples_failed(problems) else None
+        s = None
+        if camp.levels:
+            try:
+                s = camp.samples()
+            except GisnoiseError:  # already among the problems
+                s = None
         click.echo("")
         click.echo(f"{'flight':<16}{'log':<24}{'duration_s':>11}{'log_rows':>10}{'blocks':>9}{'valid':>9}  phases")
         for f in camp.flights:
@@ -54,8 +61,7 @@ def check(ctx: click.Context, campaign: str, absorption: bool, snr_db: float, ev
         for m in camp.microphones:
             nfiles = sum(1 for lv in camp.levels if lv.mic == m.id)
             sel = s.mic == m.id if s is not None else np.zeros(0, bool)
-            bg = s.background_db[sel] if s is not None and s.background_db is not None and sel.any() else []
-            bgs = f"{float(bg[0]):.1f}" if len(bg) and np.isfinite(bg[0]) else "-"
+            bgs = _background_text(s, m.id)
             click.echo(f"{m.id:<16}{m.mount:<14}{nfiles:>6d}{int(sel.sum()):>9d}"
                        f"{int(s.valid[sel].sum()) if s is not None else 0:>9d}{bgs:>15}")
         if s is not None:
@@ -71,8 +77,16 @@ def check(ctx: click.Context, campaign: str, absorption: bool, snr_db: float, ev
     click.echo("no problems found")
 
 
-def _samples_failed(problems: list) -> bool:
-    return any(p.field in ("t_e", "t_nodes", "speed_of_sound_m_s") for p in problems)
+def _background_text(s: Samples | None, mic: str) -> str:
+    """Background of a microphone over its flights: one value, a range, or '-' when not determined."""
+    if s is None or s.background_db is None:
+        return "-"
+    bg = s.background_db[s.mic == mic]
+    bg = bg[np.isfinite(bg)]
+    if bg.size == 0:
+        return "-"
+    lo, hi = float(bg.min()), float(bg.max())
+    return f"{lo:.1f}" if hi - lo < 0.05 else f"{lo:.1f}-{hi:.1f}"
 
 
 def _short(path: str) -> str:
