@@ -37,12 +37,14 @@ only), and ``exclusions``: ``[{"flight": .., "t0": .., "t1": .., "mic": ..}]``
    outside the flight log), ``excluded`` (user intervals), ``event`` (see
    :func:`detect_events`), ``low_snr`` (level below background + ``snr_db``).
 
-Background and events (per microphone and flight): :func:`fit_level_trend` fits the
-levels as spreading with distance and loudness with power, power-summed with a
-background plateau ``B`` (robust loss).  ``B`` is the background (``background_db`` of
-campaign.json replaces it; NaN, and no ``low_snr`` mask, when the levels never come
-within 10 dB of it).  The level minus this expectation, on every microphone at once,
-is what :func:`detect_events` examines.  Band backgrounds for the absorption
+Background and events (per microphone and flight).  The background is, in this
+order: ``background_db`` of campaign.json; the median level of the blocks whose
+emission lies outside the flight log (8 or more; the UAV is not flying then, and the
+value must not exceed the quiet end of the in-flight levels); the plateau ``B`` of
+:func:`fit_level_trend` when the levels show it; else NaN, and then no row is masked
+``low_snr``.  :func:`fit_level_trend` (spreading with distance, loudness with power,
+an offset per phase, power-summed with the background) also gives each row's
+expected level; the level minus it, on every microphone at once, is what :func:`detect_events` examines.  Band backgrounds for the absorption
 correction are the median band levels of the blocks outside the flight log when
 there are 8 or more, else the 10th percentile of each band over the farthest quarter
 of the distances (which overstates it while the UAV is still audible there, so fewer
