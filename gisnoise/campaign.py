@@ -44,11 +44,12 @@ value must not exceed the quiet end of the in-flight levels); the plateau ``B`` 
 :func:`fit_level_trend` when the levels show it; else NaN, and then no row is masked
 ``low_snr``.  :func:`fit_level_trend` (spreading with distance, loudness with power,
 an offset per phase, power-summed with the background) also gives each row's
-expected level; the level minus it, on every microphone at once, is what :func:`detect_events` examines.  Band backgrounds for the absorption
-correction are the median band levels of the blocks outside the flight log when
-there are 8 or more, else the 10th percentile of each band over the farthest quarter
-of the distances (which overstates it while the UAV is still audible there, so fewer
-bands are corrected: the correction errs towards too little).
+expected level; the level minus it, on every microphone at once, is what
+:func:`detect_events` examines.  Band backgrounds for the absorption correction are
+the median band levels of the blocks outside the flight log when there are 8 or
+more, else the 10th percentile of each band over the farthest quarter of the
+distances (which overstates it while the UAV is still audible there, so fewer bands
+are corrected: the correction errs towards too little).
 """
 
 from __future__ import annotations
