@@ -161,3 +161,33 @@ def test_missing_card_file(tmp_path):
     csv = write_csv(tmp_path / "f.csv", flyover())
     one_line_error(run("contour", csv, "--card", str(tmp_path / "nope.json"), "--out", str(tmp_path / "o")),
                    "nope.json")
+
+
+def test_uncertainty_bands_and_contours(tmp_path):
+    # covariance on p0 only (std 0.5 dB) of an omnidirectional card: dL/dp0 = 1 for every instant,
+    # so LAmax_std = LAeq_std = 0.5 dB everywhere and the 95 % level is 1.645 * 0.5 dB lower
+    cov = np.zeros((8, 8))
+    cov[0, 0] = 0.25
+    card = ModelCard(id="omni-fit", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0, covariance=tuple(map(tuple, cov)))
+    cpath = str(save(card, tmp_path / "fit.json"))
+    csv = write_csv(tmp_path / "flight.csv", flyover())
+    out = tmp_path / "map"
+    r = run("contour", csv, "--card", cpath, "--out", str(out), "--resolution", "25", "--margin", "150",
+            "--levels", "55,60", "--ground-height", "80", "--uncertainty")
+    assert r.exit_code == 0, r.output
+    with rasterio.open(out / "levels.tif") as ds:
+        names = ds.descriptions
+        assert {"LAmax_std", "LAmax_p95", "LAeq_std", "LAeq_p95"} <= set(names)
+        band = {n: ds.read(i + 1) for i, n in enumerate(names)}
+    np.testing.assert_allclose(band["LAmax_std"], 0.5, atol=1e-6)
+    np.testing.assert_allclose(band["LAeq_std"], 0.5, atol=1e-6)
+    np.testing.assert_allclose(band["LAmax_p95"], band["LAmax"] - 1.6448536 * 0.5, atol=1e-4)
+    doc = json.loads((out / "contours.geojson").read_text())
+    metrics = {f["properties"]["metric"] for f in doc["features"]}
+    assert {"LAmax_p95", "LAeq_p95"} <= metrics and "LAmax_std" not in metrics
+    # cards without a covariance: a clear one-line error
+    one_line_error(run("contour", csv, "--card", str(save(ModelCard(**{**card.__dict__, "covariance": None}),
+                                                              tmp_path / "nocov.json")),
+                       "--out", str(tmp_path / "o2"), "--uncertainty"), "covariance")
