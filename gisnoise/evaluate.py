@@ -63,7 +63,7 @@ import numpy as np
 
 from . import cards as _cards
 from .cards import ModelCard
-from .errors import Cancelled, CardError, InputError, TrajectoryError
+from .errors import Cancelled, CardError, GisnoiseError, InputError, TrajectoryError
 from .frames import LocalFrame, emission_angles
 from .grid import WGS84, GridSpec, apply_affine, resample_dem, transformer
 from .trajectory import Trajectory
@@ -412,6 +412,8 @@ def _levels_chunk(
     jac_offsets: Sequence[int] | None = None,
     n_jac: int = 0,
     min_distance_m: float = 1.0,
+    receiver_agl_m: float = 1.5,
+    meta: Mapping[str, Any] | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Levels of ``nc`` receivers x ``ns`` instants: the evaluator's physics, pure.
 
@@ -441,6 +443,10 @@ def _levels_chunk(
         Total Jacobian columns.
     min_distance_m : float
         Distances are clamped to at least this (the point-source model's near-field limit), m.
+    receiver_agl_m : float
+        Receiver height above ground (input ``mic_agl`` of extensions such as ground reflection), m.
+    meta : dict, optional
+        Facts for extensions (``speed_of_sound_m_s``), passed as input ``meta``.
 
     Returns
     -------
@@ -467,19 +473,26 @@ def _levels_chunk(
             x[name] = v[None, sel]
         for name in receiver_extras:
             x[name] = rcv[:, None, :]
-        x["meta"] = {}
-        if J is None:
-            L[:, sel] = card.level(x, background=background)
-        else:
-            assert jac_offsets is not None
+        x["mic_agl"] = receiver_agl_m
+        x["meta"] = dict(meta or {})
+        try:
+            if J is None:
+                L[:, sel] = card.level(x, background=background)
+                continue
             lv, jk = card.model.level_and_jacobian(card.p, x, background=background,
                                                    d_ref=card.reference_distance_m)
-            L[:, sel] = lv
-            o = jac_offsets[int(k)]
-            if ks.size == 1:
-                J[:, :, o:o + jk.shape[-1]] = jk
-            else:
-                J[:, sel, o:o + jk.shape[-1]] = jk
+        except (ValueError, IndexError, KeyError, TypeError) as exc:
+            if isinstance(exc, GisnoiseError):
+                raise
+            raise InputError(f"card {card.id!r}: ansatz {card.ansatz!r} cannot be evaluated on a map "
+                             f"({type(exc).__name__}: {exc})", field="ansatz") from None
+        assert jac_offsets is not None
+        L[:, sel] = lv
+        o = jac_offsets[int(k)]
+        if ks.size == 1:
+            J[:, :, o:o + jk.shape[-1]] = jk
+        else:
+            J[:, sel, o:o + jk.shape[-1]] = jk
     return L, J
 
 
@@ -505,6 +518,7 @@ def evaluate_grid(
     chunk_cells: int | None = None,
     block_size: int = DEFAULT_BLOCK,
     min_distance_m: float = 1.0,
+    temperature_c: float = 15.0,
     progress: Callable[[float], Any] | None = None,
     cancel: Callable[[], bool] | None = None,
 ) -> MapResult:
@@ -549,6 +563,10 @@ def evaluate_grid(
         Cell-instants per block; bounds the memory (about 20 float64 arrays of this size).
     min_distance_m : float
         Near-field limit: distances below it are clamped, m.
+    temperature_c : float
+        Air temperature, deg C, for extended ansatzes that need the speed of sound
+        (Doppler, ground reflection): ``c = 331.3 sqrt(1 + T / 273.15)`` m/s.  Default
+        15 deg C (ISA sea level).  The paper's ansatz does not use it.
     progress : callable, optional
         Called with the fraction done (0-1) after every block.
     cancel : callable, optional
@@ -580,6 +598,8 @@ def evaluate_grid(
         raise InputError(f"substeps must be an integer >= 1, got {substeps!r}", field="substeps")
     substeps = int(substeps)
     min_d = _as_float(min_distance_m, "min_distance_m", minimum=0.0, strict=True)
+    temp = _as_float(temperature_c, "temperature_c", minimum=-273.15, strict=True)
+    c_sound = 331.3 * math.sqrt(1.0 + temp / 273.15)
     block = int(block_size)
     if block < 1:
         raise InputError(f"block_size must be >= 1, got {block_size!r}", field="block_size")
@@ -691,7 +711,8 @@ def evaluate_grid(
     to_wgs = transformer(grid.crs, WGS84)
     ground_flat = None if ground is None else ground.ravel()
     done = 0.0
-    kw = dict(background=background, receiver_extras=receiver_extras, min_distance_m=min_d)
+    kw = dict(background=background, receiver_extras=receiver_extras, min_distance_m=min_d, receiver_agl_m=hr,
+              meta={"speed_of_sound_m_s": c_sound, "temperature_c": temp})
     for c0 in range(0, n_cells, nc_chunk):
         c1 = min(c0 + nc_chunk, n_cells)
         nc = c1 - c0
@@ -789,6 +810,7 @@ def evaluate_grid(
         **ground_desc,
         "background_included": bool(background),
         "min_distance_m": min_d,
+        "speed_of_sound_m_s": c_sound,
         "thresholds_db": thresholds,
         "snapshot_t_s": snap,
         "cards": {c.id: {"phase": c.phase, "phases": list(c.served_phases), "ansatz": c.ansatz}

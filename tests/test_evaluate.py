@@ -339,3 +339,22 @@ def test_uncertainty_needs_a_covariance(flyover):
     with pytest.raises(CardError, match="no covariance") as exc:
         evaluate_grid(flyover["traj"], [omni_card()], centred_grid(50.0, 3, 3), ground_h=0.0, uncertainty=True)
     assert exc.value.field == "covariance"
+
+
+def test_extended_ansatz_reads_the_bank_angle():
+    # paper-offset+bank_angle adds k_bank |sin(bank)| dB to every instant: a constant 20 deg bank
+    # raises LAmax and LAeq everywhere by k_bank sin(20 deg)
+    from gisnoise.model import get_ansatz
+
+    ansatz = get_ansatz("paper-offset+bank_angle")
+    traj = straight_flight(dt=1.0)
+    traj = traj.with_(roll=np.full(len(traj), 20.0))
+    grid = centred_grid(100.0, 5, 5)
+    base = omni_card()
+    params = {**base.parameters, ansatz.params[-1]: 3.0}
+    ext = ModelCard(id="bank", vehicle="t", phase="horizontal", ansatz=ansatz.name, parameters=params,
+                    reference_power_w=3000.0)
+    a = evaluate_grid(traj, [base], grid, ground_h=0.0, metrics=("LAmax", "LAeq"))
+    b = evaluate_grid(traj, [ext], grid, ground_h=0.0, metrics=("LAmax", "LAeq"))
+    for m in ("LAmax", "LAeq"):
+        np.testing.assert_allclose(b.bands[m] - a.bands[m], 3.0 * np.sin(np.radians(20.0)), atol=1e-9)
