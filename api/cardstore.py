@@ -47,6 +47,7 @@ class CardStore:
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
         self._lock = threading.Lock()
+        self._cache: dict[Path, tuple[int, int, ModelCard]] = {}
 
     def seed(self, folder: Path | None) -> int:
         """Copy the cards of ``folder`` into a store that does not exist yet; returns how many."""
@@ -95,7 +96,17 @@ class CardStore:
             raise ApiError(404, f"version: card {card_id!r} has no version {v} (versions: "
                                 f"{', '.join(map(str, vs))})", field="version")
         path = self.root / card_id / f"v{v}.json"
-        return StoredCard(gcards.load(path), v, path)
+        return StoredCard(self._load(path), v, path)
+
+    def _load(self, path: Path) -> ModelCard:
+        """A card file, parsed once (versions are never rewritten; the cache key is also the file's stat)."""
+        st = path.stat()
+        hit = self._cache.get(path)
+        if hit is not None and hit[:2] == (st.st_mtime_ns, st.st_size):
+            return hit[2]
+        card = gcards.load(path)
+        self._cache[path] = (st.st_mtime_ns, st.st_size, card)
+        return card
 
     def resolve(self, ref: str, *, field: str) -> ModelCard:
         """A card from a reference ``id`` or ``id@version``; errors name ``field``."""

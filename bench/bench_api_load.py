@@ -1,0 +1,208 @@
+"""Load test of the service on loopback: req/s, latency percentiles, memory with 8 large jobs queued.
+
+Starts the service (uvicorn on the app factory) on 127.0.0.1 with a throw-away
+data folder, then
+
+1. a typical route-planner request (a 2 km delivery route as waypoints -> GeoJSON
+   contours at 25 m cells) from ``--clients`` concurrent clients, ``--requests``
+   in all; the baseline is the same map made in-process by the library
+   (``gisnoise.contour.make_map``) in this run, so the ratio is the service's
+   overhead and queueing;
+2. ``GET /cards`` (a cheap read) the same way;
+3. eight large contour jobs queued at once: the server's resident memory (RSS,
+   process tree) sampled while they run, against its idle RSS and the peak with
+   one such job alone; the jobs are cancelled after ``--job-seconds``.
+
+Bounded in count and time; talks to 127.0.0.1 only.  Exits non-zero when any
+request failed.  Usage: ``python bench/bench_api_load.py [--requests 40] [--clients 4]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import httpx
+import psutil
+
+REPO = Path(__file__).resolve().parent.parent
+
+ROUTE = {"type": "FeatureCollection", "route": {"altitude_reference": "agl"}, "features": [
+    {"type": "Feature", "geometry": {"type": "Point", "coordinates": c}, "properties": {"alt": a, "speed": 22}}
+    for c, a in [([10.5200, 52.2600], 0), ([10.5200, 52.2600], 80), ([10.5350, 52.2660], 80),
+                 ([10.5450, 52.2620], 80), ([10.5480, 52.2540], 80), ([10.5480, 52.2540], 0)]]}
+CARDS = ["demo-horizontal", "demo-climb", "demo-sink"]
+
+
+def typical_request() -> dict:
+    return {"trajectory": {"format": "waypoints", "data": ROUTE}, "cards": CARDS,
+            "grid": {"resolution_m": 25, "margin_m": 300}, "levels": [45, 50, 55, 60, 65], "metrics": ["LAmax"]}
+
+
+def large_request(i: int) -> dict:
+    req = typical_request()
+    req["grid"] = {"resolution_m": 8, "margin_m": 800 + i}  # distinct requests, ~0.2 M cells each
+    req["metrics"] = ["LAmax", "LAeq", "SEL"]
+    return req
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_server(data: Path) -> tuple[subprocess.Popen, str]:
+    port = free_port()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("GISNOISE_")}
+    env.update(GISNOISE_DATA_DIR=str(data), GISNOISE_TILE_URL="", GISNOISE_WORKERS="1",
+               GISNOISE_SEED_CARDS_DIR=str(REPO / "sample_data" / "cards"))
+    proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "api.app:create_app", "--factory", "--host",
+                             "127.0.0.1", "--port", str(port), "--log-level", "warning"], env=env, cwd=str(REPO))
+    url = f"http://127.0.0.1:{port}"
+    end = time.monotonic() + 60
+    while time.monotonic() < end:
+        try:
+            if httpx.get(url + "/health", timeout=1).status_code == 200:
+                return proc, url
+        except httpx.HTTPError:
+            time.sleep(0.1)
+    proc.kill()
+    raise SystemExit("the server did not start")
+
+
+def rss_mb(proc: subprocess.Popen) -> float:
+    p = psutil.Process(proc.pid)
+    return sum(q.memory_info().rss for q in [p, *p.children(recursive=True)]) / 2**20
+
+
+def pct(v: list[float], q: float) -> float:
+    s = sorted(v)
+    return s[min(len(s) - 1, max(0, int(round(q / 100 * (len(s) - 1)))))]
+
+
+def load(url: str, method: str, path: str, body: dict | None, n: int, clients: int, max_s: float) -> dict:
+    lat: list[float] = []
+    errors: list[str] = []
+    lock = threading.Lock()
+    t_end = time.monotonic() + max_s
+    local = threading.local()
+
+    def one(_: int) -> None:
+        if time.monotonic() > t_end:
+            return
+        if not hasattr(local, "client"):  # one keep-alive connection per client, as a route planner has
+            local.client = httpx.Client(timeout=120)
+        t0 = time.perf_counter()
+        r = local.client.request(method, url + path, json=body)
+        dt = time.perf_counter() - t0
+        with lock:
+            if r.status_code != 200:
+                errors.append(f"{r.status_code} {r.text[:200]}")
+            else:
+                lat.append(dt)
+
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(clients) as ex:
+        list(ex.map(one, range(n)))
+    wall = time.perf_counter() - t0
+    return {"n": len(lat), "errors": errors, "rps": len(lat) / wall, "p50": pct(lat, 50), "p90": pct(lat, 90),
+            "p99": pct(lat, 99), "max": max(lat) if lat else float("nan"), "mean": statistics.fmean(lat) if lat else 0}
+
+
+def direct_baseline(repeats: int) -> float:
+    """Seconds per typical map made in-process by the library (no HTTP)."""
+    from gisnoise import cards as gcards
+    from gisnoise.contour import make_map
+
+    cards = [gcards.load(REPO / "sample_data" / "cards" / f"{c.replace('-', '_')}.json") for c in CARDS]
+    req = typical_request()
+    times = []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory() as d:
+            t0 = time.perf_counter()
+            make_map(ROUTE, cards, d, resolution_m=25, margin_m=300, levels=req["levels"], metrics=["LAmax"])
+            times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def memory_with_queued_jobs(url: str, proc: subprocess.Popen, n_jobs: int, job_s: float) -> dict:
+    idle = rss_mb(proc)
+    # one large job alone: its peak
+    jid = httpx.post(url + "/jobs/contours", json=large_request(0), timeout=60).json()["id"]
+    peak_one = idle
+    while httpx.get(f"{url}/jobs/{jid}").json()["status"] in ("queued", "running"):
+        peak_one = max(peak_one, rss_mb(proc))
+        time.sleep(0.1)
+    alone = httpx.get(f"{url}/jobs/{jid}").json()
+    # eight at once
+    ids = [httpx.post(url + "/jobs/contours", json=large_request(i + 1), timeout=60).json()["id"]
+           for i in range(n_jobs)]
+    peak_many = rss_mb(proc)
+    t_end = time.monotonic() + job_s
+    while time.monotonic() < t_end:
+        peak_many = max(peak_many, rss_mb(proc))
+        states = [httpx.get(f"{url}/jobs/{i}").json()["status"] for i in ids]
+        if all(s not in ("queued", "running") for s in states):
+            break
+        time.sleep(0.1)
+    states = [httpx.get(f"{url}/jobs/{i}").json()["status"] for i in ids]
+    for i, s in zip(ids, states, strict=True):
+        if s in ("queued", "running"):
+            httpx.post(f"{url}/jobs/{i}/cancel")
+    return {"idle": idle, "peak_one": peak_one, "peak_many": peak_many, "alone_status": alone["status"],
+            "alone_s": (alone["finished"] or 0) - (alone["started"] or 0), "states": states}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--requests", type=int, default=40, help="typical contour requests (default 40)")
+    ap.add_argument("--clients", type=int, default=4, help="concurrent clients (default 4)")
+    ap.add_argument("--max-seconds", type=float, default=120, help="time bound of each load phase, s")
+    ap.add_argument("--jobs", type=int, default=8, help="large jobs queued at once (default 8)")
+    ap.add_argument("--job-seconds", type=float, default=60, help="watch the queued jobs this long, s")
+    args = ap.parse_args()
+
+    base = direct_baseline(3)
+    with tempfile.TemporaryDirectory(prefix="gisnoise-bench-") as tmp:
+        proc, url = start_server(Path(tmp) / "data")
+        try:
+            httpx.post(url + "/contours", json=typical_request(), timeout=120)  # warm-up
+            contours = load(url, "POST", "/contours", typical_request(), args.requests, args.clients,
+                            args.max_seconds)
+            cards = load(url, "GET", "/cards", None, 20 * args.requests, args.clients, args.max_seconds)
+            mem = memory_with_queued_jobs(url, proc, args.jobs, args.job_seconds)
+        finally:
+            proc.terminate()
+            proc.wait(30)
+
+    print("gisnoise service load test (loopback, uvicorn, 1 job worker)")
+    print(f"baseline: the same map in-process via make_map: {base * 1000:.0f} ms")
+    for name, r in (("POST /contours (2 km route, 25 m cells, GeoJSON)", contours), ("GET /cards", cards)):
+        print(f"{name}: {r['n']} ok, {len(r['errors'])} errors, {r['rps']:.1f} req/s with {args.clients} clients; "
+              f"latency p50 {r['p50'] * 1000:.0f} ms, p90 {r['p90'] * 1000:.0f} ms, p99 {r['p99'] * 1000:.0f} ms, "
+              f"max {r['max'] * 1000:.0f} ms")
+    print(f"ratio p50 latency / in-process baseline: {contours['p50'] / base:.2f} "
+          f"(single-request compute; {args.clients} clients share 2 sync slots)")
+    print(f"ratio throughput / (1 / baseline): {contours['rps'] * base:.2f}")
+    print(f"memory: idle {mem['idle']:.0f} MB; one large job alone peak {mem['peak_one']:.0f} MB "
+          f"({mem['alone_status']}, {mem['alone_s']:.1f} s); {args.jobs} queued peak {mem['peak_many']:.0f} MB; "
+          f"ratio {args.jobs}-queued / one {mem['peak_many'] / mem['peak_one']:.2f}")
+    print(f"queued jobs after {args.job_seconds:.0f} s: {', '.join(mem['states'])} (the rest cancelled)")
+    errors = contours["errors"] + cards["errors"]
+    for e in errors[:5]:
+        print("error:", e)
+    return 1 if errors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
