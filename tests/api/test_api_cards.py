@@ -41,15 +41,16 @@ def test_upload_new_identical_conflict_and_new_version(client):
     r = client.post("/cards", json=doc)
     assert r.status_code == 200 and r.json()["version"] == 1
     # a different card under the same id is refused, the stored one kept
-    changed = dict(doc, parameters=dict(doc["parameters"], p0=70.0))
+    p0 = doc["parameters"]["p0"]
+    changed = dict(doc, parameters=dict(doc["parameters"], p0=p0 + 6.0))
     body = assert_names_field(client.post("/cards", json=changed), 409, "id")
     assert "new_version" in body["detail"]
-    assert client.get("/cards/uploaded").json()["parameters"]["p0"] == 64.0
+    assert client.get("/cards/uploaded").json()["parameters"]["p0"] == p0
     # asked for: a new version; both stay readable
     r = client.post("/cards", params={"new_version": "true"}, json=changed)
     assert r.status_code == 201 and r.json()["version"] == 2 and r.json()["versions"] == [1, 2]
-    assert client.get("/cards/uploaded").json()["parameters"]["p0"] == 70.0
-    assert client.get("/cards/uploaded", params={"version": 1}).json()["parameters"]["p0"] == 64.0
+    assert client.get("/cards/uploaded").json()["parameters"]["p0"] == p0 + 6.0
+    assert client.get("/cards/uploaded", params={"version": 1}).json()["parameters"]["p0"] == p0
     assert client.get("/cards/uploaded/versions").json() == {"id": "uploaded", "versions": [1, 2]}
 
 
