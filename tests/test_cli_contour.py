@@ -191,3 +191,30 @@ def test_uncertainty_bands_and_contours(tmp_path):
     one_line_error(run("contour", csv, "--card", str(save(ModelCard(**{**card.__dict__, "covariance": None}),
                                                               tmp_path / "nocov.json")),
                        "--out", str(tmp_path / "o2"), "--uncertainty"), "covariance")
+
+
+def test_receivers_on_a_dem(tmp_path, card_path):
+    # a flat DEM at 100 m (ellipsoidal): receivers at 101.5 m, the track at 140 m
+    from affine import Affine
+    from pyproj import Transformer
+
+    x0, y0 = Transformer.from_crs("EPSG:4326", "EPSG:32632", always_xy=True).transform(10.52, 52.27)
+    dem = tmp_path / "dem.tif"
+    with rasterio.open(dem, "w", driver="GTiff", width=200, height=200, count=1, dtype="float32",
+                       crs="EPSG:32632", transform=Affine(10.0, 0, x0 - 1000.0, 0, -10.0, y0 + 1000.0)) as ds:
+        ds.write(np.full((200, 200), 100.0, dtype=np.float32), 1)
+    csv = write_csv(tmp_path / "flight.csv", flyover())
+    out = tmp_path / "map"
+    r = run("contour", csv, "--card", card_path, "--out", str(out), "--resolution", "20", "--margin", "100",
+            "--dem", str(dem), "--metrics", "LAmax")
+    assert r.exit_code == 0, r.output
+    flat = tmp_path / "flat"
+    r = run("contour", csv, "--card", card_path, "--out", str(flat), "--resolution", "20", "--margin", "100",
+            "--ground-height", "100", "--metrics", "LAmax")
+    with rasterio.open(out / "levels.tif") as a, rasterio.open(flat / "levels.tif") as b:
+        assert a.descriptions == ("LAmax",)
+        on_dem, on_flat = a.read(1), b.read(1)
+    # a constant DEM is flat ground at its height (checked against the closed form above)
+    np.testing.assert_allclose(on_dem, on_flat, atol=1e-4)
+    assert on_dem.max() > G0 - 20 * np.log10(np.hypot(140.0 - 101.5, 15.0) / 40.0)  # a cell within 15 m
+

@@ -221,3 +221,30 @@ def test_sample_route_is_a_delivery_flight():
     assert np.abs(traj.roll).max() > 10.0  # it turns
     e, n, u = FRAME.to_enu(traj.lat, traj.lon, traj.h)
     assert np.hypot(e[-1] - e[0], n[-1] - n[0]) > 1000.0  # a real distance
+
+
+def test_agl_altitudes_stand_on_the_dem(tmp_path):
+    import rasterio
+    from affine import Affine
+
+    from gisnoise.grid import apply_affine
+
+    x0, y0 = 634000.0, 5794500.0  # UTM 32N near the test origin
+    tr = Affine(10.0, 0, x0, 0, -10.0, y0)
+    rows, cols = np.mgrid[0:150, 0:150]
+    xs, ys = apply_affine(tr, cols + 0.5, rows + 0.5)
+    with rasterio.open(tmp_path / "dem.tif", "w", driver="GTiff", width=150, height=150, count=1,
+                       dtype="float64", crs="EPSG:32632", transform=tr) as ds:
+        ds.write(100.0 + 0.02 * (xs - x0), 1)  # a slope rising eastwards, 2 %
+    from gisnoise.grid import WGS84, parse_crs, transformer
+
+    lon, lat = transformer(parse_crs("EPSG:32632"), WGS84).transform([x0 + 300.0, x0 + 1200.0],
+                                                                       [y0 - 700.0, y0 - 700.0])
+    wps = [{"lon": lon[0], "lat": lat[0], "alt": 0}, {"lon": lon[0], "lat": lat[0], "alt": 50},
+           {"lon": lon[1], "lat": lat[1], "alt": 50}]
+    route = read_route({"schema": "gisnoise/waypoints/1", "waypoints": wps}, dem=tmp_path / "dem.tif",
+                       dem_offset_m=40.0)
+    assert route.ground_h_m is None
+    h = route.trajectory.h
+    assert h[0] == pytest.approx(100.0 + 0.02 * 300.0 + 40.0, abs=0.01)
+    assert h[-1] == pytest.approx(100.0 + 0.02 * 1200.0 + 40.0 + 50.0, abs=0.01)
