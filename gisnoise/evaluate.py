@@ -519,6 +519,7 @@ def evaluate_grid(
     block_size: int = DEFAULT_BLOCK,
     min_distance_m: float = 1.0,
     temperature_c: float = 15.0,
+    kernel: Callable[..., tuple[np.ndarray, np.ndarray | None]] | None = None,
     progress: Callable[[float], Any] | None = None,
     cancel: Callable[[], bool] | None = None,
 ) -> MapResult:
@@ -567,6 +568,9 @@ def evaluate_grid(
         Air temperature, deg C, for extended ansatzes that need the speed of sound
         (Doppler, ground reflection): ``c = 331.3 sqrt(1 + T / 273.15)`` m/s.  Default
         15 deg C (ISA sea level).  The paper's ansatz does not use it.
+    kernel : callable, optional
+        Replacement for :func:`_levels_chunk` with the same signature and results (a
+        compiled kernel); default the NumPy reference.
     progress : callable, optional
         Called with the fraction done (0-1) after every block.
     cancel : callable, optional
@@ -708,6 +712,7 @@ def evaluate_grid(
     total_work = float(n_cells) * (ns + (1 if snap is not None else 0))
 
     out = {name: np.full(n_cells, np.nan) for name in _band_order(metrics, thresholds, snap, uncertainty)}
+    levels_fn = _levels_chunk if kernel is None else kernel
     to_wgs = transformer(grid.crs, WGS84)
     ground_flat = None if ground is None else ground.ravel()
     done = 0.0
@@ -734,7 +739,7 @@ def evaluate_grid(
             s1 = min(s0 + ns_chunk, ns)
             e1 = min(s1 + 1, ns)  # one more instant for the intervals
             sl = slice(s0, e1)
-            L, J = _levels_chunk(
+            L, J = levels_fn(
                 rcv, src_enu[sl], att[sl], power[sl], card_idx[sl], cardset.cards,
                 sample_extras={k: v[sl] for k, v in sample_extras.items()},
                 jac_offsets=offsets if want_jac else None, n_jac=n_jac, **kw)
@@ -773,7 +778,7 @@ def evaluate_grid(
             out[threshold_name(thr)][sl_c] = tabove[i]
         if snap_args is not None:
             s_src, s_att, s_pow, s_idx, s_sx = snap_args
-            Ls, _ = _levels_chunk(rcv, s_src, s_att, s_pow, s_idx, cardset.cards, sample_extras=s_sx, **kw)
+            Ls, _ = levels_fn(rcv, s_src, s_att, s_pow, s_idx, cardset.cards, sample_extras=s_sx, **kw)
             out[snapshot_name(snap)][sl_c] = Ls[:, 0]  # type: ignore[arg-type]
             done += nc
             if progress is not None:

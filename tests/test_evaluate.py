@@ -358,3 +358,18 @@ def test_extended_ansatz_reads_the_bank_angle():
     b = evaluate_grid(traj, [ext], grid, ground_h=0.0, metrics=("LAmax", "LAeq"))
     for m in ("LAmax", "LAeq"):
         np.testing.assert_allclose(b.bands[m] - a.bands[m], 3.0 * np.sin(np.radians(20.0)), atol=1e-9)
+
+
+def test_a_replacement_kernel_is_called_with_the_reference_signature(flyover):
+    calls = []
+
+    def kernel(*args, **kw):
+        calls.append(args[0].shape[0] * args[1].shape[0])
+        return _levels_chunk(*args, **kw)
+
+    grid = centred_grid(50.0, 5, 5)
+    ref = evaluate_grid(flyover["traj"], [omni_card()], grid, ground_h=0.0)
+    alt = evaluate_grid(flyover["traj"], [omni_card()], grid, ground_h=0.0, kernel=kernel)
+    assert sum(calls) >= grid.n_cells * len(flyover["traj"])
+    for k in ref.bands:
+        np.testing.assert_array_equal(alt.bands[k], ref.bands[k])
