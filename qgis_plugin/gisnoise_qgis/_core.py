@@ -126,7 +126,7 @@ def _load_isolated(folder: str, module: str) -> None:
 def missing_requirements() -> list[str]:
     """One line per compiled requirement that is absent or too old in this Python."""
     problems = []
-    if sys.version_info < (3, 10):
+    if sys.version_info < (3, 10):  # noqa: UP036 - QGIS may bring an older Python than the project
         problems.append(f"Python >= 3.10 (QGIS runs Python {sys.version.split()[0]}; use a QGIS built with a newer "
                         "Python)")
     for module, minimum, debian in REQUIRED:
