@@ -66,7 +66,7 @@ def test_plugin_in_real_qgis(tmp_path):
     runtime = tmp_path / "xdg"
     runtime.mkdir(mode=0o700)
     env = _env(QT_QPA_PLATFORM="offscreen", GISNOISE_INSIDE_QGIS="1", GISNOISE_CLI=_cli(),
-               GISNOISE_REPO=str(ROOT), XDG_RUNTIME_DIR=str(runtime), PYTHONDONTWRITEBYTECODE="1",
+               GISNOISE_REPO=str(ROOT), GISNOISE_BUILD_PYTHON=sys.executable, XDG_RUNTIME_DIR=str(runtime), PYTHONDONTWRITEBYTECODE="1",
                HOME=str(tmp_path / "home"))
     cmd = [QGIS_PYTHON, "-m", "pytest", "-c", str(HERE / "inside" / "pytest.ini"), "--rootdir", str(HERE / "inside"),
            "--basetemp", str(tmp_path / "inside"), "-q", str(HERE / "inside")]
