@@ -16,7 +16,8 @@ P0 = 70.0  # omnidirectional card: L_UAV = P0 - 20 log10(d / 40 m) at P_el = 1
 
 def _omni_card(card_id: str = "omni") -> dict:
     doc = json.loads((CARDS / "demo_horizontal.json").read_text())
-    doc.update(id=card_id, phases=["climb", "sink", "hover", "transition"], notes="omnidirectional test card")
+    doc.update(id=card_id, phases=[], notes="omnidirectional test card", covariance=None, statistics={},
+               provenance={})
     doc["parameters"] = {"p0": P0, "p1": 20.0, "p2": 0.0, "p3": 0.0, "p4": 0.0, "p5": 0.0, "p6": 1.0, "p7": 30.0}
     return doc
 
@@ -230,3 +231,20 @@ def test_phase_cards_bind_a_card_to_a_phase(client):
 def test_malformed_json_is_422_naming_the_body(client):
     r = client.post("/contours", content=b'{"trajectory": ', headers={"content-type": "application/json"})
     assert_names_field(r, 422, "body")
+
+
+def test_uncertainty_bands_from_a_card_with_covariance(client):
+    card = json.loads((CARDS / "demo_horizontal.json").read_text())
+    if card.get("covariance") is None:
+        pytest.skip("the demo card has no covariance")
+    r = client.post("/contours", json=_request(cards=["demo-horizontal"], uncertainty=True, output="geotiff",
+                                               metrics=["LAmax", "LAeq"]))
+    assert r.status_code == 200, r.text
+    meta, bands = _read_tif(r.content)
+    names = list(meta["descriptions"])
+    assert {"LAmax_std", "LAeq_std", "LAmax_p95", "LAeq_p95"} <= set(names)
+    std = bands[names.index("LAmax_std")]
+    lamax, p95 = bands[names.index("LAmax")], bands[names.index("LAmax_p95")]
+    ok = np.isfinite(std)
+    assert np.all(std[ok] >= 0)
+    np.testing.assert_allclose(p95[ok], lamax[ok] - 1.645 * std[ok], atol=1e-3)  # one-sided 95 % normal quantile
