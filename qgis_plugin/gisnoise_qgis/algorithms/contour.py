@@ -54,7 +54,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
     MARGIN = "MARGIN"
     LEVELS = "LEVELS"
     METRICS = "METRICS"
-    CONTOUR_METRIC = "CONTOUR_METRIC"
+    CONTOUR_METRICS = "CONTOUR_METRICS"
     RECEIVER_HEIGHT = "RECEIVER_HEIGHT"
     DEM = "DEM"
     CRS = "CRS"
@@ -127,6 +127,9 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         self.addParameter(QgsProcessingParameterEnum(
             self.METRICS, "Metrics (raster bands)", options=list(METRICS), allowMultiple=True,
             defaultValue=[0, 1, 2]))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.CONTOUR_METRICS, "Metrics to contour (the layers hold one set of bands per metric)",
+            options=list(METRICS), allowMultiple=True, defaultValue=[0]))
         self.addParameter(QgsProcessingParameterNumber(
             self.RECEIVER_HEIGHT, "Receiver height above ground (m)", QgsProcessingParameterNumber.Double, 1.5,
             minValue=0.0))
@@ -204,7 +207,13 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         traj = self._trajectory(parameters, context, feedback)
         cards = self._cards(parameters, context)
         metric_idx = self.parameterAsEnums(parameters, self.METRICS, context)
-        metrics = tuple(METRICS[i] for i in metric_idx) or METRICS
+        metrics = tuple(METRICS[i] for i in sorted(metric_idx)) or METRICS
+        contoured = {METRICS[i] for i in self.parameterAsEnums(parameters, self.CONTOUR_METRICS, context)}
+        contoured = contoured or {METRICS[0]}
+        missing = contoured - set(metrics)
+        if missing:
+            raise QgsProcessingException(f"metrics to contour (parameter CONTOUR_METRICS) {', '.join(sorted(missing))} "
+                                         f"are not computed (parameter METRICS: {', '.join(metrics)})")
         crs = self.parameterAsCrs(parameters, self.CRS, context)
         crs_text = None
         if crs.isValid():
@@ -222,8 +231,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         kw = {"background": self.parameterAsBoolean(parameters, self.BACKGROUND, context),
               "dem_offset_m": self.parameterAsDouble(parameters, self.DEM_OFFSET, context),
               "substeps": self.parameterAsInt(parameters, self.SUBSTEPS, context)}
-        for key, name in ((self.GROUND_HEIGHT, "ground_h"), (self.PERIOD, "period_s"), (self.THRESHOLD, "threshold_db"),
-                          (self.SNAPSHOT_T, "snapshot_t")):
+        for key, name in ((self.GROUND_HEIGHT, "ground_h"), (self.PERIOD, "period_s"),
+                          (self.THRESHOLD, "threshold_db"), (self.SNAPSHOT_T, "snapshot_t")):
             if parameters.get(key) not in (None, ""):
                 kw[name] = self.parameterAsDouble(parameters, key, context)
         paths = make_map(
@@ -232,7 +241,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             margin_m=self.parameterAsDouble(parameters, self.MARGIN, context),
             levels=levels, metrics=metrics, crs=crs_text, dem=dem,
             receiver_height=self.parameterAsDouble(parameters, self.RECEIVER_HEIGHT, context),
-            uncertainty=self.parameterAsBoolean(parameters, self.UNCERTAINTY, context), plot=False, progress=steps.progress, cancel=steps.cancel, **kw)
+            uncertainty=self.parameterAsBoolean(parameters, self.UNCERTAINTY, context), plot=False,
+            progress=steps.progress, cancel=steps.cancel, **kw)
         tif, geojson = os.fspath(paths["levels"]), os.fspath(paths["contours"])
 
         raster_out = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)
@@ -241,15 +251,16 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         results = {self.OUTPUT_RASTER: raster_out}
         bands, lines = _contour_layers(geojson)
         for key, layer in ((self.OUTPUT_BANDS, bands), (self.OUTPUT_LINES, lines)):
-            dest = self._copy_to_sink(parameters, key, layer, context, feedback)
+            dest = self._copy_to_sink(parameters, key, layer, context, feedback, contoured)
             if dest:
                 results[key] = dest
         feedback.setProgress(98.0)
-        self._style_outputs(results, context, levels, metrics)
+        shown = next(m for m in metrics if m in contoured)
+        self._style_outputs(results, context, levels, shown, metrics.index(shown) + 1)
         feedback.setProgress(100.0)
         return results
 
-    def _copy_to_sink(self, parameters, key, layer, context, feedback):
+    def _copy_to_sink(self, parameters, key, layer, context, feedback, contoured):
         sink, dest = self.parameterAsSink(parameters, key, context, layer.fields(),
                                           QgsWkbTypes.multiType(layer.wkbType()), layer.crs())
         if sink is None and key == self.OUTPUT_LINES and not dest:
@@ -259,13 +270,15 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         for feat in layer.getFeatures():
             if feedback.isCanceled():
                 raise QgsProcessingException("cancelled by the user")
+            if feat["metric"] not in contoured:
+                continue
             out = QgsFeature(feat)
             if not sink.addFeature(out, QgsFeatureSink.FastInsert):
                 raise QgsProcessingException(f"cannot write a contour feature to {dest}: {sink.lastError()}")
         return dest
 
-    def _style_outputs(self, results, context, levels, metrics):
-        for key, post in ((self.OUTPUT_RASTER, styles.RasterStyle(levels, metrics)),
+    def _style_outputs(self, results, context, levels, metric, band):
+        for key, post in ((self.OUTPUT_RASTER, styles.RasterStyle(levels, metric, band)),
                           (self.OUTPUT_BANDS, styles.ContourStyle(levels, polygons=True)),
                           (self.OUTPUT_LINES, styles.ContourStyle(levels, polygons=False))):
             dest = results.get(key)

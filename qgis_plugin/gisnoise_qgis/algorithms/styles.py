@@ -86,19 +86,19 @@ def pseudocolor_renderer(provider, levels, band=1):
 
 
 class RasterStyle(QgsProcessingLayerPostProcessorInterface):
-    """Colours the first band (the first metric) of the noise grid by level."""
+    """Colours one band (metric) of the noise grid by level: the one the contours show."""
 
-    def __init__(self, levels, metrics):
+    def __init__(self, levels, metric, band):
         super().__init__()
         self.levels = list(levels)
-        self.metrics = list(metrics)
+        self.metric = metric
+        self.band = int(band)
 
     def postProcessLayer(self, layer, context, feedback):  # noqa: N802 - QGIS API
         if not layer.isValid():
             return
-        layer.setRenderer(pseudocolor_renderer(layer.dataProvider(), self.levels, band=1))
-        if self.metrics:
-            layer.setName(f"noise grid ({self.metrics[0]})")
+        layer.setRenderer(pseudocolor_renderer(layer.dataProvider(), self.levels, band=self.band))
+        layer.setName(f"noise grid ({self.metric})")
         layer.triggerRepaint()
 
 

@@ -149,8 +149,9 @@ def run_map(tmp_path, name, **params):
 
 @pytest.fixture(scope="session")
 def csv_map(plugin, flight_csv, tmp_path_factory):
-    """The map of the flight CSV made by processing.run."""
-    return run_map(tmp_path_factory.mktemp("csv_map"), "map", TRAJECTORY_FILE=str(flight_csv))
+    """The map of the flight CSV made by processing.run, contours of every metric."""
+    return run_map(tmp_path_factory.mktemp("csv_map"), "map", TRAJECTORY_FILE=str(flight_csv),
+                   CONTOUR_METRICS=[0, 1, 2])
 
 
 def assert_same_raster(a_path, b_path, atol):

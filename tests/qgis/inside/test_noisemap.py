@@ -82,6 +82,7 @@ def test_contours_carry_metric_and_level_and_follow_the_raster(csv_map):
     bands_layer, bands = _features(csv_map["OUTPUT_BANDS"])
     lines_layer, lines = _features(csv_map["OUTPUT_LINES"])
     assert bands_layer.crs().authid() == lines_layer.crs().authid() == "EPSG:4326"
+    assert {f["metric"] for f in bands} == set(names)
     for f in bands + lines:
         assert f["metric"] in names and f["level"] in LEVELS
     assert {f["kind"] for f in bands} == {"isoband"} and {f["kind"] for f in lines} == {"isoline"}
@@ -119,6 +120,7 @@ def test_loaded_outputs_are_styled_by_level(plugin, flight_csv, tmp_path):
     vectors = [lyr for lyr in project.mapLayers().values() if lyr.type() == lyr.VectorLayer]
     assert len(vectors) == 2
     for lyr in vectors:
+        assert {f["metric"] for f in lyr.getFeatures()} == {"LAmax"}  # the default: LAmax contours only
         renderer = lyr.renderer()
         assert renderer.type() == "graduatedSymbol"
         assert renderer.classAttribute() == "level"
