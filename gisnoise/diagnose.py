@@ -100,13 +100,32 @@ def load_samples(source: Any) -> Samples:
     if isinstance(source, (str, os.PathLike)):
         from .campaign import read_campaign
 
-        return read_campaign(source).samples()
+        return _with_mic_heights(read_campaign(source).samples(), source)
     if hasattr(source, "samples") and callable(source.samples):
         s = source.samples()
         if isinstance(s, Samples):
             return s
     raise InputError(f"campaign: expected a campaign folder, Campaign or Samples, got {type(source).__name__}",
                      field="campaign")
+
+
+def _with_mic_heights(s: Samples, folder: str | os.PathLike[str]) -> Samples:
+    """Add the microphones' ``height_agl_m`` from campaign.json to the samples' facts when the reader left it out."""
+    import json
+    from pathlib import Path
+
+    mics = (s.meta or {}).get("microphones")
+    try:
+        doc = json.loads((Path(folder) / "campaign.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return s
+    heights = {m.get("id"): m["height_agl_m"] for m in doc.get("microphones", [])
+               if isinstance(m, Mapping) and isinstance(m.get("height_agl_m"), (int, float))}
+    if not heights or not isinstance(mics, Mapping):
+        return s
+    merged = {k: ({**v, "height_agl_m": heights[k]} if k in heights and "height_agl_m" not in v else v)
+              for k, v in mics.items()}
+    return s.with_(meta={**s.meta, "microphones": merged})
 
 
 def _series(s: Samples) -> np.ndarray:
@@ -154,12 +173,18 @@ def sample_regimes(s: Samples) -> np.ndarray:
 
     ``hover``: ground speed below :data:`HOVER_SPEED_M_S` or phase hover; ``climb``/``sink``:
     those phases, or vertical speed beyond :data:`VERTICAL_SPEED_M_S`; ``turn``: |bank|
-    above :data:`TURN_BANK_DEG`; else ``straight``.
+    above :data:`TURN_BANK_DEG`; else ``straight``.  Speeds are 2 s running means.
     """
     n = len(s)
     reg = np.full(n, "straight", dtype=object)
-    vz = s.vel_enu[:, 2]
-    speed = np.linalg.norm(s.vel_enu[:, :2], axis=1)
+    # velocities differentiated from logged positions are noisy: judge them over ~2 s
+    vz = np.empty(n)
+    speed = np.empty(n)
+    for idx in _runs(_series(s), s.t_e):
+        dt = float(np.median(np.diff(s.t_e[idx]))) if len(idx) > 1 else 1.0
+        k = max(1, int(round(2.0 / max(dt, 1e-6))))
+        vz[idx] = _rolling_mean(s.vel_enu[idx, 2], k)
+        speed[idx] = _rolling_mean(np.linalg.norm(s.vel_enu[idx, :2], axis=1), k)
     turn = np.abs(s.roll) > TURN_BANK_DEG
     reg[turn] = "turn"
     reg[(vz > VERTICAL_SPEED_M_S) & ~turn] = "climb"
@@ -197,18 +222,32 @@ class _Series:
 def _window_mean_error(r: np.ndarray, n_w: int, sigma_white: float) -> float:
     """Standard error of a mean over ``n_w`` consecutive samples of measurement noise, dB.
 
-    From the spread of differences of adjacent non-overlapping window means
-    (``1.4826 MAD / sqrt 2``): slow model error cancels, coloured noise is
-    counted with its correlation; never below the white-noise value
+    The residual minus its running mean over ``4 n_w`` samples keeps the fast
+    scatter and drops slow model error.  Its robust variance and its lag-1 and
+    lag-2 autocorrelations give the noise variance and the coefficient ``rho``
+    of first-order (AR(1)) noise, corrected for what the running mean removed;
+    then ``var(mean) = var / n_w (1 + 2 sum_k (1 - k/n_w) rho^k)``: coloured
+    noise counts with its correlation.  Never below the white-noise value
     ``sigma_white / sqrt(n_w)``.
     """
     white = sigma_white / math.sqrt(n_w)
-    k = len(r) // n_w
-    if k < 6:
+    if len(r) < 8 * n_w:
         return white
-    m = r[: k * n_w].reshape(k, n_w).mean(axis=1)
-    dm = np.diff(m)
-    return max(white, float(1.4826 * np.median(np.abs(dm - np.median(dm))) / math.sqrt(2.0)))
+    e = r - _rolling_mean(r, 4 * n_w)
+    e = e - np.median(e)
+    var = float((1.4826 * np.median(np.abs(e))) ** 2)
+    full = float(np.mean(e * e))
+    if full <= 0.0:
+        return white
+    a1 = float(np.mean(e[1:] * e[:-1])) / full
+    a2 = float(np.mean(e[2:] * e[:-2])) / full
+    # the running mean lowers every short-lag autocorrelation by about the same c:
+    # a_k = (rho^k - c) / (1 - c), so rho = (a1 - a2) / (1 - a1) and var = var_e / (1 - c)
+    rho = min(max((a1 - a2) / (1.0 - a1), 0.0), 0.99) if a1 < 1.0 else 0.0
+    c = min(max((rho - a1) / (1.0 - a1), 0.0), 0.9) if a1 < 1.0 else 0.0
+    k = np.arange(1, n_w)
+    factor = 1.0 + 2.0 * float(np.sum((1.0 - k / n_w) * rho ** k))
+    return max(white, math.sqrt(var / (1.0 - c) * factor / n_w))
 
 
 def _smoothed(resid, sid, t, mic, flight, noise, window_s, z, relative=False):
@@ -1003,8 +1042,9 @@ def run_diagnosis(
             tick(nme)
             continue
         if nme == "background_event" and not ev_list:
-            cand.reason = "no window of added sound found"
+            cand.reason = "no window of added sound found: the extension is the baseline"
             cand.oof = oof_base.copy()
+            cand.summary["rms_db_fit"] = base_fit.rms_db
             tick(nme)
             continue
         try:

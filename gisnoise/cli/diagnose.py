@@ -1,0 +1,67 @@
+"""``gisnoise diagnose``: where a card misses a campaign, which effect explains it, how far the gap shrinks."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ..cards import load
+from .options import progress
+
+
+@click.command("diagnose")
+@click.argument("campaign", type=click.Path(file_okay=False))
+@click.option("--card", "card_path", required=True, type=click.Path(dir_okay=False),
+              help="Model card to diagnose (its ansatz is the base of every candidate extension).")
+@click.option("--out", "out", required=True, type=click.Path(file_okay=False),
+              help="Output folder: diagnosis.json, report.html and figures.")
+@click.option("--effect", "effects", multiple=True,
+              help="Candidate effect to test (repeat; default: the whole library).")
+@click.option("--alpha", default=0.01, show_default=True, type=click.FloatRange(0.0, 1.0, min_open=True, max_open=True),
+              help="Family-wise significance level of the extension tests.")
+@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading.")
+@click.option("--no-report", is_flag=True, help="Write diagnosis.json only.")
+@click.pass_context
+def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects: tuple[str, ...], alpha: float,
+            absorption: bool, no_report: bool) -> None:
+    """Diagnose the gap between a model card and a measurement campaign.
+
+    CAMPAIGN is a campaign folder (campaign.json, flights/, mics/ with WAV or level
+    CSV files).  Writes OUT/diagnosis.json (segments where the card misses, every
+    candidate effect with its significance and held-out shrinkage, the verdict)
+    and OUT/report.html with the figures.
+    """
+    from ..campaign import read_campaign
+    from ..diagnose import _with_mic_heights, run_diagnosis
+
+    quiet = bool((ctx.find_root().obj or {}).get("quiet"))
+    card = load(card_path)
+    camp = read_campaign(campaign, absorption=absorption)
+    samples = _with_mic_heights(camp.samples(), campaign)
+    names = list(effects) or None
+    n_steps = 3 + (len(names) if names else 8)
+    with progress(ctx, "diagnosing", float(n_steps)) as update:
+        diag = run_diagnosis(samples, card, candidates=names, alpha=alpha,
+                             progress=lambda done, total, what: update(float(done)))
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "diagnosis.json"
+    doc = dict(diag.result)
+    doc["campaign"] = str(campaign)
+    path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    if not no_report:
+        from ..diagreport import write_report
+
+        with progress(ctx, "writing the report", 1.0) as update:
+            write_report(diag, folder, progress=lambda done, total: update(done / max(total, 1)))
+    if not quiet:
+        v = diag.result["verdict"]
+        if v["effect"]:
+            click.echo(f"verdict: {v['effect']} (held-out rms {v['rms_db_holdout_baseline']:.2f} -> "
+                       f"{v['rms_db_holdout_extended']:.2f} dB, shrinkage {v['holdout_shrinkage_pct']:.1f} %)")
+        else:
+            click.echo(f"verdict: no effect ({v['reason']})")
+        click.echo(f"{len(diag.result['segments'])} segment(s) where the card misses; wrote {path}"
+                   + ("" if no_report else f" and {folder / 'report.html'}"))

@@ -1,0 +1,296 @@
+"""The diagnosis: localization, event detection, folds, and blind proofs on simulated campaigns.
+
+The simulated campaigns come from the simulator (``gisnoise.simulate``) with one
+effect injected by its scenario switch; the diagnosis does not know which, and
+the simulator's forms are its own (the library's extension terms are not
+copies of them).  The control has no effect.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gisnoise import cards, simulate
+from gisnoise.cli.main import cli
+from gisnoise.diagnose import (
+    _window_mean_error,
+    detect_events,
+    diagnose,
+    fold_labels,
+    localize,
+    measurement_noise,
+    run_diagnosis,
+)
+from gisnoise.errors import Cancelled, InputError
+from gisnoise.model import level_sum
+from gisnoise.samples import Samples
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIO = ROOT / "sample_data" / "scenarios" / "diagnosis_base.json"
+CARD = ROOT / "sample_data" / "cards" / "demo_horizontal.json"
+EFFECTS = ["bank_angle", "atmospheric_absorption", "ground_reflection", "doppler", "emission_time", "wind", "rpm",
+           "background_event"]
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def table(t, mic, level, *, flight="f1", d=100.0, roll=0.0):
+    """A minimal Samples table (UAV flying east at 20 m/s, 50 m up)."""
+    n = len(t)
+    arr = lambda v: np.broadcast_to(np.asarray(v, dtype=float), (n,)).copy()  # noqa: E731
+    uav = np.column_stack([20.0 * np.asarray(t), np.zeros(n), np.full(n, 50.0)])
+    return Samples(mic=np.asarray(mic).astype(str), flight=np.broadcast_to(np.asarray(flight), (n,)).astype(str),
+                   t_r=np.asarray(t, float), t_e=np.asarray(t, float), level=np.asarray(level, float), d=arr(d),
+                   phi=arr(0.3), theta=arr(-0.5), power_w=arr(3000.0), phase=np.full(n, "horizontal"), roll=arr(roll),
+                   pitch=arr(2.0), yaw=arr(90.0), uav_enu=uav, mic_enu=np.zeros((n, 3)),
+                   vel_enu=np.tile([20.0, 0.0, 0.0], (n, 1)), valid=np.ones(n, bool), mask_reason=np.full(n, ""))
+
+
+@functools.lru_cache(maxsize=None)
+def simulated(effect: str | None, seed: int = 1):
+    """(SimulationResult, Samples) of the diagnosis base scenario with one effect at its default magnitude."""
+    doc = json.loads(SCENARIO.read_text())
+    doc["seed"] = seed
+    if effect:
+        doc["effects"] = {effect: {}}
+    res = simulate.run(doc, base_dir=SCENARIO.parent)
+    return res, simulate.simulate_samples(res)
+
+
+@functools.lru_cache(maxsize=None)
+def diagnosed(effect: str | None, seed: int = 1):
+    _, samples = simulated(effect, seed)
+    return run_diagnosis(samples, cards.load(CARD))
+
+
+# --------------------------------------------------------------------------- pure parts
+
+
+def test_window_mean_error_counts_coloured_noise():
+    # AR(1) noise, rho = 0.8: the standard error of a 16-sample mean is
+    # sigma sqrt(1/n (1 + 2 sum_k (1 - k/n) rho^k)), far above the white sigma / 4
+    rng = np.random.default_rng(3)
+    rho, sigma, n_w, n = 0.8, 1.0, 16, 200_000
+    z = rng.normal(0.0, sigma * math.sqrt(1 - rho * rho), n)
+    e = np.empty(n)
+    e[0] = rng.normal(0.0, sigma)
+    for i in range(1, n):
+        e[i] = rho * e[i - 1] + z[i]
+    k = np.arange(1, n_w)
+    exact = sigma * math.sqrt((1 + 2 * np.sum((1 - k / n_w) * rho ** k)) / n_w)
+    white = measurement_noise(e, np.zeros(n, int), np.arange(n) * 0.125, np.full(n, "m"))["m"]
+    got = _window_mean_error(e, n_w, white)
+    assert got == pytest.approx(exact, rel=0.05)
+    assert white / math.sqrt(n_w) < 0.6 * exact
+
+
+def test_localize_finds_a_known_excess_and_nothing_in_noise():
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 300.0, 0.125)
+    r = rng.normal(0.0, 1.0, t.size)
+    bump = (t >= 100.0) & (t < 130.0)
+    level = 60.0 + r + 3.0 * bump
+    s = table(t, np.full(t.size, "m1"), level, roll=np.where(bump, 30.0, 0.0))
+    resid = level - 60.0
+    noise = measurement_noise(resid, np.zeros(t.size, int), t, s.mic)
+    segs, flagged = localize(s, resid, noise)
+    assert len(segs) == 1
+    g = segs[0]
+    assert g["t0"] == pytest.approx(100.0, abs=1.5) and g["t1"] == pytest.approx(130.0, abs=1.5)
+    assert g["regime"] == "turn" and g["excess_db"] == pytest.approx(3.0, abs=0.3)
+    quiet, flagged_q = localize(s, r, noise)
+    assert quiet == [] and not flagged_q.any()
+
+
+def three_mics(extra):
+    """Three microphones hearing the UAV at 70, 55 and 45 dB over 40 dB background for 120 s; ``extra(t, l_uav, bg)``
+    returns the measured level."""
+    t = np.arange(0.0, 120.0, 0.125)
+    rows = []
+    for m, lu in (("m1", 70.0), ("m2", 55.0), ("m3", 45.0)):
+        l_uav = np.full(t.size, lu)
+        bg = np.full(t.size, 40.0)
+        rows.append((t, np.full(t.size, m), l_uav, bg, extra(t, l_uav, bg)))
+    cat = [np.concatenate(c) for c in zip(*rows, strict=True)]
+    rng = np.random.default_rng(1)
+    level = cat[4] + rng.normal(0.0, 0.5, cat[0].size)
+    s = table(cat[0], cat[1], level)
+    resid = level - level_sum(cat[2], cat[3])
+    noise = measurement_noise(resid, np.searchsorted(["m1", "m2", "m3"], cat[1]), cat[0], cat[1])
+    return s, resid, noise, cat[2], cat[3]
+
+
+def test_added_sound_is_an_event_a_louder_uav_is_not():
+    inside = lambda t: (t > 40.0) & (t < 70.0)  # noqa: E731
+    # a distant source at 60 dB heard by all: +0.04 dB at the loud microphone, +5.5 and +14.6 dB at the quiet ones
+    s, r, nz, lu, bg = three_mics(lambda t, l_uav, b: level_sum(level_sum(l_uav, b), np.where(inside(t), 60.0, -99)))
+    win, found = detect_events(s, r, nz, lu, bg)
+    assert len(found) == 1 and found[0]["source"] == "detector"
+    assert found[0]["t0"] == pytest.approx(40.0, abs=1.0) and found[0]["t1"] == pytest.approx(70.0, abs=1.0)
+    assert np.all(win[inside(s.t_e) & (s.mic != "m1")] >= 0)
+    # the UAV 6 dB louder for the same 30 s: every microphone it dominates rises by the same dB -> no event
+    s, r, nz, lu, bg = three_mics(lambda t, l_uav, b: level_sum(l_uav + np.where(inside(t), 6.0, 0.0), b))
+    win, found = detect_events(s, r, nz, lu, bg)
+    assert found == [] and np.all(win < 0)
+
+
+def test_folds_alternate_flights_or_time_blocks():
+    t = np.arange(0.0, 200.0, 0.125)
+    two = table(np.r_[t, t], np.full(2 * t.size, "m1"), np.zeros(2 * t.size),
+                flight=np.r_[np.full(t.size, "a"), np.full(t.size, "b")])
+    fold, _, how = fold_labels(two)
+    assert how == "flights" and set(fold[:t.size]) == {0} and set(fold[t.size:]) == {1}
+    one = table(t, np.full(t.size, "m1"), np.zeros(t.size))
+    fold, block, how = fold_labels(one, block_s=30.0)
+    assert how == "time blocks"
+    np.testing.assert_array_equal(fold, (np.floor(t / 30.0) % 2).astype(int))
+    assert len(np.unique(block)) == math.ceil(200.0 / 30.0)
+
+
+# --------------------------------------------------------------------------- blind proofs on simulated campaigns
+
+
+def test_control_gives_no_effect():
+    r = diagnosed(None).result
+    assert r["verdict"]["effect"] is None
+    assert r["segments"] == [] and r["event_windows"] == []
+    names = {e["name"] for e in r["effects"]}
+    assert names == set(EFFECTS)
+    # measurement noise recovered from the fast scatter: the scenario's noise_std_db per microphone
+    truth = simulated(None)[1].meta["noise_std_db"]
+    for m, sd in truth.items():
+        assert r["noise_std_db"][m] == pytest.approx(sd, rel=0.1)
+
+
+@pytest.mark.parametrize("effect", EFFECTS)
+def test_each_injected_effect_is_named_with_held_out_shrinkage(effect):
+    r = diagnosed(effect).result
+    v = r["verdict"]
+    assert v["effect"] == effect, [(e["name"], e.get("significant"), e.get("holdout_improvement_db2"))
+                                   for e in r["effects"]]
+    assert v["holdout_shrinkage_pct"] > 0.0
+    assert v["rms_db_holdout_extended"] < v["rms_db_holdout_baseline"]
+    top = next(e for e in r["effects"] if e["name"] == effect)
+    assert top["rank"] == 1 and top["significant"]
+
+
+def test_bank_angle_segments_lie_in_the_simulated_turns():
+    res, _ = simulated("bank_angle")
+    segs = diagnosed("bank_angle").result["segments"]
+    turns = {f.id: f.turns for f in res.flights}
+    flagged = inside = 0.0
+    for g in segs:
+        flagged += g["t1"] - g["t0"]
+        inside += sum(max(0.0, min(g["t1"], b) - max(g["t0"], a)) for a, b, *_ in turns[g["flight"]])
+    assert flagged > 0 and inside / flagged >= 0.8
+    # and most of the turn time is flagged at some microphone (turns served by the horizontal card)
+    s = diagnosed("bank_angle").samples
+    covered = total = 0.0
+    for fl, tt in turns.items():
+        te = np.sort(s.t_e[s.flight == fl])
+        for a, b, *_ in tt:
+            if not np.any((te > a) & (te < b)):
+                continue
+            grid = np.arange(a, b, 0.25)
+            hit = np.zeros(grid.size, bool)
+            for g in segs:
+                if g["flight"] == fl:
+                    hit |= (grid >= g["t0"]) & (grid <= g["t1"])
+            covered += hit.sum()
+            total += grid.size
+    assert covered / total >= 0.8
+
+
+def test_missing_inputs_make_candidates_not_testable():
+    _, s = simulated(None)
+    bare = s.with_(rpm=None, bands=None, band_f=None)
+    r = diagnose(bare, cards.load(CARD), candidates=["rpm", "atmospheric_absorption", "bank_angle"])
+    by = {e["name"]: e for e in r["effects"]}
+    assert by["rpm"]["testable"] is False and by["rpm"]["reason"] == "no rpm column in the flight logs"
+    assert by["atmospheric_absorption"]["testable"] is False
+    assert "band levels" in by["atmospheric_absorption"]["reason"]
+    assert by["bank_angle"]["testable"] is True and by["bank_angle"]["rank"] == 1
+    assert r["verdict"]["effect"] is None
+
+
+def test_cancel_stops_and_progress_counts():
+    _, s = simulated(None)
+    seen = []
+    with pytest.raises(Cancelled):
+        run_diagnosis(s, cards.load(CARD), progress=lambda d, n, what: seen.append((d, n, what)),
+                      cancel=lambda: len(seen) >= 2)
+    assert seen[0][:2] == (1, 11) and seen[0][2] == "localization"
+
+
+def test_no_samples_of_the_cards_phase_is_refused():
+    _, s = simulated(None)
+    climb = cards.load(ROOT / "sample_data" / "cards" / "demo_climb.json")
+    only = s.select(s.phase == "horizontal")
+    with pytest.raises(InputError, match="phase"):
+        diagnose(only, climb)
+
+
+# --------------------------------------------------------------------------- WAV campaign through the command line
+
+
+def wav_scenario():
+    return {
+        "schema": "gisnoise/scenario/1", "name": "diag_wav", "seed": 7,
+        "origin": {"lat": 52.3186, "lon": 10.5564, "h": 125.0},
+        "weather": {"temperature_c": 15.0, "humidity_pct": 60.0, "pressure_kpa": 101.3},
+        "microphones": [
+            {"id": "m1", "e": 0.0, "n": 0.0, "mount": "ground_plate", "noise_std_db": 0.8},
+            {"id": "m2", "e": 60.0, "n": 40.0, "mount": "ground_plate", "noise_std_db": 0.8}],
+        "background": {"level_dba": 40.0, "spectrum": "ambient"},
+        "output": {"format": "wav", "block_s": 0.125, "fs_hz": 16000, "band_max_hz": 5000.0},
+        "flights": [{"id": "f1", "start": {"e": -200.0, "n": -100.0, "heading_deg": 90.0}, "patterns": [
+            {"type": "climb", "to_height_m": 40.0, "rate_m_s": 4.0},
+            {"type": "racetrack", "centre": [0.0, 20.0], "heading_deg": 90.0, "straight_m": 250.0,
+             "heights_m": [40.0, 70.0], "laps": 1, "turn": "left", "speed_m_s": 24.0},
+            {"type": "flyby", "through": [20.0, 10.0], "heading_deg": 0.0, "length_m": 400.0, "height_m": 35.0,
+             "speed_m_s": 26.0}]}],
+        "effects": {"rpm": {}},
+    }
+
+
+def test_wav_campaign_diagnosed_from_the_command_line(tmp_path):
+    camp = simulate.simulate(wav_scenario(), tmp_path / "camp", base_dir=SCENARIO.parent)
+    assert list((camp / "mics" / "m1").glob("*.wav"))
+    out = tmp_path / "diag"
+    run = CliRunner().invoke(cli, ["-q", "diagnose", str(camp), "--card", str(CARD), "--out", str(out)])
+    assert run.exit_code == 0, run.output
+    doc = json.loads((out / "diagnosis.json").read_text())
+    # the SPEC section 6 shape
+    assert isinstance(doc["baseline"]["rms_db"], float)
+    for g in doc["segments"]:
+        assert {"flight", "t0", "t1", "rms_db", "regime"} <= set(g)
+    for e in doc["effects"]:
+        assert {"name", "rank", "significant"} <= set(e)
+        if e["testable"]:
+            assert {"rms_db_fit", "rms_db_holdout", "shrinkage_pct"} <= set(e)
+    assert doc["verdict"]["effect"] == "rpm" and doc["verdict"]["holdout_shrinkage_pct"] > 0
+    assert doc["data"]["holdout"] == "time blocks"
+    for f in ("report.html", "timeline_f1.png", "inputs.png", "before_after.png"):
+        assert (out / f).stat().st_size > 1000
+    # the numbers behind the before/after figure are the diagnosis' held-out RMS values
+    ba = json.loads((out / "before_after.json").read_text())
+    first = ba["candidates"][0]
+    assert first["name"] == "rpm"
+    by = {e["name"]: e for e in doc["effects"]}
+    assert first["rms_db_holdout_after"] == pytest.approx(by["rpm"]["rms_db_holdout"], rel=1e-9)
+    assert first["rms_db_holdout_before"] == pytest.approx(doc["baseline"]["rms_db_holdout"], rel=1e-9)
+    assert "rpm" in (out / "report.html").read_text()
+
+
+def test_cli_names_a_missing_card(tmp_path):
+    run = CliRunner().invoke(cli, ["diagnose", str(tmp_path), "--card", str(tmp_path / "no.json"),
+                                   "--out", str(tmp_path / "o")])
+    assert run.exit_code == 2 and "no such card file" in run.output
