@@ -54,7 +54,7 @@ def table(t, mic, level, *, flight="f1", d=100.0, roll=0.0):
                    vel_enu=np.tile([20.0, 0.0, 0.0], (n, 1)), valid=np.ones(n, bool), mask_reason=np.full(n, ""))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def simulated(effect: str | None, seed: int = 1):
     """(SimulationResult, Samples) of the diagnosis base scenario with one effect at its default magnitude."""
     doc = json.loads(SCENARIO.read_text())
@@ -65,7 +65,7 @@ def simulated(effect: str | None, seed: int = 1):
     return res, simulate.simulate_samples(res)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def diagnosed(effect: str | None, seed: int = 1):
     _, samples = simulated(effect, seed)
     return run_diagnosis(samples, cards.load(CARD))
