@@ -45,6 +45,8 @@ class GisnoiseAlgorithm(QgsProcessingAlgorithm):
             raise QgsProcessingException("cancelled by the user") from None
         except GisnoiseError as exc:
             raise QgsProcessingException(error_message(exc)) from None
+        except ImportError as exc:
+            raise QgsProcessingException(f"a Python package this step needs is missing in QGIS's Python: {exc}") from None
         except MemoryError:
             raise QgsProcessingException("out of memory; use a coarser resolution or a smaller margin") from None
 

@@ -20,6 +20,7 @@ from qgis.core import (
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFile,
     QgsProcessingParameterFileDestination,
+    QgsProcessingParameterFolderDestination,
     QgsProcessingParameterString,
     QgsWkbTypes,
 )
@@ -52,6 +53,7 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
     CARD = "CARD"
     CANDIDATES = "CANDIDATES"
     OUTPUT_JSON = "OUTPUT_JSON"
+    OUTPUT_REPORT = "OUTPUT_REPORT"
     OUTPUT_SEGMENTS = "OUTPUT_SEGMENTS"
     OUTPUT_MICS = "OUTPUT_MICS"
     VERDICT = "VERDICT"
@@ -87,6 +89,8 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
             self.CANDIDATES, "Effects to test (comma separated; empty: all)", optional=True))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT_JSON, "Diagnosis", fileFilter="JSON (*.json)"))
+        self.addParameter(QgsProcessingParameterFolderDestination(
+            self.OUTPUT_REPORT, "Report (report.html and figures)", optional=True, createByDefault=False))
         self.addParameter(QgsProcessingParameterFeatureSink(
             self.OUTPUT_SEGMENTS, "Flagged segments", QgsProcessing.TypeVectorLine, optional=True,
             createByDefault=True))
@@ -100,7 +104,7 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
     def compute(self, parameters, context, feedback):
         from gisnoise import cards as gcards
         from gisnoise.campaign import read_campaign
-        from gisnoise.diagnose import diagnose
+        from gisnoise.diagnose import run_diagnosis
 
         folder = self.parameterAsFile(parameters, self.CAMPAIGN, context)
         if not folder:
@@ -113,17 +117,15 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
         candidates = [c.strip() for c in text.split(",") if c.strip()] or None
         dest = output_path(self, parameters, self.OUTPUT_JSON, context)
 
-        feedback.pushInfo(f"reading the campaign {folder}")
-        campaign = read_campaign(folder)
-        feedback.setProgress(5.0)
-
         def progress(done, total, what=""):
-            feedback.setProgress(5.0 + 85.0 * min(float(done) / max(float(total), 1.0), 1.0))
+            feedback.setProgress(80.0 * min(float(done) / max(float(total), 1.0), 1.0))
             if what:
                 feedback.pushInfo(str(what))
 
-        kw = {"candidates": candidates} if candidates else {}
-        result = diagnose(campaign, card, progress=progress, cancel=feedback.isCanceled, **kw)
+        feedback.pushInfo(f"diagnosing {card.id} against the campaign {folder}")
+        diag = run_diagnosis(folder, card, candidates=candidates, progress=progress, cancel=feedback.isCanceled)
+        result = dict(diag.result)
+        result["campaign"] = folder
         with open(dest, "w", encoding="utf-8") as fh:
             json.dump(result, fh, indent=1, allow_nan=False)
             fh.write("\n")
@@ -136,6 +138,15 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
         out = {self.OUTPUT_JSON: dest, self.VERDICT: effect or "",
                self.BASELINE_RMS_DB: base if base is not None else float("nan"),
                self.HOLDOUT_SHRINKAGE_PCT: shrink if isinstance(shrink, (int, float)) else float("nan")}
+        report = self.parameterAsString(parameters, self.OUTPUT_REPORT, context)
+        if report and parameters.get(self.OUTPUT_REPORT) not in (None, ""):
+            from gisnoise.diagreport import write_report
+
+            feedback.pushInfo(f"writing the report into {report}")
+            write_report(diag, report)
+            out[self.OUTPUT_REPORT] = report
+        feedback.setProgress(90.0)
+        campaign = read_campaign(folder)
         seg_dest = self._segments(parameters, context, feedback, campaign, result.get("segments") or [])
         if seg_dest:
             out[self.OUTPUT_SEGMENTS] = seg_dest

@@ -9,6 +9,7 @@ from qgis.core import (
     QgsProcessingParameterEnum,
     QgsProcessingParameterFile,
     QgsProcessingParameterFileDestination,
+    QgsProcessingParameterFolderDestination,
     QgsProcessingParameterNumber,
     QgsProcessingParameterString,
 )
@@ -27,6 +28,7 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
     ANSATZ = "ANSATZ"
     MAX_ITER = "MAX_ITER"
     OUTPUT_CARD = "OUTPUT_CARD"
+    OUTPUT_REPORT = "OUTPUT_REPORT"
     RMS_DB = "RMS_DB"
     N_SAMPLES = "N_SAMPLES"
     CARD_ID = "CARD_ID"
@@ -61,6 +63,9 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
             minValue=1, maxValue=10000))
         self.addParameter(QgsProcessingParameterFileDestination(
             self.OUTPUT_CARD, "Model card", fileFilter="Model card (*.json)"))
+        self.addParameter(QgsProcessingParameterFolderDestination(
+            self.OUTPUT_REPORT, "Fit report (report.html and the paper's plots)", optional=True,
+            createByDefault=False))
         self.addOutput(QgsProcessingOutputNumber(self.RMS_DB, "rms residual (dB)"))
         self.addOutput(QgsProcessingOutputNumber(self.N_SAMPLES, "samples used"))
         self.addOutput(QgsProcessingOutputString(self.CARD_ID, "card id"))
@@ -87,6 +92,14 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
         feedback.pushInfo(result.summary())
         card = result.to_card()
         gcards.save(card, dest)
+        out = {self.OUTPUT_CARD: dest, self.RMS_DB: result.rms_db, self.N_SAMPLES: int(result.n),
+               self.CARD_ID: card.id}
+        report = self.parameterAsString(parameters, self.OUTPUT_REPORT, context)
+        if report and parameters.get(self.OUTPUT_REPORT) not in (None, ""):
+            from gisnoise.fitreport import write_report
+
+            feedback.pushInfo(f"writing the fit report into {report}")
+            write_report(result, report)
+            out[self.OUTPUT_REPORT] = report
         feedback.setProgress(100.0)
-        return {self.OUTPUT_CARD: dest, self.RMS_DB: result.rms_db, self.N_SAMPLES: int(result.n),
-                self.CARD_ID: card.id}
+        return out

@@ -33,7 +33,8 @@ def control_fit(plugin, control_campaign, tmp_path_factory):
 
     card = tmp_path_factory.mktemp("fit") / "card.json"
     res = processing.run("gisnoise:fitcard", {"CAMPAIGN": str(control_campaign), "PHASE": 0,
-                                              "ANSATZ": "paper-offset", "OUTPUT_CARD": str(card)})
+                                              "ANSATZ": "paper-offset", "OUTPUT_CARD": str(card),
+                                              "OUTPUT_REPORT": str(card.parent / "report")})
     return res, card
 
 
@@ -50,6 +51,7 @@ def test_fit_recovers_the_simulated_truth(control_fit, control_campaign, tmp_pat
     # the simulated microphones' noise is 0.8-1.2 dB, so the residual cannot be much smaller or larger
     assert 0.6 < res["RMS_DB"] < 2.0
     assert res["CARD_ID"] == card.id
+    assert (path.parent / "report" / "report.html").is_file()
 
 
 def test_fit_of_a_folder_that_is_no_campaign_names_the_file(plugin, tmp_path):
@@ -71,7 +73,9 @@ def test_diagnose_names_bank_angle_and_maps_the_flagged_segments(plugin, tmp_pat
 
     res = processing.run("gisnoise:diagnose", {
         "CAMPAIGN": str(SAMPLE_CAMPAIGN), "CARD": str(truth_card(SAMPLE_CAMPAIGN, tmp_path)), "OUTPUT_JSON": str(tmp_path / "diagnosis.json"),
-        "OUTPUT_SEGMENTS": str(tmp_path / "segments.gpkg"), "OUTPUT_MICS": str(tmp_path / "mics.geojson")})
+        "OUTPUT_SEGMENTS": str(tmp_path / "segments.gpkg"), "OUTPUT_MICS": str(tmp_path / "mics.geojson"),
+        "OUTPUT_REPORT": str(tmp_path / "report")})
+    assert (tmp_path / "report" / "report.html").is_file()
     doc = json.loads((tmp_path / "diagnosis.json").read_text(encoding="utf-8"))
     assert res["VERDICT"] == doc["verdict"]["effect"] == "bank_angle"
     assert res["BASELINE_RMS_DB"] == pytest.approx(doc["baseline"]["rms_db"])
