@@ -25,20 +25,23 @@ microphones and altitudes to minimize one of two objectives:
 
 Design model
 ------------
-The pattern is flown once by the simulator (:func:`gisnoise.simulate.run`, seeded
-by the plan) with every repetition at the first base altitude; this gives the
-horizontal track, attitude (coordinated-turn bank, crab in wind), ground speed and
-electric power at the simulator's rate.  Heights follow the pattern's own climb
-rule: the racetrack climbs linearly along the first straight and turn of each later
-repetition, so the height of every sample is linear in the altitudes,
-``u = W h``; ``W`` is found by flying the pattern (:class:`gisnoise._patterns.PathBuilder`)
-with unit altitudes.  Attitude and power are those of the reference flight (the
-flight-path angle of the climbs, at most a few degrees, and their climb power are
-neglected).  Samples are taken every ``1 / evaluation.rate_hz`` s per microphone at
-emission time; a sample counts when the source-microphone distance is at most the
-signal-to-noise distance :func:`snr_distance`.  The Fisher information is scaled to
-the campaign's averaging blocks (``evaluation.block_s``) so the expected standard
-deviations are those of a fit of the whole pattern with white noise.
+The pattern is flown by the simulator (:func:`gisnoise.simulate.run`, seeded by the
+plan) with every repetition at the first base altitude; this gives the horizontal
+track, heading, coordinated-turn bank, ground speed, level-flight pitch and electric
+power at the simulator's rate.  Heights follow the pattern's own climb rule: the
+racetrack climbs linearly along the first straight and turn of each later repetition,
+so the height and vertical speed of every sample are linear in the altitudes,
+``u = W h``, ``vz = W' h``; ``W`` and ``W'`` come from flying the pattern
+(:class:`gisnoise._patterns.PathBuilder`) with unit altitudes.  A design's pitch adds
+the flight-path angle ``atan2(vz, v)`` to the level pitch, and its power adds the
+power per m/s of climb or sink times the vertical speed; these slopes are measured on
+two more simulator flights climbing and sinking between repetitions, so climbs cost
+power exactly as in the simulator (the same random draws for the same seed).  Samples
+are taken every ``1 / evaluation.rate_hz`` s per microphone at emission time; a sample
+counts when the source-microphone distance is at most the signal-to-noise distance
+(:func:`snr_distance`).  The Fisher information is scaled to the campaign's averaging
+blocks (``evaluation.block_s``) so the expected standard deviations are those of a fit
+of the whole pattern with white noise.
 
 Optimizer
 ---------
@@ -53,10 +56,10 @@ never worse than the base.
 
 Examples
 --------
->>> x = {"power": np.array([1.0, 2.0, 3.0]), "polar": np.array([3.0, 1.0, 2.0]),
-...      "distance": np.array([1.0, 2.0, 3.5]), "bank": np.array([0.0, 1.0, 0.0])}
->>> round(max_abs_correlation(x), 3)
-0.999
+>>> x = {"a": np.array([1.0, 2.0, 3.0, 4.0]), "b": np.array([2.0, 4.0, 6.0, 8.0]),
+...      "c": np.array([1.0, -1.0, 1.0, -1.0])}
+>>> round(max_abs_correlation(x), 3), round(max_abs_correlation(x, skip=[("a", "b")]), 3)
+(1.0, 0.447)
 """
 
 from __future__ import annotations
@@ -79,7 +82,6 @@ from . import cards as _cards
 from ._patterns import PathBuilder, fwd, right
 from .errors import Cancelled, DesignError, FitError, InputError, ScenarioError
 from .frames import LocalFrame, emission_angles
-from .model import add_background
 
 __all__ = [
     "SCHEMA",
@@ -805,7 +807,7 @@ def _logdet(m: np.ndarray) -> float:
 
 @dataclass(frozen=True, eq=False)
 class DesignModel:
-    """The pattern flown once, ready to give the samples of any design (see the module docstring).
+    """The pattern flown by the simulator, ready to give the samples of any design (see the module docstring).
 
     Attributes
     ----------
@@ -816,14 +818,25 @@ class DesignModel:
         Horizontal UAV position, m.
     weights : ndarray, shape (n, k)
         Height of each sample is ``weights @ altitudes`` (m).
-    yaw, pitch, roll : ndarray, shape (n,)
-        Attitude, rad.
-    power_w, speed_m_s : ndarray, shape (n,)
-        Electric power (W) and ground speed (m/s).
+    vz_weights : ndarray, shape (n, k)
+        Vertical speed of each sample is ``vz_weights @ altitudes`` (m/s).
+    yaw, roll : ndarray, shape (n,)
+        Heading and bank, rad (the same at every altitude).
+    pitch_level : ndarray, shape (n,)
+        Pitch in level flight, rad; a design adds its flight-path angle ``atan2(vz, v)``.
+    power_level_w : ndarray, shape (n,)
+        Electric power in level flight, W.
+    power_per_climb, power_per_sink : ndarray, shape (n,)
+        Change of electric power per m/s of climb and of sink, W s/m, measured on the
+        simulator by flying the pattern climbing and sinking between repetitions.
+    speed_m_s : ndarray, shape (n,)
+        Horizontal ground speed, m/s.
+    vel_en : ndarray, shape (n, 2)
+        Horizontal ground velocity (east, north), m/s.
     repetition : ndarray of int, shape (n,)
         Repetition of the pattern each sample belongs to.
     track : dict of ndarray
-        The same at the simulator's rate (``t``, ``e``, ``n``, ``weights``) for drawing the track.
+        ``t``, ``e``, ``n``, ``weights`` at the simulator's rate, for drawing the track.
     start_en : ndarray, shape (2,)
         Where the simulated flight starts (it accelerates for 8 s into the pattern's entry), m.
     duration_s : float
@@ -835,19 +848,31 @@ class DesignModel:
     e: np.ndarray
     n: np.ndarray
     weights: np.ndarray
+    vz_weights: np.ndarray
     yaw: np.ndarray
-    pitch: np.ndarray
     roll: np.ndarray
-    power_w: np.ndarray
+    pitch_level: np.ndarray
+    power_level_w: np.ndarray
+    power_per_climb: np.ndarray
+    power_per_sink: np.ndarray
     speed_m_s: np.ndarray
+    vel_en: np.ndarray
     repetition: np.ndarray
     track: dict[str, np.ndarray] = field(repr=False)
     start_en: np.ndarray = field(repr=False)
     duration_s: float = 0.0
 
     @classmethod
-    def build(cls, plan: Plan) -> DesignModel:
-        """Fly the plan's pattern with the simulator and derive the height weights."""
+    def build(cls, plan: Plan, *, calibration_step_m: float = 50.0) -> DesignModel:
+        """Fly the plan's pattern with the simulator and derive the height weights.
+
+        Three flights of the simulator: every repetition at the first base altitude
+        (level flight), and climbing and sinking by ``calibration_step_m`` between
+        repetitions; the power change over the vertical speed gives the power per m/s
+        of climb and of sink at every sample (the simulator's power law and its slow
+        random part, the same draws for the same seed), so a design's power follows
+        its climbs without a second statement of the power law.
+        """
         from .simulate import run
 
         pat = plan.doc["pattern"]
@@ -859,78 +884,139 @@ class DesignModel:
         # the simulator accelerates from rest for 8 s along the heading before a horizontal pattern:
         # start that far before the entry so the pattern is flown from its entry, without a joining path
         start = entry - 0.5 * v * _TRANSITION_S * fwd(heading)
-        ref = Design(plan.base.mic_e, plan.base.mic_n, np.full(plan.n_reps, plan.base.altitudes[0]))
+        k_reps = plan.n_reps
+        h0 = float(plan.base.altitudes[0])
         mics = plan.doc["microphones"]
-        try:
-            res = run(_scenario_doc(plan.doc, plan.card, ref, mics, seed=plan.seed, start=start, noise=False))
-        except ScenarioError as exc:
-            raise _renamed(exc) from None
-        tr = res.flights[0].true
-        i0 = int(np.argmax(tr["phase"] == "horizontal"))
-        sim = {k: np.asarray(tr[k])[i0:] for k in ("t", "e", "n", "u", "yaw", "pitch", "roll", "power_w")}
-        sim["speed"] = np.hypot(tr["vel"][i0:, 0], tr["vel"][i0:, 1])
-        sim["t"] = sim["t"] - sim["t"][0]
-        dt = 1.0 / float(res.scenario.doc["output"]["sim_rate_hz"])
-        cols = []
-        for k in range(plan.n_reps):
-            unit = [1.0 if j == k else 0.0 for j in range(plan.n_reps)]
+
+        def fly(heights: np.ndarray) -> dict[str, np.ndarray]:
+            d = Design(plan.base.mic_e, plan.base.mic_n, heights)
+            try:
+                res = run(_scenario_doc(plan.doc, plan.card, d, mics, seed=plan.seed, start=start, noise=False))
+            except ScenarioError as exc:
+                raise _renamed(exc) from None
+            tr = res.flights[0].true
+            i0 = int(np.argmax(tr["phase"] == "horizontal"))
+            out = {k: np.asarray(tr[k])[i0:] for k in ("t", "e", "n", "u", "yaw", "pitch", "roll", "power_w")}
+            out["vel"] = np.asarray(tr["vel"][i0:], dtype=float)
+            out["t"] = out["t"] - out["t"][0]
+            out["dt"] = np.array(1.0 / float(res.scenario.doc["output"]["sim_rate_hz"]))
+            return out
+
+        sim = fly(np.full(k_reps, h0))
+        dt = float(sim["dt"])
+        cols, vcols = [], []
+        for k in range(k_reps):
+            unit = [1.0 if j == k else 0.0 for j in range(k_reps)]
             b = PathBuilder(e=float(entry[0]), n=float(entry[1]), u=unit[0], heading=heading, dt=dt, speed=v)
             b.racetrack(centre, heading, straight, radius, unit, pat["laps"], v, turn, math.radians(6.0))
             p = b.finish()
             cols.append(p["u"])
-        w = np.column_stack(cols)
+            vcols.append(p["vz"])
+        w, wv = np.column_stack(cols), np.column_stack(vcols)
         if (len(w) != len(sim["t"]) or np.max(np.abs(p["e"] - sim["e"])) > 1e-6
                 or np.max(np.abs(p["n"] - sim["n"])) > 1e-6 or np.max(np.abs(w.sum(axis=1) - 1.0)) > 1e-9):
             raise RuntimeError("design model: the pattern flown by the simulator and by the path builder differ")
+        per_climb = np.zeros(len(w))
+        per_sink = np.zeros(len(w))
+        if k_reps > 1:
+            step = calibration_step_m * np.arange(k_reps)
+            for heights, out in ((h0 + step, per_climb), (h0 + step[::-1], per_sink)):
+                f = fly(heights)
+                vz = wv @ heights
+                moving = np.abs(vz) > 1e-6
+                out[moving] = (f["power_w"][moving] - sim["power_w"][moving]) / vz[moving]
         rep_s = pat["laps"] * (2.0 * straight + 2.0 * math.pi * radius) / v
-        step = max(1, int(round(1.0 / (plan.doc["evaluation"]["rate_hz"] * dt))))
-        idx = np.arange(0, len(sim["t"]), step)
-        sub = {k: a[idx] for k, a in sim.items()}
-        rep = np.minimum((sub["t"] / rep_s).astype(int), plan.n_reps - 1)
-        return cls(plan=plan, t=sub["t"], e=sub["e"], n=sub["n"], weights=w[idx], yaw=sub["yaw"],
-                   pitch=sub["pitch"], roll=sub["roll"], power_w=sub["power_w"], speed_m_s=sub["speed"],
-                   repetition=rep, track={"t": sim["t"], "e": sim["e"], "n": sim["n"], "weights": w},
-                   start_en=start, duration_s=float(sim["t"][-1]))
+        step_i = max(1, int(round(1.0 / (plan.doc["evaluation"]["rate_hz"] * dt))))
+        idx = np.arange(0, len(sim["t"]), step_i)
+        t = sim["t"][idx]
+        rep = np.minimum((t / rep_s).astype(int), k_reps - 1)
+        vel = sim["vel"][idx]
+        return cls(plan=plan, t=t, e=sim["e"][idx], n=sim["n"][idx], weights=w[idx], vz_weights=wv[idx],
+                   yaw=sim["yaw"][idx], roll=sim["roll"][idx], pitch_level=sim["pitch"][idx],
+                   power_level_w=sim["power_w"][idx], power_per_climb=per_climb[idx], power_per_sink=per_sink[idx],
+                   speed_m_s=np.hypot(vel[:, 0], vel[:, 1]), vel_en=vel[:, :2], repetition=rep,
+                   track={"t": sim["t"], "e": sim["e"], "n": sim["n"], "weights": w}, start_en=start,
+                   duration_s=float(sim["t"][-1]))
 
     @property
     def rate_hz(self) -> float:
         return float(self.plan.doc["evaluation"]["rate_hz"])
 
-    def samples(self, design: Design) -> dict[str, np.ndarray]:
-        """Per (microphone, sample) geometry of ``design``: flattened arrays, microphone-major.
+    def state(self, altitudes: np.ndarray) -> dict[str, np.ndarray]:
+        """Height ``u`` (m), vertical speed ``vz`` (m/s), ``pitch`` (rad) and ``power_w`` (W) of the
+        pattern flown at ``altitudes`` (shape (S, k)), each of shape (S, n)."""
+        h = np.asarray(altitudes, dtype=float)
+        u = h @ self.weights.T
+        vz = h @ self.vz_weights.T
+        power = (self.power_level_w + self.power_per_climb * np.maximum(vz, 0.0)
+                 + self.power_per_sink * np.minimum(vz, 0.0))
+        pitch = self.pitch_level + np.arctan2(vz, self.speed_m_s)  # plus the flight-path angle
+        return {"u": u, "vz": vz, "pitch": pitch, "power_w": power}
 
-        Returns ``mic`` (index), ``d`` (m), ``phi``, ``theta`` (rad), ``power_w``, ``bank`` (rad),
-        ``speed``, ``uav_enu``, ``mic_enu``, ``t_e`` and ``usable`` (distance within the
-        signal-to-noise distance).
+    def samples_batch(self, mic_e: np.ndarray, mic_n: np.ndarray, altitudes: np.ndarray) -> dict[str, np.ndarray]:
+        """Geometry and flight state of ``S`` designs at once, each row microphone-major over the samples.
+
+        Parameters
+        ----------
+        mic_e, mic_n : ndarray, shape (S, m)
+            Microphone positions, m.
+        altitudes : ndarray, shape (S, k)
+            Altitude of each repetition, m.
+
+        Returns
+        -------
+        dict
+            ``d`` (m), ``phi``, ``theta`` (rad), ``u`` (UAV height, m), ``vz`` (m/s),
+            ``pitch`` (rad), ``power_w`` (W) and ``usable`` (distance within the
+            signal-to-noise distance), shape (S, m n); ``mic`` (microphone index) and
+            ``sample`` (index into the pattern's samples), shape (m n,).
         """
         plan = self.plan
-        u = self.weights @ np.asarray(design.altitudes, dtype=float)
-        m = plan.n_mics
-        de = design.mic_e[:, None] - self.e[None, :]
-        dn = design.mic_n[:, None] - self.n[None, :]
-        du = plan.mic_height_m[:, None] - u[None, :]
-        d, phi, theta = emission_angles(de, dn, du, self.yaw[None, :], self.pitch[None, :], self.roll[None, :])
-        k = len(self.t)
+        m, k = plan.n_mics, len(self.t)
+        st = self.state(altitudes)
+        n_s = st["u"].shape[0]
+        de = np.asarray(mic_e, dtype=float)[:, :, None] - self.e[None, None, :]
+        dn = np.asarray(mic_n, dtype=float)[:, :, None] - self.n[None, None, :]
+        du = plan.mic_height_m[None, :, None] - st["u"][:, None, :]
+        d, phi, theta = emission_angles(de, dn, du, self.yaw, st["pitch"][:, None, :], self.roll)
+        d = d.reshape(n_s, m * k)
 
-        def rep(a: np.ndarray) -> np.ndarray:
-            return np.broadcast_to(a, (m, k)).ravel()
+        def per_mic(a: np.ndarray) -> np.ndarray:
+            return np.broadcast_to(a[:, None, :], (n_s, m, k)).reshape(n_s, m * k)
 
-        uav = np.column_stack([rep(self.e), rep(self.n), rep(u)])
-        mic = np.column_stack([np.repeat(design.mic_e, k), np.repeat(design.mic_n, k), np.repeat(plan.mic_height_m, k)])
-        d = d.ravel()
-        return {"mic": np.repeat(np.arange(m), k), "d": d, "phi": phi.ravel(), "theta": theta.ravel(),
-                "power_w": rep(self.power_w), "bank": rep(self.roll), "speed": rep(self.speed_m_s),
-                "t_e": rep(self.t), "uav_enu": uav, "mic_enu": mic, "usable": d <= plan.max_distance_m}
+        return {"d": d, "phi": phi.reshape(n_s, m * k), "theta": theta.reshape(n_s, m * k),
+                "u": per_mic(st["u"]), "vz": per_mic(st["vz"]), "pitch": per_mic(st["pitch"]),
+                "power_w": per_mic(st["power_w"]), "usable": d <= plan.max_distance_m,
+                "mic": np.repeat(np.arange(m), k), "sample": np.tile(np.arange(k), m)}
 
-    def model_inputs(self, s: Mapping[str, np.ndarray]) -> dict[str, Any]:
-        """Ansatz inputs of usable samples (the names of :meth:`gisnoise.samples.Samples.inputs`)."""
-        sel = s["usable"]
+    def samples(self, design: Design) -> dict[str, np.ndarray]:
+        """Per (microphone, sample) geometry of one design: :meth:`samples_batch` with ``S = 1``, squeezed."""
+        b = self.samples_batch(design.mic_e[None, :], design.mic_n[None, :], design.altitudes[None, :])
+        return {k: (v[0] if v.ndim == 2 else v) for k, v in b.items()}
+
+    def model_inputs(self, s: Mapping[str, np.ndarray], *, design: Design | None = None) -> dict[str, Any]:
+        """Ansatz inputs of the samples ``s`` (from :meth:`samples` or :meth:`samples_batch`), all rows.
+
+        The names are those of :meth:`gisnoise.samples.Samples.inputs`; vector inputs
+        (``uav_enu``, ``mic_enu``, ``vel_enu``) need ``design`` and a single design's samples.
+        """
         card = self.plan.card
-        bank = s["bank"][sel]
-        return {"d": s["d"][sel], "phi": s["phi"][sel], "theta": s["theta"][sel],
-                "p_el": s["power_w"][sel] / card.reference_power_w, "bank": bank, "roll": np.degrees(bank),
-                "speed": s["speed"][sel], "t_e": s["t_e"][sel], "uav_enu": s["uav_enu"][sel],
-                "mic_enu": s["mic_enu"][sel], "meta": {}}
+        j = s["sample"]
+        x: dict[str, Any] = {"d": s["d"], "phi": s["phi"], "theta": s["theta"],
+                             "p_el": s["power_w"] / card.reference_power_w, "bank": self.roll[j],
+                             "roll": np.degrees(self.roll[j]), "pitch": np.degrees(s["pitch"]),
+                             "yaw": np.degrees(self.yaw[j]), "speed": np.hypot(self.speed_m_s[j], s["vz"]),
+                             "t_e": self.t[j], "meta": {}}
+        if design is not None and s["d"].ndim == 1:
+            mi = s["mic"]
+            x["uav_enu"] = np.column_stack([self.e[j], self.n[j], s["u"]])
+            x["mic_enu"] = np.column_stack([design.mic_e[mi], design.mic_n[mi], self.plan.mic_height_m[mi]])
+            x["vel_enu"] = np.column_stack([self.vel_en[j], s["vz"]])
+        return x
+
+
+_SCALAR_INPUTS = ("d", "phi", "theta", "p_el", "bank", "roll", "pitch", "yaw", "speed", "t_e", "meta")
+_VECTOR_INPUTS = ("uav_enu", "mic_enu", "vel_enu")
 
 
 # =========================================================================== evaluation
@@ -986,6 +1072,7 @@ class Evaluation:
                              "lat": round(float(lat[i]), 9), "lon": round(float(lon[i]), 9),
                              "n_usable": self.n_usable_per_mic[mid]} for i, mid in enumerate(plan.mic_ids)],
             "altitudes_m": [round(float(a), 3) for a in d.altitudes],
+            "variables": [round(float(x), 4) for x in d.vector(plan.base)],
             "objectives": {"paper": self.max_abs_corr, "d-optimal": self.log_det_fisher},
             "max_abs_corr_all_pairs": self.max_abs_corr_all,
             "correlation": {"variables": list(CORRELATION_VARIABLES), "matrix": self.correlation.tolist()},
@@ -1016,11 +1103,11 @@ def evaluate(model: DesignModel, design: Design | None = None) -> Evaluation:
     design = plan.base if design is None else design
     s = model.samples(design)
     sel = s["usable"]
-    cols = _corr_columns(s)
-    corr = correlation_matrix(cols) if sel.sum() >= 3 else np.ones((4, 4))
-    mac = max_abs_correlation(cols, skip=PATTERN_PAIRS) if sel.sum() >= 3 else 1.0
-    mac_all = max_abs_correlation(cols) if sel.sum() >= 3 else 1.0
-    m = _fisher(model, s)
+    corr = _corr_batch(model, {k: v[None] if v.ndim == 1 and k not in ("mic", "sample") else v
+                               for k, v in s.items()})[0]
+    mac = _max_abs(corr, _pair_mask(PATTERN_PAIRS)) if sel.sum() >= 3 else 1.0
+    mac_all = _max_abs(corr, _pair_mask(())) if sel.sum() >= 3 else 1.0
+    m = _fisher(model, s, design)
     ld = _logdet(m)
     names = plan.card.model.params
     try:
@@ -1033,42 +1120,112 @@ def evaluate(model: DesignModel, design: Design | None = None) -> Evaluation:
     v = design.vector(plan.base)
     feasible = bool(np.all(v >= lo - 1e-9) and np.all(v <= hi + 1e-9) and not _in_exclusion(plan, design).any())
     per_mic = {mid: int(np.sum(sel & (s["mic"] == i))) for i, mid in enumerate(plan.mic_ids)}
-    return Evaluation(design=design, max_abs_corr=float(mac), max_abs_corr_all=float(mac_all), log_det_fisher=ld, correlation=corr, expected_std=std,
-                      n_usable=int(sel.sum()), n_usable_per_mic=per_mic, feasible=feasible)
+    return Evaluation(design=design, max_abs_corr=float(mac), max_abs_corr_all=float(mac_all), log_det_fisher=ld,
+                      correlation=corr, expected_std=std, n_usable=int(sel.sum()), n_usable_per_mic=per_mic,
+                      feasible=feasible)
 
 
-def _corr_columns(s: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    sel = s["usable"]
-    return {"power": s["power_w"][sel], "polar": np.degrees(s["theta"][sel]), "distance": s["d"][sel],
-            "bank": np.degrees(s["bank"][sel])}
+def _pair_mask(skip: Sequence[tuple[str, str]]) -> np.ndarray:
+    names = list(CORRELATION_VARIABLES)
+    use = ~np.eye(len(names), dtype=bool)
+    for a, b in skip:
+        i, j = names.index(a), names.index(b)
+        use[i, j] = use[j, i] = False
+    return use
 
 
-def _fisher(model: DesignModel, s: Mapping[str, np.ndarray]) -> np.ndarray:
-    """Fisher information of a fit of the whole campaign (block rate), from samples at the evaluation rate."""
+def _max_abs(corr: np.ndarray, use: np.ndarray) -> float:
+    return float(np.max(np.abs(corr[use])))
+
+
+def _corr_batch(model: DesignModel, s: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Correlation matrices (S, 4, 4) of :data:`CORRELATION_VARIABLES` over each design's usable samples.
+
+    The same numbers as :func:`correlation_matrix` of the usable rows (Eq. 12-14, 1/N moments;
+    a column that does not vary correlates 1 with everything); fewer than 3 usable rows give ones.
+    """
+    j = s["sample"]
+    w = s["usable"].astype(float)  # (S, N)
+    n_s = w.shape[0]
+    x = np.stack([s["power_w"], np.degrees(s["theta"]), s["d"],
+                  np.broadcast_to(np.degrees(model.roll[j]), w.shape)], axis=1)  # (S, 4, N)
+    nw = w.sum(axis=1)
+    safe = np.maximum(nw, 1.0)
+    mean = np.einsum("san,sn->sa", x, w) / safe[:, None]
+    xc = (x - mean[:, :, None]) * w[:, None, :]
+    cov = np.matmul(xc, xc.transpose(0, 2, 1)) / safe[:, None, None]
+    sd = np.sqrt(np.maximum(np.einsum("saa->sa", cov), 0.0))
+    scale = np.maximum(1.0, np.max(np.abs(x * w[:, None, :]), axis=2))
+    const = sd <= 1e-12 * scale
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / (sd[:, :, None] * sd[:, None, :])
+    corr = np.where(const[:, :, None] | const[:, None, :], 1.0, corr)
+    idx = np.arange(4)
+    corr[:, idx, idx] = 1.0
+    corr = np.clip(corr, -1.0, 1.0)
+    corr[nw < 3] = 1.0
+    return corr if n_s else np.ones((0, 4, 4))
+
+
+def _fisher(model: DesignModel, s: Mapping[str, np.ndarray], design: Design) -> np.ndarray:
+    """Fisher information of a fit of the whole campaign (block rate) for one design's samples."""
     plan = model.plan
-    sel = s["usable"]
     k = plan.card.model.n_params
+    sel = s["usable"]
     if not sel.any():
         return np.zeros((k, k))
-    x = model.model_inputs(s)
+    x = model.model_inputs(s, design=design)
+    x = {key: (v[sel] if isinstance(v, np.ndarray) and len(v) == len(sel) else v) for key, v in x.items()}
     m = fisher_information(plan.card, x, plan.noise_std_db[s["mic"][sel]])
-    blocks_per_sample = 1.0 / (model.rate_hz * plan.doc["evaluation"]["block_s"])
-    return m * blocks_per_sample
+    return m * _blocks_per_sample(model)
 
 
-def _objective_fn(model: DesignModel, name: str) -> Callable[[Design], float]:
-    if name == "paper":
-        def f(design: Design) -> float:
-            s = model.samples(design)
-            return max_abs_correlation(_corr_columns(s), skip=PATTERN_PAIRS) if s["usable"].sum() >= 3 else 1.0
-    elif name == "d-optimal":
-        def f(design: Design) -> float:
-            ld = _logdet(_fisher(model, model.samples(design)))
-            # a singular design is worse than every regular one: a large finite value keeps the
-            # population statistics of the evolution finite
-            return -ld if np.isfinite(ld) else 1e6
-    else:
+def _blocks_per_sample(model: DesignModel) -> float:
+    return 1.0 / (model.rate_hz * model.plan.doc["evaluation"]["block_s"])
+
+
+def _logdet_batch(m: np.ndarray) -> np.ndarray:
+    d = np.sqrt(np.clip(np.einsum("spp->sp", m), 1e-300, None))
+    sign, ld = np.linalg.slogdet(m / (d[:, :, None] * d[:, None, :]))
+    out = ld + 2.0 * np.sum(np.log(d), axis=1)
+    return np.where((sign > 0) & np.isfinite(out), out, -np.inf)
+
+
+def _fisher_logdet_batch(model: DesignModel, s: Mapping[str, np.ndarray], designs: Sequence[Design]) -> np.ndarray:
+    """``log det`` of the Fisher information of ``S`` designs (one row of ``s`` each)."""
+    plan = model.plan
+    card = plan.card
+    if any(k in _VECTOR_INPUTS for k in card.model.inputs):  # kernels of vector inputs take one design at a time
+        out = []
+        for i, d in enumerate(designs):
+            one = {k: (v[i] if v.ndim == 2 else v) for k, v in s.items()}
+            out.append(_logdet(_fisher(model, one, d)))
+        return np.array(out)
+    x = model.model_inputs(s)
+    _, jac = card.model.level_and_jacobian(card.p, x, d_ref=card.reference_distance_m)
+    jac = np.broadcast_to(jac, s["d"].shape + (card.model.n_params,))
+    w = s["usable"] / plan.noise_std_db[s["mic"]][None, :] ** 2
+    m = np.matmul(jac.transpose(0, 2, 1) * w[:, None, :], jac) * _blocks_per_sample(model)
+    return _logdet_batch(m)
+
+
+def _objective_batch(model: DesignModel, name: str) -> Callable[[Sequence[Design]], np.ndarray]:
+    """The minimized value for many designs at once: ``max |corr|`` (paper) or ``-log det`` (d-optimal)."""
+    if name not in OBJECTIVES:
         raise InputError(f"objective must be one of {', '.join(OBJECTIVES)}, got {name!r}", field="objective")
+    use = _pair_mask(PATTERN_PAIRS)
+
+    def f(designs: Sequence[Design]) -> np.ndarray:
+        s = model.samples_batch(np.array([d.mic_e for d in designs]), np.array([d.mic_n for d in designs]),
+                                np.array([d.altitudes for d in designs]))
+        if name == "paper":
+            corr = _corr_batch(model, s)
+            return np.max(np.abs(corr[:, use]), axis=1)
+        ld = _fisher_logdet_batch(model, s, designs)
+        # a singular design is worse than every regular one; a large finite value keeps the
+        # population statistics of the evolution finite
+        return np.where(np.isfinite(ld), -ld, 1e6)
+
     return f
 
 
@@ -1166,7 +1323,7 @@ def optimize(model: DesignModel, objective: str = "paper", *, x0: Design | None 
     from scipy.optimize import NonlinearConstraint, differential_evolution
 
     plan = model.plan
-    f_design = _objective_fn(model, objective)
+    f_batch = _objective_batch(model, objective)
     opt = plan.doc["optimizer"]
     maxiter = int(opt["maxiter"] if maxiter is None else maxiter)
     popsize = int(opt["popsize"] if popsize is None else popsize)
@@ -1174,7 +1331,6 @@ def optimize(model: DesignModel, objective: str = "paper", *, x0: Design | None 
     tol = float(opt["tol"] if tol is None else tol)
     lo, hi = plan.bounds()
     free = hi > lo
-    base_v = plan.base.vector(plan.base)
     start = (plan.base if x0 is None else x0).vector(plan.base)
     start = np.clip(start, lo, hi)
     fixed_v = start.copy()
@@ -1183,6 +1339,15 @@ def optimize(model: DesignModel, objective: str = "paper", *, x0: Design | None 
         v = fixed_v.copy()
         v[free] = x
         return Design.from_vector(v, plan.base)
+
+    def designs_of(xs: np.ndarray) -> list[Design]:
+        xs = np.asarray(xs, dtype=float)
+        return [design_of(xs)] if xs.ndim == 1 else [design_of(xs[:, i]) for i in range(xs.shape[1])]
+
+    def energy(xs: np.ndarray) -> Any:
+        # vectorized: xs has shape (n_free, S); the polish step sends one vector (n_free,)
+        v = f_batch(designs_of(xs))
+        return float(v[0]) if np.ndim(xs) == 1 else v
 
     base_eval = evaluate(model)
     base_value = base_eval.objective(objective)
@@ -1220,12 +1385,12 @@ def optimize(model: DesignModel, objective: str = "paper", *, x0: Design | None 
             near_a = np.array(near)
 
             def signed_distance(x: np.ndarray) -> np.ndarray:
-                d = design_of(x)
-                e, n = d.mic_e[near_a], d.mic_n[near_a]
-                pts = shapely.points(e, n)
-                dist = shapely.distance(boundary, pts)
-                inside = shapely.contains_xy(union, e, n)
-                return np.where(inside, -dist, dist)
+                ds = designs_of(x)
+                e = np.array([d.mic_e[near_a] for d in ds]).T  # (n_near, S)
+                n = np.array([d.mic_n[near_a] for d in ds]).T
+                dist = shapely.distance(boundary, shapely.points(e, n))
+                val = np.where(shapely.contains_xy(union, e, n), -dist, dist)
+                return val[:, 0] if np.ndim(x) == 1 else val
 
             constraints = NonlinearConstraint(signed_distance, 0.0, np.inf)
 
@@ -1245,10 +1410,10 @@ def optimize(model: DesignModel, objective: str = "paper", *, x0: Design | None 
     else:  # scipy < 1.15
         kw["seed"] = seed
     with np.errstate(all="ignore"):
-        res = differential_evolution(lambda x: f_design(design_of(x)), list(zip(lo[free], hi[free], strict=True)),
+        res = differential_evolution(energy, list(zip(lo[free], hi[free], strict=True)),
                                      maxiter=maxiter, popsize=popsize, tol=tol, polish=bool(opt["polish"]),
                                      callback=callback, x0=start[free], constraints=constraints, workers=1,
-                                     updating="immediate", init="latinhypercube", **kw)
+                                     updating="deferred", vectorized=True, init="latinhypercube", **kw)
     if progress is not None:
         progress(1.0)
     design = design_of(np.asarray(res.x, dtype=float))
