@@ -522,6 +522,8 @@ def evaluate_grid(
     kernel: Callable[..., tuple[np.ndarray, np.ndarray | None]] | None = None,
     progress: Callable[[float], Any] | None = None,
     cancel: Callable[[], bool] | None = None,
+    engine: str = "numpy",
+    floor_db: float | None = None,
 ) -> MapResult:
     """Noise metrics of a trajectory on a grid of receivers (see the module docstring).
 
@@ -575,11 +577,28 @@ def evaluate_grid(
         Called with the fraction done (0-1) after every block.
     cancel : callable, optional
         Polled between blocks; returning true raises :class:`~gisnoise.errors.Cancelled`.
+    engine : {"numpy", "fast"}
+        ``"fast"``: the numba kernel of :mod:`gisnoise._fastkernel` (same bands within
+        0.01 dB; ansatzes ``paper`` and ``paper-offset``; no uncertainty).
+    floor_db : float, optional
+        With ``engine="fast"``: audibility floor, dB(A); cells certainly below it at every
+        instant are skipped (NaN).
 
     Returns
     -------
     MapResult
     """
+    if engine != "numpy":
+        from ._fastkernel import evaluate_grid_fast
+
+        return evaluate_grid_fast(
+            traj, cards, grid, engine=engine, metrics=metrics, receiver_height=receiver_height, dem=dem,
+            ground_h=ground_h, dem_offset_m=dem_offset_m, period_s=period_s, threshold_db=threshold_db,
+            snapshot_t=snapshot_t, background=background, substeps=substeps, uncertainty=uncertainty,
+            chunk_cells=chunk_cells, min_distance_m=min_distance_m, kernel=kernel, progress=progress,
+            cancel=cancel, floor_db=floor_db)
+    if floor_db is not None:
+        raise InputError("floor_db: the audibility floor is an option of engine='fast'", field="floor_db")
     if not isinstance(traj, Trajectory):
         raise TrajectoryError(f"trajectory must be a Trajectory, got {type(traj).__name__}", field="trajectory")
     if not isinstance(grid, GridSpec):
