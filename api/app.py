@@ -82,6 +82,8 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
                     "when the service has keys.",
         lifespan=lifespan,
         responses=ERROR_RESPONSES,
+        docs_url=None,  # served below from the vendored swagger-ui: no network needed
+        redoc_url=None,
     )
     settings.data_dir.mkdir(parents=True, exist_ok=True)
     jobs = JobStore(settings.db_path, settings.jobs_dir)

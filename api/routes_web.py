@@ -25,6 +25,17 @@ def index() -> FileResponse:
     return FileResponse(Path(__file__).resolve().parent / "static" / "index.html", media_type=MediaType.html.value)
 
 
+@router.get("/docs", response_class=HTMLResponse, include_in_schema=False)
+def docs() -> HTMLResponse:
+    """The OpenAPI documentation (swagger-ui served by the service itself)."""
+    from fastapi.openapi.docs import get_swagger_ui_html
+
+    return get_swagger_ui_html(openapi_url="/openapi.json", title="gisnoise API",
+                               swagger_js_url="/static/vendor/swagger-ui/swagger-ui-bundle.js",
+                               swagger_css_url="/static/vendor/swagger-ui/swagger-ui.css",
+                               swagger_favicon_url="/static/vendor/swagger-ui/favicon-32x32.png")
+
+
 @router.get("/health", response_model=Health, tags=["service"], summary="Liveness and queue length")
 def health(state: StateDep) -> Health:
     return Health(status="ok", version=__version__, queued=state.jobs.count(status="queued"),

@@ -118,3 +118,16 @@ def test_keys_from_the_environment(monkeypatch, tmp_path):
     monkeypatch.setenv("GISNOISE_WORKERS", "3")
     s = Settings()
     assert s.api_keys == ["k1", "k2"] and s.workers == 3 and s.data_dir == tmp_path / "d"
+
+
+def test_docs_and_page_are_served_without_any_network(client):
+    docs = client.get("/docs")
+    assert docs.status_code == 200 and "/static/vendor/swagger-ui/swagger-ui-bundle.js" in docs.text
+    page = client.get("/")
+    assert page.status_code == 200 and "/static/vendor/leaflet/leaflet.js" in page.text
+    for html in (docs.text, page.text):
+        assert "https://" not in html
+    for asset in ("/static/vendor/swagger-ui/swagger-ui-bundle.js", "/static/vendor/leaflet/leaflet.js",
+                  "/static/app.js", "/static/style.css"):
+        assert client.get(asset).status_code == 200, asset
+    assert client.get("/openapi.json").json()["info"]["title"] == "gisnoise"
