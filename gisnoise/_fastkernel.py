@@ -21,15 +21,16 @@ How the kernel is fast (all in float32, where the level keeps about 1e-5 dB):
   most :data:`SEGMENT_M` metres.  Positions (local ENU) are exact (pyproj) at the
   segment's ends and middle and quadratic in the column in between (the residual,
   from the third derivative of the projection and the Earth's curvature, is below
-  1e-6 m for 1 km segments 10 km from the frame's origin); the body vector of cell ``q``
-  of a segment is ``A + q (B + q D)`` with ``A, B, D`` rotated once per instant (plus
-  ``dh (N + q T)`` for heights from a DEM: ENU is exactly linear in the ellipsoidal
-  height along the normal).
+  1e-7 m for 512 m segments 10 km from the frame's origin); the body vector of the cell
+  ``u`` columns from the segment's middle is ``A + u (B + u D)`` with ``A, B, D``
+  rotated once per instant (plus ``dh (N + u T)`` for heights from a DEM: ENU is exactly
+  linear in the ellipsoidal height along the normal).  In float32 the body vector
+  carries about 6e-8 times the segment length (1.5e-5 m): 0.01 dB holds down to a few
+  centimetres from the UAV.
 * **Cells beyond audibility are skipped, provably.**  With ``floor_db``, a segment is
   skipped when, at every instant, its cells' distance to the UAV is beyond the radius
   at which an upper bound of the card's level over *all* emission angles
-  (``max over the corners of g (1 +- |p2| pi)(1 +- |p4|)`` with spreading at the
-  distance) drops below the floor.  Its cells get NaN (LAmax certainly below
+  (:func:`directivity_range`, with spreading at the distance) drops below the floor.  Its cells get NaN (LAmax certainly below
   ``floor_db``); every other cell is computed over all instants, exactly.
 
 Accumulation: the maximum and the trapezoid energy ``sum w_i 10^(L_i/10)`` per cell
@@ -74,6 +75,7 @@ __all__ = [
     "FlightInstants",
     "Receivers",
     "card_coefficients",
+    "directivity_range",
     "evaluate_grid_fast",
     "level_from_body",
     "prepare_flight",
@@ -87,7 +89,7 @@ log = logging.getLogger(__name__)
 FAST_ANSATZES = ("paper", "paper-offset")
 """Ansatzes the kernel implements (:mod:`gisnoise.model` registry names)."""
 
-SEGMENT_M = 1024.0
+SEGMENT_M = 512.0
 """Longest run of receivers (m) along a grid row between exact positions (ends and middle)."""
 
 DEFAULT_CHUNK_CELLS = 1 << 17
@@ -292,6 +294,8 @@ if numba is not None:
         lo_b = np.empty(3)
         hi_b = np.empty(3)
         inv_k = 1.0 / k
+        half_k = 0.5 * k
+        half_k32 = np.float32(half_k)
         for r in range(nr):
             for s in range(ns):
                 a = (m0 + s) * k
@@ -302,23 +306,25 @@ if numba is not None:
                 m = hi - lo
                 q0 = lo - a
                 jl = lo - c0
-                # position of cell q: e0 + q e1 + q^2 e2 (+ dh (n0 + q n1))
+                # position of the cell u = q - k/2 from the middle: e0 + u e1 + u^2 e2 (+ dh (n0 + u n1));
+                # counting from the middle halves the float32 rounding of the body vector
                 for c in range(3):
                     pa = P[r, 2 * s, c]
                     pm = P[r, 2 * s + 1, c]
                     pb = P[r, 2 * s + 2, c]
-                    e0[c] = pa
-                    e1[c] = (4.0 * pm - 3.0 * pa - pb) * inv_k
+                    e0[c] = pm
+                    e1[c] = (pb - pa) * inv_k
                     e2[c] = 2.0 * (pa - 2.0 * pm + pb) * inv_k * inv_k
-                    n0[c] = U[r, 2 * s, c] if has_dem else 0.0
+                    n0[c] = 0.5 * (U[r, 2 * s, c] + U[r, 2 * s + 2, c]) if has_dem else 0.0
                     n1[c] = (U[r, 2 * s + 2, c] - U[r, 2 * s, c]) * inv_k if has_dem else 0.0
                     lo_b[c] = np.inf
                     hi_b[c] = -np.inf
                 for q in range(q0, q0 + m):
+                    u = q - half_k
                     for c in range(3):
-                        v = e0[c] + q * (e1[c] + q * e2[c])
+                        v = e0[c] + u * (e1[c] + u * e2[c])
                         if has_dem:
-                            v += dh[r, jl + q - q0] * (n0[c] + q * n1[c])
+                            v += dh[r, jl + q - q0] * (n0[c] + u * n1[c])
                         lo_b[c] = min(lo_b[c], v)
                         hi_b[c] = max(hi_b[c], v)
                 cx = 0.5 * (lo_b[0] + hi_b[0])
@@ -347,7 +353,7 @@ if numba is not None:
                     v0 = e0[0] - src[i, 0]
                     v1 = e0[1] - src[i, 1]
                     v2 = e0[2] - src[i, 2]
-                    # body frame: A + q (B + q D) (+ dh (N + q T)); q counted from the segment start
+                    # body frame: A + u (B + u D) (+ dh (N + u T)), u = q - k/2
                     ax = np.float32(C[i, 0, 0] * v0 + C[i, 0, 1] * v1 + C[i, 0, 2] * v2)
                     ay = np.float32(C[i, 1, 0] * v0 + C[i, 1, 1] * v1 + C[i, 1, 2] * v2)
                     az = np.float32(C[i, 2, 0] * v0 + C[i, 2, 1] * v1 + C[i, 2, 2] * v2)
@@ -377,7 +383,7 @@ if numba is not None:
                         ty = np.float32(C[i, 1, 0] * n1[0] + C[i, 1, 1] * n1[1] + C[i, 1, 2] * n1[2])
                         tz = np.float32(C[i, 2, 0] * n1[0] + C[i, 2, 1] * n1[1] + C[i, 2, 2] * n1[2])
                         for q in range(m):
-                            qf = np.float32(q0 + q)
+                            qf = np.float32(q0 + q) - half_k32
                             hh = dhr[q]
                             xb = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
                             yb = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
@@ -388,7 +394,7 @@ if numba is not None:
                             lcur[q] = lev
                     else:
                         for q in range(m):
-                            qf = np.float32(q0 + q)
+                            qf = np.float32(q0 + q) - half_k32
                             xb = ax + qf * (bx + qf * dx)
                             yb = ay + qf * (by + qf * dy)
                             zb = az + qf * (bz + qf * dz)
@@ -548,22 +554,45 @@ class FlightInstants:
         return int(self.t.size)
 
 
-def _audibility_radius(gain: np.ndarray, p2: np.ndarray, p4: np.ndarray, p6: np.ndarray, p7: np.ndarray,
-                       d_ref: np.ndarray, d_min: float, floor_db: float | None, background: bool) -> np.ndarray:
+def directivity_range(p2: float, p4: float, p5: float, *, n: int = 2049) -> tuple[float, float]:
+    """Bounds ``(lo, hi)`` of ``a b = (1 + p2 sin(phi - p3)(theta + pi/2))(1 + p4 sin(theta - p5))`` over all angles.
+
+    For a fixed polar angle the azimuth only moves ``a`` within ``1 -+ |p2| (theta + pi/2)``;
+    the remaining function of ``theta`` is maximised (minimised) on ``n`` points of
+    [-pi/2, pi/2] and widened by its Lipschitz constant times half the spacing, so the
+    bounds are safe, not estimates.
+
+    >>> [round(v, 3) for v in directivity_range(0.0, 0.3, 0.0)]  # 1 + 0.3 sin(theta)
+    [0.7, 1.3]
+    """
+    th = np.linspace(-np.pi / 2, np.pi / 2, n)
+    span = np.abs(p2) * (th + np.pi / 2)
+    b = 1.0 + p4 * np.sin(th - p5)
+    prods = np.stack([(1.0 + span) * b, (1.0 - span) * b])
+    lip = abs(p2) * (1.0 + abs(p4)) + (1.0 + abs(p2) * np.pi) * abs(p4)
+    slack = lip * (th[1] - th[0]) / 2.0 + 1e-12
+    return float(prods.min() - slack), float(prods.max() + slack)
+
+
+def _audibility_radius(gain: np.ndarray, p2: np.ndarray, p4: np.ndarray, p5: np.ndarray, p6: np.ndarray,
+                       p7: np.ndarray, d_ref: np.ndarray, d_min: float, floor_db: float | None,
+                       background: bool) -> np.ndarray:
     """Distance beyond which an upper bound of the level over all emission angles is below the floor, m.
 
-    Over all angles ``p2 sin(phi - p3)(theta + pi/2)`` lies in ``[-|p2| pi, |p2| pi]`` and
-    ``p4 sin(theta - p5)`` in ``[-|p4|, |p4|]``; the product ``g a b`` is bilinear in
-    ``(a, b)``, so its maximum over that box is at a corner.  Spreading decreases with
-    distance when ``p6 > 0`` (else no radius: ``inf``).
+    The bound is ``g hi`` for ``g >= 0`` and ``g lo`` for ``g < 0`` with
+    :func:`directivity_range`; spreading decreases with distance when ``p6 > 0`` (else
+    no radius: ``inf``).  Negative: below the floor even at the near-field clamp.
     """
     n = gain.size
     if floor_db is None:
         return np.full(n, np.inf)
-    a = np.stack([1.0 - np.abs(p2) * np.pi, 1.0 + np.abs(p2) * np.pi])
-    b = np.stack([1.0 - np.abs(p4), 1.0 + np.abs(p4)])
-    corners = np.stack([gain * a[i] * b[j] for i in range(2) for j in range(2)])
-    bound = corners.max(axis=0)  # dB at d_ref, over all angles
+    bound = np.empty(n)
+    keys = np.stack([p2, p4, p5], axis=-1)
+    for key in np.unique(keys, axis=0):
+        sel = np.all(keys == key, axis=-1)
+        lo, hi = directivity_range(*key)
+        g = gain[sel]
+        bound[sel] = np.where(g >= 0, g * hi, g * lo)  # dB at d_ref over all angles
     target = np.full(n, float(floor_db))
     if background:
         # 10 log10(10^(Lu/10) + 10^(p7/10)) < floor  <=>  Lu < 10 log10(10^(floor/10) - 10^(p7/10))
@@ -586,13 +615,13 @@ def _instants(t: np.ndarray, state: dict[str, np.ndarray], card_idx: np.ndarray,
     p0 = np.zeros(len(cards))
     p1 = np.zeros(len(cards))
     ref_w = np.ones(len(cards))
-    raw = np.zeros((len(cards), 4))  # p2, p4, p6, p7 for the audibility bound
+    raw = np.zeros((len(cards), 5))  # p2, p4, p5, p6, p7 for the audibility bound
     d_ref = np.full(len(cards), 40.0)
     for k in used:
         c = cards[k]
         p0[k], p1[k], coef[k] = card_coefficients(c, background=background, min_distance_m=min_distance_m)
         pp = dict(zip(c.model.params, c.p))
-        raw[k] = (pp["p2"], pp["p4"], pp["p6"], pp["p7"])
+        raw[k] = (pp["p2"], pp["p4"], pp["p5"], pp["p6"], pp["p7"])
         ref_w[k] = c.reference_power_w
         d_ref[k] = c.reference_distance_m
     ci = card_idx.astype(np.int64)
@@ -605,8 +634,7 @@ def _instants(t: np.ndarray, state: dict[str, np.ndarray], card_idx: np.ndarray,
 
     w = _trapezoid_weights(t)
     dt = np.concatenate([[0.0], np.diff(t)])
-    radius = _audibility_radius(gain, raw[ci, 0], raw[ci, 1], raw[ci, 2], raw[ci, 3], d_ref[ci], min_distance_m,
-                                floor_db, background)
+    radius = _audibility_radius(gain, *raw[ci].T, d_ref[ci], min_distance_m, floor_db, background)
     return FlightInstants(t=np.asarray(t, dtype=float), src=src, C=C, gain=gain, cidx=ci, coef=coef, w=w, dt=dt,
                           radius=radius, source=source)
 
