@@ -472,6 +472,10 @@ def resolve_plan(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[str] | N
     if model.background is None:
         raise DesignError(f"plan: field 'card': ansatz {model.name!r} has no background parameter",
                           field="card")
+    missing = [k for k in model.inputs if k not in _SCALAR_INPUTS + _VECTOR_INPUTS]
+    if missing:
+        raise DesignError(f"plan: field 'card': ansatz {model.name!r} reads {', '.join(missing)}, which a design "
+                          f"cannot predict (it knows {', '.join(_SCALAR_INPUTS + _VECTOR_INPUTS)})", field="card")
 
     # ---------------------------------------------------------------- pattern
     pat = top.get("pattern")
@@ -689,7 +693,8 @@ def snr_distance(card: _cards.ModelCard, level_db: float, *, power_w: float | No
     (uniform in solid angle: azimuth -180..180 deg, polar angle -90..0 deg) at the
     electric power ``power_w`` (default the card's reference power), and the distance
     is solved with the card's model (the one model definition), not from a formula
-    of its own.
+    of its own.  For an extended ansatz (``base+effect``) the base model is used: the
+    level of steady, straight, level flight.
 
     Parameters
     ----------
@@ -712,6 +717,12 @@ def snr_distance(card: _cards.ModelCard, level_db: float, *, power_w: float | No
     from scipy.optimize import brentq
 
     pw = card.reference_power_w if power_w is None else float(power_w)
+    if "+" in card.ansatz:  # an extension (bank angle, Doppler, ...): the base model in steady level flight
+        from .model import get_ansatz
+
+        base_model = get_ansatz(card.ansatz.split("+", 1)[0])
+        card = dataclasses.replace(card, ansatz=base_model.name, covariance=None,
+                                   parameters={k: card.parameters[k] for k in base_model.params})
     # midpoint grid: azimuth uniform, sin(polar) uniform in [-1, 0] (equal solid angle per cell)
     phi = (np.arange(n_dir) + 0.5) / n_dir * 2.0 * np.pi - np.pi
     theta = np.arcsin(-(np.arange(n_dir) + 0.5) / n_dir)
@@ -841,6 +852,8 @@ class DesignModel:
         Where the simulated flight starts (it accelerates for 8 s into the pattern's entry), m.
     duration_s : float
         Duration of the pattern (all repetitions), s.
+    speed_of_sound_m_s : float
+        Of the plan's weather (as the simulator takes it), m/s; for ansatz extensions that need it.
     """
 
     plan: Plan
@@ -861,6 +874,7 @@ class DesignModel:
     track: dict[str, np.ndarray] = field(repr=False)
     start_en: np.ndarray = field(repr=False)
     duration_s: float = 0.0
+    speed_of_sound_m_s: float = 340.0
 
     @classmethod
     def build(cls, plan: Plan, *, calibration_step_m: float = 50.0) -> DesignModel:
@@ -900,6 +914,7 @@ class DesignModel:
             out["vel"] = np.asarray(tr["vel"][i0:], dtype=float)
             out["t"] = out["t"] - out["t"][0]
             out["dt"] = np.array(1.0 / float(res.scenario.doc["output"]["sim_rate_hz"]))
+            out["c"] = np.array(res.scenario.c)
             return out
 
         sim = fly(np.full(k_reps, h0))
@@ -936,7 +951,7 @@ class DesignModel:
                    power_level_w=sim["power_w"][idx], power_per_climb=per_climb[idx], power_per_sink=per_sink[idx],
                    speed_m_s=np.hypot(vel[:, 0], vel[:, 1]), vel_en=vel[:, :2], repetition=rep,
                    track={"t": sim["t"], "e": sim["e"], "n": sim["n"], "weights": w}, start_en=start,
-                   duration_s=float(sim["t"][-1]))
+                   duration_s=float(sim["t"][-1]), speed_of_sound_m_s=float(sim["c"]))
 
     @property
     def rate_hz(self) -> float:
@@ -1006,7 +1021,9 @@ class DesignModel:
                              "p_el": s["power_w"] / card.reference_power_w, "bank": self.roll[j],
                              "roll": np.degrees(self.roll[j]), "pitch": np.degrees(s["pitch"]),
                              "yaw": np.degrees(self.yaw[j]), "speed": np.hypot(self.speed_m_s[j], s["vz"]),
-                             "t_e": self.t[j], "meta": {}}
+                             "t_e": self.t[j], "mic_agl": self.plan.mic_height_m[s["mic"]],
+                             "meta": {"speed_of_sound_m_s": self.speed_of_sound_m_s,
+                                      "weather": dict(self.plan.doc["weather"])}}
         if design is not None and s["d"].ndim == 1:
             mi = s["mic"]
             x["uav_enu"] = np.column_stack([self.e[j], self.n[j], s["u"]])
@@ -1015,7 +1032,7 @@ class DesignModel:
         return x
 
 
-_SCALAR_INPUTS = ("d", "phi", "theta", "p_el", "bank", "roll", "pitch", "yaw", "speed", "t_e", "meta")
+_SCALAR_INPUTS = ("d", "phi", "theta", "p_el", "bank", "roll", "pitch", "yaw", "speed", "t_e", "mic_agl", "meta")
 _VECTOR_INPUTS = ("uav_enu", "mic_enu", "vel_enu")
 
 

@@ -11,6 +11,7 @@ Fig. 18 grid, many seeds) is in test_design_study.py (slow).
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -28,6 +29,7 @@ from gisnoise.design import (
     DesignError,
     DesignModel,
     _corr_batch,
+    _objective_batch,
     campaign_scenario,
     correlation_matrix,
     evaluate,
@@ -113,6 +115,9 @@ def test_snr_distance_closed_form_without_directivity():
     ({"objectives": ["a-optimal"]}, "objectives"),
     ({"colour": "red"}, "colour"),
     ({"card": "no_such_card"}, "card"),
+    ({"card": {**cards.load(CARD).to_dict(), "ansatz": "paper-offset+rpm",
+               "parameters": {**cards.load(CARD).parameters, "k_rpm": 0.0, "rpm_ref": 4800.0}, "covariance": None}},
+     "card"),
 ])
 def test_bad_plans_are_refused_naming_the_field(change, fld):
     with pytest.raises(DesignError) as err:
@@ -351,3 +356,21 @@ def test_run_design_without_study_or_verification(model):
     assert res.study == [] and res.verify is None
     with pytest.raises(DesignError):
         model.plan.with_limits(altitude_range_m=(80.0, 40.0))
+
+
+@pytest.mark.parametrize("effect, extra", [("bank_angle", {"k_bank": 3.0}), ("doppler", {"q_doppler": 4.0})])
+def test_extended_ansatz_cards_are_designed_for(model, effect, extra):
+    """A card with a model extension (the paper asks for the bank angle in future models): its extra
+    parameter gets an expected standard deviation, and the batched Fisher information of the optimizer
+    equals the one of a single design."""
+    base = cards.load(CARD)
+    card = cards.from_dict({**base.to_dict(), "ansatz": f"paper-offset+{effect}",
+                            "parameters": {**base.parameters, **extra}, "covariance": None})
+    plan = resolve_plan(plan_doc(), base_dir=PLAN.parent, card=card)
+    m = dataclasses.replace(model, plan=plan)
+    ev = evaluate(m)
+    (name,) = extra
+    assert np.isfinite(ev.expected_std[name]) and ev.expected_std[name] > 0
+    other = Design(plan.base.mic_e + 80.0, plan.base.mic_n, np.array([40.0, 120.0, 180.0]))
+    batch = _objective_batch(m, "d-optimal")([plan.base, other])
+    np.testing.assert_allclose(-batch, [ev.log_det_fisher, evaluate(m, other).log_det_fisher], rtol=1e-9)
