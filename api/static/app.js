@@ -49,7 +49,7 @@ async function init() {
   $("version").textContent = "gisnoise " + app.config.version;
   $("key-label").hidden = !app.config.api_key_required;
   $("btn-sample").disabled = !app.config.sample_route;
-  app.map = L.map("map", { doubleClickZoom: false }).setView([51.0, 10.0], 6);
+  app.map = L.map("map", { doubleClickZoom: false, zoomSnap: 0.25 }).setView([51.0, 10.0], 6);
   if (app.config.tile_url) {
     L.tileLayer(app.config.tile_url, {
       maxZoom: 19, attribution: "&copy; OpenStreetMap contributors",
@@ -96,8 +96,13 @@ async function loadSample() {
   stopDrawing();
   app.drawn = [];
   app.trajectory = { format: "geojson", data: geo };
-  showRoute(L.geoJSON(geo, { pointToLayer: (f, ll) => L.circleMarker(ll, { radius: 4, color: "#0047ab" }),
-                             style: { color: "#0047ab", weight: 3 } }));
+  const layer = L.featureGroup();
+  L.geoJSON(geo, { pointToLayer: (f, ll) => L.circleMarker(ll, { radius: 4, color: "#0047ab" }),
+                   style: { color: "#0047ab", weight: 3 } }).addTo(layer);
+  const points = (geo.features || []).filter((f) => f.geometry && f.geometry.type === "Point")
+    .map((f) => [f.geometry.coordinates[1], f.geometry.coordinates[0]]);
+  if (points.length > 1) L.polyline(points, { color: "#0047ab", weight: 3 }).addTo(layer);  // waypoints in order
+  showRoute(layer);
   $("route-info").textContent = "Sample route loaded.";
 }
 

@@ -101,3 +101,19 @@ def test_a_job_shows_its_progress_then_its_contours(page):
     b.wait_for(f"{row}.dataset.status === 'succeeded'", 120)
     b.wait_for("gisnoise.contourCount > 0", 30)
     assert contour_fraction(b.screenshot()) > 0.2
+
+
+def test_load_the_sample_route_and_see_its_contours(page):
+    b = page
+    if b.evaluate("document.getElementById('btn-sample').disabled"):
+        pytest.skip("this checkout has no sample route")
+    b.evaluate("document.getElementById('btn-sample').click(); true")
+    b.wait_for("gisnoise.trajectory !== null", 20)
+    assert b.evaluate("gisnoise.trajectory.data.features.length") > 4
+    assert contour_fraction(b.screenshot()) < 0.005
+    b.evaluate("document.getElementById('resolution').value = 30; document.getElementById('btn-compute').click();"
+               "true")
+    b.wait_for("gisnoise.contourCount > 0 || document.getElementById('status').classList.contains('error')", 120)
+    assert not b.evaluate("document.getElementById('status').classList.contains('error')"), \
+        b.evaluate("document.getElementById('status').textContent")
+    assert contour_fraction(b.screenshot()) > 0.05  # an L-shaped route leaves much of its frame empty
