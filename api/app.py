@@ -21,6 +21,7 @@ from .errors import install_handlers
 from .jobs import Handler, JobStore, WorkerPool
 from .limits import BodySizeLimit
 from .models import ErrorBody
+from .responses import AsciiJSONResponse
 from .settings import Settings, get_settings
 
 __all__ = ["create_app", "ERROR_RESPONSES"]
@@ -82,6 +83,7 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
                     "when the service has keys.",
         lifespan=lifespan,
         responses=ERROR_RESPONSES,
+        default_response_class=AsciiJSONResponse,
         docs_url=None,  # served below from the vendored swagger-ui: no network needed
         redoc_url=None,
     )

@@ -13,7 +13,7 @@ from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from pydantic import BaseModel
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gisnoise.errors import (
@@ -32,6 +32,9 @@ from gisnoise.errors import (
     SchemaVersionError,
     TrajectoryError,
 )
+
+from . import models as _models
+from .responses import AsciiJSONResponse as JSONResponse
 
 __all__ = ["STATUS", "ApiError", "status_for", "error_body", "install_handlers"]
 
@@ -84,8 +87,27 @@ def error_body(message: str, field: str | None, errors: Sequence[dict[str, Any]]
     return body
 
 
+_TRAJECTORY_TAGS = {"csv", "columns", "rows", "geojson", "waypoints"}
+_MODEL_NAMES = {n for n, v in vars(_models).items() if isinstance(v, type) and issubclass(v, BaseModel)}
+
+
+def _is_tag(part: str, previous: str | None) -> bool:
+    """A union member's name that pydantic puts in the location (not a field the client wrote)."""
+    if part == "[key]" or part.startswith(("constrained-", "function-")) or part in ("str", "float", "int", "bool"):
+        return True
+    if part in _MODEL_NAMES:  # a model class name (CardDocument, ...)
+        return True
+    return previous == "trajectory" and part in _TRAJECTORY_TAGS
+
+
 def _loc_field(loc: Sequence[Any]) -> str:
-    parts = [str(p) for p in loc if p != "[key]"]
+    parts: list[str] = []
+    previous = None
+    for p in loc:
+        s = str(p)
+        if not _is_tag(s, previous):
+            parts.append(s)
+        previous = s
     if parts and parts[0] in ("body", "query", "path", "header", "cookie"):
         where, rest = parts[0], parts[1:]
         # a tagged union adds the tag name to the location; users know the field, not the tag

@@ -12,7 +12,6 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, Request, UploadFile
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse
 
 from gisnoise import cards as gcards
 
@@ -20,6 +19,7 @@ from .deps import WRITE, State, StateDep
 from .errors import ApiError
 from .jobs import JobContext
 from .models import JobInfo, PhaseName
+from .responses import AsciiJSONResponse as JSONResponse
 from .routes_jobs import job_info
 
 __all__ = ["router", "unpack_campaign", "run_fit_job", "run_diagnose_job"]

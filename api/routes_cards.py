@@ -5,13 +5,13 @@ from __future__ import annotations
 from typing import Annotated
 
 from fastapi import APIRouter, Body, Query, Request, Response
-from fastapi.responses import JSONResponse
 
 from gisnoise import cards as gcards
 
 from .cardstore import StoredCard
 from .deps import WRITE, State, StateDep
 from .models import CardDocument, CardInfo, CardList, CardVersions, MediaType
+from .responses import AsciiJSONResponse as JSONResponse
 
 router = APIRouter(prefix="/cards", tags=["cards"])
 

@@ -21,7 +21,6 @@ from typing import Any
 
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse
 
 from gisnoise import cards as gcards
 from gisnoise.cards import ModelCard
@@ -43,6 +42,7 @@ from .models import (
     OutputFormat,
     RowsTrajectory,
 )
+from .responses import AsciiJSONResponse as JSONResponse
 from .routes_jobs import job_info
 
 __all__ = ["router", "run_contour_job", "build_trajectory", "resolve_cards", "make_map_files"]

@@ -126,3 +126,24 @@ def test_uploads_need_a_key(make_client):
 def test_unknown_paths_and_methods_name_what_is_wrong(client):
     assert_names_field(client.get("/nowhere"), 404, "path")
     assert_names_field(client.put("/cards"), 405, "method")
+
+
+def test_strings_with_lone_surrogates_are_echoed_not_500(client):
+    # JSON may carry \ud800-style escapes that no UTF-8 encoder accepts; responses escape them
+    doc = json.loads((CARDS / "demo_sink.json").read_text())
+    text = json.dumps(dict(doc, id="odd", vehicle="van \ud800 x")).replace("\\\\ud800", "\\ud800")
+    r = client.post("/cards", content=text.encode("ascii"), headers={"content-type": "application/json"})
+    assert r.status_code == 201 and r.json()["vehicle"] == "van \ud800 x"
+    bad = '{"cards": ["\\udb5f"], "trajectory": {"format": "csv", "text": "t\\uda18"}}'
+    r = client.post("/contours", content=bad.encode("ascii"), headers={"content-type": "application/json"})
+    body = assert_names_field(r, 422)
+    assert {e["field"] for e in body["errors"]} == {"cards.0", "trajectory.text"}  # no union member names
+
+
+def test_validation_fields_leave_out_union_tags(client):
+    r = client.post("/contours", json={"trajectory": {"format": "csv"}, "cards": ["demo-sink"]})
+    assert_names_field(r, 422, "trajectory.text")
+    r = client.post("/contours", json={"trajectory": {"format": "columns", "columns": {"Lat": [None]}},
+                                       "cards": ["demo-sink"]})
+    body = assert_names_field(r, 422)
+    assert body["field"].startswith("trajectory.columns.Lat.0"), body
