@@ -49,7 +49,7 @@ import math
 import os
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -702,6 +702,9 @@ class Receivers:
         Cells per segment (exact positions every ``seg`` columns).
     ground : dict
         How the ground was chosen (for the result's metadata).
+    dh_origin : tuple of int
+        Grid row and column of ``dh[0, 0]`` and ``valid[0, 0]`` (a window's copy, see
+        :meth:`for_window`).
     """
 
     grid: GridSpec
@@ -711,6 +714,18 @@ class Receivers:
     valid: np.ndarray | None = None
     seg: int = 1
     ground: dict | None = None
+    dh_origin: tuple[int, int] = (0, 0)
+
+    def for_window(self, r0: int, r1: int, c0: int, c1: int) -> Receivers:
+        """The same receivers holding only the DEM heights of rows ``r0:r1``, columns ``c0:c1``
+        (what a worker needs for one tile)."""
+        if self.dh is None:
+            return self
+        o_r, o_c = self.dh_origin
+        sl = (slice(r0 - o_r, r1 - o_r), slice(c0 - o_c, c1 - o_c))
+        return replace(self, dh=np.ascontiguousarray(self.dh[sl]),
+                       valid=None if self.valid is None else np.ascontiguousarray(self.valid[sl]),
+                       dh_origin=(r0, c0))
 
     @property
     def frame(self) -> LocalFrame:
@@ -824,7 +839,11 @@ def run_window(fl: FlightInstants, rc: Receivers, r0: int, r1: int, c0: int, c1:
     P, U = rc.lattice(r0, r1, m0, m1)
     nr, ncw = r1 - r0, c1 - c0
     if rc.dh is not None:
-        dh = np.ascontiguousarray(rc.dh[r0:r1, c0:c1])
+        o_r, o_c = rc.dh_origin
+        if r0 < o_r or c0 < o_c or r1 - o_r > rc.dh.shape[0] or c1 - o_c > rc.dh.shape[1]:
+            raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the receivers' DEM heights",
+                             field="window")
+        dh = np.ascontiguousarray(rc.dh[r0 - o_r:r1 - o_r, c0 - o_c:c1 - o_c])
     else:
         dh = np.zeros((1, 1), np.float32)
     thr = np.asarray(list(thresholds), dtype=np.float64)

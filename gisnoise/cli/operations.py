@@ -1,0 +1,69 @@
+"""``gisnoise operations``: a day of flights -> Lden, LAeq per period, N-above, time above."""
+
+from __future__ import annotations
+
+import click
+
+from .options import out_dir_option, progress
+
+
+@click.command("operations")
+@click.argument("schedule", type=click.Path(dir_okay=False))
+@out_dir_option
+@click.option("--scheduler", "scheduler", default=None, metavar="ADDRESS",
+              help="Run on the Dask scheduler at ADDRESS (e.g. tcp://10.0.0.5:8786) "
+                   "[default: $GISNOISE_DASK_SCHEDULER, else this machine].")
+@click.option("--workers", "workers", type=click.IntRange(min=1), default=None,
+              help="Start a local Dask cluster of N worker processes for the run "
+                   "[default: no cluster; one process, tiles on threads].")
+@click.option("--threads", "threads", type=click.IntRange(min=1), default=None,
+              help="Threads of the one-process run [default: $GISNOISE_THREADS, else the CPUs].")
+@click.option("--tile-cells", "tile_cells", type=click.IntRange(min=1), default=1 << 18, show_default=True,
+              help="Cells per tile: the unit of work and of memory per task.")
+@click.option("--memory-limit", "memory_limit", default=None,
+              help="Memory per worker of a local cluster, e.g. 2GiB [default: Dask's].")
+@click.option("--levels", "levels", default=None,
+              help="Contour levels of Lden and Lnight, dB(A), comma-separated [default: the schedule's].")
+@click.pass_context
+def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, workers: int | None,
+            threads: int | None, tile_cells: int, memory_limit: str | None, levels: str | None) -> None:
+    """Noise of a day of operations: DIR/operations.tif, DIR/contours.geojson, DIR/summary.json.
+
+    SCHEDULE is a JSON file (schema gisnoise/operations/1): model cards, the receiver grid
+    (or resolution and margin around the flights), ground, thresholds and the flights, each
+    a trajectory file with counts per period {"day", "evening", "night"} or departure
+    clock times.  Periods and Lden follow EU Directive 2002/49/EC (day 07-19, evening
+    19-23 +5 dB, night 23-07 +10 dB).  Bands: Lden, Lday, Levening, Lnight, LAmax, and per
+    threshold L: NA<L>_<period>, NA<L> (flights with LAmax above L) and TA<L>_<period>,
+    TA<L> (time above L, s).
+
+    \b
+    Examples:
+      gisnoise operations day.json --out ops/                   this machine, threads
+      gisnoise operations day.json --out ops/ --workers 2       local Dask cluster
+      gisnoise operations day.json --out ops/ --scheduler tcp://sched:8786
+    """
+    import numpy as np
+
+    from ..contours import parse_levels
+    from ..operations import evaluate_operations, load_schedule, write_operations
+
+    sched = load_schedule(schedule)
+    lv = None if levels is None else parse_levels(levels, field="levels")
+    with progress(ctx, "operations", 1.0) as update:
+        res = evaluate_operations(sched, scheduler=scheduler, workers=workers, threads=threads,
+                                  tile_cells=tile_cells, memory_limit=memory_limit, progress=update)
+    paths = write_operations(res, out, lv)
+    g = res.grid
+    ex = res.metadata["execution"]
+    how = (f"Dask ({ex['workers']} workers, {ex['tasks']} tasks)" if ex["executor"] == "dask"
+           else f"{ex['threads']} threads")
+    click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m; {len(res.metadata['flights'])} "
+               f"flights; {res.metadata['tiles']} tiles on {how}")
+    for name in res.bands:
+        a = res.bands[name]
+        if np.isfinite(a).any():
+            click.echo(f"{name}: max {np.nanmax(a):.1f} {res.units.get(name, '')}")
+    for key in ("levels", "contours", "summary"):
+        if key in paths:
+            click.echo(f"wrote {paths[key]}")
