@@ -9,6 +9,7 @@ later change of the card store does not change a queued job's result.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import io
 import json
@@ -83,7 +84,12 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
     """The trajectory of a request (csv text, columns, rows, GeoJSON or waypoints)."""
     with _prefixed("trajectory"):
         if isinstance(spec, CsvTrajectory):
-            traj = read_flight_csv(io.StringIO(spec.text), source="trajectory")
+            # universal newlines, as reading the same file from disk (the CLI) would give
+            text = spec.text.replace("\r\n", "\n").replace("\r", "\n")
+            try:
+                traj = read_flight_csv(io.StringIO(text), source="trajectory")
+            except csv.Error as exc:
+                raise TrajectoryError(f"trajectory: not a readable CSV: {exc}", field="text") from None
         elif isinstance(spec, ColumnsTrajectory):
             cols = spec.columns
             lengths = {k: len(v) for k, v in cols.items()}

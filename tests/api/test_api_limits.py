@@ -147,3 +147,15 @@ def test_validation_fields_leave_out_union_tags(client):
                                        "cards": ["demo-sink"]})
     body = assert_names_field(r, 422)
     assert body["field"].startswith("trajectory.columns.Lat.0"), body
+
+
+def test_csv_text_with_old_mac_newlines_reads_like_a_file(client):
+    from test_api_contours import _request, flyover_csv
+
+    text = flyover_csv(length_m=100.0, dt=1.0)
+    a = client.post("/contours", json=_request(trajectory={"format": "csv", "text": text}, output="geotiff"))
+    b = client.post("/contours", json=_request(trajectory={"format": "csv", "text": text.replace("\n", "\r")},
+                                               output="geotiff"))
+    assert a.status_code == b.status_code == 200 and a.content == b.content
+    r = client.post("/contours", json=_request(trajectory={"format": "csv", "text": 't,"lat\n'}))
+    assert_names_field(r, 422)

@@ -53,7 +53,7 @@ def test_gisnoise_serve_answers_and_stops_cleanly(tmp_path):
 
 def test_kill_during_a_running_job_then_restart_gives_the_uninterrupted_result(tmp_path):
     data = tmp_path / "data"
-    req = _heavy_request(3.5)  # a few seconds of work
+    req = _heavy_request(5.0)  # a few seconds of work
     srv = Server(data)
     try:
         r = httpx.post(srv.url + "/jobs/contours", json=req, timeout=30)
