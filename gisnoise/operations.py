@@ -427,7 +427,7 @@ def tile_windows(shape: tuple[int, int], seg: int, tile_cells: int = DEFAULT_TIL
     H, W = shape
     tile_cells = max(1, int(tile_cells))
     side = max(1, int(math.sqrt(tile_cells)))
-    cols = min(W, max(seg, (side // seg) * seg)) if seg < W else W
+    cols = min(W, seg * max(1, round(side / seg)))
     rows = max(1, min(H, tile_cells // max(cols, 1)))
     out = []
     for r0 in range(0, H, rows):

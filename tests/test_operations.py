@@ -1,0 +1,206 @@
+"""A day of operations against hand-computed period levels, Lden, N-above and time above."""
+
+import json
+
+import numpy as np
+import pytest
+from affine import Affine
+from click.testing import CliRunner
+from hypothesis import given
+from hypothesis import strategies as st
+
+pytest.importorskip("numba")
+
+from gisnoise.cards import ModelCard, save  # noqa: E402
+from gisnoise.errors import InputError  # noqa: E402
+from gisnoise.frames import LocalFrame  # noqa: E402
+from gisnoise.grid import GridSpec  # noqa: E402
+from gisnoise.operations import (  # noqa: E402
+    Flight,
+    Schedule,
+    evaluate_operations,
+    lden,
+    load_schedule,
+    period_of,
+    schedule_from_dict,
+    tile_windows,
+)
+from gisnoise.trajectory import Trajectory  # noqa: E402
+
+LAT0, LON0 = 52.27, 10.52
+TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+FRAME = LocalFrame(LAT0, LON0, 0.0)
+G0 = 70.0  # dB at 40 m
+HOUR = 3600.0
+
+
+def omni(phase="hover"):
+    p = dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0)
+    return ModelCard(id=f"omni-{phase}", vehicle="test", phase=phase, ansatz="paper-offset", parameters=p,
+                     reference_power_w=3000.0)
+
+
+def hover(e, n, up, seconds, source):
+    t = np.array([0.0, seconds])
+    lat, lon, h = FRAME.to_wgs84(np.full(2, e), np.full(2, n), np.full(2, up))
+    return Trajectory(t=t, lat=lat, lon=lon, h=h, roll=np.zeros(2), pitch=np.zeros(2), yaw=np.zeros(2),
+                      power_w=np.full(2, 3000.0), phase=np.full(2, "hover"), source=source)
+
+
+def grid():
+    # 50 m cells centred on x, y = 0 (tmerc: x, y = local east, north within millimetres)
+    return GridSpec(TMERC, Affine(50.0, 0.0, -425.0, 0.0, -50.0, 425.0), 17, 17)
+
+
+def cell(g, x, y):
+    return int(np.argmin(np.abs(g.ys - y))), int(np.argmin(np.abs(g.xs - x)))
+
+
+def level(x, y, e, n, up):
+    return G0 - 20 * np.log10(np.sqrt((x - e) ** 2 + (y - n) ** 2 + (up - 1.5) ** 2) / 40.0)
+
+
+A = dict(e=0.0, n=0.0, up=31.5, seconds=60.0, counts={"day": 10, "evening": 2, "night": 1})
+B = dict(e=300.0, n=-100.0, up=51.5, seconds=120.0, counts={"day": 5, "night": 3})
+
+
+@pytest.fixture(scope="module")
+def day():
+    flights = tuple(Flight(name, hover(f["e"], f["n"], f["up"], f["seconds"], name), f["counts"])
+                    for name, f in (("A", A), ("B", B)))
+    sched = Schedule(flights=flights, cards=[omni()], grid=grid(), ground_h_m=0.0, thresholds_db=(60.0, 70.0))
+    return sched, evaluate_operations(sched, threads=1)
+
+
+def test_lden_formula_of_the_directive():
+    # the penalties make 60 / 55 / 50 dB in day / evening / night all count as 60 dB
+    assert float(lden(60.0, 55.0, 50.0)) == pytest.approx(60.0, abs=1e-12)
+    expected = 10 * np.log10((12 * 10 ** 6.5 + 4 * 10 ** 6.5 + 8 * 10 ** 6.0) / 24)
+    assert float(lden(65.0, 60.0, 50.0)) == pytest.approx(expected, abs=1e-12)
+    assert float(lden(50.0, -np.inf, -np.inf)) == pytest.approx(50.0 + 10 * np.log10(12 / 24), abs=1e-12)
+
+
+def test_periods_of_clock_times():
+    assert [period_of(t) for t in ("00:00", "06:59:59", "07:00", "18:59", "19:00", "22:59", "23:00")] == \
+        ["night", "night", "day", "day", "evening", "evening", "night"]
+    for bad in ("24:00", "7", "07:60", "noon"):
+        with pytest.raises(InputError):
+            period_of(bad)
+
+
+@pytest.mark.parametrize("where", [(0.0, 0.0), (300.0, -100.0), (-200.0, 150.0), (400.0, 400.0)])
+def test_period_levels_lden_and_counts_equal_hand_computation(day, where):
+    sched, res = day
+    g = sched.grid
+    r, c = cell(g, *where)
+    x, y = g.xs[c], g.ys[r]
+    la = level(x, y, A["e"], A["n"], A["up"])  # constant during each hover
+    lb = level(x, y, B["e"], B["n"], B["up"])
+    ea = A["seconds"] * 10 ** (la / 10)  # single-event exposure, s
+    eb = B["seconds"] * 10 ** (lb / 10)
+    l_day = 10 * np.log10((10 * ea + 5 * eb) / (12 * HOUR))
+    l_eve = 10 * np.log10(2 * ea / (4 * HOUR))
+    l_night = 10 * np.log10((1 * ea + 3 * eb) / (8 * HOUR))
+    l_den = 10 * np.log10((12 * 10 ** (l_day / 10) + 4 * 10 ** ((l_eve + 5) / 10)
+                           + 8 * 10 ** ((l_night + 10) / 10)) / 24)
+    b = res.bands
+    for name, want in (("Lday", l_day), ("Levening", l_eve), ("Lnight", l_night), ("Lden", l_den),
+                       ("LAmax", max(la, lb))):
+        assert b[name][r, c] == pytest.approx(want, abs=0.01), name
+    for thr in (60.0, 70.0):
+        na, nb = la > thr, lb > thr
+        assert b[f"NA{thr:g}_day"][r, c] == 10 * na + 5 * nb
+        assert b[f"NA{thr:g}_evening"][r, c] == 2 * na
+        assert b[f"NA{thr:g}_night"][r, c] == 1 * na + 3 * nb
+        assert b[f"NA{thr:g}"][r, c] == 13 * na + 8 * nb
+        assert b[f"TA{thr:g}_day"][r, c] == pytest.approx(10 * 60 * na + 5 * 120 * nb, abs=1e-3)
+        assert b[f"TA{thr:g}_night"][r, c] == pytest.approx(60 * na + 3 * 120 * nb, abs=1e-3)
+        assert b[f"TA{thr:g}"][r, c] == pytest.approx(13 * 60 * na + 8 * 120 * nb, abs=1e-3)
+
+
+def test_the_cases_above_cover_both_sides_of_the_thresholds(day):
+    sched, res = day
+    # A (13 flights) reaches 72.5 dB under it, B (8 flights) 68.1 dB; their 60 dB areas are apart
+    assert set(np.unique(res.bands["NA70"])) == {0.0, 13.0}
+    assert set(np.unique(res.bands["NA60"])) == {0.0, 8.0, 13.0}
+    assert res.units["Lden"] == "dB(A)" and res.units["NA60"] == "events" and res.units["TA60_day"] == "s"
+    assert res.metadata["periods"]["night"] == {"start_h": 23.0, "hours": 8.0, "penalty_db": 10.0}
+
+
+def test_a_period_without_flights_is_nodata_and_lden_still_counts_the_others():
+    f = Flight("A", hover(0.0, 0.0, 31.5, 60.0, "A"), {"day": 4})
+    res = evaluate_operations(Schedule(flights=(f,), cards=[omni()], grid=grid(), ground_h_m=0.0), threads=1)
+    assert np.isnan(res.bands["Lnight"]).all() and np.isnan(res.bands["Levening"]).all()
+    np.testing.assert_allclose(res.bands["Lden"], res.bands["Lday"] + 10 * np.log10(12 / 24), atol=1e-9)
+
+
+def test_schedule_checks_its_input():
+    tr = hover(0.0, 0.0, 31.5, 60.0, "A")
+    with pytest.raises(InputError, match="unknown period"):
+        Flight("A", tr, {"morning": 3})
+    with pytest.raises(InputError, match=">= 0"):
+        Flight("A", tr, {"day": -1})
+    with pytest.raises(InputError, match="below floor_db"):
+        Schedule(flights=(Flight("A", tr, {"day": 1}),), cards=[omni()], thresholds_db=(50.0,), floor_db=55.0)
+    with pytest.raises(InputError, match="used twice"):
+        Schedule(flights=(Flight("A", tr, {"day": 1}), Flight("A", tr, {"day": 1})), cards=[omni()])
+    with pytest.raises(InputError, match="give 'cards'"):
+        Schedule(flights=(Flight("A", tr, {"day": 1}),))
+    with pytest.raises(InputError, match="schema"):
+        schedule_from_dict({"schema": "gisnoise/operations/9", "flights": []})
+
+
+def write_case(tmp_path):
+    (tmp_path / "routes").mkdir()
+    hover(0.0, 0.0, 31.5, 60.0, "A").to_csv(tmp_path / "routes" / "a.csv")
+    hover(300.0, -100.0, 51.5, 120.0, "B").to_csv(tmp_path / "routes" / "b.csv")
+    save(omni(), tmp_path / "hover.json")
+    doc = {"schema": "gisnoise/operations/1", "cards": ["hover.json"],
+           "grid": {"crs": TMERC, "bounds": [-425, -425, 425, 425], "resolution_m": 50},
+           "ground_h_m": 0.0, "thresholds_db": [60, 70], "levels_db": [40, 50],
+           "flights": [{"id": "A", "trajectory": "routes/a.csv", "counts": {"day": 10, "evening": 2, "night": 1}},
+                       {"id": "B", "trajectory": "routes/b.csv",
+                        "departures": ["07:00", "09:30", "12:00", "15:00", "18:59", "23:10", "02:00", "06:00"]}]}
+    path = tmp_path / "day.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_schedule_file_with_departure_times(tmp_path, day):
+    sched = load_schedule(write_case(tmp_path))
+    assert [dict(f.counts) for f in sched.flights] == [{"day": 10, "evening": 2, "night": 1},
+                                                        {"day": 5, "evening": 0, "night": 3}]
+    res = evaluate_operations(sched)
+    for name, band in day[1].bands.items():  # the same day as the fixture, from files
+        np.testing.assert_allclose(res.bands[name], band, atol=1e-3, err_msg=name)  # CSV rounds positions
+
+
+def test_cli_writes_bands_contours_and_summary(tmp_path, day):
+    import rasterio
+
+    from gisnoise.cli.main import cli
+
+    path = write_case(tmp_path)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(out), "--threads", "2"])
+    assert r.exit_code == 0, r.output
+    assert "Lden: max" in r.output and "NA60_night: max 3.0 events" in r.output
+    with rasterio.open(out / "operations.tif") as ds:
+        names = list(ds.descriptions)
+        lden_band = ds.read(names.index("Lden") + 1)
+    np.testing.assert_allclose(lden_band, day[1].bands["Lden"].astype(np.float32), atol=1e-4)
+    feats = json.loads((out / "contours.geojson").read_text())["features"]
+    assert {f["properties"]["metric"] for f in feats} == {"Lden", "Lnight"}
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["metadata"]["flights"][1]["counts"] == {"day": 5.0, "evening": 0.0, "night": 3.0}
+    r = CliRunner().invoke(cli, ["operations", str(tmp_path / "missing.json"), "--out", str(out)])
+    assert r.exit_code == 2 and "no such schedule file" in r.output
+
+
+@given(h=st.integers(1, 300), w=st.integers(1, 300), seg=st.integers(1, 80), cells=st.integers(1, 5000))
+def test_tiles_cover_the_grid_once_with_segment_aligned_columns(h, w, seg, cells):
+    cover = np.zeros((h, w), int)
+    for r0, r1, c0, c1 in tile_windows((h, w), seg, cells):
+        cover[r0:r1, c0:c1] += 1
+        assert c0 % seg == 0 and (c1 % seg == 0 or c1 == w)
+    assert (cover == 1).all()
