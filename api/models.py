@@ -59,7 +59,7 @@ class ErrorBody(BaseModel):
 class CardDocument(BaseModel):
     """A model card (``gisnoise/model-card/1``, SPEC section 4); validated by the core on upload."""
 
-    model_config = ConfigDict(extra="allow", populate_by_name=True, json_schema_extra={"example": {
+    model_config = ConfigDict(extra="allow", populate_by_name=True, strict=True, json_schema_extra={"example": {
         "schema": "gisnoise/model-card/1", "id": "my-horizontal", "vehicle": "demo 35 kg cargo eVTOL",
         "phase": "horizontal", "ansatz": "paper-offset",
         "parameters": {"p0": 64.0, "p1": 20.0, "p2": 0.03, "p3": -0.28, "p4": -0.05, "p5": 1.05, "p6": 1.0,
@@ -146,7 +146,7 @@ class Health(BaseModel):
 class CsvTrajectory(BaseModel):
     """A flight CSV (SPEC section 3 columns) as text."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["csv"]
     text: str = Field(min_length=1, description="Flight CSV text: t, lat, lon, h, roll, pitch, yaw, power_w[, phase]")
 
@@ -154,7 +154,7 @@ class CsvTrajectory(BaseModel):
 class ColumnsTrajectory(BaseModel):
     """Flight-CSV columns as arrays."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["columns"]
     columns: dict[str, list[float | str]] = Field(
         description="Column name (t, lat, lon, h, roll, pitch, yaw, power_w, phase, rpm, airspeed_m_s) -> values")
@@ -163,7 +163,7 @@ class ColumnsTrajectory(BaseModel):
 class RowsTrajectory(BaseModel):
     """Flight-CSV rows as objects."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["rows"]
     rows: list[dict[str, float | str]] = Field(min_length=1, description="One object per log sample.")
 
@@ -171,7 +171,7 @@ class RowsTrajectory(BaseModel):
 class GeoJSONTrajectory(BaseModel):
     """A GeoJSON LineString with Z and times, or waypoints (SPEC section 7) as GeoJSON or JSON."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["geojson", "waypoints"]
     data: dict[str, Any] = Field(description="GeoJSON object (Feature, FeatureCollection, LineString) or "
                                              "waypoint document, as read by gisnoise.routes.read_trajectory")
@@ -182,8 +182,8 @@ TrajectoryInput = Annotated[CsvTrajectory | ColumnsTrajectory | RowsTrajectory |
 
 
 class GridRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    resolution_m: float = Field(default=10.0, gt=0, le=100_000, description="Cell size, m.")
+    model_config = ConfigDict(extra="forbid", strict=True)
+    resolution_m: float = Field(default=10.0, ge=0.1, le=100_000, description="Cell size, m (0.1 m or more).")
     margin_m: float = Field(default=500.0, ge=0, le=1_000_000, description="Margin around the track, m.")
     crs: str | None = Field(default=None, description="Grid CRS (e.g. 'EPSG:25832'); default a local UTM zone.")
 
@@ -191,10 +191,19 @@ class GridRequest(BaseModel):
 CardRef = Annotated[str, Field(min_length=1, max_length=160, description="Card id in the store, or 'id@version'.")]
 
 
+_ROUTE_EXAMPLE = {"type": "FeatureCollection", "route": {"altitude_reference": "agl"}, "features": [
+    {"type": "Feature", "geometry": {"type": "Point", "coordinates": c}, "properties": p}
+    for c, p in [([10.540, 52.243], {"alt": 0}), ([10.540, 52.243], {"alt": 60}),
+                 ([10.550, 52.250], {"alt": 60, "speed": 22}), ([10.550, 52.250], {"alt": 0})]]}
+
+
 class ContourRequest(BaseModel):
     """A noise map of one trajectory."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", strict=True, json_schema_extra={"example": {
+        "trajectory": {"format": "waypoints", "data": _ROUTE_EXAMPLE},
+        "cards": ["demo-horizontal", "demo-climb", "demo-sink"], "grid": {"resolution_m": 20, "margin_m": 400},
+        "metrics": ["LAmax", "LAeq"], "levels": [45, 50, 55, 60]}})
     trajectory: TrajectoryInput
     cards: list[CardRef | CardDocument] = Field(
         default_factory=list, max_length=32,
@@ -222,5 +231,5 @@ class ContourRequest(BaseModel):
     substeps: int = Field(default=1, ge=1, le=50, description="Time steps per trajectory sample interval.")
     uncertainty: bool = Field(default=False, description="Add LAmax/LAeq standard-deviation bands "
                                                          "(cards need a covariance).")
-    output: OutputFormat | None = Field(default=None, description="Response format; default from the Accept "
+    output: Literal["geojson", "geotiff"] | None = Field(default=None, description="Response format; default from the Accept "
                                                                   "header, else GeoJSON.")

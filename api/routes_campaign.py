@@ -20,7 +20,7 @@ from .errors import ApiError
 from .jobs import JobContext
 from .models import JobInfo, PhaseName
 from .responses import AsciiJSONResponse as JSONResponse
-from .routes_jobs import job_info
+from .routes_jobs import JOB_LINKS, job_info
 
 __all__ = ["router", "unpack_campaign", "run_fit_job", "run_diagnose_job"]
 
@@ -99,7 +99,7 @@ def _submit(request: Request, state: State, kind: str, params: dict[str, Any], c
     return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
 
 
-@router.post("/fit", status_code=202, response_model=JobInfo, dependencies=WRITE,
+@router.post("/fit", status_code=202, response_model=JobInfo, dependencies=WRITE, responses={202: {"links": JOB_LINKS}},
              summary="Fit a model card to an uploaded campaign (job)")
 async def fit_job(request: Request, state: StateDep,
                   campaign: Annotated[UploadFile, File(description="Zipped campaign folder (campaign.json, "
@@ -123,6 +123,7 @@ async def fit_job(request: Request, state: StateDep,
 
 
 @router.post("/diagnose", status_code=202, response_model=JobInfo, dependencies=WRITE,
+             responses={202: {"links": JOB_LINKS}},
              summary="Diagnose a card against an uploaded campaign (job)")
 async def diagnose_job(request: Request, state: StateDep,
                        campaign: Annotated[UploadFile, File(description="Zipped campaign folder.")],

@@ -44,7 +44,7 @@ from .models import (
     RowsTrajectory,
 )
 from .responses import AsciiJSONResponse as JSONResponse
-from .routes_jobs import job_info
+from .routes_jobs import JOB_LINKS, job_info
 
 __all__ = ["router", "run_contour_job", "build_trajectory", "resolve_cards", "make_map_files"]
 
@@ -205,7 +205,8 @@ def _job_request(req: ContourRequest, cards: list[ModelCard]) -> dict[str, Any]:
 _CONTOUR_RESPONSES: dict[int | str, dict[str, Any]] = {
     200: {"description": "The map: GeoJSON contours (isobands and isolines, WGS84) or a GeoTIFF, one band per metric.",
           "content": {MediaType.geojson.value: {"schema": {"type": "object"}}, MediaType.geotiff.value: {}}},
-    202: {"model": JobInfo, "description": "The map is large: a job was queued (see Location)."},
+    202: {"model": JobInfo, "description": "The map is large: a job was queued (see Location).",
+          "links": JOB_LINKS},
 }
 
 
@@ -241,6 +242,7 @@ def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tif
 
 
 @router.post("/jobs/contours", status_code=202, response_model=JobInfo, dependencies=WRITE,
+             responses={202: {"links": JOB_LINKS}},
              summary="Queue a noise map as a job")
 async def contour_job(req: ContourRequest, request: Request, state: StateDep) -> JSONResponse:
     s = state.settings

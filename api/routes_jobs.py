@@ -19,6 +19,10 @@ _MEDIA = {".geojson": MediaType.geojson.value, ".tif": MediaType.geotiff.value, 
           ".zip": MediaType.zip.value, ".csv": MediaType.csv.value, ".html": MediaType.html.value,
           ".png": MediaType.png.value}
 
+JOB_LINKS = {name: {"operationId": op, "parameters": {"job_id": "$response.body#/id"}}
+             for name, op in (("GetJob", "get_job"), ("JobResult", "job_result"), ("CancelJob", "cancel_job"))}
+"""OpenAPI links from a 202 (job queued) to the job's operations."""
+
 MAIN_RESULT = {"contours": ("contours.geojson", "levels.tif"), "fit": ("card.json",),
                "diagnose": ("diagnosis.json",)}
 """Result file of each job kind served by ``/jobs/{id}/result`` (first = default)."""
@@ -53,7 +57,7 @@ def list_jobs(request: Request, state: StateDep,
     return JobList(jobs=[job_info(request, j) for j in jobs], total=state.jobs.count(status=status))
 
 
-@router.get("/{job_id}", response_model=JobInfo, summary="A job's status and progress")
+@router.get("/{job_id}", response_model=JobInfo, summary="A job's status and progress", operation_id="get_job")
 def get_job(job_id: str, request: Request, state: StateDep) -> JobInfo:
     return job_info(request, _get(state, job_id))
 
@@ -82,6 +86,7 @@ _RESULT_RESPONSES = {200: {"content": {m.value: {} for m in (MediaType.geojson, 
 
 
 @router.get("/{job_id}/result", summary="Download a job's main result", responses=_RESULT_RESPONSES,
+            operation_id="job_result",
             response_class=Response)
 def job_result(job_id: str, request: Request, state: StateDep,
                format: str | None = Query(None, pattern="^(geojson|geotiff)$",
@@ -100,7 +105,8 @@ def job_file(job_id: str, name: str, state: StateDep) -> Response:
     return _file_response(_result_path(state, _get(state, job_id), name))
 
 
-@router.post("/{job_id}/cancel", response_model=JobInfo, dependencies=WRITE, summary="Cancel a queued or running job")
+@router.post("/{job_id}/cancel", response_model=JobInfo, dependencies=WRITE, summary="Cancel a queued or running job",
+             operation_id="cancel_job")
 def cancel_job(job_id: str, request: Request, state: StateDep) -> JobInfo:
     job = _get(state, job_id)
     if job.done:
@@ -109,7 +115,7 @@ def cancel_job(job_id: str, request: Request, state: StateDep) -> JobInfo:
     return job_info(request, job)
 
 
-@router.delete("/{job_id}", status_code=204, dependencies=WRITE, response_class=Response,
+@router.delete("/{job_id}", status_code=204, dependencies=WRITE, response_class=Response, operation_id="delete_job",
                summary="Delete a finished job and its files")
 def delete_job(job_id: str, state: StateDep) -> Response:
     job = _get(state, job_id)

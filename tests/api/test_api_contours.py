@@ -200,7 +200,8 @@ def test_bad_trajectories_name_the_field(client, trajectory, status, field):
 
 
 @pytest.mark.parametrize("change, status, field", [
-    ({"grid": {"resolution_m": 0.01, "margin_m": 2000}}, 413, "grid.resolution_m"),
+    ({"grid": {"resolution_m": 0.1, "margin_m": 2000}}, 413, "grid.resolution_m"),
+    ({"grid": {"resolution_m": 0.01}}, 422, "grid.resolution_m"),
     ({"grid": {"resolution_m": -1}}, 422, "grid.resolution_m"),
     ({"grid": {"crs": "EPSG:999999"}}, 422, "grid.crs"),
     ({"grid": {"crs": "EPSG:4326"}}, 422, "grid.crs"),

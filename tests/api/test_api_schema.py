@@ -6,6 +6,8 @@ runs a longer one against a real server.
 
 from __future__ import annotations
 
+import atexit
+import shutil
 import tempfile
 import warnings
 from pathlib import Path
@@ -20,6 +22,7 @@ from service_helpers import CARDS, KEY  # noqa: E402
 from api import Settings, create_app  # noqa: E402
 
 _tmp = Path(tempfile.mkdtemp(prefix="gisnoise-schema-"))
+atexit.register(shutil.rmtree, _tmp, True)
 # a tiny sync limit: generated contour requests become queued jobs (workers off) or fail fast
 APP = create_app(Settings(data_dir=_tmp / "data", seed_cards_dir=CARDS, tile_url="", sync_work_limit=2e4,
                           max_cells=200_000, api_keys=[KEY]), start_workers=False)
@@ -55,7 +58,7 @@ def _lifespan():
 
 
 @schema.parametrize()
-@settings(max_examples=12, deadline=None, derandomize=True,
+@settings(max_examples=12, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.data_too_large])
 def test_openapi_conformance(case):
     case.call_and_validate(checks=CHECKS)
