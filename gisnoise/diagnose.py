@@ -455,8 +455,8 @@ def detect_events(
     residual of a microphone rises above its series median by more than
     ``min_db`` and ``z`` standard errors of the window mean, and runs the campaign
     reader masked as ``event``.  Overlapping candidates of one flight form a
-    window.  A detector window counts as an event only when added sound explains
-    it better than a louder UAV: within sub-windows of ``sub_s`` seconds the
+    window.  A window counts as an event only when added sound explains it
+    better than a louder UAV (the reader's mask is a hint, not a proof): within sub-windows of ``sub_s`` seconds the
     measured levels of all microphones are fitted (a) with a gain of the UAV
     level common to all microphones (an unmodelled UAV effect), (b) with a level
     added energetically at every microphone (a distant source heard by all) and
@@ -494,7 +494,8 @@ def detect_events(
         reader = s.mask_reason[ser.idx] == "event"
         for a, b in _intervals(reader, ser.t, min_len_s=0.0, join_gap_s=window_s):
             ex = float(np.mean(ser.excess[a:b + 1]))
-            cands.setdefault(ser.flight, []).append((ser.t[a], ser.t[b], ser.mic, "reader", ex, np.inf))
+            zz = ex / (ser.threshold / z) if ser.threshold > 0 else np.inf
+            cands.setdefault(ser.flight, []).append((ser.t[a], ser.t[b], ser.mic, "reader", ex, zz))
         mask = (ser.excess > max(min_db, ser.threshold)) & ~reader
         for a, b in _intervals(mask, ser.t, min_len_s=window_s / 2, join_gap_s=window_s / 2):
             if ser.t[b] - ser.t[a] > max_s:
@@ -527,7 +528,7 @@ def detect_events(
             bic = _explain_window(s.level[rows], l_uav[rows], background_db[rows], sub, mic_idx[rows], flagged)
             kind = "area" if bic["area"] <= bic["local"] else "local"
             margin = bic["gain"] - bic[kind]
-            if src == "detector" and margin < min_bic:
+            if margin < min_bic:
                 continue
             params = []
             for j in np.unique(sub):
@@ -1202,16 +1203,18 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
     start.update(fixed)
     rows_all = np.arange(n)
     tested = eff.tested if eff.tested is not None else tuple(k for k in eff.params if k not in fixed)
-    try:
-        full = _fit(level, x, model, s, rows_all, p0=start, fixed=fixed, bounds=bounds, cancel=cancel)
-    except NotIdentifiableError:
-        # a vanishing effect leaves its shape parameters undetermined: hold them at their start values
-        shape = {k: float(start[k]) for k in eff.params if k not in tested and k not in fixed}
-        if not shape:
-            raise
-        fixed = {**fixed, **shape}
-        full = _fit(level, x, model, s, rows_all, p0=start, fixed=fixed, bounds=bounds, cancel=cancel)
-        cand.reason = f"{', '.join(shape)} held at the start value(s) (not identifiable at the optimum)"
+    def fit_ext(rows: np.ndarray, p0: dict[str, float], fx: dict[str, float]) -> FitResult:
+        try:
+            return _fit(level, x, model, s, rows, p0=p0, fixed=fx or None, bounds=bounds, cancel=cancel)
+        except NotIdentifiableError:
+            # a vanishing effect leaves its shape parameters undetermined: hold them at their start values
+            shape = {k: float(p0[k]) for k in eff.params if k not in tested and k not in fx}
+            if not shape:
+                raise
+            cand.reason = f"{', '.join(shape)} held at the start value(s) where not identifiable"
+            return _fit(level, x, model, s, rows, p0=p0, fixed={**fx, **shape}, bounds=bounds, cancel=cancel)
+
+    full = fit_ext(rows_all, start, fixed)
     cand.fit = full
     oof = np.empty(n)
     for f in (0, 1):
@@ -1225,7 +1228,7 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
                     fx[k] = float(full.params[k])  # window only in held-out data: its level is a nuisance
         p0 = {k: v for k, v in full.params.items()}
         p0.update(fx)
-        r = _fit(level, x, model, s, tr, p0=p0, fixed=fx or None, bounds=bounds, cancel=cancel)
+        r = fit_ext(tr, p0, fx)
         oof[te] = level[te] - _predict(model, r.p, x, te, n)
     cand.oof = oof
     summ = cand.summary
@@ -1238,8 +1241,6 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
         n_scan = max(1.0, n / 8.0)
         zmax = max(zs) if zs else 0.0
         summ["p_value"] = float(min(1.0, n_scan * stats.norm.sf(zmax))) if zs else 1.0
-        if any(w["source"] == "reader" for w in ctx.event_windows):
-            summ["p_value"] = 0.0
         summ["test"] = "scan statistic of the strongest window against white measurement noise (Bonferroni)"
     else:
         w, dof = _wald(full, tested)
