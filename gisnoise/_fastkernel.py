@@ -21,12 +21,12 @@ How the kernel is fast (all in float32, where the level keeps about 1e-5 dB):
   most :data:`SEGMENT_M` metres.  Positions (local ENU) are exact (pyproj) at the
   segment's ends and middle and quadratic in the column in between (the residual,
   from the third derivative of the projection and the Earth's curvature, is below
-  1e-7 m for 512 m segments 10 km from the frame's origin); the body vector of the cell
+  5e-7 m for 1 km segments 10 km from the frame's origin); the body vector of the cell
   ``u`` columns from the segment's middle is ``A + u (B + u D)`` with ``A, B, D``
   rotated once per instant (plus ``dh (N + u T)`` for heights from a DEM: ENU is exactly
   linear in the ellipsoidal height along the normal).  In float32 the body vector
-  carries about 6e-8 times the segment length (1.5e-5 m): 0.01 dB holds down to a few
-  centimetres from the UAV.
+  carries about 6e-8 times the distance from the segment's middle (at most 3e-5 m):
+  0.01 dB holds down to about 0.1 m from the UAV.
 * **Cells beyond audibility are skipped, provably.**  With ``floor_db``, a segment is
   skipped when, at every instant, its cells' distance to the UAV is beyond the radius
   at which an upper bound of the card's level over *all* emission angles
@@ -89,7 +89,7 @@ log = logging.getLogger(__name__)
 FAST_ANSATZES = ("paper", "paper-offset")
 """Ansatzes the kernel implements (:mod:`gisnoise.model` registry names)."""
 
-SEGMENT_M = 512.0
+SEGMENT_M = 1024.0
 """Longest run of receivers (m) along a grid row between exact positions (ends and middle)."""
 
 DEFAULT_CHUNK_CELLS = 1 << 17
@@ -885,14 +885,14 @@ def run_grid(fl: FlightInstants, rc: Receivers, thresholds: Sequence[float] = ()
     from .errors import Cancelled
 
     H, W = rc.grid.shape
-    rows = max(1, int(chunk_cells) // W)
+    nthreads = default_threads() if threads is None else max(1, int(threads))
+    rows = max(1, min(int(chunk_cells) // W, -(-H // (4 * nthreads))))  # >= 4 blocks a thread when it can
     blocks = [(r, min(r + rows, H)) for r in range(0, H, rows)]
     nt = len(list(thresholds))
     emax = np.zeros((H, W), np.float32)
     energy = np.zeros((H, W), np.float64)
     ta = np.zeros((nt, H, W), np.float64)
     computed = np.zeros((H, W), bool)
-    nthreads = default_threads() if threads is None else max(1, int(threads))
     done = 0
 
     def put(b: tuple[int, int], res: WindowResult) -> None:

@@ -200,7 +200,7 @@ def test_cells_beyond_audibility_are_skipped_and_certainly_below_the_floor():
 
 def test_window_tiles_and_threads_give_bitwise_the_same_cells():
     traj = circle_flight(25)
-    g = grid_around(7.0, 300, 23)  # 73 cells per segment: several segments per row
+    g = grid_around(3.0, 800, 23)  # 341 cells per segment: three segments per row
     rc = fk.receivers_for(g, [traj], ground_h=0.0)
     fl = fk.prepare_flight(traj, [card()], rc.frame, floor_db=25.0)
     whole = fk.run_grid(fl, rc, [50.0], threads=1)
@@ -208,7 +208,8 @@ def test_window_tiles_and_threads_give_bitwise_the_same_cells():
     for a, b in ((whole.emax, two.emax), (whole.energy, two.energy), (whole.ta, two.ta)):
         np.testing.assert_array_equal(a, b)
     k = rc.seg
-    for r0, r1, c0, c1 in ((0, 7, 0, k), (7, 23, k, 3 * k), (3, 9, 3 * k, 300)):
+    assert 2 * k < 800 < 3 * k
+    for r0, r1, c0, c1 in ((0, 7, 0, k), (7, 23, k, 2 * k), (3, 9, 2 * k, 800), (0, 23, k, 800)):
         w = fk.run_window(fl, rc, r0, r1, c0, c1, [50.0])
         np.testing.assert_array_equal(w.emax, whole.emax[r0:r1, c0:c1])
         np.testing.assert_array_equal(w.energy, whole.energy[r0:r1, c0:c1])
