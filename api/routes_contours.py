@@ -29,7 +29,7 @@ from gisnoise.errors import GisnoiseError, GridTooLargeError, InputError, Trajec
 from gisnoise.trajectory import Trajectory, from_columns, read_flight_csv
 
 from .cardstore import CardStore
-from .deps import WRITE, StateDep
+from .deps import WRITE, State, StateDep, require_key
 from .errors import ApiError
 from .jobs import JobContext
 from .models import (
@@ -210,23 +210,31 @@ _CONTOUR_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 
 
+def _prepare(req: ContourRequest, state: State) -> tuple[Trajectory, list[ModelCard], int]:
+    """Trajectory, cards and grid size of a request (in a worker thread: routes and grids take CPU)."""
+    s = state.settings
+    traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
+    cards = resolve_cards(req, state.cards)
+    return traj, cards, _grid_cells(traj, req, s.max_cells)
+
+
+def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory, cards: list[ModelCard],
+           cells: int) -> JSONResponse:
+    j = state.jobs.submit("contours", {"cells": cells, "samples": len(traj)},
+                          {"request.json": json.dumps(_job_request(req, cards)).encode()})
+    info = job_info(request, j)
+    return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
+
+
 @router.post("/contours", response_class=Response, responses=_CONTOUR_RESPONSES,
              summary="Noise map of a trajectory (small at once, large as a job)")
 async def contours(req: ContourRequest, request: Request, state: StateDep,
                    job: bool = Query(False, description="Always answer with a job (202).")) -> Response:
-    s = state.settings
-    traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
-    cards = resolve_cards(req, state.cards)
-    cells = await run_in_threadpool(_grid_cells, traj, req, s.max_cells)
+    traj, cards, cells = await run_in_threadpool(_prepare, req, state)
     work = float(cells) * len(traj) * req.substeps
-    if job or work > s.sync_work_limit:
-        from .deps import require_key
-
-        require_key(request, request.headers.get("x-api-key"))
-        j = state.jobs.submit("contours", {"cells": cells, "samples": len(traj)},
-                              {"request.json": json.dumps(_job_request(req, cards)).encode()})
-        info = job_info(request, j)
-        return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
+    if job or work > state.settings.sync_work_limit:
+        require_key(request, request.headers.get("x-api-key"))  # a job is a write
+        return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
     tiff = _want_tiff(req, request.headers.get("accept", ""))
     data = await run_in_threadpool(_sync_map, traj, cards, req, tiff)
     if tiff:
@@ -245,14 +253,8 @@ def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tif
              responses={202: {"links": JOB_LINKS}},
              summary="Queue a noise map as a job")
 async def contour_job(req: ContourRequest, request: Request, state: StateDep) -> JSONResponse:
-    s = state.settings
-    traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
-    cards = resolve_cards(req, state.cards)
-    cells = await run_in_threadpool(_grid_cells, traj, req, s.max_cells)
-    j = state.jobs.submit("contours", {"cells": cells, "samples": len(traj)},
-                          {"request.json": json.dumps(_job_request(req, cards)).encode()})
-    info = job_info(request, j)
-    return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
+    traj, cards, cells = await run_in_threadpool(_prepare, req, state)
+    return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
 
 
 # ------------------------------------------------------------------ job handler
