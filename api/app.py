@@ -63,6 +63,9 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
         n = st.cards.seed(settings.seed_cards_dir)
         if n:
             log.info("card store seeded with %d cards", n)
+        orphans = st.jobs.remove_orphans()
+        if orphans:
+            log.warning("removed %d job folder(s) without a job (left by a stop during a submission)", orphans)
         requeued = st.jobs.requeue_interrupted()
         if requeued:
             log.warning("%d job(s) interrupted by the last stop were re-queued", requeued)

@@ -253,6 +253,18 @@ class JobStore:
             shutil.rmtree(self.job_dir(r["id"]) / "result.partial", ignore_errors=True)
         return n
 
+    def remove_orphans(self) -> int:
+        """Delete folders of the jobs folder that belong to no job (a stop between writing inputs and the
+        row, or an upload in flight); call at start-up only.  Returns how many."""
+        with self._connect() as con:
+            ids = {r[0] for r in con.execute("SELECT id FROM jobs").fetchall()}
+        n = 0
+        for p in self.jobs_dir.iterdir():
+            if p.is_dir() and p.name not in ids:
+                shutil.rmtree(p, ignore_errors=True)
+                n += 1
+        return n
+
     def claim_next(self) -> Job | None:
         """Mark the oldest queued job running and return it (None when the queue is empty)."""
         with self._lock, self._connect() as con:

@@ -27,6 +27,15 @@ def test_submit_is_durable_before_it_returns(tmp_path):
     assert (s2.input_dir(job.id) / "sub" / "x.bin").read_bytes() == b"\x00\x01"
 
 
+def test_folders_without_a_job_are_removed_at_start_up(tmp_path):
+    s = _store(tmp_path)
+    keep = s.submit("contours", {}, {"request.json": b"{}"}).id
+    (s.jobs_dir / "upload-abc" / "campaign").mkdir(parents=True)  # an upload cut off by a stop
+    (s.jobs_dir / "deadbeef" / "input").mkdir(parents=True)  # inputs written, row never inserted
+    assert _store(tmp_path).remove_orphans() == 2
+    assert [p.name for p in s.jobs_dir.iterdir()] == [keep]
+
+
 def test_jobs_are_claimed_in_submission_order(tmp_path):
     s = _store(tmp_path)
     ids = [s.submit("contours", {"i": i}).id for i in range(5)]
