@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from service_helpers import CARDS, KEY, assert_names_field, wait_job
+from service_helpers import CARDS, KEY, REPO, assert_names_field, wait_job
 
 rasterio = pytest.importorskip("rasterio")
 
@@ -97,6 +97,34 @@ def test_http_result_equals_the_cli(client, tmp_path):
     tif = client.post("/contours", json=req, headers={"accept": "image/tiff; application=geotiff"})
     geo = client.post("/contours", json=req)
     assert tif.status_code == 200 and geo.status_code == 200
+    meta_http, bands_http = _read_tif(tif.content)
+    meta_cli, bands_cli = _read_tif((out / "levels.tif").read_bytes())
+    assert meta_http == meta_cli
+    np.testing.assert_array_equal(bands_http, bands_cli)
+    assert geo.json() == json.loads((out / "contours.geojson").read_text())
+
+
+def test_http_result_equals_the_cli_for_the_sample_route(client, tmp_path):
+    from click.testing import CliRunner
+
+    from gisnoise.cli.main import cli
+
+    route = REPO / "sample_data" / "route" / "delivery_route.geojson"
+    if not route.is_file():
+        pytest.skip("no sample route in this checkout")
+    out = tmp_path / "cli"
+    args = ["-q", "contour", str(route), "--out", str(out), "--resolution", "40", "--margin", "200",
+            "--levels", "45,55,65"]
+    for name in ("demo_horizontal", "demo_climb", "demo_sink"):
+        args += ["--card", str(CARDS / f"{name}.json")]
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0, res.output
+    req = {"trajectory": {"format": "waypoints", "data": json.loads(route.read_text())},
+           "cards": ["demo-horizontal", "demo-climb", "demo-sink"], "grid": {"resolution_m": 40, "margin_m": 200},
+           "levels": [45, 55, 65]}
+    tif = client.post("/contours", json=dict(req, output="geotiff"))
+    geo = client.post("/contours", json=req)
+    assert tif.status_code == 200 and geo.status_code == 200, (tif.text, geo.text)
     meta_http, bands_http = _read_tif(tif.content)
     meta_cli, bands_cli = _read_tif((out / "levels.tif").read_bytes())
     assert meta_http == meta_cli
