@@ -223,11 +223,17 @@ class JobStore:
             rows = con.execute(q, args).fetchall()
         return [self._row(r) for r in rows]
 
-    def count(self, *, status: str | None = None) -> int:
+    def count(self, *, status: str | None = None, kind: str | None = None) -> int:
+        conds, args = [], []
+        if status:
+            conds.append("status = ?")
+            args.append(status)
+        if kind:
+            conds.append("kind = ?")
+            args.append(kind)
+        q = "SELECT COUNT(*) FROM jobs" + (" WHERE " + " AND ".join(conds) if conds else "")
         with self._connect() as con:
-            if status:
-                return int(con.execute("SELECT COUNT(*) FROM jobs WHERE status = ?", (status,)).fetchone()[0])
-            return int(con.execute("SELECT COUNT(*) FROM jobs").fetchone()[0])
+            return int(con.execute(q, args).fetchone()[0])
 
     def requeue_interrupted(self) -> int:
         """Put jobs found ``running`` (the process stopped under them) back in the queue; returns how many."""

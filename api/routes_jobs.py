@@ -54,7 +54,7 @@ def list_jobs(request: Request, state: StateDep,
               kind: str | None = Query(None, pattern="^(contours|fit|diagnose)$"),
               limit: int = Query(50, ge=1, le=1000), offset: int = Query(0, ge=0, le=10**9)) -> JobList:
     jobs = state.jobs.list(status=status, kind=kind, limit=limit, offset=offset)
-    return JobList(jobs=[job_info(request, j) for j in jobs], total=state.jobs.count(status=status))
+    return JobList(jobs=[job_info(request, j) for j in jobs], total=state.jobs.count(status=status, kind=kind))
 
 
 @router.get("/{job_id}", response_model=JobInfo, summary="A job's status and progress", operation_id="get_job")
