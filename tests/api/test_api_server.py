@@ -93,7 +93,7 @@ def test_graceful_stop_requeues_the_running_job(tmp_path):
     data = tmp_path / "data"
     srv = Server(data)
     try:
-        jid = httpx.post(srv.url + "/jobs/contours", json=_heavy_request(6.0), timeout=30).json()["id"]
+        jid = httpx.post(srv.url + "/jobs/contours", json=_heavy_request(5.0), timeout=30).json()["id"]
         _wait(f"{srv.url}/jobs/{jid}", ("running",))
     finally:
         srv.stop()  # SIGTERM: the worker sees cancel(), the job goes back to the queue
