@@ -14,7 +14,7 @@ from fastapi import FastAPI
 
 from gisnoise import __version__
 
-from . import routes_cards, routes_jobs
+from . import routes_campaign, routes_cards, routes_contours, routes_jobs, routes_web
 from .cardstore import CardStore
 from .deps import State
 from .errors import install_handlers
@@ -38,8 +38,7 @@ ERROR_RESPONSES: dict[int | str, dict] = {
 
 
 def _handlers() -> dict[str, Handler]:
-    from . import routes_campaign, routes_contours
-
+    """The job handler of each job kind."""
     return {"contours": routes_contours.run_contour_job, "fit": routes_campaign.run_fit_job,
             "diagnose": routes_campaign.run_diagnose_job}
 
@@ -75,8 +74,6 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
             yield
         finally:
             st.pool.stop()
-
-    from . import routes_campaign, routes_contours, routes_web
 
     app = FastAPI(
         title="gisnoise",
