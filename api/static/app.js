@@ -290,7 +290,10 @@ async function refreshJobs() {
     bar.max = 1;
     bar.value = j.progress;
     bar.title = `${Math.round(j.progress * 100)} % ${j.message}`;
-    tdp.append(bar);
+    const pct = document.createElement("span");
+    pct.className = "hint";
+    pct.textContent = ` ${Math.round(j.progress * 100)} %`;
+    tdp.append(bar, pct);
     tr.append(tdp);
     const tda = document.createElement("td");
     if (j.status === "queued" || j.status === "running") {
