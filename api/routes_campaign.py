@@ -107,6 +107,8 @@ async def fit_job(request: Request, state: StateDep,
                   phase: Annotated[PhaseName, Form(description="Flight phase to fit.")],
                   ansatz: Annotated[str, Form(max_length=100, description="Ansatz name.")] = "paper-offset",
                   card_id: Annotated[str | None, Form(max_length=128, description="Id of the fitted card.")] = None,
+                  report: Annotated[bool, Form(description="Also write the fit report (report.html, "
+                                                           "figures).")] = False,
                   ) -> JSONResponse:
     from gisnoise.model import get_ansatz
 
@@ -119,7 +121,8 @@ async def fit_job(request: Request, state: StateDep,
 
         check_id(card_id, "card_id")
     folder = await _receive_campaign(state, campaign)
-    return _submit(request, state, "fit", {"phase": phase, "ansatz": ansatz, "card_id": card_id}, folder)
+    return _submit(request, state, "fit", {"phase": phase, "ansatz": ansatz, "card_id": card_id,
+                                           "report": report}, folder)
 
 
 @router.post("/diagnose", status_code=202, response_model=JobInfo, dependencies=WRITE,
@@ -130,6 +133,8 @@ async def diagnose_job(request: Request, state: StateDep,
                        card_id: Annotated[str | None, Form(max_length=160, description="Card in the store "
                                                                                        "('id' or 'id@version').")] = None,
                        card: Annotated[UploadFile | None, File(description="Or a card JSON file.")] = None,
+                       report: Annotated[bool, Form(description="Also write report.html and its "
+                                                                "figures.")] = True,
                        ) -> JSONResponse:
     if (card_id is None) == (card is None):
         raise ApiError(422, "card_id: give either card_id or a card file", field="card_id")
@@ -145,7 +150,7 @@ async def diagnose_job(request: Request, state: StateDep,
         assert card_id is not None
         mc = state.cards.resolve(card_id, field="card_id")
     folder = await _receive_campaign(state, campaign)
-    return _submit(request, state, "diagnose", {"card": mc.id}, folder,
+    return _submit(request, state, "diagnose", {"card": mc.id, "report": report}, folder,
                    {"card.json": gcards.dumps(mc).encode()})
 
 
@@ -175,22 +180,48 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
         v = getattr(result, k, None)
         if isinstance(v, (bool, int, float, str)):
             summary[k] = v
+    if p.get("report"):
+        ctx.progress(0.96, "writing the report")
+        summary["report"] = _report("gisnoise.fitreport", result, ctx.output_dir / "report")
     (ctx.output_dir / "fit.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary
 
 
+def _report(module: str, *args: Any, **kw: Any) -> str:
+    """Call ``write_report`` of a report module; a missing plotting library is said, not hidden."""
+    import importlib
+
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return "not written: matplotlib is not installed (the 'plot' extra)"
+    importlib.import_module(module).write_report(*args, **kw)
+    return "written"
+
+
 def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
-    """Diagnose the stored card against the stored campaign; writes diagnosis.json."""
-    from gisnoise.diagnose import diagnose
+    """Diagnose the stored card against the stored campaign: diagnosis.json (and report.html), as the CLI."""
+    from gisnoise.diagnose import run_diagnosis
 
     card = gcards.load(ctx.input_dir / "card.json")
     ctx.progress(0.0, "reading the campaign")
-    doc = diagnose(ctx.input_dir / "campaign", card, progress=ctx.progress, cancel=ctx.cancel)
+
+    def progress(done: int, total: int, what: str = "") -> None:
+        ctx.progress(0.9 * done / max(total, 1), what or "diagnosing")
+
+    diag = run_diagnosis(ctx.input_dir / "campaign", card, progress=progress, cancel=ctx.cancel)
     ctx.check_cancel()
+    doc = dict(diag.result)
+    doc["campaign"] = f"uploaded campaign (job {ctx.job.id})"
     _strip_server_paths(doc, str(ctx.input_dir))
     text = json.dumps(doc, indent=2, allow_nan=False, default=_json_default)
     (ctx.output_dir / "diagnosis.json").write_text(text + "\n", encoding="utf-8")
-    return {"card": card.id, "verdict": doc.get("verdict"), "baseline": doc.get("baseline")}
+    summary = {"card": card.id, "verdict": doc.get("verdict"), "baseline": doc.get("baseline")}
+    if ctx.params.get("report", True):
+        ctx.progress(0.9, "writing the report")
+        summary["report"] = _report("gisnoise.diagreport", diag, ctx.output_dir,
+                                    progress=lambda d, t: ctx.progress(0.9 + 0.1 * d / max(t, 1), "writing the report"))
+    return summary
 
 
 def _json_default(v: Any) -> Any:

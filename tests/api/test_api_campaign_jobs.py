@@ -37,11 +37,12 @@ def test_fit_job_returns_the_librarys_card(client, campaign_zip, tmp_path):
     from gisnoise.fit import fit_campaign
 
     r = client.post("/jobs/fit", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
-                    data={"phase": "horizontal", "card_id": "fitted-horizontal"})
+                    data={"phase": "horizontal", "card_id": "fitted-horizontal", "report": "true"})
     assert r.status_code == 202, r.text
     info = wait_job(client, r.json()["id"], timeout=300)
     assert info["status"] == "succeeded", info
-    assert set(info["files"]) == {"card.json", "fit.json"}
+    assert {"card.json", "fit.json", "report/report.html"} <= set(info["files"])
+    assert info["summary"]["report"] == "written"
     card = gcards.loads(client.get(info["result_url"]).content)
     assert card.id == "fitted-horizontal" and card.phase == "horizontal" and card.covariance is not None
     assert str(tmp_path) not in client.get(info["result_url"]).text  # no server paths leak
@@ -64,7 +65,7 @@ def test_fit_job_failing_in_the_core_reports_the_field(client, campaign_zip):
     assert_names_field(client.get(f"/jobs/{info['id']}/result"), 409, "job_id")
 
 
-def test_diagnose_job_finds_the_injected_effect(client, campaign_zip):
+def test_diagnose_job_finds_the_injected_effect(client, campaign_zip, tmp_path):
     truth = json.loads((CAMPAIGN / "truth.json").read_text())
     injected = [e["name"] for e in truth["effects"]]
     r = client.post("/jobs/diagnose", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
@@ -76,3 +77,8 @@ def test_diagnose_job_finds_the_injected_effect(client, campaign_zip):
     assert {"baseline", "segments", "effects", "verdict"} <= set(doc)
     assert doc["verdict"]["effect"] in injected
     assert info["summary"]["verdict"]["effect"] == doc["verdict"]["effect"]
+    assert info["summary"]["report"] == "written" and "report.html" in info["files"]
+    page = client.get(f"/jobs/{info['id']}/files/report.html")
+    assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
+    for text in (page.text, client.get(info["result_url"]).text):
+        assert str(tmp_path) not in text  # no server paths leak
