@@ -214,12 +214,14 @@ def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str
     else:
         src = source or "flight CSV"
         text = path.read()
-    reader = csv.reader(io.StringIO(text))
+    reader = csv.reader(io.StringIO(text, newline=None))
     try:
         header = [h.strip() for h in next(reader)]
+        rows = [r for r in reader if r and any(x.strip() for x in r)]
     except StopIteration:
         raise TrajectoryError(f"{src}: the file is empty", field="t") from None
-    rows = [r for r in reader if r and any(x.strip() for x in r)]
+    except csv.Error as exc:
+        raise TrajectoryError(f"{src}: malformed CSV at line {reader.line_num}: {exc}", field="csv") from None
     cols: dict[str, list[str]] = {h: [] for h in header}
     for ln, r in enumerate(rows, start=2):
         if len(r) != len(header):
