@@ -47,6 +47,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import threading
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
@@ -620,7 +621,7 @@ def _instants(t: np.ndarray, state: dict[str, np.ndarray], card_idx: np.ndarray,
     for k in used:
         c = cards[k]
         p0[k], p1[k], coef[k] = card_coefficients(c, background=background, min_distance_m=min_distance_m)
-        pp = dict(zip(c.model.params, c.p))
+        pp = dict(zip(c.model.params, c.p, strict=True))
         raw[k] = (pp["p2"], pp["p4"], pp["p5"], pp["p6"], pp["p7"])
         ref_w[k] = c.reference_power_w
         d_ref[k] = c.reference_distance_m
@@ -821,12 +822,19 @@ class WindowResult:
     computed: np.ndarray
 
 
+def window_lattice(rc: Receivers, r0: int, r1: int, c0: int, c1: int) -> tuple[np.ndarray, np.ndarray]:
+    """The lattice (:meth:`Receivers.lattice`) a window needs; compute it once for many flights."""
+    return rc.lattice(r0, r1, c0 // rc.seg, -(-c1 // rc.seg))
+
+
 def run_window(fl: FlightInstants, rc: Receivers, r0: int, r1: int, c0: int, c1: int,
-               thresholds: Sequence[float] = ()) -> WindowResult:
+               thresholds: Sequence[float] = (), *, lattice: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> WindowResult:
     """Run the kernel on rows ``r0:r1`` and columns ``c0:c1`` of the grid (releases the GIL).
 
     ``c0`` and ``c1`` should be multiples of ``rc.seg`` (or ``c1`` the grid's width) so that
-    the window's cells equal the whole grid's bit for bit.
+    the window's cells equal the whole grid's bit for bit.  ``lattice``: the window's
+    :func:`window_lattice`, when already computed.
     """
     _require_numba()
     W = rc.grid.width
@@ -835,8 +843,7 @@ def run_window(fl: FlightInstants, rc: Receivers, r0: int, r1: int, c0: int, c1:
                          field="window")
     k = rc.seg
     m0 = c0 // k
-    m1 = -(-c1 // k)
-    P, U = rc.lattice(r0, r1, m0, m1)
+    P, U = window_lattice(rc, r0, r1, c0, c1) if lattice is None else lattice
     nr, ncw = r1 - r0, c1 - c0
     if rc.dh is not None:
         o_r, o_c = rc.dh_origin
@@ -854,6 +861,19 @@ def run_window(fl: FlightInstants, rc: Receivers, r0: int, r1: int, c0: int, c1:
     _window_kernel(P, U, dh, rc.dh is not None, k, m0, c0, ncw, fl.src, fl.C, fl.gain, fl.cidx, fl.coef, fl.w,
                    fl.dt, fl.radius, thr, emax, energy, ta, computed)
     return WindowResult(emax, energy, ta, computed.astype(bool))
+
+
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def thread_pool(n: int) -> ThreadPoolExecutor:
+    """A process-wide pool of ``n`` threads, kept for reuse (its threads keep their pyproj transformers)."""
+    with _POOLS_LOCK:
+        pool = _POOLS.get(n)
+        if pool is None:
+            pool = _POOLS[n] = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"gisnoise-fast{n}")
+        return pool
 
 
 def default_threads() -> int:
@@ -912,27 +932,28 @@ def run_grid(fl: FlightInstants, rc: Receivers, thresholds: Sequence[float] = ()
                 raise Cancelled("cancelled", field="cancel")
             put(b, run_window(fl, rc, b[0], b[1], 0, W, thresholds))
         return WindowResult(emax, energy, ta, computed)
-    with ThreadPoolExecutor(max_workers=nthreads, thread_name_prefix="gisnoise-fast") as pool:
-        pending: dict[Any, tuple[int, int]] = {}
-        it = iter(blocks)
-        try:
+    pool = thread_pool(nthreads)
+    pending: dict[Any, tuple[int, int]] = {}
+    it = iter(blocks)
+    try:
+        for b in it:
+            pending[pool.submit(run_window, fl, rc, b[0], b[1], 0, W, thresholds)] = b
+            if len(pending) >= 2 * nthreads:
+                break
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for f in finished:
+                put(pending.pop(f), f.result())
+            if cancel is not None and cancel():
+                raise Cancelled("cancelled", field="cancel")
             for b in it:
                 pending[pool.submit(run_window, fl, rc, b[0], b[1], 0, W, thresholds)] = b
                 if len(pending) >= 2 * nthreads:
                     break
-            while pending:
-                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for f in finished:
-                    put(pending.pop(f), f.result())
-                if cancel is not None and cancel():
-                    raise Cancelled("cancelled", field="cancel")
-                for b in it:
-                    pending[pool.submit(run_window, fl, rc, b[0], b[1], 0, W, thresholds)] = b
-                    if len(pending) >= 2 * nthreads:
-                        break
-        finally:
-            for f in pending:
-                f.cancel()
+    finally:
+        for f in pending:
+            f.cancel()
+        wait(pending)
     return WindowResult(emax, energy, ta, computed)
 
 

@@ -69,7 +69,7 @@ import logging
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -533,11 +533,13 @@ def _plan(schedule: Schedule, grid: GridSpec) -> _Plan:
 
 
 def _tile_step(acc: dict[str, np.ndarray] | None, fl: Any, counts: Mapping[str, float], rc: Any,
-               window: tuple[int, ...], thresholds: Sequence[float], copy: bool = False) -> dict[str, np.ndarray]:
+               window: tuple[int, ...], thresholds: Sequence[float], copy: bool = False,
+               lattice: Any = None) -> dict[str, np.ndarray]:
     """One flight on one tile, added to the tile's accumulators.
 
     ``copy=True`` leaves ``acc`` untouched (a cluster task must not change its inputs:
-    a retried task would add twice); the sums are the same either way.
+    a retried task would add twice); the sums are the same either way.  ``lattice``: the
+    tile's receiver lattice when already computed.
     """
     from . import _fastkernel as fk
 
@@ -546,18 +548,21 @@ def _tile_step(acc: dict[str, np.ndarray] | None, fl: Any, counts: Mapping[str, 
         acc = _new_acc((r1 - r0, c1 - c0), len(thresholds))
     elif copy:
         acc = {k: v.copy() for k, v in acc.items()}
-    res = fk.run_window(fl, rc, r0, r1, c0, c1, thresholds)
+    res = fk.run_window(fl, rc, r0, r1, c0, c1, thresholds, lattice=lattice)
     return _accumulate(acc, res, counts, thresholds)
 
 
 def _tile_all(plan: _Plan, window: tuple[int, ...], cancel: Callable[[], bool] | None = None) -> dict:
     """Every flight, in schedule order, on one tile."""
+    from . import _fastkernel as fk
+
     rc = plan.rc.for_window(*window)
+    lattice = fk.window_lattice(rc, *window)
     acc = None
-    for fl, counts in zip(plan.flights, plan.counts):
+    for fl, counts in zip(plan.flights, plan.counts, strict=True):
         if cancel is not None and cancel():
             raise Cancelled("cancelled", field="cancel")
-        acc = _tile_step(acc, fl, counts, rc, window, plan.thresholds)
+        acc = _tile_step(acc, fl, counts, rc, window, plan.thresholds, lattice=lattice)
     assert acc is not None
     return acc
 
@@ -568,25 +573,28 @@ def _run_local(plan: _Plan, windows: Sequence[tuple[int, ...]], put: Callable[[t
         for w in windows:
             put(w, _tile_all(plan, w, cancel))
         return
-    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="gisnoise-ops") as pool:
-        it = iter(windows)
-        pending: dict[Any, tuple[int, ...]] = {}
-        try:
+    from ._fastkernel import thread_pool
+
+    pool = thread_pool(threads)
+    it = iter(windows)
+    pending: dict[Any, tuple[int, ...]] = {}
+    try:
+        for w in it:
+            pending[pool.submit(_tile_all, plan, w, cancel)] = w
+            if len(pending) >= 2 * threads:
+                break
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for f in finished:
+                put(pending.pop(f), f.result())
             for w in it:
                 pending[pool.submit(_tile_all, plan, w, cancel)] = w
                 if len(pending) >= 2 * threads:
                     break
-            while pending:
-                finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for f in finished:
-                    put(pending.pop(f), f.result())
-                for w in it:
-                    pending[pool.submit(_tile_all, plan, w, cancel)] = w
-                    if len(pending) >= 2 * threads:
-                        break
-        finally:
-            for f in pending:
-                f.cancel()
+    finally:
+        for f in pending:
+            f.cancel()
+        wait(pending)
 
 
 def evaluate_operations(
@@ -676,7 +684,7 @@ def evaluate_operations(
                     for p in PERIODS},
         "lden": "EU Directive 2002/49/EC, Annex I",
         "flights": [{"id": i, "counts": c, "duration_s": fl.duration_s, "instants": fl.n}
-                    for i, c, fl in zip(plan.ids, plan.counts, plan.flights)],
+                    for i, c, fl in zip(plan.ids, plan.counts, plan.flights, strict=True)],
         "thresholds_db": list(plan.thresholds),
         "levels_db": list(schedule.levels_db),
         "floor_db": schedule.floor_db,
