@@ -118,6 +118,7 @@ def summarize(rows: list[dict]) -> dict:
             "correct_realistic": correct, "n_realistic": len(realistic), "false_positives": fp,
             "n_controls": len(controls), "rates": rates, "limits": limits,
             "all_correct": sum(1 for r in rows if r["verdict"] == r["effect"]), "n_all": len(rows),
+            "wrong_effect": sum(1 for r in rows if r["verdict"] not in (None, r["effect"])),
             "seconds_median": float(np.median([r["seconds"] for r in rows]))}
 
 
@@ -145,8 +146,8 @@ def render(s: dict) -> str:
         f"* False positives on the controls: **{s['false_positives']} of {s['n_controls']} "
         f"({100 * s['false_positives'] / s['n_controls']:.1f} %)**.",
         f"* Over the whole sweep, weak magnitudes included: {s['all_correct']} of {s['n_all']} "
-        f"({100 * s['all_correct'] / s['n_all']:.1f} %); below the detection limit the verdict is mostly null, "
-        "rarely another effect (see the table).",
+        f"({100 * s['all_correct'] / s['n_all']:.1f} %); {s['wrong_effect']} verdict(s) named another effect than "
+        "the injected one, the rest of the misses are null verdicts below the detection limit.",
         "",
         "Confusion matrix at realistic magnitudes (rows: injected effect, columns: verdict):",
         "",
