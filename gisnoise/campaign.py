@@ -144,6 +144,8 @@ class Microphone:
     sensitivity_v_per_pa: float | None = None
     full_scale_v: float = 1.0
     background_db: float | None = None
+    height_agl_m: float | None = None
+    """Height of the capsule above the ground, m (for ground reflection); None when not stated."""
 
 
 @dataclass(frozen=True)
@@ -892,11 +894,12 @@ def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Micro
                     f"{', '.join(acoustics.MOUNT_CORRECTIONS_DB)}")
             good = False
         extra: dict[str, Any] = {}
-        for k in ("sensitivity_v_per_pa", "full_scale_v", "background_db"):
+        for k in ("sensitivity_v_per_pa", "full_scale_v", "background_db", "height_agl_m"):
             v = m.get(k)
             if v is None:
                 continue
-            if not _is_number(v) or (k != "background_db" and v <= 0):
+            if not _is_number(v) or (k == "height_agl_m" and v < 0) or (k not in ("background_db", "height_agl_m")
+                                                                        and v <= 0):
                 col.add(cjs, f"{where}.{k}", f"{cjs}: field '{where}.{k}' must be a positive number, got {v!r}")
                 good = False
             else:
@@ -1173,7 +1176,9 @@ def _build_samples(camp: Campaign) -> Samples:
         "snr_db": camp.snr_db,
         "event_db": camp.event_db,
         "flights": {f.id: {"start_utc": f.start_utc, "log": Path(f.log).name} for f in camp.flights},
-        "microphones": {m.id: {"lat": m.lat, "lon": m.lon, "h": m.h, "mount": m.mount} for m in camp.microphones},
+        "microphones": {m.id: {"lat": m.lat, "lon": m.lon, "h": m.h, "mount": m.mount,
+                               **({} if m.height_agl_m is None else {"height_agl_m": m.height_agl_m})}
+                        for m in camp.microphones},
     }
     if meta_uncorrected:
         log.info("absorption not corrected for %d series without band levels", len(meta_uncorrected))

@@ -556,3 +556,23 @@ def test_unknown_schema_and_missing_files(tmp_path):
     (root / "flights" / "f1.csv").unlink()
     with pytest.raises(CampaignError, match=r"flights/f1\.csv: missing flight log for flight 'f1'"):
         read_campaign(root)
+
+
+def test_microphone_height_above_ground_reaches_the_samples(tmp_path):
+    """campaign.json's height_agl_m is passed to Samples.meta, where the ground-reflection effect reads it."""
+    import json
+
+    from gisnoise.campaign import read_campaign
+    from gisnoise.effects import mic_height_agl
+    from gisnoise.simulate import simulate
+
+    root = __import__("pathlib").Path(__file__).resolve().parents[1]
+    scen = json.loads((root / "sample_data/scenarios/diagnosis_base.json").read_text())
+    out = simulate(scen, tmp_path / "c", base_dir=root / "sample_data/scenarios")
+    doc = json.loads((out / "campaign.json").read_text())
+    stated = {m["id"]: m["height_agl_m"] for m in doc["microphones"] if "height_agl_m" in m}
+    assert stated, "the scenario states microphone heights"
+    s = read_campaign(out).samples()
+    h = mic_height_agl({**s.inputs(3000.0), "mic": s.mic})
+    for mid, hm in stated.items():
+        assert np.all(h[s.mic == mid] == hm)
