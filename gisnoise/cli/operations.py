@@ -11,7 +11,7 @@ from .options import out_dir_option, progress
 @click.argument("schedule", type=click.Path(dir_okay=False))
 @out_dir_option
 @click.option("--scheduler", "scheduler", default=None, metavar="ADDRESS",
-              help="Run on the Dask scheduler at ADDRESS (e.g. tcp://10.0.0.5:8786) "
+              help="Run on the Dask scheduler at ADDRESS (e.g. tcp://scheduler:8786) "
                    "[default: $GISNOISE_DASK_SCHEDULER, else this machine].")
 @click.option("--workers", "workers", type=click.IntRange(min=1), default=None,
               help="Start a local Dask cluster of N worker processes for the run "
