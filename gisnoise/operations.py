@@ -50,9 +50,11 @@ Schedule document (JSON, ``"schema": "gisnoise/operations/1"``; paths relative t
 
 ``grid`` may instead give ``"crs"``, ``"bounds": [left, bottom, right, top]`` (m) and
 ``"resolution_m"``; by default it covers every flight plus the margin in the local UTM zone.
-Counts may be fractional (averages over a year).  With ``floor_db``, a flight's
-contribution at cells where it is certainly below the floor is left out (its SEL there
-is below ``floor_db + 10 log10(duration)``); thresholds must not lie below the floor.
+Counts may be fractional (averages over a year).  With ``floor_db`` the fast engine
+skips a flight at cells where it is certainly below the floor; its exposure there is
+below ``duration 10^(floor/10)``, so each level band is kept where the skipped flights
+could move it by at most 0.01 dB and NaN elsewhere (LAmax: kept where at or above the
+floor).  N-above and time above are exact; their thresholds must not lie below the floor.
 
 Examples
 --------
@@ -446,6 +448,7 @@ def _band_names(thresholds: Sequence[float]) -> list[str]:
 
 def _new_acc(shape: tuple[int, int], n_thr: int) -> dict[str, np.ndarray]:
     acc = {f"E_{p}": np.zeros(shape) for p in PERIODS}
+    acc.update({f"O_{p}": np.zeros(shape) for p in PERIODS})  # bound of the exposure left out below the floor
     acc["emax"] = np.zeros(shape, np.float32)
     acc["any"] = np.zeros(shape, bool)
     for k in range(n_thr):
@@ -456,10 +459,15 @@ def _new_acc(shape: tuple[int, int], n_thr: int) -> dict[str, np.ndarray]:
 
 
 def _accumulate(acc: dict[str, np.ndarray], res: Any, counts: Mapping[str, float],
-                thresholds: Sequence[float]) -> dict[str, np.ndarray]:
-    """Add one flight's kernel result (``WindowResult``) with its counts per period, in place."""
+                thresholds: Sequence[float], omitted_bound: float = 0.0) -> dict[str, np.ndarray]:
+    """Add one flight's kernel result (``WindowResult``) with its counts per period, in place.
+
+    ``omitted_bound`` (s): an upper bound of the flight's exposure where the kernel skipped it
+    (``duration 10^(floor/10)``).
+    """
     np.maximum(acc["emax"], res.emax, out=acc["emax"])
     acc["any"] |= res.computed
+    skipped = None if omitted_bound == 0.0 else ~res.computed
     # LAmax > L  <=>  emax > 10^(L/10) (emax holds 10^(LAmax/10) in float32)
     above = [res.emax > np.float32(10.0 ** (thr / 10.0)) for thr in thresholds]
     for p in PERIODS:
@@ -467,21 +475,38 @@ def _accumulate(acc: dict[str, np.ndarray], res: Any, counts: Mapping[str, float
         if n == 0:
             continue
         acc[f"E_{p}"] += n * res.energy
+        if skipped is not None:
+            acc[f"O_{p}"] += (n * omitted_bound) * skipped
         for k in range(len(thresholds)):
             acc[f"NA{k}_{p}"] += n * above[k]
             acc[f"TA{k}_{p}"] += n * res.ta[k]
     return acc
 
 
-def _finish(acc: dict[str, np.ndarray], thresholds: Sequence[float]) -> dict[str, np.ndarray]:
+UNCERTAIN_DB = 0.01
+"""With a floor, level bands are NaN where the flights left out could move them by more than this, dB."""
+
+
+def _finish(acc: dict[str, np.ndarray], thresholds: Sequence[float], floor_db: float | None = None
+            ) -> dict[str, np.ndarray]:
     """Bands from the accumulators."""
     with np.errstate(divide="ignore"):
         e = {p: acc[f"E_{p}"] / (PERIOD_HOURS[p] * 3600.0) for p in PERIODS}
-        bands = {"Lden": 10.0 * np.log10(_lden_energy(e["day"], e["evening"], e["night"])),
+        o = {p: acc[f"O_{p}"] / (PERIOD_HOURS[p] * 3600.0) for p in PERIODS}
+        e_den = _lden_energy(e["day"], e["evening"], e["night"])
+        bands = {"Lden": 10.0 * np.log10(e_den),
                  "Lday": 10.0 * np.log10(e["day"]), "Levening": 10.0 * np.log10(e["evening"]),
                  "Lnight": 10.0 * np.log10(e["night"]), "LAmax": 10.0 * np.log10(acc["emax"].astype(np.float64))}
     for a in bands.values():
-        a[~np.isfinite(a)] = np.nan  # no sound above the floor in that period: nodata
+        a[~np.isfinite(a)] = np.nan  # no sound (above the floor) in that period: nodata
+    if floor_db is not None:
+        # what the skipped flights may add: at most o; the level is kept where that is < 0.01 dB
+        rel = 10.0 ** (UNCERTAIN_DB / 10.0) - 1.0
+        for p, name in (("day", "Lday"), ("evening", "Levening"), ("night", "Lnight")):
+            bands[name][o[p] > rel * e[p]] = np.nan
+        bands["Lden"][_lden_energy(o["day"], o["evening"], o["night"]) > rel * e_den] = np.nan
+        skipped = (acc["O_day"] + acc["O_evening"] + acc["O_night"]) > 0
+        bands["LAmax"][skipped & ~(bands["LAmax"] >= floor_db)] = np.nan
     for k, thr in enumerate(thresholds):
         for kind in ("NA", "TA"):
             total = np.zeros(acc["emax"].shape)
@@ -501,6 +526,7 @@ class _Plan:
     counts: tuple[dict[str, float], ...]
     ids: tuple[str, ...]
     thresholds: tuple[float, ...]
+    floor_db: float | None = None
 
 
 def _plan(schedule: Schedule, grid: GridSpec) -> _Plan:
@@ -529,17 +555,17 @@ def _plan(schedule: Schedule, grid: GridSpec) -> _Plan:
         ids.append(f.id)
     if not flights:
         raise InputError(f"{schedule.source}: no flight has a count above 0", field="counts")
-    return _Plan(rc, tuple(flights), tuple(counts), tuple(ids), schedule.thresholds_db)
+    return _Plan(rc, tuple(flights), tuple(counts), tuple(ids), schedule.thresholds_db, schedule.floor_db)
 
 
 def _tile_step(acc: dict[str, np.ndarray] | None, fl: Any, counts: Mapping[str, float], rc: Any,
                window: tuple[int, ...], thresholds: Sequence[float], copy: bool = False,
-               lattice: Any = None) -> dict[str, np.ndarray]:
+               lattice: Any = None, floor_db: float | None = None) -> dict[str, np.ndarray]:
     """One flight on one tile, added to the tile's accumulators.
 
     ``copy=True`` leaves ``acc`` untouched (a cluster task must not change its inputs:
     a retried task would add twice); the sums are the same either way.  ``lattice``: the
-    tile's receiver lattice when already computed.
+    tile's receiver lattice when already computed; ``floor_db``: the flights' floor.
     """
     from . import _fastkernel as fk
 
@@ -549,7 +575,8 @@ def _tile_step(acc: dict[str, np.ndarray] | None, fl: Any, counts: Mapping[str, 
     elif copy:
         acc = {k: v.copy() for k, v in acc.items()}
     res = fk.run_window(fl, rc, r0, r1, c0, c1, thresholds, lattice=lattice)
-    return _accumulate(acc, res, counts, thresholds)
+    bound = 0.0 if floor_db is None else fl.duration_s * 10.0 ** (floor_db / 10.0)
+    return _accumulate(acc, res, counts, thresholds, bound)
 
 
 def _tile_all(plan: _Plan, window: tuple[int, ...], cancel: Callable[[], bool] | None = None) -> dict:
@@ -562,7 +589,7 @@ def _tile_all(plan: _Plan, window: tuple[int, ...], cancel: Callable[[], bool] |
     for fl, counts in zip(plan.flights, plan.counts, strict=True):
         if cancel is not None and cancel():
             raise Cancelled("cancelled", field="cancel")
-        acc = _tile_step(acc, fl, counts, rc, window, plan.thresholds, lattice=lattice)
+        acc = _tile_step(acc, fl, counts, rc, window, plan.thresholds, lattice=lattice, floor_db=plan.floor_db)
     assert acc is not None
     return acc
 
@@ -669,7 +696,7 @@ def evaluate_operations(
         n = fk.default_threads() if threads is None else max(1, int(threads))
         _run_local(plan, windows, put, n, cancel)
         how = {"executor": "threads", "threads": n}
-    bands = _finish(acc, plan.thresholds)
+    bands = _finish(acc, plan.thresholds, plan.floor_db)
     if plan.rc.valid is not None and not plan.rc.valid.all():
         for a in bands.values():
             a[~plan.rc.valid] = np.nan

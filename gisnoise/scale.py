@@ -125,7 +125,7 @@ def run_on_dask(plan: Any, windows: Sequence[tuple[int, ...]], put: Callable[[tu
                 fut = None
                 for k, key in enumerate(chain_keys(t, len(flights), run)):
                     fut = client.submit(_tile_step, fut, flights[k], plan.counts[k], rc, w, plan.thresholds,
-                                        copy=True, key=key, pure=False, priority=-t)
+                                        copy=True, floor_db=plan.floor_db, key=key, pure=False, priority=-t)
                 last[fut] = w
             tasks = len(windows) * len(flights)
             with client.as_current():
