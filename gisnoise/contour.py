@@ -57,6 +57,7 @@ def make_map(
     snapshot_t: float | None = None,
     substeps: int = 1,
     background: bool = False,
+    engine: str = "numpy",
     progress: Callable[[float], Any] | None = None,
     cancel: Callable[[], bool] | None = None,
 ) -> dict[str, Any]:
@@ -94,7 +95,7 @@ def make_map(
         Also draw ``map.png``.
     plot_metric : str, optional
         Band drawn in ``map.png`` (default ``LAmax`` if computed, else the first level band).
-    period_s, threshold_db, snapshot_t, substeps, background
+    period_s, threshold_db, snapshot_t, substeps, background, engine
         Passed to :func:`~gisnoise.evaluate.evaluate_grid`.
     progress : callable, optional
         Called with the fraction done (0-1).
@@ -130,7 +131,8 @@ def make_map(
     result: MapResult = evaluate_grid(
         traj, cardset, grid, metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground_h,
         dem_offset_m=dem_offset_m, period_s=period_s, threshold_db=threshold_db, snapshot_t=snapshot_t,
-        background=background, substeps=substeps, uncertainty=uncertainty, progress=eval_progress, cancel=cancel)
+        background=background, substeps=substeps, uncertainty=uncertainty, engine=engine, progress=eval_progress,
+        cancel=cancel)
     result.metadata["levels_db"] = lv
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Any] = {}

@@ -218,3 +218,23 @@ def test_receivers_on_a_dem(tmp_path, card_path):
     np.testing.assert_allclose(on_dem, on_flat, atol=1e-4)
     assert on_dem.max() > G0 - 20 * np.log10(np.hypot(140.0 - 101.5, 15.0) / 40.0)  # a cell within 15 m
 
+
+
+def test_fast_engine_map_equals_the_reference_within_0_01_db(tmp_path):
+    """`gisnoise contour --engine fast` writes the same LAmax/LAeq/SEL as the NumPy reference (issue 9: 0.01 dB)."""
+    root = __import__("pathlib").Path(__file__).resolve().parents[1]
+    route = root / "sample_data/route/delivery_route.geojson"
+    cards = [str(root / f"sample_data/cards/demo_{p}.json") for p in ("horizontal", "climb", "sink")]
+    bands = {}
+    for engine in ("numpy", "fast"):
+        args = ["-q", "contour", str(route), "--out", str(tmp_path / engine), "--resolution", "40",
+                "--margin", "300", "--engine", engine]
+        for c in cards:
+            args += ["--card", c]
+        res = CliRunner().invoke(cli, args)
+        assert res.exit_code == 0, res.output
+        with rasterio.open(tmp_path / engine / "levels.tif") as ds:
+            bands[engine] = {d: ds.read(i + 1) for i, d in enumerate(ds.descriptions)}
+    assert set(bands["fast"]) == set(bands["numpy"]) == {"LAmax", "LAeq", "SEL"}
+    for name in ("LAmax", "LAeq", "SEL"):
+        np.testing.assert_allclose(bands["fast"][name], bands["numpy"][name], atol=0.01)

@@ -60,11 +60,15 @@ def _metrics(ctx: click.Context, param: click.Parameter, value: str) -> list[str
               help="Add LAmax_std, LAeq_std and the 95 %-confidence levels LAmax_p95, LAeq_p95 "
                    "(cards need a covariance).")
 @click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png.")
+@click.option("--engine", "engine", type=click.Choice(["numpy", "fast"]), default="numpy", show_default=True,
+              help="Evaluator: 'numpy' is the reference (any ansatz, uncertainty); 'fast' is the numba float32 "
+                   "kernel for the paper ansatzes, equal within 0.01 dB and tens of times faster on large grids.")
 @click.pass_context
 def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float,
             levels: list[float], dem: str | None, dem_offset: float, receiver_height: float, ground_h: float | None,
             crs: str | None, metrics: list[str], period: float | None, threshold: list[float] | None,
-            snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool) -> None:
+            snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool,
+            engine: str) -> None:
     """Noise map of TRAJECTORY: DIR/levels.tif, DIR/contours.geojson (and DIR/map.png).
 
     TRAJECTORY is a flight CSV (t, lat, lon, h, roll, pitch, yaw, power_w, phase), a GeoJSON
@@ -81,7 +85,7 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
             metrics=metrics, crs=crs, dem=dem, receiver_height=receiver_height, ground_h=ground_h,
             dem_offset_m=dem_offset, uncertainty=uncertainty, plot=plot, period_s=period,
             threshold_db=threshold, snapshot_t=snapshot, substeps=substeps, background=background,
-            progress=update)
+            engine=engine, progress=update)
     res = paths["result"]
     g = res.grid
     auth = g.crs.to_authority()
