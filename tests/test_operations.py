@@ -182,8 +182,14 @@ def test_cli_writes_bands_contours_and_summary(tmp_path, day):
 
     path = write_case(tmp_path)
     out = tmp_path / "out"
-    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(out), "--threads", "2"])
+    # the default: a local Dask cluster; its bands equal the single-process reference
+    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(out), "--workers", "1"])
     assert r.exit_code == 0, r.output
+    assert "Dask (1 workers" in r.output
+    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "one"), "--single-process",
+                                 "--threads", "2"])
+    assert r.exit_code == 0, r.output
+    assert "2 threads" in r.output
     assert "Lden: max" in r.output and "NA60_night: max 3.0 events" in r.output
     with rasterio.open(out / "operations.tif") as ds:
         names = list(ds.descriptions)

@@ -14,8 +14,9 @@ from .options import out_dir_option, progress
               help="Run on the Dask scheduler at ADDRESS (e.g. tcp://scheduler:8786) "
                    "[default: $GISNOISE_DASK_SCHEDULER, else this machine].")
 @click.option("--workers", "workers", type=click.IntRange(min=1), default=None,
-              help="Start a local Dask cluster of N worker processes for the run "
-                   "[default: no cluster; one process, tiles on threads].")
+              help="Worker processes of the local Dask cluster started for the run [default: the CPUs, at most 4].")
+@click.option("--single-process", "single_process", is_flag=True,
+              help="No Dask: one process, tiles on threads (faster on one small machine; same bands).")
 @click.option("--threads", "threads", type=click.IntRange(min=1), default=None,
               help="Threads of the one-process run [default: $GISNOISE_THREADS, else the CPUs].")
 @click.option("--tile-cells", "tile_cells", type=click.IntRange(min=1), default=1 << 18, show_default=True,
@@ -26,7 +27,7 @@ from .options import out_dir_option, progress
               help="Contour levels of Lden and Lnight, dB(A), comma-separated [default: the schedule's].")
 @click.pass_context
 def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, workers: int | None,
-            threads: int | None, tile_cells: int, memory_limit: str | None, levels: str | None) -> None:
+            single_process: bool, threads: int | None, tile_cells: int, memory_limit: str | None, levels: str | None) -> None:
     """Noise of a day of operations: DIR/operations.tif, DIR/contours.geojson, DIR/summary.json.
 
     SCHEDULE is a JSON file (schema gisnoise/operations/1): model cards, the receiver grid
@@ -39,8 +40,8 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
 
     \b
     Examples:
-      gisnoise operations day.json --out ops/                   this machine, threads
-      gisnoise operations day.json --out ops/ --workers 2       local Dask cluster
+      gisnoise operations day.json --out ops/                   local Dask cluster
+      gisnoise operations day.json --out ops/ --single-process  this machine, threads
       gisnoise operations day.json --out ops/ --scheduler tcp://sched:8786
     """
     import numpy as np
@@ -48,6 +49,13 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     from ..contours import parse_levels
     from ..operations import evaluate_operations, load_schedule, write_operations
 
+    import os
+
+    if single_process and (scheduler or workers):
+        raise click.UsageError("--single-process excludes --scheduler and --workers")
+    scheduler = scheduler or os.environ.get("GISNOISE_DASK_SCHEDULER") or None
+    if not single_process and scheduler is None and workers is None:
+        workers = max(1, min(os.cpu_count() or 1, 4))
     sched = load_schedule(schedule)
     lv = None if levels is None else parse_levels(levels, field="levels")
     with progress(ctx, "operations", 1.0) as update:
