@@ -65,7 +65,7 @@ except ImportError:  # pragma: no cover - numba is the optional extra "fast"
 
 from . import model as _model
 from .cards import ModelCard
-from .errors import CardError, InputError, TrajectoryError
+from .errors import CardError, InputError
 from .frames import LocalFrame, dcm_ned_to_body
 from .grid import WGS84, GridSpec, transformer
 from .trajectory import Trajectory
@@ -1020,11 +1020,13 @@ def evaluate_grid_fast(
         ``metadata["cells_below_floor"]``.
     """
     from .evaluate import (
-        METRICS,
-        CardSet,
         MapResult,
         _as_float,
         _band_order,
+        _check_flight_and_grid,
+        _period_and_snapshot,
+        _requested,
+        _substeps_and_min_distance,
         _unit,
         snapshot_name,
         threshold_name,
@@ -1035,51 +1037,17 @@ def evaluate_grid_fast(
     if kernel is not None:
         raise InputError("kernel: a replacement block function belongs to engine='numpy'", field="kernel")
     _require_numba()
-    if not isinstance(traj, Trajectory):
-        raise TrajectoryError(f"trajectory must be a Trajectory, got {type(traj).__name__}", field="trajectory")
-    if not isinstance(grid, GridSpec):
-        raise InputError(f"grid must be a GridSpec, got {type(grid).__name__}", field="grid")
+    _check_flight_and_grid(traj, grid)
     if uncertainty:
         raise InputError("uncertainty: engine 'fast' computes levels only; use engine='numpy' for the "
                          "uncertainty bands", field="engine")
-    cardset = cards if isinstance(cards, CardSet) else CardSet(cards)
-    if isinstance(metrics, str):
-        metrics = [m.strip() for m in metrics.split(",") if m.strip()]
-    metrics = list(dict.fromkeys(metrics))
-    bad = [m for m in metrics if m not in METRICS]
-    if bad:
-        raise InputError(f"metrics: unknown metric {bad[0]!r}; known: {', '.join(METRICS)}", field="metrics")
-    thresholds: list[float] = []
-    if threshold_db is not None:
-        seq = [threshold_db] if np.ndim(threshold_db) == 0 else list(threshold_db)  # type: ignore[arg-type]
-        thresholds = [_as_float(v, "threshold_db") for v in seq]
-    if not metrics and not thresholds and snapshot_t is None:
-        raise InputError("metrics: nothing to compute (no metric, threshold or snapshot)", field="metrics")
-    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
-        raise InputError(f"substeps must be an integer >= 1, got {substeps!r}", field="substeps")
-    substeps = int(substeps)
-    min_d = _as_float(min_distance_m, "min_distance_m", minimum=0.0, strict=True)
+    cardset, metrics, thresholds = _requested(cards, metrics, threshold_db, snapshot_t)
+    substeps, min_d = _substeps_and_min_distance(substeps, min_distance_m)
     floor = None if floor_db is None else _as_float(floor_db, "floor_db")
     if chunk_cells is not None and (isinstance(chunk_cells, bool) or int(chunk_cells) < 1):
         raise InputError(f"chunk_cells must be >= 1, got {chunk_cells!r}", field="chunk_cells")
     chunk = DEFAULT_CHUNK_CELLS if chunk_cells is None else int(chunk_cells)
-    integral = bool({"LAeq", "SEL"} & set(metrics)) or bool(thresholds)
-    if integral and len(traj) < 2:
-        raise TrajectoryError(f"{traj.source}: LAeq, SEL and time above need at least two samples, got "
-                              f"{len(traj)}", field="t")
-    duration = traj.duration_s
-    period = None
-    if "LAeq" in metrics:
-        period = duration if period_s is None else _as_float(period_s, "period_s", minimum=0.0, strict=True)
-        if period < duration * (1.0 - 1e-12):
-            raise InputError(f"period_s ({period:g} s) must cover the trajectory's duration ({duration:g} s)",
-                             field="period_s")
-    snap = None
-    if snapshot_t is not None:
-        snap = _as_float(snapshot_t, "snapshot_t")
-        if not traj.t[0] <= snap <= traj.t[-1]:
-            raise InputError(f"snapshot_t={snap:g} s lies outside the trajectory "
-                             f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
+    integral, duration, period, snap = _period_and_snapshot(traj, metrics, thresholds, period_s, snapshot_t)
 
     rc = receivers_for(grid, [traj], receiver_height=receiver_height, dem=dem, ground_h=ground_h,
                        dem_offset_m=dem_offset_m)

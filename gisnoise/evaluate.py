@@ -310,6 +310,63 @@ def _as_float(v: Any, name: str, *, minimum: float | None = None, strict: bool =
     return f
 
 
+def _check_flight_and_grid(traj: Any, grid: Any) -> None:
+    """Refuse a ``traj`` that is not a :class:`Trajectory` or a ``grid`` that is not a :class:`GridSpec`."""
+    if not isinstance(traj, Trajectory):
+        raise TrajectoryError(f"trajectory must be a Trajectory, got {type(traj).__name__}", field="trajectory")
+    if not isinstance(grid, GridSpec):
+        raise InputError(f"grid must be a GridSpec, got {type(grid).__name__}", field="grid")
+
+
+def _requested(cards: Any, metrics: Sequence[str] | str, threshold_db: Any,
+               snapshot_t: Any) -> tuple[CardSet, list[str], list[float]]:
+    """The card set, the metrics (deduplicated, checked) and the time-above levels (dB(A)) asked for."""
+    cardset = cards if isinstance(cards, CardSet) else CardSet(cards)
+    if isinstance(metrics, str):
+        metrics = [m.strip() for m in metrics.split(",") if m.strip()]
+    metrics = list(dict.fromkeys(metrics))
+    bad = [m for m in metrics if m not in METRICS]
+    if bad:
+        raise InputError(f"metrics: unknown metric {bad[0]!r}; known: {', '.join(METRICS)}", field="metrics")
+    thresholds: list[float] = []
+    if threshold_db is not None:
+        seq = [threshold_db] if np.ndim(threshold_db) == 0 else list(threshold_db)
+        thresholds = [_as_float(v, "threshold_db") for v in seq]
+    if not metrics and not thresholds and snapshot_t is None:
+        raise InputError("metrics: nothing to compute (no metric, threshold or snapshot)", field="metrics")
+    return cardset, metrics, thresholds
+
+
+def _substeps_and_min_distance(substeps: Any, min_distance_m: Any) -> tuple[int, float]:
+    """Checked ``substeps`` (integer >= 1) and near-field limit (m, > 0)."""
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise InputError(f"substeps must be an integer >= 1, got {substeps!r}", field="substeps")
+    return int(substeps), _as_float(min_distance_m, "min_distance_m", minimum=0.0, strict=True)
+
+
+def _period_and_snapshot(traj: Trajectory, metrics: Sequence[str], thresholds: Sequence[float], period_s: Any,
+                         snapshot_t: Any) -> tuple[bool, float, float | None, float | None]:
+    """Whether time integrals are asked for, the duration (s), the LAeq period (s) and the snapshot time (s)."""
+    integral = bool({"LAeq", "SEL"} & set(metrics)) or bool(thresholds)
+    if integral and len(traj) < 2:
+        raise TrajectoryError(f"{traj.source}: LAeq, SEL and time above need at least two samples, got "
+                              f"{len(traj)}", field="t")
+    duration = traj.duration_s
+    period = None
+    if "LAeq" in metrics:
+        period = duration if period_s is None else _as_float(period_s, "period_s", minimum=0.0, strict=True)
+        if period < duration * (1.0 - 1e-12):
+            raise InputError(f"period_s ({period:g} s) must cover the trajectory's duration ({duration:g} s)",
+                             field="period_s")
+    snap = None
+    if snapshot_t is not None:
+        snap = _as_float(snapshot_t, "snapshot_t")
+        if not traj.t[0] <= snap <= traj.t[-1]:
+            raise InputError(f"snapshot_t={snap:g} s lies outside the trajectory "
+                             f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
+    return integral, duration, period, snap
+
+
 def _eval_states(traj: Trajectory, substeps: int) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
     """Evaluation instants, the state there, and the index of the sample each starts from."""
     if substeps == 1 or len(traj) < 2:
@@ -599,51 +656,17 @@ def evaluate_grid(
             cancel=cancel, floor_db=floor_db)
     if floor_db is not None:
         raise InputError("floor_db: the audibility floor is an option of engine='fast'", field="floor_db")
-    if not isinstance(traj, Trajectory):
-        raise TrajectoryError(f"trajectory must be a Trajectory, got {type(traj).__name__}", field="trajectory")
-    if not isinstance(grid, GridSpec):
-        raise InputError(f"grid must be a GridSpec, got {type(grid).__name__}", field="grid")
-    cardset = cards if isinstance(cards, CardSet) else CardSet(cards)
-    if isinstance(metrics, str):
-        metrics = [m.strip() for m in metrics.split(",") if m.strip()]
-    metrics = list(dict.fromkeys(metrics))
-    bad = [m for m in metrics if m not in METRICS]
-    if bad:
-        raise InputError(f"metrics: unknown metric {bad[0]!r}; known: {', '.join(METRICS)}", field="metrics")
-    thresholds: list[float] = []
-    if threshold_db is not None:
-        seq = [threshold_db] if np.ndim(threshold_db) == 0 else list(threshold_db)  # type: ignore[arg-type]
-        thresholds = [_as_float(v, "threshold_db") for v in seq]
-    if not metrics and not thresholds and snapshot_t is None:
-        raise InputError("metrics: nothing to compute (no metric, threshold or snapshot)", field="metrics")
+    _check_flight_and_grid(traj, grid)
+    cardset, metrics, thresholds = _requested(cards, metrics, threshold_db, snapshot_t)
     hr = _as_float(receiver_height, "receiver_height")
-    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
-        raise InputError(f"substeps must be an integer >= 1, got {substeps!r}", field="substeps")
-    substeps = int(substeps)
-    min_d = _as_float(min_distance_m, "min_distance_m", minimum=0.0, strict=True)
+    substeps, min_d = _substeps_and_min_distance(substeps, min_distance_m)
     temp = _as_float(temperature_c, "temperature_c", minimum=-273.15, strict=True)
     c_sound = 331.3 * math.sqrt(1.0 + temp / 273.15)
     block = int(block_size)
     if block < 1:
         raise InputError(f"block_size must be >= 1, got {block_size!r}", field="block_size")
 
-    integral = bool({"LAeq", "SEL"} & set(metrics)) or bool(thresholds)
-    if integral and len(traj) < 2:
-        raise TrajectoryError(f"{traj.source}: LAeq, SEL and time above need at least two samples, got "
-                              f"{len(traj)}", field="t")
-    duration = traj.duration_s
-    period = None
-    if "LAeq" in metrics:
-        period = duration if period_s is None else _as_float(period_s, "period_s", minimum=0.0, strict=True)
-        if period < duration * (1.0 - 1e-12):
-            raise InputError(f"period_s ({period:g} s) must cover the trajectory's duration ({duration:g} s)",
-                             field="period_s")
-    snap = None
-    if snapshot_t is not None:
-        snap = _as_float(snapshot_t, "snapshot_t")
-        if not traj.t[0] <= snap <= traj.t[-1]:
-            raise InputError(f"snapshot_t={snap:g} s lies outside the trajectory "
-                             f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
+    integral, duration, period, snap = _period_and_snapshot(traj, metrics, thresholds, period_s, snapshot_t)
 
     card_idx_samples = cardset.assign(traj.phase, traj.t, source=traj.source)
     used = sorted(set(card_idx_samples.tolist()))
