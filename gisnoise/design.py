@@ -79,6 +79,7 @@ import numpy as np
 
 from . import __version__
 from . import cards as _cards
+from ._jsondoc import JsonObject, load_card
 from ._patterns import PathBuilder, fwd, right
 from .errors import Cancelled, DesignError, FitError, InputError, ScenarioError
 from .frames import LocalFrame, emission_angles
@@ -137,48 +138,11 @@ CancelFn = Callable[[], bool]
 # =========================================================================== plan
 
 
-_REQ = object()
-
-
-class _Doc:
+class _Doc(JsonObject):
     """Reads one JSON object of a plan, naming fields with their dotted path in errors."""
 
-    def __init__(self, doc: Any, path: str, known: tuple[str, ...]) -> None:
-        if not isinstance(doc, Mapping):
-            raise DesignError(f"plan: field '{path or 'plan'}' must be an object, got {doc!r}", field=path or "plan")
-        self.doc, self.path = doc, path
-        unknown = [k for k in doc if k not in known]
-        if unknown:
-            name = self.name(unknown[0])
-            raise DesignError(f"plan: unknown field '{name}' (known: {', '.join(known)})", field=name)
-
-    def name(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else key
-
-    def fail(self, key: str, what: str, v: Any) -> None:
-        raise DesignError(f"plan: field '{self.name(key)}' must be {what}, got {v!r}", field=self.name(key))
-
-    def get(self, key: str, default: Any = _REQ) -> Any:
-        if key not in self.doc:
-            if default is _REQ:
-                raise DesignError(f"plan: missing field '{self.name(key)}'", field=self.name(key))
-            return default
-        return self.doc[key]
-
-    def num(self, key: str, default: Any = _REQ, lo: float = -math.inf, hi: float = math.inf, *,
-            lo_open: bool = False, integer: bool = False, allow_none: bool = False) -> Any:
-        v = self.get(key, default)
-        if v is None and allow_none:
-            return None
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-        if ok and integer and float(v) != int(v):
-            ok = False
-        if ok and (v < lo or v > hi or (lo_open and v == lo)):
-            ok = False
-        if not ok:
-            rng = f" in {'(' if lo_open else '['}{lo:g}, {hi:g}]" if (lo > -math.inf or hi < math.inf) else ""
-            self.fail(key, f"{'an integer' if integer else 'a number'}{rng}", v)
-        return int(v) if integer else float(v)
+    error = DesignError
+    what = "plan"
 
 
 def _num_list(v: Any) -> bool:
@@ -319,32 +283,10 @@ def load_plan(path: str | os.PathLike[str]) -> Plan:
     return resolve_plan(doc, base_dir=p.resolve().parent)
 
 
-def _sample_data_dir() -> Path:
-    return Path(__file__).resolve().parent.parent / "sample_data"
-
-
 def _load_card(ref: Any, base_dir: Path | None) -> _cards.ModelCard:
-    try:
-        if isinstance(ref, _cards.ModelCard):
-            return ref
-        if isinstance(ref, Mapping):
-            return _cards.from_dict(ref, source="plan field 'card'")
-        if not isinstance(ref, str) or not ref:
-            raise DesignError(f"plan: field 'card' must be a card file, a bundled card name or a card object, "
-                              f"got {ref!r}", field="card")
-        if ref.endswith(".json") or "/" in ref or os.sep in ref:
-            p = Path(ref)
-            if not p.is_absolute() and base_dir is not None:
-                p = base_dir / p
-        else:
-            p = _sample_data_dir() / "cards" / f"{ref}.json"
-            if not p.exists():
-                raise DesignError(f"plan: field 'card': no bundled card {ref!r}", field="card")
-        return _cards.load(p)
-    except DesignError:
-        raise
-    except InputError as exc:
-        raise DesignError(f"plan: field 'card': {exc}", field="card") from None
+    if isinstance(ref, _cards.ModelCard):
+        return ref
+    return load_card(ref, "card", base_dir, _Doc)
 
 
 def _polygons(obj: Any, fld: str) -> list[list[list[list[float]]]]:
@@ -708,8 +650,9 @@ def snr_distance(card: _cards.ModelCard, level_db: float, *, power_w: float | No
 
     Examples
     --------
+    >>> from gisnoise._jsondoc import sample_data_dir
     >>> from gisnoise.cards import load
-    >>> card = load(_sample_data_dir() / "cards" / "demo_horizontal.json")
+    >>> card = load(sample_data_dir() / "cards" / "demo_horizontal.json")
     >>> d = snr_distance(card, 43.0, power_w=3000.0)
     >>> 200 < d < 800
     True

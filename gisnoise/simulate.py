@@ -145,6 +145,7 @@ import numpy as np
 
 from . import __version__, acoustics
 from . import cards as _cards
+from ._jsondoc import JsonObject, load_card
 from ._patterns import G, PathBuilder
 from .errors import InputError, ScenarioError
 from .frames import LocalFrame, emission_angles, wrap_angle
@@ -326,61 +327,11 @@ def _rng(seed: int, *keys: int) -> np.random.Generator:
 # =========================================================================== scenario
 
 
-_REQ = object()
-
-
-class _Obj:
+class _Obj(JsonObject):
     """Reads one JSON object of the scenario, naming fields with their dotted path in errors."""
 
-    def __init__(self, doc: Any, path: str, known: tuple[str, ...]) -> None:
-        if not isinstance(doc, Mapping):
-            raise ScenarioError(f"scenario: field '{path}' must be an object, got {doc!r}", field=path)
-        self.doc, self.path = doc, path
-        unknown = [k for k in doc if k not in known]
-        if unknown:
-            raise ScenarioError(f"scenario: unknown field '{self._name(unknown[0])}' (known: {', '.join(known)})",
-                                field=self._name(unknown[0]))
-
-    def _name(self, key: str) -> str:
-        return f"{self.path}.{key}" if self.path else key
-
-    def _fail(self, key: str, what: str, v: Any) -> None:
-        raise ScenarioError(f"scenario: field '{self._name(key)}' must be {what}, got {v!r}", field=self._name(key))
-
-    def get(self, key: str, default: Any = _REQ) -> Any:
-        if key not in self.doc:
-            if default is _REQ:
-                raise ScenarioError(f"scenario: missing field '{self._name(key)}'", field=self._name(key))
-            return default
-        return self.doc[key]
-
-    def num(self, key: str, default: Any = _REQ, lo: float = -math.inf, hi: float = math.inf,
-            lo_open: bool = False, integer: bool = False, allow_none: bool = False) -> Any:
-        v = self.get(key, default)
-        if v is None and allow_none:
-            return None
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-        if ok and integer and float(v) != int(v):
-            ok = False
-        if ok and (v < lo or v > hi or (lo_open and v == lo)):
-            ok = False
-        if not ok:
-            rng = f" in {'(' if lo_open else '['}{lo:g}, {hi:g}]" if (lo > -math.inf or hi < math.inf) else ""
-            self._fail(key, f"{'an integer' if integer else 'a number'}{rng}", v)
-        return int(v) if integer else float(v)
-
-    def str(self, key: str, default: Any = _REQ, choices: tuple[str, ...] | None = None) -> Any:
-        v = self.get(key, default)
-        if not isinstance(v, str) or not v or (choices is not None and v not in choices):
-            self._fail(key, f"one of {', '.join(choices)}" if choices else "a non-empty string", v)
-        return v
-
-    def point(self, key: str, default: Any = _REQ) -> list[float]:
-        v = self.get(key, default)
-        if (not isinstance(v, (list, tuple)) or len(v) != 2
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
-            self._fail(key, "a point [east_m, north_m]", v)
-        return [float(v[0]), float(v[1])]
+    error = ScenarioError
+    what = "scenario"
 
 
 _DEFAULT_CARDS = {"horizontal": "demo_horizontal", "transition": "demo_horizontal", "climb": "demo_climb",
@@ -418,32 +369,6 @@ _EFFECT_FORMS = {
     "background_event": "event energy peak_dba * sin^2(pi (t - t0) / duration_s) on all microphones at once"
                         " (+ per-mic offset N(0, mic_spread_db)), jet-like spectrum",
 }
-
-
-def _sample_data_dir() -> Path:
-    return Path(__file__).resolve().parent.parent / "sample_data"
-
-
-def _load_card(ref: Any, fld: str, base_dir: Path | None) -> _cards.ModelCard:
-    try:
-        if isinstance(ref, Mapping):
-            return _cards.from_dict(ref, source=f"scenario field '{fld}'")
-        if not isinstance(ref, str) or not ref:
-            raise ScenarioError(f"scenario: field '{fld}' must be a card file, a bundled card name or a card "
-                                f"object, got {ref!r}", field=fld)
-        if ref.endswith(".json") or "/" in ref or os.sep in ref:
-            p = Path(ref)
-            if not p.is_absolute() and base_dir is not None:
-                p = base_dir / p
-        else:
-            p = _sample_data_dir() / "cards" / f"{ref}.json"
-            if not p.exists():
-                raise ScenarioError(f"scenario: field '{fld}': no bundled card {ref!r}", field=fld)
-        return _cards.load(p)
-    except ScenarioError:
-        raise
-    except InputError as exc:
-        raise ScenarioError(f"scenario: field '{fld}': {exc}", field=fld) from None
 
 
 def load_scenario(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -521,7 +446,7 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
             raise ScenarioError(f"scenario: field 'vehicle.cards.{ph}': unknown phase; known: "
                                 f"{', '.join(_cards.PHASES)}", field=f"vehicle.cards.{ph}")
     card_refs.update(given)
-    cards = {ph: _load_card(ref, f"vehicle.cards.{ph}", bdir) for ph, ref in card_refs.items()}
+    cards = {ph: load_card(ref, f"vehicle.cards.{ph}", bdir, _Obj) for ph, ref in card_refs.items()}
     ref_p = v.num("reference_power_w", cards["horizontal"].reference_power_w, lo=0.0, lo_open=True)
     for ph, cd in cards.items():
         if abs(cd.reference_power_w - ref_p) > 1e-9 * ref_p:
@@ -578,12 +503,12 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
                                             "sensitivity_v_per_pa"))
         mid = mo.str("id")
         if mid in seen or "/" in mid or mid in (".", ".."):
-            mo._fail("id", "a unique name usable as a folder", mid)
+            mo.fail("id", "a unique name usable as a folder", mid)
         seen.add(mid)
         mount = mo.str("mount", "ground_plate", MOUNTS)
         height = mo.num("height_m", 0.0 if mount == "ground_plate" else 1.2, lo=0.0, hi=100.0)
         if mount == "ground_plate" and height != 0.0:
-            mo._fail("height_m", "0 for a ground_plate microphone", height)
+            mo.fail("height_m", "0 for a ground_plate microphone", height)
         if "lat" in m or "lon" in m:
             lat, lon = mo.num("lat", lo=-90.0, hi=90.0), mo.num("lon", lo=-180.0, hi=180.0)
             e, n, _ = frame.to_enu(lat, lon, out["origin"]["h"])
@@ -620,15 +545,15 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
             "background_in_campaign": op.get("background_in_campaign", True)}
     for k in ("bands", "background_in_campaign"):
         if not isinstance(outp[k], bool):
-            op._fail(k, "true or false", outp[k])
+            op.fail(k, "true or false", outp[k])
     if outp["band_max_hz"] < outp["band_min_hz"]:
-        op._fail("band_max_hz", f"at least band_min_hz ({outp['band_min_hz']:g})", outp["band_max_hz"])
+        op.fail("band_max_hz", f"at least band_min_hz ({outp['band_min_hz']:g})", outp["band_max_hz"])
     if outp["format"] == "wav":
         n_blk = outp["fs_hz"] * outp["block_s"]
         if abs(n_blk - round(n_blk)) > 1e-6:
-            op._fail("block_s", f"a whole number of samples at fs_hz {outp['fs_hz']}", outp["block_s"])
+            op.fail("block_s", f"a whole number of samples at fs_hz {outp['fs_hz']}", outp["block_s"])
         if outp["band_max_hz"] * 10 ** 0.05 >= outp["fs_hz"] / 2:
-            op._fail("fs_hz", f"above twice the top band edge ({2 * outp['band_max_hz'] * 10 ** 0.05:.0f} Hz)",
+            op.fail("fs_hz", f"above twice the top band edge ({2 * outp['band_max_hz'] * 10 ** 0.05:.0f} Hz)",
                      outp["fs_hz"])
     out["output"] = outp
 
@@ -643,19 +568,19 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
         fo = _Obj(f, f"flights[{i}]", ("id", "start_utc", "start", "patterns"))
         fid = fo.str("id")
         if fid in fseen or "/" in fid or fid in (".", ".."):
-            fo._fail("id", "a unique name usable as a file name", fid)
+            fo.fail("id", "a unique name usable as a file name", fid)
         fseen.add(fid)
         start_utc = fo.str("start_utc", (t_base + timedelta(hours=i)).strftime("%Y-%m-%dT%H:%M:%SZ"))
         try:
             datetime.fromisoformat(start_utc.replace("Z", "+00:00"))
         except ValueError:
-            fo._fail("start_utc", "an ISO 8601 time such as 2024-05-04T10:00:00Z", start_utc)
+            fo.fail("start_utc", "an ISO 8601 time such as 2024-05-04T10:00:00Z", start_utc)
         so = _Obj(fo.get("start", {}), f"flights[{i}].start", ("e", "n", "height_m", "heading_deg"))
         start = {"e": so.num("e", 0.0), "n": so.num("n", 0.0), "height_m": so.num("height_m", 0.0, lo=0.0, hi=2000.0),
                  "heading_deg": so.num("heading_deg", 0.0)}
         pats = fo.get("patterns")
         if not isinstance(pats, list) or not pats:
-            fo._fail("patterns", "a non-empty list", pats)
+            fo.fail("patterns", "a non-empty list", pats)
         plist = [_pattern(p, f"flights[{i}].patterns[{j}]", veh) for j, p in enumerate(pats)]
         out["flights"].append({"id": fid, "start_utc": start_utc, "start": start, "patterns": plist})
 
@@ -717,7 +642,7 @@ def _events(v: Any, fld: str, flights: set[str]) -> list[dict[str, Any]] | None:
         eo = _Obj(e, f"{fld}[{i}]", ("flight", "t_s", "duration_s", "peak_dba"))
         fl = eo.str("flight")
         if fl not in flights:
-            eo._fail("flight", f"one of the flights ({', '.join(sorted(flights))})", fl)
+            eo.fail("flight", f"one of the flights ({', '.join(sorted(flights))})", fl)
         out.append({"flight": fl, "t_s": eo.num("t_s"), "duration_s": eo.num("duration_s", lo=0.0, lo_open=True),
                     "peak_dba": eo.num("peak_dba", lo=-20.0, hi=140.0)})
     return out
@@ -748,7 +673,7 @@ def _pattern(p: Any, fld: str, veh: Mapping[str, Any]) -> dict[str, Any]:
         hs = o.get("heights_m")
         if (not isinstance(hs, list) or not hs
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and 0 <= x <= 2000 for x in hs)):
-            o._fail("heights_m", "a non-empty list of heights in [0, 2000] m", hs)
+            o.fail("heights_m", "a non-empty list of heights in [0, 2000] m", hs)
         return {"type": t, "centre": o.point("centre"), "heading_deg": o.num("heading_deg", 0.0),
                 "straight_m": o.num("straight_m", 300.0, lo=0.0, hi=20000.0), "radius_m": radius,
                 "heights_m": [float(x) for x in hs], "laps": o.num("laps", 1, lo=1, hi=100, integer=True),
