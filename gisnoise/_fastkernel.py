@@ -1024,10 +1024,10 @@ def evaluate_grid_fast(
         _as_float,
         _band_order,
         _check_flight_and_grid,
+        _map_metadata,
         _period_and_snapshot,
         _requested,
         _substeps_and_min_distance,
-        _unit,
         snapshot_name,
         threshold_name,
     )
@@ -1047,7 +1047,7 @@ def evaluate_grid_fast(
     if chunk_cells is not None and (isinstance(chunk_cells, bool) or int(chunk_cells) < 1):
         raise InputError(f"chunk_cells must be >= 1, got {chunk_cells!r}", field="chunk_cells")
     chunk = DEFAULT_CHUNK_CELLS if chunk_cells is None else int(chunk_cells)
-    integral, duration, period, snap = _period_and_snapshot(traj, metrics, thresholds, period_s, snapshot_t)
+    _, period, snap = _period_and_snapshot(traj, metrics, thresholds, period_s, snapshot_t)
 
     rc = receivers_for(grid, [traj], receiver_height=receiver_height, dem=dem, ground_h=ground_h,
                        dem_offset_m=dem_offset_m)
@@ -1091,28 +1091,8 @@ def evaluate_grid_fast(
     if rc.valid is not None and not rc.valid.all():
         for a in bands.values():
             a[~rc.valid] = np.nan
-    units = {k: _unit(k) for k in bands}
     used = sorted(set(fl.cidx.tolist()))
-    meta: dict[str, Any] = {
-        "grid": grid.to_dict(),
-        "units": units,
-        "trajectory": {"source": traj.source, "samples": len(traj), "t_start_s": float(traj.t[0]),
-                       "t_end_s": float(traj.t[-1]), "duration_s": duration},
-        "evaluation_instants": int(fl.n),
-        "substeps": substeps,
-        "time_integration": "trapezoid over the evaluation instants",
-        "period_s": period,
-        "receiver_height_m": float(receiver_height),
-        **(rc.ground or {}),
-        "background_included": bool(background),
-        "min_distance_m": min_d,
-        "thresholds_db": thresholds,
-        "snapshot_t_s": snap,
-        "cards": {c.id: {"phase": c.phase, "phases": list(c.served_phases), "ansatz": c.ansatz}
-                  for k, c in enumerate(cardset.cards) if k in used},
-        "phases": cardset.phases,
-        "engine": "fast",
-        "floor_db": floor,
-        "cells_below_floor": int(below.sum()),
-    }
+    meta = _map_metadata(grid, bands, traj, fl.n, substeps, period, float(receiver_height), rc.ground or {},
+                         background, min_d, thresholds, snap, cardset, used)
+    meta.update({"engine": "fast", "floor_db": floor, "cells_below_floor": int(below.sum())})
     return MapResult(bands=bands, grid=grid, metadata=meta)

@@ -345,8 +345,8 @@ def _substeps_and_min_distance(substeps: Any, min_distance_m: Any) -> tuple[int,
 
 
 def _period_and_snapshot(traj: Trajectory, metrics: Sequence[str], thresholds: Sequence[float], period_s: Any,
-                         snapshot_t: Any) -> tuple[bool, float, float | None, float | None]:
-    """Whether time integrals are asked for, the duration (s), the LAeq period (s) and the snapshot time (s)."""
+                         snapshot_t: Any) -> tuple[bool, float | None, float | None]:
+    """Whether time integrals are asked for, the LAeq period (s) and the snapshot time (s)."""
     integral = bool({"LAeq", "SEL"} & set(metrics)) or bool(thresholds)
     if integral and len(traj) < 2:
         raise TrajectoryError(f"{traj.source}: LAeq, SEL and time above need at least two samples, got "
@@ -364,7 +364,7 @@ def _period_and_snapshot(traj: Trajectory, metrics: Sequence[str], thresholds: S
         if not traj.t[0] <= snap <= traj.t[-1]:
             raise InputError(f"snapshot_t={snap:g} s lies outside the trajectory "
                              f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
-    return integral, duration, period, snap
+    return integral, period, snap
 
 
 def _eval_states(traj: Trajectory, substeps: int) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
@@ -666,7 +666,7 @@ def evaluate_grid(
     if block < 1:
         raise InputError(f"block_size must be >= 1, got {block_size!r}", field="block_size")
 
-    integral, duration, period, snap = _period_and_snapshot(traj, metrics, thresholds, period_s, snapshot_t)
+    integral, period, snap = _period_and_snapshot(traj, metrics, thresholds, period_s, snapshot_t)
 
     card_idx_samples = cardset.assign(traj.phase, traj.t, source=traj.source)
     used = sorted(set(card_idx_samples.tolist()))
@@ -843,32 +843,45 @@ def evaluate_grid(
                 a[sl_c][~valid] = np.nan
 
     bands = {k: v.reshape(grid.shape) for k, v in out.items()}
-    units = {k: _unit(k) for k in bands}
-    meta: dict[str, Any] = {
-        "grid": grid.to_dict(),
-        "units": units,
-        "trajectory": {"source": traj.source, "samples": len(traj), "t_start_s": float(traj.t[0]),
-                       "t_end_s": float(traj.t[-1]), "duration_s": duration},
-        "evaluation_instants": int(ns),
-        "substeps": substeps,
-        "time_integration": "trapezoid over the evaluation instants",
-        "period_s": period,
-        "receiver_height_m": hr,
-        **ground_desc,
-        "background_included": bool(background),
-        "min_distance_m": min_d,
-        "speed_of_sound_m_s": c_sound,
-        "thresholds_db": thresholds,
-        "snapshot_t_s": snap,
-        "cards": {c.id: {"phase": c.phase, "phases": list(c.served_phases), "ansatz": c.ansatz}
-                  for k, c in enumerate(cardset.cards) if k in used},
-        "phases": cardset.phases,
-    }
+    meta = _map_metadata(grid, bands, traj, ns, substeps, period, hr, ground_desc, background, min_d, thresholds,
+                         snap, cardset, used, speed_of_sound_m_s=c_sound)
     if uncertainty:
         meta["uncertainty"] = ("delta method through the ansatz Jacobian with the cards' covariance; "
                                "*_std standard deviation (dB); *_p95 = level - 1.645 std, the level exceeded "
                                "with 95 % confidence (one-sided, normal approximation)")
     return MapResult(bands=bands, grid=grid, metadata=meta)
+
+
+def _map_metadata(grid: GridSpec, bands: Mapping[str, np.ndarray], traj: Trajectory, n_instants: int,
+                  substeps: int, period: float | None, receiver_height_m: float, ground_desc: Mapping[str, Any],
+                  background: bool, min_d: float, thresholds: Sequence[float], snap: float | None, cardset: CardSet,
+                  used: Iterable[int], *, speed_of_sound_m_s: float | None = None) -> dict[str, Any]:
+    """The metadata both engines give a :class:`MapResult` (``speed_of_sound_m_s`` only when given)."""
+    used = set(used)
+    meta: dict[str, Any] = {
+        "grid": grid.to_dict(),
+        "units": {k: _unit(k) for k in bands},
+        "trajectory": {"source": traj.source, "samples": len(traj), "t_start_s": float(traj.t[0]),
+                       "t_end_s": float(traj.t[-1]), "duration_s": traj.duration_s},
+        "evaluation_instants": int(n_instants),
+        "substeps": substeps,
+        "time_integration": "trapezoid over the evaluation instants",
+        "period_s": period,
+        "receiver_height_m": receiver_height_m,
+        **ground_desc,
+        "background_included": bool(background),
+        "min_distance_m": min_d,
+    }
+    if speed_of_sound_m_s is not None:
+        meta["speed_of_sound_m_s"] = speed_of_sound_m_s
+    meta.update({
+        "thresholds_db": thresholds,
+        "snapshot_t_s": snap,
+        "cards": {c.id: {"phase": c.phase, "phases": list(c.served_phases), "ansatz": c.ansatz}
+                  for k, c in enumerate(cardset.cards) if k in used},
+        "phases": cardset.phases,
+    })
+    return meta
 
 
 def _band_order(metrics: Sequence[str], thresholds: Sequence[float], snap: float | None,
