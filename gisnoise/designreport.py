@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import InputError
+from ._report import correlation_axes, figure
 
 if TYPE_CHECKING:  # pragma: no cover
     from .design import DesignResult
@@ -117,14 +117,7 @@ def _study_panels(doc: dict[str, Any]) -> list[tuple[str, np.ndarray]]:
 
 
 def _figure(w: float, h: float) -> Any:
-    try:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-    except ImportError:  # pragma: no cover - depends on the install
-        raise InputError("the design report needs matplotlib: install gisnoise[plot]", field="report") from None
-    fig = Figure(figsize=(w, h), dpi=110, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
+    return figure(w, h, dpi=110, report="design")
 
 
 def _plot_study(curves: dict[str, Any], path: Path) -> None:
@@ -152,13 +145,7 @@ def _corr_panels(panels: list[tuple[str, np.ndarray]], variables: list[str], pat
     labels = [_LABELS.get(v, v) for v in variables]
     im = None
     for ax, (name, c) in zip(axes, panels, strict=True):
-        im = ax.imshow(c, vmin=-1, vmax=1, cmap="RdBu_r")
-        ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right", fontsize=8)
-        ax.set_yticks(range(len(labels)), labels, fontsize=8)
-        for i in range(len(labels)):
-            for j in range(len(labels)):
-                ax.text(j, i, f"{c[i, j]:.2f}", ha="center", va="center", fontsize=8,
-                        color="w" if abs(c[i, j]) > 0.6 else "k")
+        im = correlation_axes(ax, c, labels, fontsize=8, tick_fontsize=8)
         ax.set_title(name, fontsize=9)
     fig.colorbar(im, ax=list(axes), shrink=0.8, label="correlation coefficient")
     fig.suptitle(title, fontsize=10)

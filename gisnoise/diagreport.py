@@ -25,7 +25,6 @@ matplotlib (``gisnoise[plot]``) is imported on use with the Agg canvas.
 from __future__ import annotations
 
 import html
-import json
 import math
 import os
 from collections.abc import Callable
@@ -35,13 +34,13 @@ from typing import Any
 import numpy as np
 
 from . import effects as _effects
+from ._report import dump_json, figure, safe_name, with_gaps
 from .diagnose import Diagnosis
 from .errors import InputError
 
 __all__ = ["write_report", "timeline_data", "inputs_data", "before_after_data", "candidate_inputs",
            "EFFECT_INPUT"]
 
-_GAP_S = 1.0
 _REGIME_COLOURS = {"turn": "#ffbf80", "climb": "#a6d96a", "sink": "#80cdc1", "hover": "#d9a6e0",
                    "transition": "#c6c6c6"}
 
@@ -178,21 +177,7 @@ def before_after_data(diag: Diagnosis, *, top: int = 3) -> dict[str, Any]:
 
 
 def _figure(w: float, h: float) -> Any:
-    try:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-    except ImportError:  # pragma: no cover - depends on the install
-        raise InputError("the diagnosis report needs matplotlib: install gisnoise[plot]", field="report") from None
-    fig = Figure(figsize=(w, h), dpi=100, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _gaps(t: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
-    if len(t) < 2:
-        return (t, *ys)
-    cut = np.flatnonzero(np.diff(t) > _GAP_S) + 1
-    return tuple(np.insert(np.asarray(a, dtype=float), cut, np.nan) for a in (t, *ys))
+    return figure(w, h, dpi=100, report="diagnosis")
 
 
 def _plot_timeline(fl: str, d: dict[str, Any], path: Path) -> None:
@@ -204,7 +189,7 @@ def _plot_timeline(fl: str, d: dict[str, Any], path: Path) -> None:
             c = _REGIME_COLOURS.get(sp["regime"])
             if c:
                 ax.axvspan(sp["t0"], sp["t1"], color=c, alpha=0.5, lw=0)
-        t, r = _gaps(np.asarray(v["t_s"]), np.asarray(v["resid_db"]))
+        t, r = with_gaps(np.asarray(v["t_s"]), np.asarray(v["resid_db"]))
         ax.plot(t, r, lw=0.6, color="#333333")
         f = np.asarray(v["flagged"], dtype=bool)
         ax.plot(np.asarray(v["t_s"])[f], np.asarray(v["resid_db"])[f], ".", ms=1.5, color="#d62728")
@@ -259,14 +244,6 @@ def _plot_before_after(d: dict[str, Any], path: Path) -> None:
 # --------------------------------------------------------------------------- page
 
 
-def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
-
-
-def _dump(obj: Any, path: Path) -> None:
-    path.write_text(json.dumps(obj, allow_nan=False) + "\n", encoding="utf-8")
-
-
 def _num(v: Any, fmt: str = ".3g") -> str:
     if v is None:
         return ""
@@ -287,13 +264,13 @@ def write_report(diag: Diagnosis, out_dir: str | os.PathLike[str], *, title: str
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, Path] = {}
     tl = timeline_data(diag)
-    _dump(tl, out / "timeline.json")
+    dump_json(tl, out / "timeline.json")
     files["timeline.json"] = out / "timeline.json"
     total = len(tl["flights"]) + 2
     done = 0
     pngs = []
     for fl, d in tl["flights"].items():
-        p = out / f"timeline_{_safe(fl)}.png"
+        p = out / f"timeline_{safe_name(fl)}.png"
         _plot_timeline(fl, d, p)
         files[p.name] = p
         pngs.append((fl, p.name))
@@ -301,11 +278,11 @@ def write_report(diag: Diagnosis, out_dir: str | os.PathLike[str], *, title: str
         if progress:
             progress(done, total)
     ip = inputs_data(diag)
-    _dump(ip, out / "inputs.json")
+    dump_json(ip, out / "inputs.json")
     _plot_inputs(ip, out / "inputs.png")
     files.update({"inputs.json": out / "inputs.json", "inputs.png": out / "inputs.png"})
     ba = before_after_data(diag)
-    _dump(ba, out / "before_after.json")
+    dump_json(ba, out / "before_after.json")
     _plot_before_after(ba, out / "before_after.png")
     files.update({"before_after.json": out / "before_after.json", "before_after.png": out / "before_after.png"})
     if progress:

@@ -25,7 +25,6 @@ pyplot, so reports can be written from worker threads.  Needs the ``plot`` extra
 from __future__ import annotations
 
 import html
-import json
 import math
 import os
 from pathlib import Path
@@ -33,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ._report import correlation_axes, dump_json, figure, safe_name, with_gaps
 from .errors import InputError
 from .fit import FitResult
 from .model import get_ansatz
@@ -45,7 +45,6 @@ CORRELATION_VARIABLES = ("speed", "rpm", "power", "bank", "distance", "polar", "
 
 _UNITS = {"speed": "m/s", "rpm": "1/min", "power": "W", "bank": "deg", "distance": "m", "polar": "deg",
           "azimuth": "deg", "residual": "dB"}
-_GAP_S = 1.0
 
 
 def _require_samples(result: FitResult) -> None:
@@ -234,22 +233,7 @@ def parameter_table(result: FitResult) -> dict[str, Any]:
 
 
 def _figure(w: float, h: float) -> Any:
-    try:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-    except ImportError:  # pragma: no cover - depends on the install
-        raise InputError("the fit report needs matplotlib: install gisnoise[plot]", field="report") from None
-    fig = Figure(figsize=(w, h), dpi=110, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _with_gaps(t: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Insert NaN where consecutive times are more than ``_GAP_S`` apart so lines break."""
-    if len(t) < 2:
-        return (t, *ys)
-    cut = np.nonzero(np.diff(t) > _GAP_S)[0] + 1
-    return tuple(np.insert(np.asarray(a, dtype=float), cut, np.nan) for a in (t, *ys))
+    return figure(w, h, dpi=110, report="fit")
 
 
 def _plot_timeseries(data: dict[str, Any], path: Path) -> None:
@@ -266,7 +250,7 @@ def _plot_timeseries(data: dict[str, Any], path: Path) -> None:
     for ax, (mic, m) in zip(axes, mics.items(), strict=True):
         fl = np.array(m["flight"])
         t = np.array(m["t_s"]) + np.array([offsets[f] for f in fl]) if len(fl) else np.array([])
-        tm, meas, mod = _with_gaps(t, np.array(m["measured_db"]), np.array(m["model_db"]))
+        tm, meas, mod = with_gaps(t, np.array(m["measured_db"]), np.array(m["model_db"]))
         ax.plot(tm, meas, color="0.45", lw=0.7, label="measured")
         ax.plot(tm, mod, color="tab:red", lw=1.0, label="model")
         ax.set_ylabel(f"{mic}\nL_A / dB(A)")
@@ -302,15 +286,7 @@ def _plot_directivity(data: dict[str, Any], path: Path) -> None:
 def _plot_correlation(data: dict[str, Any], path: Path) -> None:
     fig = _figure(6.4, 5.6)
     ax = fig.subplots()
-    c = np.array(data["matrix"])
-    im = ax.imshow(c, vmin=-1, vmax=1, cmap="RdBu_r")
-    names = data["variables"]
-    ax.set_xticks(range(len(names)), names, rotation=45, ha="right")
-    ax.set_yticks(range(len(names)), names)
-    for i in range(len(names)):
-        for j in range(len(names)):
-            ax.text(j, i, f"{c[i, j]:.2f}", ha="center", va="center", fontsize=7,
-                    color="w" if abs(c[i, j]) > 0.6 else "k")
+    im = correlation_axes(ax, np.array(data["matrix"]), data["variables"], fontsize=7)
     fig.colorbar(im, ax=ax, label="correlation coefficient")
     ax.set_title("Correlation of inputs and residual (paper Fig. 15)")
     fig.savefig(path)
@@ -320,13 +296,13 @@ def _plot_residuals(fl: str, data: dict[str, Any], path: Path) -> None:
     fig = _figure(10, 8)
     ax = fig.subplots(4, 1, sharex=True)
     for mic, m in data["microphones"].items():
-        t, r, d = _with_gaps(np.array(m["t_s"]), np.array(m["residual_db"]), np.array(m["distance_m"]))
+        t, r, d = with_gaps(np.array(m["t_s"]), np.array(m["residual_db"]), np.array(m["distance_m"]))
         ax[0].plot(t, r, lw=0.7, label=mic)
         ax[2].plot(t, d, lw=0.8, label=mic)
     ax[0].axhline(0.0, color="k", lw=0.6)
     ax[0].set_ylabel("residual\nmeasured - model / dB")
     ax[0].legend(fontsize=7, ncol=4, loc="upper right")
-    t, bank, pw, sp = _with_gaps(np.array(data["t_s"]), np.array(data["bank_deg"]), np.array(data["power_w"]),
+    t, bank, pw, sp = with_gaps(np.array(data["t_s"]), np.array(data["bank_deg"]), np.array(data["power_w"]),
                                  np.array(data["speed_m_s"]))
     ax[1].plot(t, bank, color="tab:purple", lw=0.8)
     ax[1].set_ylabel("bank angle / deg")
@@ -342,14 +318,6 @@ def _plot_residuals(fl: str, data: dict[str, Any], path: Path) -> None:
     ax[0].set_title(f"Flight {fl}: residual with bank angle, distance, power and speed (paper Figs. 11-14); "
                     f"rms {data['rms_db']:.2f} dB")
     fig.savefig(path)
-
-
-def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
-
-
-def _dump(obj: Any, path: Path) -> None:
-    path.write_text(json.dumps(obj, allow_nan=False) + "\n", encoding="utf-8")
 
 
 def write_report(result: FitResult, out_dir: str | os.PathLike[str], *, distance_m: float = 30.0,
@@ -379,32 +347,32 @@ def write_report(result: FitResult, out_dir: str | os.PathLike[str], *, distance
     files: dict[str, Path] = {}
 
     ts = timeseries_data(result)
-    _dump(ts, out / "timeseries.json")
+    dump_json(ts, out / "timeseries.json")
     _plot_timeseries(ts, out / "timeseries.png")
     files.update({"timeseries.json": out / "timeseries.json", "timeseries.png": out / "timeseries.png"})
 
     dr = directivity_data(result, distance_m=distance_m, p_el=p_el)
-    _dump(dr, out / "directivity.json")
+    dump_json(dr, out / "directivity.json")
     _plot_directivity(dr, out / "directivity.png")
     files.update({"directivity.json": out / "directivity.json", "directivity.png": out / "directivity.png"})
 
     cr = correlation_data(result)
-    _dump(cr, out / "correlation.json")
+    dump_json(cr, out / "correlation.json")
     _plot_correlation(cr, out / "correlation.png")
     files.update({"correlation.json": out / "correlation.json", "correlation.png": out / "correlation.png"})
 
     rs = residual_data(result)
-    _dump(rs, out / "residuals.json")
+    dump_json(rs, out / "residuals.json")
     files["residuals.json"] = out / "residuals.json"
     res_pngs = []
     for fl, d in rs["flights"].items():
-        p = out / f"residuals_{_safe(fl)}.png"
+        p = out / f"residuals_{safe_name(fl)}.png"
         _plot_residuals(fl, d, p)
         files[p.name] = p
         res_pngs.append((fl, p.name))
 
     pt = parameter_table(result)
-    _dump(pt, out / "parameters.json")
+    dump_json(pt, out / "parameters.json")
     files["parameters.json"] = out / "parameters.json"
 
     page = _html(result, pt, cr, dr, res_pngs, title)
