@@ -894,6 +894,45 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def _map_threads(fn: Callable[[Any], Any], items: Sequence[Any], put: Callable[[Any, Any], None], threads: int,
+                 *, poll: Callable[[], None] | None = None) -> None:
+    """``put(item, fn(item))`` for every item, ``put`` in the calling thread as results come.
+
+    With ``threads > 1`` (and more than one item) ``fn`` runs on :func:`thread_pool`, at most
+    ``2 threads`` items pending; ``poll`` (which may raise to stop) is called after every batch
+    of finished items, and on the way out the pending items are cancelled or waited for.
+    Otherwise the items run in order here, ``poll`` before each.
+    """
+    if threads == 1 or len(items) == 1:
+        for x in items:
+            if poll is not None:
+                poll()
+            put(x, fn(x))
+        return
+    pool = thread_pool(threads)
+    pending: dict[Any, Any] = {}
+    it = iter(items)
+    try:
+        for x in it:
+            pending[pool.submit(fn, x)] = x
+            if len(pending) >= 2 * threads:
+                break
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for f in finished:
+                put(pending.pop(f), f.result())
+            if poll is not None:
+                poll()
+            for x in it:
+                pending[pool.submit(fn, x)] = x
+                if len(pending) >= 2 * threads:
+                    break
+    finally:
+        for f in pending:
+            f.cancel()
+        wait(pending)
+
+
 def run_grid(fl: FlightInstants, rc: Receivers, thresholds: Sequence[float] = (), *, threads: int | None = None,
              chunk_cells: int = DEFAULT_CHUNK_CELLS, progress: Callable[[float], Any] | None = None,
              cancel: Callable[[], bool] | None = None) -> WindowResult:
@@ -926,34 +965,11 @@ def run_grid(fl: FlightInstants, rc: Receivers, thresholds: Sequence[float] = ()
         if progress is not None:
             progress(done / H)
 
-    if nthreads == 1 or len(blocks) == 1:
-        for b in blocks:
-            if cancel is not None and cancel():
-                raise Cancelled("cancelled", field="cancel")
-            put(b, run_window(fl, rc, b[0], b[1], 0, W, thresholds))
-        return WindowResult(emax, energy, ta, computed)
-    pool = thread_pool(nthreads)
-    pending: dict[Any, tuple[int, int]] = {}
-    it = iter(blocks)
-    try:
-        for b in it:
-            pending[pool.submit(run_window, fl, rc, b[0], b[1], 0, W, thresholds)] = b
-            if len(pending) >= 2 * nthreads:
-                break
-        while pending:
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for f in finished:
-                put(pending.pop(f), f.result())
-            if cancel is not None and cancel():
-                raise Cancelled("cancelled", field="cancel")
-            for b in it:
-                pending[pool.submit(run_window, fl, rc, b[0], b[1], 0, W, thresholds)] = b
-                if len(pending) >= 2 * nthreads:
-                    break
-    finally:
-        for f in pending:
-            f.cancel()
-        wait(pending)
+    def check() -> None:
+        if cancel is not None and cancel():
+            raise Cancelled("cancelled", field="cancel")
+
+    _map_threads(lambda b: run_window(fl, rc, b[0], b[1], 0, W, thresholds), blocks, put, nthreads, poll=check)
     return WindowResult(emax, energy, ta, computed)
 
 

@@ -71,7 +71,6 @@ import logging
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -596,32 +595,9 @@ def _tile_all(plan: _Plan, window: tuple[int, ...], cancel: Callable[[], bool] |
 
 def _run_local(plan: _Plan, windows: Sequence[tuple[int, ...]], put: Callable[[tuple[int, ...], dict], None],
                threads: int, cancel: Callable[[], bool] | None) -> None:
-    if threads == 1 or len(windows) == 1:
-        for w in windows:
-            put(w, _tile_all(plan, w, cancel))
-        return
-    from ._fastkernel import thread_pool
+    from ._fastkernel import _map_threads
 
-    pool = thread_pool(threads)
-    it = iter(windows)
-    pending: dict[Any, tuple[int, ...]] = {}
-    try:
-        for w in it:
-            pending[pool.submit(_tile_all, plan, w, cancel)] = w
-            if len(pending) >= 2 * threads:
-                break
-        while pending:
-            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for f in finished:
-                put(pending.pop(f), f.result())
-            for w in it:
-                pending[pool.submit(_tile_all, plan, w, cancel)] = w
-                if len(pending) >= 2 * threads:
-                    break
-    finally:
-        for f in pending:
-            f.cancel()
-        wait(pending)
+    _map_threads(lambda w: _tile_all(plan, w, cancel), windows, put, threads)
 
 
 def evaluate_operations(
