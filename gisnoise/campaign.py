@@ -62,7 +62,7 @@ import math
 import os
 import re
 import struct
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -863,15 +863,19 @@ def _parse_header(cjs: str, doc: Mapping[str, Any], col: _Collector,
     return origin, weather, vehicle, float(c)
 
 
-def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Microphone]:
-    raw = doc.get("microphones")
+def _named_entries(cjs: str, doc: Mapping[str, Any], key: str, kind: str,
+                   col: _Collector) -> Iterator[tuple[str, dict[str, Any], str]]:
+    """``(where, entry, id)`` of each entry of the list ``doc[key]`` that is an object with a valid, unique id.
+
+    The list being missing or empty, an entry not an object, a bad id and a duplicate ``kind`` id are
+    reported to ``col`` (the entry is skipped)."""
+    raw = doc.get(key)
     if not isinstance(raw, list) or not raw:
-        col.add(cjs, "microphones", f"{cjs}: field 'microphones' must be a non-empty list")
-        return []
-    out: list[Microphone] = []
+        col.add(cjs, key, f"{cjs}: field '{key}' must be a non-empty list")
+        return
     seen = set()
     for i, m in enumerate(raw):
-        where = f"microphones[{i}]"
+        where = f"{key}[{i}]"
         if not isinstance(m, dict):
             col.add(cjs, where, f"{cjs}: field '{where}' must be an object")
             continue
@@ -880,9 +884,15 @@ def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Micro
             col.add(cjs, f"{where}.id", f"{cjs}: field '{where}.id' must be a non-empty name, got {mid!r}")
             continue
         if mid in seen:
-            col.add(cjs, f"{where}.id", f"{cjs}: field '{where}.id': duplicate microphone id {mid!r}")
+            col.add(cjs, f"{where}.id", f"{cjs}: field '{where}.id': duplicate {kind} id {mid!r}")
             continue
         seen.add(mid)
+        yield where, m, mid
+
+
+def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Microphone]:
+    out: list[Microphone] = []
+    for where, m, mid in _named_entries(cjs, doc, "microphones", "microphone", col):
         good = True
         for k in ("lat", "lon", "h"):
             if not _is_number(m.get(k)):
@@ -911,25 +921,8 @@ def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Micro
 
 
 def _parse_flights(cjs: str, root: Path, doc: Mapping[str, Any], col: _Collector) -> list[Flight]:
-    raw = doc.get("flights")
-    if not isinstance(raw, list) or not raw:
-        col.add(cjs, "flights", f"{cjs}: field 'flights' must be a non-empty list")
-        return []
     out: list[Flight] = []
-    seen = set()
-    for i, f in enumerate(raw):
-        where = f"flights[{i}]"
-        if not isinstance(f, dict):
-            col.add(cjs, where, f"{cjs}: field '{where}' must be an object")
-            continue
-        fid = f.get("id")
-        if not isinstance(fid, str) or not fid or "/" in fid or "\\" in fid:
-            col.add(cjs, f"{where}.id", f"{cjs}: field '{where}.id' must be a non-empty name, got {fid!r}")
-            continue
-        if fid in seen:
-            col.add(cjs, f"{where}.id", f"{cjs}: field '{where}.id': duplicate flight id {fid!r}")
-            continue
-        seen.add(fid)
+    for where, f, fid in _named_entries(cjs, doc, "flights", "flight", col):
         try:
             start = as_unix_time(f.get("start_utc"), field=f"{where}.start_utc")
         except GisnoiseError as exc:
