@@ -71,6 +71,16 @@ def _north_arrow(ax: Any) -> None:
                 zorder=7)
 
 
+def _save_png(fig: Any, path: str | os.PathLike[str], dpi: int) -> Path:
+    """Save ``fig`` as PNG at ``path`` (folders created), via a temporary file so a reader never sees half a file."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(p.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=dpi)
+    os.replace(tmp, p)
+    return p
+
+
 def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequence[float],
              trajectory: Trajectory | None = None, metric: str | None = None, dpi: int = 120) -> Path:
     """Draw a level band with its contours, the track, a scale bar, a north arrow and a legend.
@@ -153,11 +163,7 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
         if metric == "LAeq" and md.get("period_s"):
             sub += f", period {md['period_s']:.0f} s"
         ax.set_title(f"{metric} of the UAV\n{sub}", fontsize=11)
-        p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        tmp = p.with_name(p.stem + ".tmp.png")
-        fig.savefig(tmp, dpi=dpi)
-        os.replace(tmp, p)
+        p = _save_png(fig, path, dpi)
     finally:
         plt.close(fig)
     return p
@@ -218,11 +224,7 @@ def plot_directivity(card: ModelCard, path: str | os.PathLike[str], *, p_el: flo
         ax.set_xticks(np.arange(-180, 181, 45))
         ax.set_yticks(np.arange(-90, 91, 30))
         ax.set_title(f"{card.id} ({card.phase}): level at {distance_m:g} m, P_el = {p_el:g}", fontsize=11)
-        p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        tmp = p.with_name(p.stem + ".tmp.png")
-        fig.savefig(tmp, dpi=dpi)
-        os.replace(tmp, p)
+        p = _save_png(fig, path, dpi)
     finally:
         plt.close(fig)
     return p
