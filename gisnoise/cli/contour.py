@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import click
@@ -22,6 +23,20 @@ def _levels(ctx: click.Context, param: click.Parameter, value: Any) -> list[floa
 
 def _metrics(ctx: click.Context, param: click.Parameter, value: str) -> list[str]:
     return [m.strip() for m in value.split(",") if m.strip()]
+
+
+def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str]) -> None:
+    """Echo the maximum of every band of ``res`` (a MapResult) that has values, then ``wrote <path>``
+    for each of ``keys`` that ``paths`` holds (shared by the contour and operations commands)."""
+    import numpy as np
+
+    for name in res.bands:
+        a = res.bands[name]
+        if np.isfinite(a).any():
+            click.echo(f"{name}: max {np.nanmax(a):.1f} {res.units.get(name, '')}")
+    for key in keys:
+        if key in paths:
+            click.echo(f"wrote {paths[key]}")
 
 
 @click.command("contour")
@@ -75,8 +90,6 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
     LineString with times, or waypoints (JSON or GeoJSON points).  Give one --card per flight
     phase; a card serves its phase and the phases it lists.
     """
-    import numpy as np
-
     from ..contour import make_map
 
     with progress(ctx, "evaluating", 1.0) as update:
@@ -91,10 +104,4 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
     auth = g.crs.to_authority()
     click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m in "
                f"{':'.join(auth) if auth else g.crs.name}; {res.metadata['evaluation_instants']} instants")
-    for name in res.bands:
-        a = res.bands[name]
-        if np.isfinite(a).any():
-            click.echo(f"{name}: max {np.nanmax(a):.1f} {res.units.get(name, '')}")
-    for key in ("levels", "contours", "map"):
-        if key in paths:
-            click.echo(f"wrote {paths[key]}")
+    _echo_bands_and_files(res, paths, ("levels", "contours", "map"))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from .contour import _echo_bands_and_files
 from .options import out_dir_option, progress
 
 
@@ -44,12 +45,10 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
       gisnoise operations day.json --out ops/ --single-process  this machine, threads
       gisnoise operations day.json --out ops/ --scheduler tcp://sched:8786
     """
-    import numpy as np
+    import os
 
     from ..contours import parse_levels
     from ..operations import evaluate_operations, load_schedule, write_operations
-
-    import os
 
     if single_process and (scheduler or workers):
         raise click.UsageError("--single-process excludes --scheduler and --workers")
@@ -68,10 +67,4 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
            else f"{ex['threads']} threads")
     click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m; {len(res.metadata['flights'])} "
                f"flights; {res.metadata['tiles']} tiles on {how}")
-    for name in res.bands:
-        a = res.bands[name]
-        if np.isfinite(a).any():
-            click.echo(f"{name}: max {np.nanmax(a):.1f} {res.units.get(name, '')}")
-    for key in ("levels", "contours", "summary"):
-        if key in paths:
-            click.echo(f"wrote {paths[key]}")
+    _echo_bands_and_files(res, paths, ("levels", "contours", "summary"))
