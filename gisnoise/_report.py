@@ -9,7 +9,7 @@ written from worker threads.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +63,14 @@ def safe_name(name: str) -> str:
 def dump_json(obj: Any, path: Path) -> None:
     """Write ``obj`` as one line of strict JSON (no NaN) and a newline, UTF-8."""
     path.write_text(json.dumps(obj, allow_nan=False) + "\n", encoding="utf-8")
+
+
+def write_view(out: Path, name: str, data: Any, plot: Callable[[Any, Path], None], files: dict[str, Path]) -> None:
+    """Write one view into ``out``: ``<name>.json`` (its numbers) and ``<name>.png`` (``plot(data, path)``),
+    recording both in ``files`` (name -> path)."""
+    dump_json(data, out / f"{name}.json")
+    plot(data, out / f"{name}.png")
+    files.update({f"{name}.json": out / f"{name}.json", f"{name}.png": out / f"{name}.png"})
 
 
 def correlation_axes(ax: Any, c: np.ndarray, labels: Sequence[str], *, fontsize: float,

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from . import effects as _effects
-from ._report import dump_json, figure, safe_name, with_gaps
+from ._report import dump_json, figure, safe_name, with_gaps, write_view
 from .diagnose import Diagnosis
 from .errors import InputError
 
@@ -278,13 +278,9 @@ def write_report(diag: Diagnosis, out_dir: str | os.PathLike[str], *, title: str
         if progress:
             progress(done, total)
     ip = inputs_data(diag)
-    dump_json(ip, out / "inputs.json")
-    _plot_inputs(ip, out / "inputs.png")
-    files.update({"inputs.json": out / "inputs.json", "inputs.png": out / "inputs.png"})
+    write_view(out, "inputs", ip, _plot_inputs, files)
     ba = before_after_data(diag)
-    dump_json(ba, out / "before_after.json")
-    _plot_before_after(ba, out / "before_after.png")
-    files.update({"before_after.json": out / "before_after.json", "before_after.png": out / "before_after.png"})
+    write_view(out, "before_after", ba, _plot_before_after, files)
     if progress:
         progress(total, total)
     (out / "report.html").write_text(_html(diag.result, pngs, title), encoding="utf-8")

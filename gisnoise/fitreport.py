@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ._report import correlation_axes, dump_json, figure, safe_name, with_gaps
+from ._report import correlation_axes, dump_json, figure, safe_name, with_gaps, write_view
 from .errors import InputError
 from .fit import FitResult
 from .model import get_ansatz
@@ -347,19 +347,13 @@ def write_report(result: FitResult, out_dir: str | os.PathLike[str], *, distance
     files: dict[str, Path] = {}
 
     ts = timeseries_data(result)
-    dump_json(ts, out / "timeseries.json")
-    _plot_timeseries(ts, out / "timeseries.png")
-    files.update({"timeseries.json": out / "timeseries.json", "timeseries.png": out / "timeseries.png"})
+    write_view(out, "timeseries", ts, _plot_timeseries, files)
 
     dr = directivity_data(result, distance_m=distance_m, p_el=p_el)
-    dump_json(dr, out / "directivity.json")
-    _plot_directivity(dr, out / "directivity.png")
-    files.update({"directivity.json": out / "directivity.json", "directivity.png": out / "directivity.png"})
+    write_view(out, "directivity", dr, _plot_directivity, files)
 
     cr = correlation_data(result)
-    dump_json(cr, out / "correlation.json")
-    _plot_correlation(cr, out / "correlation.png")
-    files.update({"correlation.json": out / "correlation.json", "correlation.png": out / "correlation.png"})
+    write_view(out, "correlation", cr, _plot_correlation, files)
 
     rs = residual_data(result)
     dump_json(rs, out / "residuals.json")
