@@ -72,6 +72,25 @@ def test_bands_are_nested_and_open_at_the_top(hover_map):
     # bands tile the plane without overlap: the union of [55,60) and [60,inf) is the disc L >= 55
     assert shape(bands[55.0]["geometry"]).intersection(shape(bands[60.0]["geometry"])).area < 1e-12
     assert len(outer55.geoms if hasattr(outer55, "geoms") else [outer55]) == 1
+    # the omnidirectional hover 38.5 m above the receivers: L >= L_c on the disc of horizontal radius
+    # r_c = sqrt(D_c^2 - 38.5^2), D_c = 40 m * 10^((70 - L_c) / 20) (spherical spreading); areas in the
+    # local east/north plane of the hover point
+    frame = LocalFrame(LAT0, LON0, 500.0)
+
+    def local_area(geom):
+        def to_en(lonlat):
+            e, n, _ = frame.to_enu(lonlat[:, 1], lonlat[:, 0], np.full(len(lonlat), 500.0))
+            return np.column_stack([e, n])
+
+        return shapely.transform(geom, to_en).area
+
+    def radius(level):
+        return np.sqrt((40.0 * 10 ** ((70.0 - level) / 20.0)) ** 2 - 38.5 ** 2)
+
+    assert local_area(shape(bands[60.0]["geometry"])) == pytest.approx(np.pi * radius(60.0) ** 2, rel=5e-3)
+    assert local_area(shape(bands[55.0]["geometry"])) == pytest.approx(
+        np.pi * (radius(55.0) ** 2 - radius(60.0) ** 2), rel=5e-3)
+    assert local_area(outer55) == pytest.approx(np.pi * radius(55.0) ** 2, rel=5e-3)
 
 
 def test_isoband_area_of_a_cone_is_the_disc():
