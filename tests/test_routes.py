@@ -43,7 +43,8 @@ def test_flight_csv_is_read_as_is(tmp_path):
                       yaw=10 * t, power_w=np.full(5, 2000.0), phase=np.full(5, "hover"))
     traj.to_csv(tmp_path / "f.csv")
     back = read_trajectory(tmp_path / "f.csv")
-    np.testing.assert_allclose(back.roll, traj.roll)
+    for k in ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w"):  # every column, as written
+        np.testing.assert_allclose(getattr(back, k), getattr(traj, k), rtol=0, atol=1e-9, err_msg=k)
     assert list(back.phase) == ["hover"] * 5
 
 
@@ -102,9 +103,18 @@ def test_short_legs_tighten_the_turn_and_slow_down():
     # legs of 60 m: the fillet radius shrinks to fit and the speed drops to keep the bank at 30 deg
     wps = [wp(0, 0, 80), wp(200, 0, 80), wp(200, 60, 80), wp(260, 60, 80), wp(460, 60, 80)]
     traj = route_from_waypoints(wps, {"sample_dt_s": 0.1}).trajectory
-    assert np.max(np.abs(traj.roll)) <= 30.0 + 1e-6
-    assert traj.airspeed_m_s.min() < 20.0
+    # 90 deg turns between 60 m legs: each fillet's tangent length R tan(45 deg) = R is at most half a
+    # leg, R = 30 m; at 30 deg bank the coordinated turn allows v = sqrt(g R tan 30 deg) = 13.03 m/s
+    radius = 30.0
+    v_turn = math.sqrt(GRAVITY * radius * math.tan(math.radians(30.0)))
+    assert np.max(np.abs(traj.roll)) == pytest.approx(30.0, abs=1e-6)
+    assert traj.airspeed_m_s.min() == pytest.approx(v_turn, abs=0.01)
     assert traj.airspeed_m_s[0] == pytest.approx(25.0)  # the route starts in flight
+    # the first (left) turn at (200, 0): centre (170, 30), the track on the arc 30 m from it
+    e, n, _ = enu(traj)
+    first = (np.abs(traj.roll) > 1.0) & (n < 15.0)
+    assert first.sum() > 10
+    np.testing.assert_allclose(np.hypot(e[first] - 170.0, n[first] - 30.0), radius, atol=0.05)
 
 
 def test_hold_hovers_for_its_duration():
@@ -221,6 +231,21 @@ def test_sample_route_is_a_delivery_flight():
     assert np.abs(traj.roll).max() > 10.0  # it turns
     e, n, u = FRAME.to_enu(traj.lat, traj.lon, traj.h)
     assert np.hypot(e[-1] - e[0], n[-1] - n[0]) > 1000.0  # a real distance
+    # the file's own waypoints: lift-off at the first pad, landing on the last, altitudes above the
+    # document's flat ground (agl, ground_h_m), the highest cruise altitude 100 m
+    doc = json.loads(path.read_text())
+    pts = [f["geometry"]["coordinates"] for f in doc["features"]]
+    alts = [f["properties"]["alt"] for f in doc["features"]]
+    ground = doc["route"]["ground_h_m"]
+    assert route.ground_h_m == ground
+    assert (traj.lon[0], traj.lat[0]) == pytest.approx(tuple(pts[0][:2]), abs=1e-9)
+    assert (traj.lon[-1], traj.lat[-1]) == pytest.approx(tuple(pts[-1][:2]), abs=1e-9)
+    assert traj.h[0] == pytest.approx(ground + alts[0], abs=0.01)
+    assert traj.h[-1] == pytest.approx(ground + alts[-1], abs=0.01)
+    assert traj.h.max() == pytest.approx(ground + max(alts), abs=0.01)
+    climb = traj.phase == "climb"
+    np.testing.assert_allclose(traj.lon[climb], pts[0][0], atol=1e-9)  # straight up from the pad
+    assert traj.h[climb].max() == pytest.approx(ground + alts[1], abs=0.01)
 
 
 def test_agl_altitudes_stand_on_the_dem(tmp_path):
