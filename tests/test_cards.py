@@ -23,9 +23,20 @@ def test_sample_cards_load_and_round_trip(path, tmp_path):
     assert card.p.shape == (card.model.n_params,)
 
 
-def test_published_cards_hold_table_1_verbatim():
-    h = cards.load(ROOT / "sample_data" / "cards" / "published_horizontal.json")
-    assert [h.parameters[k] for k in h.model.params] == [13.409, 0.176, -0.280, -0.365, 1.049, 0.939, 40.393]
+# the paper's Table 1, p1 ... p7, per column (horizontal flight, vertical flight climb and sink)
+TABLE_1 = {
+    "horizontal": [13.409, 0.176, -0.280, -0.365, 1.049, 0.939, 40.393],
+    "climb": [16.726, 0.090, 0.137, -0.151, 0.293, 1.000, 40.162],
+    "sink": [12.722, 0.146, 0.085, -0.513, 0.411, 0.800, 40.278],
+}
+
+
+@pytest.mark.parametrize("phase", sorted(TABLE_1))
+def test_published_cards_hold_table_1_verbatim(phase):
+    card = cards.load(ROOT / "sample_data" / "cards" / f"published_{phase}.json")
+    assert card.ansatz == "paper" and card.phase == phase
+    assert list(card.model.params) == [f"p{i}" for i in range(1, 8)]
+    assert [card.parameters[k] for k in card.model.params] == TABLE_1[phase]
 
 
 def doc():

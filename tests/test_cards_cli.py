@@ -49,6 +49,16 @@ def test_directivity_numbers_peak_at_74_deg_and_fall_towards_below():
     assert phi[j] == pytest.approx(np.degrees(-0.280) + 90.0, abs=0.1)
     k = int(np.argmin(np.abs(phi - 74.0)))
     assert lvl[theta == 0.0, k] > lvl[theta == -90.0, k]
+    # every grid value is Eq. 9 + Eq. 10 as printed (SPEC 1) with Table 1 (horizontal), at the
+    # grid's own azimuth / polar angle: the axes are neither swapped, flipped nor shifted
+    p1, p2, p3, p4, p5, p6 = 13.409, 0.176, -0.280, -0.365, 1.049, 0.939
+    for phi_deg, theta_deg in ((74.0, 0.0), (74.0, -90.0), (-106.0, 30.0), (180.0, -45.0), (0.0, 90.0)):
+        f, t = np.radians(phi_deg), np.radians(theta_deg)
+        l_dt = p1 * np.log10(1.1) * (1 + p2 * np.sin(f - p3) * (t + np.pi / 2)) * (1 + p4 * np.sin(t - p5))
+        l_sp = -p6 * 20 * np.log10(30.0 / 40.0)
+        i, j = int(np.argmin(np.abs(theta - theta_deg))), int(np.argmin(np.abs(phi - phi_deg)))
+        assert (theta[i], phi[j]) == pytest.approx((theta_deg, phi_deg), abs=1e-9)
+        assert lvl[i, j] == pytest.approx(l_dt + l_sp, abs=1e-9), (phi_deg, theta_deg)
 
 
 def test_card_plot_writes_a_png(tmp_path):
