@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 from test_campaign import make_campaign, make_wav_campaign, straight_track, write_flight_csv
 
-from gisnoise.campaign import read_level_csv
+from gisnoise.campaign import read_campaign, read_level_csv
 from gisnoise.cli.main import cli
 
 
@@ -74,6 +74,12 @@ def test_levels_writes_csv_beside_the_wav_and_refuses_to_overwrite(tmp_path):
     # 1 Pa RMS at 1 kHz on a ground plate: 94 - 6 = 88 dB(A), free field
     np.testing.assert_allclose(lv.la[steady], 88.0, atol=0.1)
     assert lv.band_f is not None and lv.band_f.min() < 30.0
+    # the reader now takes the level CSVs, not the WAVs: their 0.25 s blocks (the WAV default is 0.125 s) and
+    # the same 88 dB(A), the ground plate's 6 dB taken off once only (twice would read 82 dB(A))
+    camp = read_campaign(root)
+    for lvm in camp.levels:
+        assert abs(np.median(np.diff(lvm.t)) - 0.25) < 1e-6
+        np.testing.assert_allclose(lvm.la[(lvm.t > 0.4) & (lvm.t < 1.6)], 88.0, atol=0.1)
     again = run("campaign", "levels", str(root))
     assert again.exit_code == 2
     assert "exists; use --force" in again.stderr and "mics/m1/f1.csv" in again.stderr

@@ -189,6 +189,11 @@ def test_progress_reports_falling_cost_and_cancel_stops(campaign):
     its = [i for i, _ in seen]
     assert its == sorted(its) and its[-1] == res.iterations
     assert seen[-1][1] == pytest.approx(res.cost, rel=1e-9)
+    # the reported cost falls: Levenberg-Marquardt accepts only steps that lower the weighted cost, and each
+    # relaxation cycle sets the noise variances to their ML values, which minimise the NLL at fixed residuals
+    costs = np.array([c for _, c in seen])
+    assert np.all(np.diff(costs) <= 1e-9 * abs(costs[0])), np.diff(costs)
+    assert costs[0] > costs[-1]
     calls = []
 
     def cancel():

@@ -390,10 +390,33 @@ def test_background_event_rises_on_all_mics_at_once():
 
 
 def test_random_events_are_listed_in_truth(tmp_path):
-    doc = base(effects={"background_event": {"count": 2, "duration_s": 10.0, "peak_dba": 70.0}})
+    doc = base(background={"level_dba": 30.0},
+               effects={"background_event": {"count": 2, "duration_s": 10.0, "peak_dba": 70.0, "mic_spread_db": 0.0}})
     out = simulate(doc, tmp_path / "c")
-    ev = json.loads((out / "truth.json").read_text())["flights"]["f1"]["events"]
+    truth = json.loads((out / "truth.json").read_text())
+    ev = truth["flights"]["f1"]["events"]
     assert len(ev) == 2 and all(abs(e["t1"] - e["t0"] - 10.0) < 1e-9 for e in ev)
+    # the listed events are the ones in the levels: each adds 70 dB(A) times its sin^2 envelope over the listed
+    # window (averaged over each 0.125 s block; random events may overlap, their energies add); nothing elsewhere
+    doc_off = copy.deepcopy(doc)
+    doc_off["effects"] = {}
+    off = run(doc_off)
+    for mic in ("m1", "m2"):
+        blk = truth["flights"]["f1"]["blocks"][mic]
+        t, on_la = np.array(blk["t"]), np.array(blk["LA_clean"])
+        off_la = off.levels["f1"][mic].la_clean
+        sub = t[:, None] + np.linspace(-0.0625, 0.0625, 201)[None, :]
+        env = np.zeros(t.size)
+        outside = np.ones(t.size, dtype=bool)
+        for e in ev:
+            u = np.clip((sub - e["t0"]) / (e["t1"] - e["t0"]), 0.0, 1.0)
+            env += np.mean(np.sin(np.pi * u) ** 2, axis=1) * 10 ** (e["peak_dba"] / 10)
+            outside &= (t < e["t0"] - 0.07) | (t > e["t1"] + 0.07)
+        strong = env > 10 ** 6.0  # events above 60 dB(A): the 0.01 dB rounding of truth.json stays negligible
+        assert strong.sum() > 40
+        added = 10 ** (on_la[strong] / 10) - 10 ** (off_la[strong] / 10)
+        np.testing.assert_allclose(10 * np.log10(added), 10 * np.log10(env[strong]), atol=0.02)
+        np.testing.assert_allclose(on_la[outside], off_la[outside], atol=0.006)  # truth.json rounds to 0.01 dB
 
 
 # ------------------------------------------------------------------ samples and audio
@@ -481,7 +504,13 @@ def test_cli_simulate_and_bad_field(tmp_path):
     good.write_text(json.dumps(hover_doc()))
     r = CliRunner().invoke(cli, ["-q", "simulate", str(good), "--out", str(tmp_path / "c")])
     assert r.exit_code == 0, r.output
-    assert (tmp_path / "c" / "campaign.json").exists() and (tmp_path / "c" / "mics" / "m1" / "f1.csv").exists()
+    assert (tmp_path / "c" / "campaign.json").exists()
+    # the command simulates the given scenario: its level file holds the block levels of the same scenario
+    # (same seed) run through the library, to the CSV's 0.01 dB rounding
+    written = np.genfromtxt(tmp_path / "c" / "mics" / "m1" / "f1.csv", delimiter=",", names=True)
+    ref = run(hover_doc()).levels["f1"]["m1"]
+    np.testing.assert_allclose(written["t"], ref.t, atol=1e-4)
+    np.testing.assert_allclose(written["LA"], ref.la, atol=0.006)
     doc = hover_doc()
     doc["flights"][0]["patterns"][1]["duration_s"] = 0
     bad = tmp_path / "bad.json"
