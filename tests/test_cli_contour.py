@@ -211,12 +211,25 @@ def test_receivers_on_a_dem(tmp_path, card_path):
     flat = tmp_path / "flat"
     r = run("contour", csv, "--card", card_path, "--out", str(flat), "--resolution", "20", "--margin", "100",
             "--ground-height", "100", "--metrics", "LAmax")
+    assert r.exit_code == 0, r.output
     with rasterio.open(out / "levels.tif") as a, rasterio.open(flat / "levels.tif") as b:
         assert a.descriptions == ("LAmax",)
         on_dem, on_flat = a.read(1), b.read(1)
-    # a constant DEM is flat ground at its height (checked against the closed form above)
+        rows, cols = np.mgrid[0:a.height, 0:a.width]
+        x, y = rasterio.transform.xy(a.transform, rows.ravel(), cols.ravel(), offset="center")
+        lon, lat = Transformer.from_crs(a.crs.to_wkt(), "EPSG:4326", always_xy=True).transform(x, y)
+    # a constant DEM is flat ground at its height
     np.testing.assert_allclose(on_dem, on_flat, atol=1e-4)
-    assert on_dem.max() > G0 - 20 * np.log10(np.hypot(140.0 - 101.5, 15.0) / 40.0)  # a cell within 15 m
+    # receivers 1.5 m above the 100 m DEM, the straight track at 80 + 60 m: spherical spreading from the
+    # closest approach r (inside the track for |e| < 150 m).  LAmax is the maximum over the samples,
+    # 10 m apart along the track: the nearest one is at most 5 m from the closest point, so
+    # L(sqrt(r^2 + 5^2)) <= LAmax <= L(r); a receiver 20 m too low or high would leave this band
+    e, n, u = FRAME.to_enu(np.asarray(lat), np.asarray(lon), np.full(len(lat), 100.0 + 1.5))
+    inside = np.abs(e) < 150.0
+    r2 = n[inside] ** 2 + (60.0 - u[inside]) ** 2
+    got = on_dem.ravel()[inside]
+    assert np.all(got <= G0 - 10 * np.log10(r2 / 40.0 ** 2) + 1e-4)  # float32 band
+    assert np.all(got >= G0 - 10 * np.log10((r2 + 5.0 ** 2) / 40.0 ** 2) - 1e-4)
 
 
 
