@@ -255,6 +255,17 @@ def test_phase_cards_bind_a_card_to_a_phase(client):
     r = client.post("/contours", json=_request(cards=[], phase_cards={"horizontal": "demo-climb"},
                                                output="geotiff"))
     assert r.status_code == 200, r.text
+    # an omnidirectional card stored for 'climb' serves no phase of the level flight on its own ...
+    assert client.post("/cards", json=dict(_omni_card("omni-climb"), phase="climb")).status_code == 201
+    assert_names_field(client.post("/contours", json=_request(cards=["omni-climb"])), 422, "cards")
+    # ... bound to 'horizontal' it maps it: spherical spreading from 98.5 m below the track, as in
+    # test_lamax_below_a_level_flyover_is_spherical_spreading
+    r = client.post("/contours", json=_request(cards=[], phase_cards={"horizontal": "omni-climb"},
+                                               output="geotiff"))
+    assert r.status_code == 200, r.text
+    meta, bands = _read_tif(r.content)
+    lamax = bands[list(meta["descriptions"]).index("LAmax")]
+    assert np.nanmax(lamax) == pytest.approx(P0 - 20 * math.log10(98.5 / 40.0), abs=0.03)
 
 
 def test_malformed_json_is_422_naming_the_body(client):
@@ -277,3 +288,20 @@ def test_uncertainty_bands_from_a_card_with_covariance(client):
     ok = np.isfinite(std)
     assert np.all(std[ok] >= 0)
     np.testing.assert_allclose(p95[ok], lamax[ok] - 1.645 * std[ok], atol=1e-3)  # one-sided 95 % normal quantile
+
+
+def test_uncertainty_of_an_omni_card_with_p0_variance_only(client):
+    # covariance on p0 only (std 0.5 dB): dL_UAV/dp0 = 1 at every instant (p2 = p4 = 0, no background),
+    # so LAmax_std = LAeq_std = 0.5 dB in every cell and the 95 % level is 1.6449 * 0.5 dB lower
+    cov = np.zeros((8, 8))
+    cov[0, 0] = 0.25
+    card = dict(_omni_card("omni-cov"), covariance=cov.tolist())
+    r = client.post("/contours", json=_request(cards=[card], uncertainty=True, output="geotiff",
+                                               metrics=["LAmax", "LAeq"]))
+    assert r.status_code == 200, r.text
+    meta, bands = _read_tif(r.content)
+    b = dict(zip(meta["descriptions"], bands, strict=True))
+    np.testing.assert_allclose(b["LAmax_std"], 0.5, atol=1e-6)
+    np.testing.assert_allclose(b["LAeq_std"], 0.5, atol=1e-6)
+    np.testing.assert_allclose(b["LAmax_p95"], b["LAmax"] - 1.6448536 * 0.5, atol=1e-4)
+    np.testing.assert_allclose(b["LAeq_p95"], b["LAeq"] - 1.6448536 * 0.5, atol=1e-4)
