@@ -142,6 +142,9 @@ def test_absorption_pressure_and_broadcast():
     f = acoustics.third_octave_centres(50, 10000)
     a = acoustics.atmospheric_absorption(f[:, None], np.array([0.0, 20.0]), 50.0)
     assert a.shape == (f.size, 2)
+    # each column at its own temperature: ISO 9613-1 Table 1, 1 kHz, 50 %: 6.83 dB/km at 0 C, 4.66 dB/km at 20 C
+    j = int(np.argmin(np.abs(f - 1000.0)))
+    np.testing.assert_allclose(a[j] * 1000.0, [6.83, 4.66], atol=0.005 + 1e-9)
     assert np.all(np.diff(a[:, 1]) > 0)  # grows with frequency
     # classical (translational) absorption dominates at very high frequency: ~ 1/p
     hi = 1e6

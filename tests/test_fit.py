@@ -126,6 +126,10 @@ def test_fixed_parameters_stay_and_carry_no_variance(campaign):
     i = res.param_names.index("p6")
     assert np.all(res.cov[i] == 0) and np.all(res.cov[:, i] == 0)
     assert res.n_free == 6
+    # p6 and p7 held at their true values (TRUTH): the free parameters still find the truth
+    free = [res.param_names.index(k) for k in res.param_names if k not in ("p6", "p7")]
+    z = (res.p[free] - P_TRUE[free]) / res.std_array[free]
+    assert np.all(np.abs(z) < 3.0), z
 
 
 def test_a_bound_holds_and_is_reported(campaign):
@@ -232,6 +236,10 @@ def test_one_noise_variance_for_all_microphones(campaign):
     pooled = float(np.sqrt(np.mean(res.residuals ** 2)))
     assert list(res.noise_std) == ["m1", "m2", "m3"]
     assert all(v == pytest.approx(pooled, rel=1e-12) for v in res.noise_std.values())
+    # and the pooled deviation is the simulated one: sqrt of the row-weighted mean of the true variances
+    n_m = {m: int(np.sum(samples.mic == m)) for m in NOISE}
+    truth = math.sqrt(sum(n_m[m] * NOISE[m] ** 2 for m in NOISE) / sum(n_m.values()))
+    assert pooled == pytest.approx(truth, rel=0.05)
     assert res.aic == pytest.approx(2 * res.cost + 2 * (8 + 1), rel=1e-12)
 
 
