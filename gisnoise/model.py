@@ -176,8 +176,15 @@ def register_ansatz(ansatz: Ansatz, *, replace: bool = False) -> Ansatz:
 def get_ansatz(name: str) -> Ansatz:
     """Look an ansatz up by name; the error lists the known names."""
     if name not in _REGISTRY:
-        # extensions register on import
-        from . import effects  # noqa: F401
+        # extensions register on import; a chain "base+e1+e2" is built from its parts on demand
+        from . import effects
+
+        base, *chain = name.split("+")
+        if chain and base in _REGISTRY and name not in _REGISTRY:
+            try:
+                effects.extend(base, *chain, register=True)
+            except InputError as exc:
+                raise InputError(f"unknown ansatz {name!r}: {exc}", field="ansatz") from None
 
     try:
         return _REGISTRY[name]

@@ -94,3 +94,15 @@ def test_registry_lists_and_refuses_unknown():
 def test_wrong_parameter_count_names_parameters():
     with pytest.raises(InputError, match="takes 7 parameters"):
         get_ansatz("paper").level([1.0, 2.0], {"d": 1, "phi": 0, "theta": 0, "p_el": 1})
+
+
+def test_an_extension_chain_is_built_by_name_with_its_parameters_in_order():
+    # "base+e1+e2": the base's parameters, then each effect's, in the order named
+    from gisnoise.effects import get_effect
+
+    a = get_ansatz("paper-offset+bank_angle+doppler")
+    base = get_ansatz("paper-offset")
+    e1, e2 = get_effect("bank_angle"), get_effect("doppler")
+    assert a.params == base.params + e1.params + e2.params
+    with pytest.raises(InputError, match="unknown ansatz 'paper-offset\\+nope'.*unknown effect 'nope'"):
+        get_ansatz("paper-offset+nope")
