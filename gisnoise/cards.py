@@ -228,14 +228,10 @@ def dumps(card: ModelCard) -> str:
 
 def load(path: str | os.PathLike[str]) -> ModelCard:
     """Read a card file; errors name the file."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CardError(f"{p}: no such card file", field="card") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CardError(f"{p}: cannot read card: {exc}", field="card") from None
-    return loads(text, source=str(p))
+    from ._jsonio import read_json_file
+
+    doc = read_json_file(path, what="card", error=CardError, field="card", json_field="json")
+    return from_dict(doc, source=str(path))
 
 
 def dump(card: ModelCard, fp: Any) -> None:

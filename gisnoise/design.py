@@ -80,6 +80,7 @@ import numpy as np
 from . import __version__
 from . import cards as _cards
 from ._jsondoc import JsonObject, load_card
+from ._jsonio import read_json_file
 from ._patterns import PathBuilder, fwd, right
 from .errors import Cancelled, DesignError, FitError, InputError, ScenarioError
 from .frames import LocalFrame, emission_angles
@@ -271,15 +272,7 @@ _PLAN_KEYS = ("schema", "name", "description", "seed", "origin", "card", "patter
 def load_plan(path: str | os.PathLike[str]) -> Plan:
     """Read and check a plan file; card and exclusion paths in it are relative to its folder."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise DesignError(f"{p}: no such plan file", field="plan") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DesignError(f"{p}: cannot read plan: {exc}", field="plan") from None
-    except json.JSONDecodeError as exc:
-        raise DesignError(f"{p}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}",
-                          field="plan") from None
+    doc = read_json_file(p, what="plan", error=DesignError, field="plan")
     return resolve_plan(doc, base_dir=p.resolve().parent)
 
 

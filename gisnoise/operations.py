@@ -77,6 +77,7 @@ from typing import Any
 
 import numpy as np
 
+from ._jsonio import read_json_file
 from .errors import Cancelled, InputError
 from .grid import GridSpec, check_cell_limit, grid_for_trajectory, parse_crs
 from .trajectory import Trajectory
@@ -402,15 +403,7 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
 def load_schedule(path: str | os.PathLike[str]) -> Schedule:
     """Read a schedule JSON file (paths in it relative to the file)."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8-sig"))
-    except FileNotFoundError:
-        raise InputError(f"{p}: no such schedule file", field="schedule") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{p}: cannot read: {exc}", field="schedule") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{p}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}",
-                         field="schedule") from None
+    doc = read_json_file(p, what="schedule", error=InputError, field="schedule")
     return schedule_from_dict(doc, base_dir=p.parent, source=str(p))
 
 

@@ -146,6 +146,7 @@ import numpy as np
 from . import __version__, acoustics
 from . import cards as _cards
 from ._jsondoc import JsonObject, load_card
+from ._jsonio import read_json_file
 from ._patterns import G, PathBuilder
 from .errors import InputError, ScenarioError
 from .frames import LocalFrame, emission_angles, wrap_angle
@@ -374,13 +375,7 @@ _EFFECT_FORMS = {
 def load_scenario(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Read a scenario JSON file; card paths in it are relative to its folder."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ScenarioError(f"{p}: no such scenario file", field="scenario") from None
-    except json.JSONDecodeError as exc:
-        raise ScenarioError(f"{p}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}",
-                            field="scenario") from None
+    doc = read_json_file(p, what="scenario", error=ScenarioError, field="scenario")
     if isinstance(doc, dict):
         doc.setdefault("_base_dir", str(p.resolve().parent))
     return doc
