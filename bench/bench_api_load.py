@@ -6,7 +6,7 @@ data folder, then
 1. a typical route-planner request (a 2 km delivery route as waypoints -> GeoJSON
    contours at 25 m cells) from ``--clients`` concurrent clients, ``--requests``
    in all; the baseline is the same map made in-process by the library
-   (``gisnoise.contour.make_map``) in this run, so the ratio is the service's
+   (``gisnoise.maps.pipeline.make_map``) in this run, so the ratio is the service's
    overhead and queueing;
 2. ``GET /cards`` (a cheap read) the same way;
 3. eight large contour jobs queued at once: the server's resident memory (RSS,
@@ -65,8 +65,8 @@ def start_server(data: Path) -> tuple[subprocess.Popen, str]:
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("GISNOISE_")}
     env.update(GISNOISE_DATA_DIR=str(data), GISNOISE_TILE_URL="", GISNOISE_WORKERS="1",
-               GISNOISE_SEED_CARDS_DIR=str(REPO / "sample_data" / "cards"))
-    proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "api.app:create_app", "--factory", "--host",
+               GISNOISE_SEED_CARDS_DIR=str(REPO / "gisnoise" / "data" / "cards"))
+    proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "gisnoise.service.app:create_app", "--factory", "--host",
                              "127.0.0.1", "--port", str(port), "--log-level", "warning"], env=env, cwd=str(REPO))
     url = f"http://127.0.0.1:{port}"
     end = time.monotonic() + 60
@@ -121,10 +121,10 @@ def load(url: str, method: str, path: str, body: dict | None, n: int, clients: i
 
 def direct_baseline(repeats: int) -> float:
     """Seconds per typical map made in-process by the library (no HTTP)."""
-    from gisnoise import cards as gcards
-    from gisnoise.contour import make_map
+    from gisnoise.maps.pipeline import make_map
+    from gisnoise.model import cards as gcards
 
-    cards = [gcards.load(REPO / "sample_data" / "cards" / f"{c.replace('-', '_')}.json") for c in CARDS]
+    cards = [gcards.load(REPO / "gisnoise" / "data" / "cards" / f"{c.replace('-', '_')}.json") for c in CARDS]
     req = typical_request()
     times = []
     for _ in range(repeats):

@@ -1,4 +1,4 @@
-"""Evaluator throughput: gisnoise.evaluate.evaluate_grid vs a plain NumPy broadcast, same run.
+"""Evaluator throughput: gisnoise.maps.evaluate.evaluate_grid vs a plain NumPy broadcast, same run.
 
 The baseline forms the whole cells x instants arrays at once (receivers, emission
 angles, the ansatz, max and trapezoid energy) with no chunking: the simplest
@@ -20,11 +20,11 @@ import tracemalloc
 import numpy as np
 from affine import Affine
 
-from gisnoise.cards import ModelCard
-from gisnoise.evaluate import evaluate_grid
-from gisnoise.frames import LocalFrame, emission_angles
-from gisnoise.grid import WGS84, GridSpec, transformer
-from gisnoise.trajectory import Trajectory
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo.frames import LocalFrame, emission_angles
+from gisnoise.geo.grid import WGS84, GridSpec, transformer
+from gisnoise.maps.evaluate import evaluate_grid
+from gisnoise.model.cards import ModelCard
 
 LAT0, LON0 = 52.27, 10.52
 CARD = ModelCard(id="bench", vehicle="bench", phase="horizontal", ansatz="paper-offset",

@@ -31,17 +31,17 @@ import time
 import numpy as np
 from affine import Affine
 
-from gisnoise._fastkernel import evaluate_grid_fast
-from gisnoise.cards import ModelCard, load
-from gisnoise.evaluate import evaluate_grid
-from gisnoise.frames import LocalFrame, emission_angles
-from gisnoise.grid import WGS84, GridSpec, transformer
-from gisnoise.trajectory import Trajectory
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo.frames import LocalFrame, emission_angles
+from gisnoise.geo.grid import WGS84, GridSpec, transformer
+from gisnoise.maps.evaluate import evaluate_grid
+from gisnoise.maps.fastkernel import evaluate_grid_fast
+from gisnoise.model.cards import ModelCard, load
 
 LAT0, LON0 = 52.27, 10.52
 CRS = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
 HERE = os.path.dirname(os.path.abspath(__file__))
-CARDS = os.path.join(HERE, "..", "sample_data", "cards")
+CARDS = os.path.join(HERE, "..", "gisnoise", "data", "cards")
 CARD = ModelCard(id="bench", vehicle="bench", phase="horizontal", ansatz="paper-offset",
                  parameters=dict(p0=64.0, p1=20.0, p2=0.03, p3=-0.29, p4=-0.05, p5=1.06, p6=1.0, p7=40.0),
                  reference_power_w=3000.0)
@@ -200,8 +200,8 @@ def run_aim(side: int, n: int) -> None:
 
 def city(n_flights: int, extent_km: tuple[float, float], res_m: float):
     """Delivery flights between random hubs of a city: take-off, cruise at 100 m, landing."""
-    from gisnoise.operations import Flight, Schedule
-    from gisnoise.routes import route_from_waypoints
+    from gisnoise.flight.routes import route_from_waypoints
+    from gisnoise.ops.operations import Flight, Schedule
 
     rng = np.random.default_rng(2024)
     frame = LocalFrame(LAT0, LON0, 100.0)
@@ -227,8 +227,8 @@ def city(n_flights: int, extent_km: tuple[float, float], res_m: float):
 
 
 def run_city(n_flights: int, extent_km: tuple[float, float], res_m: float) -> None:
-    from gisnoise.operations import evaluate_operations
-    from gisnoise.scale import local_cluster
+    from gisnoise.ops.operations import evaluate_operations
+    from gisnoise.ops.scale import local_cluster
 
     sched = city(n_flights, extent_km, res_m)
     g = sched.grid

@@ -8,6 +8,6 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from .errors import GisnoiseError  # noqa: E402
+from gisnoise.errors import GisnoiseError  # noqa: E402
 
 __all__ = ["GisnoiseError", "__version__"]

@@ -12,8 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gisnoise import acoustics
-from gisnoise.campaign import (
+from gisnoise.acoustics import physics as acoustics
+from gisnoise.errors import CampaignError
+from gisnoise.geo.frames import LocalFrame
+from gisnoise.measure.campaign import (
     Exclusion,
     check_campaign,
     emission_time,
@@ -21,8 +23,6 @@ from gisnoise.campaign import (
     read_level_csv,
     write_level_csv,
 )
-from gisnoise.errors import CampaignError
-from gisnoise.frames import LocalFrame
 
 ORIGIN = {"lat": 52.3, "lon": 10.4, "h": 80.0}
 FRAME = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"])
@@ -564,9 +564,9 @@ def test_microphone_height_above_ground_reaches_the_samples(tmp_path):
     """campaign.json's height_agl_m is passed to Samples.meta, where the ground-reflection effect reads it."""
     import json
 
-    from gisnoise.campaign import read_campaign
-    from gisnoise.effects import mic_height_agl
-    from gisnoise.simulate import simulate
+    from gisnoise.measure.campaign import read_campaign
+    from gisnoise.model.effects import mic_height_agl
+    from gisnoise.simulate.simulate import simulate
 
     root = __import__("pathlib").Path(__file__).resolve().parents[1]
     scen = json.loads((root / "sample_data/scenarios/diagnosis_base.json").read_text())

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gisnoise import cards
 from gisnoise.errors import CardError, SchemaVersionError
+from gisnoise.model import cards
 
 ROOT = Path(__file__).resolve().parents[1]
-SAMPLE_CARDS = sorted((ROOT / "sample_data" / "cards").glob("*.json"))
+SAMPLE_CARDS = sorted((ROOT / "gisnoise" / "data" / "cards").glob("*.json"))
 
 
 @pytest.mark.parametrize("path", SAMPLE_CARDS, ids=lambda p: p.name)
@@ -33,14 +33,14 @@ TABLE_1 = {
 
 @pytest.mark.parametrize("phase", sorted(TABLE_1))
 def test_published_cards_hold_table_1_verbatim(phase):
-    card = cards.load(ROOT / "sample_data" / "cards" / f"published_{phase}.json")
+    card = cards.load(ROOT / "gisnoise" / "data" / "cards" / f"published_{phase}.json")
     assert card.ansatz == "paper" and card.phase == phase
     assert list(card.model.params) == [f"p{i}" for i in range(1, 8)]
     assert [card.parameters[k] for k in card.model.params] == TABLE_1[phase]
 
 
 def doc():
-    return json.loads((ROOT / "sample_data" / "cards" / "published_horizontal.json").read_text())
+    return json.loads((ROOT / "gisnoise" / "data" / "cards" / "published_horizontal.json").read_text())
 
 
 @pytest.mark.parametrize("schema", ["gisnoise/model-card/2", "gisnoise/model-card/x", "other/1", None])

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gisnoise import cards
 from gisnoise.cli.main import cli
-from gisnoise.plots import directivity_grid
+from gisnoise.maps.plots import directivity_grid
+from gisnoise.model import cards
 
 ROOT = Path(__file__).resolve().parents[1]
-PUBLISHED_H = ROOT / "sample_data" / "cards" / "published_horizontal.json"
-DEMO_H = ROOT / "sample_data" / "cards" / "demo_horizontal.json"
+PUBLISHED_H = ROOT / "gisnoise" / "data" / "cards" / "published_horizontal.json"
+DEMO_H = ROOT / "gisnoise" / "data" / "cards" / "demo_horizontal.json"
 
 
 def run(*args):

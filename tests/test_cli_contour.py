@@ -7,10 +7,10 @@ import pytest
 import rasterio
 from click.testing import CliRunner
 
-from gisnoise.cards import ModelCard, save
 from gisnoise.cli.main import cli
-from gisnoise.frames import LocalFrame
-from gisnoise.trajectory import Trajectory
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo.frames import LocalFrame
+from gisnoise.model.cards import ModelCard, save
 
 FRAME = LocalFrame(52.27, 10.52, 80.0)
 G0 = 70.0
@@ -236,8 +236,8 @@ def test_receivers_on_a_dem(tmp_path, card_path):
 def test_fast_engine_map_equals_the_reference_within_0_01_db(tmp_path):
     """`gisnoise contour --engine fast` writes the same LAmax/LAeq/SEL as the NumPy reference (issue 9: 0.01 dB)."""
     root = __import__("pathlib").Path(__file__).resolve().parents[1]
-    route = root / "sample_data/route/delivery_route.geojson"
-    cards = [str(root / f"sample_data/cards/demo_{p}.json") for p in ("horizontal", "climb", "sink")]
+    route = root / "gisnoise/data/routes/delivery_route.geojson"
+    cards = [str(root / f"gisnoise/data/cards/demo_{p}.json") for p in ("horizontal", "climb", "sink")]
     bands = {}
     for engine in ("numpy", "fast"):
         args = ["-q", "contour", str(route), "--out", str(tmp_path / engine), "--resolution", "40",

@@ -9,13 +9,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import LinearRing, shape
 
-from gisnoise.cards import ModelCard
-from gisnoise.contours import contours_geojson, isobands, isolines, parse_levels, write_geojson
 from gisnoise.errors import InputError
-from gisnoise.evaluate import evaluate_grid
-from gisnoise.frames import LocalFrame
-from gisnoise.grid import grid_for_trajectory
-from gisnoise.trajectory import Trajectory
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo.frames import LocalFrame
+from gisnoise.geo.grid import grid_for_trajectory
+from gisnoise.maps.contours import contours_geojson, isobands, isolines, parse_levels, write_geojson
+from gisnoise.maps.evaluate import evaluate_grid
+from gisnoise.model.cards import ModelCard
 
 LAT0, LON0 = 48.137, 11.575  # lat and lon far apart: a swapped order cannot pass
 

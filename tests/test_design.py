@@ -21,9 +21,8 @@ import pytest
 import shapely
 from click.testing import CliRunner
 
-from gisnoise import cards
 from gisnoise.cli.main import cli
-from gisnoise.design import (
+from gisnoise.design.design import (
     PATTERN_PAIRS,
     Design,
     DesignError,
@@ -42,12 +41,13 @@ from gisnoise.design import (
     study,
     verify,
 )
-from gisnoise.frames import LocalFrame
-from gisnoise.simulate import run
+from gisnoise.geo.frames import LocalFrame
+from gisnoise.model import cards
+from gisnoise.simulate.simulate import run
 
 ROOT = Path(__file__).resolve().parent.parent
 PLAN = ROOT / "sample_data" / "plans" / "paper_racetrack.json"
-CARD = ROOT / "sample_data" / "cards" / "demo_horizontal.json"
+CARD = ROOT / "gisnoise" / "data" / "cards" / "demo_horizontal.json"
 
 
 def plan_doc(**changes):

@@ -1,6 +1,6 @@
 """The diagnosis: localization, event detection, folds, and blind proofs on simulated campaigns.
 
-The simulated campaigns come from the simulator (``gisnoise.simulate``) with one
+The simulated campaigns come from the simulator (``gisnoise.simulate.simulate``) with one
 effect injected by its scenario switch; the diagnosis does not know which, and
 the simulator's forms are its own (the library's extension terms are not
 copies of them).  The control has no effect.
@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gisnoise import cards, simulate
+import gisnoise.simulate.simulate as simulate
 from gisnoise.cli.main import cli
-from gisnoise.diagnose import (
+from gisnoise.diagnose.diagnose import (
     _window_mean_error,
     detect_events,
     diagnose,
@@ -29,12 +29,13 @@ from gisnoise.diagnose import (
     run_diagnosis,
 )
 from gisnoise.errors import Cancelled, InputError
-from gisnoise.model import level_sum
-from gisnoise.samples import Samples
+from gisnoise.measure.samples import Samples
+from gisnoise.model import cards
+from gisnoise.model.ansatz import level_sum
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "sample_data" / "scenarios" / "diagnosis_base.json"
-CARD = ROOT / "sample_data" / "cards" / "demo_horizontal.json"
+CARD = ROOT / "gisnoise" / "data" / "cards" / "demo_horizontal.json"
 EFFECTS = ["bank_angle", "atmospheric_absorption", "ground_reflection", "doppler", "emission_time", "wind", "rpm",
            "background_event"]
 
@@ -232,7 +233,7 @@ def test_cancel_stops_and_progress_counts():
 
 def test_no_samples_of_the_cards_phase_is_refused():
     _, s = simulated(None)
-    climb = cards.load(ROOT / "sample_data" / "cards" / "demo_climb.json")
+    climb = cards.load(ROOT / "gisnoise" / "data" / "cards" / "demo_climb.json")
     only = s.select(s.phase == "horizontal")
     with pytest.raises(InputError, match="phase"):
         diagnose(only, climb)

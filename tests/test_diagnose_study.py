@@ -23,7 +23,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "sample_data" / "scenarios" / "diagnosis_base.json"
-CARD = ROOT / "sample_data" / "cards" / "demo_horizontal.json"
+CARD = ROOT / "gisnoise" / "data" / "cards" / "demo_horizontal.json"
 DOC = ROOT / "docs" / "diagnosis.md"
 BEGIN, END = "<!-- study:begin -->", "<!-- study:end -->"
 
@@ -52,8 +52,9 @@ def effect_params(effect: str, value: float) -> dict:
 
 def one_run(job: tuple[str | None, float | None, int]) -> dict:
     """Simulate one campaign and diagnose it blind; return what the study tabulates."""
-    from gisnoise import cards, simulate
-    from gisnoise.diagnose import run_diagnosis
+    import gisnoise.simulate.simulate as simulate
+    from gisnoise.diagnose.diagnose import run_diagnosis
+    from gisnoise.model import cards
 
     effect, value, seed = job
     doc = json.loads(SCENARIO.read_text())

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from gisnoise import effects
-from gisnoise.effects import bind, check_testable, extend, get_effect
 from gisnoise.errors import InputError
-from gisnoise.model import get_ansatz
+from gisnoise.model import effects
+from gisnoise.model.ansatz import get_ansatz
+from gisnoise.model.effects import bind, check_testable, extend, get_effect
 
 BASE = np.array([62.0, 13.4, 0.18, -0.28, -0.37, 1.05, 0.94, 40.4])  # paper-offset
 C = 331.3 * np.sqrt(1.0 + 11.0 / 273.15)
@@ -241,6 +241,6 @@ def test_new_effect_registers_by_name():
         assert delta("test_linear_d", [2.0], row(d=np.array([50.0])))[0] == pytest.approx(1.0)
     finally:
         effects._EFFECTS.pop("test_linear_d", None)
-        from gisnoise import model
+        from gisnoise.model import ansatz as model
         model._REGISTRY.pop("paper-offset+test_linear_d", None)
         model._REGISTRY.pop("paper+test_linear_d", None)

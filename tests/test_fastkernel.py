@@ -10,13 +10,13 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
-from gisnoise import _fastkernel as fk  # noqa: E402
-from gisnoise.cards import ModelCard  # noqa: E402
 from gisnoise.errors import CardError, InputError  # noqa: E402
-from gisnoise.evaluate import evaluate_grid  # noqa: E402
-from gisnoise.frames import LocalFrame  # noqa: E402
-from gisnoise.grid import GridSpec, utm_crs  # noqa: E402
-from gisnoise.trajectory import Trajectory  # noqa: E402
+from gisnoise.flight.trajectory import Trajectory  # noqa: E402
+from gisnoise.geo.frames import LocalFrame  # noqa: E402
+from gisnoise.geo.grid import GridSpec, utm_crs  # noqa: E402
+from gisnoise.maps import fastkernel as fk  # noqa: E402
+from gisnoise.maps.evaluate import evaluate_grid  # noqa: E402
+from gisnoise.model.cards import ModelCard  # noqa: E402
 
 LAT0, LON0 = 52.27, 10.52
 TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
@@ -70,7 +70,7 @@ def test_polynomials_are_accurate_to_float32():
 @pytest.mark.parametrize("ansatz", ["paper", "paper-offset"])
 def test_kernel_level_equals_the_registry_ansatz(ansatz):
     # one model definition: the kernel's algebra (no atan2 for phi, polynomial exp2/log2/atan)
-    # gives the ansatz of gisnoise.model at the emission angles of the same body vectors
+    # gives the ansatz of gisnoise.model.ansatz at the emission angles of the same body vectors
     rng = np.random.default_rng(3)
     c = card(ansatz=ansatz, p0=61.0, p1=35.0, p2=0.21, p3=0.9, p4=-0.4, p5=-2.1, p6=1.2)
     n = 20000

@@ -9,10 +9,10 @@ import pytest
 from _fit_synth import NOISE, REF_W, TRUTH, synthetic_samples
 from scipy.optimize import least_squares
 
-from gisnoise import cards
 from gisnoise.errors import Cancelled, FitError, InputError, NotIdentifiableError
-from gisnoise.fit import fit, fit_arrays, fit_campaign
-from gisnoise.model import get_ansatz
+from gisnoise.identify.fit import fit, fit_arrays, fit_campaign
+from gisnoise.model import cards
+from gisnoise.model.ansatz import get_ansatz
 
 MODEL = get_ansatz("paper-offset")
 P_TRUE = np.array([TRUTH[k] for k in MODEL.params])
@@ -149,7 +149,7 @@ def test_flipped_start_converges_to_the_canonical_directivity(campaign):
 
 def test_start_from_a_card(campaign):
     samples, _ = campaign
-    card = cards.load(__import__("pathlib").Path(__file__).parents[1] / "sample_data/cards/demo_horizontal.json")
+    card = cards.load(__import__("pathlib").Path(__file__).parents[1] / "gisnoise/data/cards/demo_horizontal.json")
     res = fit(samples, reference_power_w=REF_W, p0=card)
     assert np.all(np.abs(res.p - P_TRUE) < 3.0 * res.std_array)
 
@@ -293,8 +293,8 @@ def make_campaign_folder(root, *, seed=0, truth=None):
     """
     from _fit_synth import MICS, racetrack
 
-    from gisnoise.campaign import read_campaign
-    from gisnoise.frames import LocalFrame
+    from gisnoise.geo.frames import LocalFrame
+    from gisnoise.measure.campaign import read_campaign
 
     truth = TRUTH if truth is None else truth
     frame = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"])
@@ -380,7 +380,7 @@ def test_cli_writes_a_card_with_covariance_and_a_report(campaign_folder, tmp_pat
 
 def test_cli_start_card_and_fixed_parameter(campaign_folder, tmp_path):
     start = tmp_path / "start.json"
-    cards.save(cards.load(__import__("pathlib").Path(__file__).parents[1] / "sample_data/cards/demo_horizontal.json"),
+    cards.save(cards.load(__import__("pathlib").Path(__file__).parents[1] / "gisnoise/data/cards/demo_horizontal.json"),
                start)
     out = tmp_path / "card.json"
     r = _run("fit", campaign_folder, "--phase", "horizontal", "--out", out, "--start", start, "--fix", "p7=40")
@@ -413,15 +413,15 @@ def test_fit_campaign_can_be_cancelled_while_reading(campaign_folder):
 def test_simulated_sample_campaign_without_effects_recovers_the_truth_card():
     # the simulator's sample campaign with no injected effect, no log noise and a steady background:
     # the model is then exactly right, and the ML estimate must sit within 3 std of the truth card
-    from gisnoise.simulate import load_scenario, scenario_copy, simulate_samples
+    from gisnoise.simulate.simulate import load_scenario, scenario_copy, simulate_samples
 
     root = __import__("pathlib").Path(__file__).parents[1]
     sc = load_scenario(root / "sample_data/scenarios/sample_campaign.json")
     veh = dict(sc["vehicle"], log_noise={"position_m": 0.0, "attitude_deg": 0.0, "power_pct": 0.0})
     doc = scenario_copy(sc, effects={}, vehicle=veh, background=dict(sc["background"], fluctuation_db=0.0))
     samples = simulate_samples(doc, base_dir=root / "sample_data/scenarios")
-    truth = cards.load(root / "sample_data/cards/demo_horizontal.json")
-    from gisnoise.fit import usable_rows
+    truth = cards.load(root / "gisnoise/data/cards/demo_horizontal.json")
+    from gisnoise.identify.fit import usable_rows
 
     res = fit(usable_rows(samples, "horizontal"), reference_power_w=samples.meta["reference_power_w"])
     z = (res.p - truth.p) / res.std_array

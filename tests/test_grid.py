@@ -8,10 +8,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gisnoise.errors import CRSError, GridTooLargeError, InvalidGridError
-from gisnoise.evaluate import MapResult
-from gisnoise.grid import GridSpec, apply_affine, grid_for_trajectory, parse_crs, resample_dem, utm_crs
-from gisnoise.raster import NODATA, read_dem, sample_dem, write_geotiff
-from gisnoise.trajectory import Trajectory
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo.grid import GridSpec, apply_affine, grid_for_trajectory, parse_crs, resample_dem, utm_crs
+from gisnoise.geo.raster import NODATA, read_dem, sample_dem, write_geotiff
+from gisnoise.maps.evaluate import MapResult
 
 
 def track(lon, lat):

@@ -2,11 +2,11 @@
 
 import pytest
 
-from gisnoise import cards
-from gisnoise.design import load_plan
+from gisnoise.design.design import load_plan
 from gisnoise.errors import CardError, DesignError, InputError, ScenarioError
-from gisnoise.operations import load_schedule
-from gisnoise.simulate import load_scenario
+from gisnoise.model import cards
+from gisnoise.ops.operations import load_schedule
+from gisnoise.simulate.simulate import load_scenario
 
 LOADERS = [(cards.load, CardError, "card"), (load_scenario, ScenarioError, "scenario"),
            (load_plan, DesignError, "plan"), (load_schedule, InputError, "schedule")]
@@ -31,7 +31,7 @@ def test_missing_unreadable_and_malformed_files_name_the_file(tmp_path, load, er
 def test_a_byte_order_mark_is_accepted(tmp_path):
     from pathlib import Path
 
-    src = Path(__file__).resolve().parents[1] / "sample_data/cards/published_horizontal.json"
+    src = Path(__file__).resolve().parents[1] / "gisnoise/data/cards/published_horizontal.json"
     p = tmp_path / "bom.json"
     p.write_bytes(b"\xef\xbb\xbf" + src.read_bytes())
     assert cards.load(p).parameters["p3"] == -0.280  # paper Table 1

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gisnoise import logs
 from gisnoise.errors import InputError, MissingColumnError
-from gisnoise.logs import gps_to_unix, phase_by_speed, quaternion_to_euler, read_flight
+from gisnoise.flight import logs
+from gisnoise.flight.logs import gps_to_unix, phase_by_speed, quaternion_to_euler, read_flight
 
 pyulog = pytest.importorskip("pyulog")
 pytest.importorskip("pymavlink")

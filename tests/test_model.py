@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gisnoise import cards
 from gisnoise.errors import InputError
-from gisnoise.model import ansatz_names, get_ansatz, level_sum
+from gisnoise.model import cards
+from gisnoise.model.ansatz import ansatz_names, get_ansatz, level_sum
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 TABLE1_HORIZONTAL = [13.409, 0.176, -0.280, -0.365, 1.049, 0.939, 40.393]
@@ -20,7 +20,7 @@ def test_level_sum_of_equal_levels_is_plus_3db():
 
 def test_published_horizontal_card_peaks_at_74_deg_azimuth():
     # SPEC 1 / paper Fig. 7: P_el = 1.1, 30 m; maximum at phi = p3 + pi/2 = 73.96 deg
-    card = cards.load(ROOT / "sample_data/cards/published_horizontal.json")
+    card = cards.load(ROOT / "gisnoise/data/cards/published_horizontal.json")
     phi = np.radians(np.arange(-180.0, 180.0, 0.01))
     for theta in (-1.2, -0.6, 0.0, 0.5):
         lvl = card.level_uav(card.inputs(30.0, phi, theta, 1.1 * card.reference_power_w))
@@ -31,7 +31,7 @@ def test_published_horizontal_card_falls_from_polar_0_to_minus_90():
     # paper section 4.2 and Fig. 7: at P_el = 1.1, the level decreases as the observer
     # moves from the horizon (theta = 0) to straight below (theta = -90 deg), at the
     # loud azimuths (ahead through starboard to aft); behind-port the p2 term reverses it
-    card = cards.load(ROOT / "sample_data/cards/published_horizontal.json")
+    card = cards.load(ROOT / "gisnoise/data/cards/published_horizontal.json")
     theta = np.radians(np.linspace(0.0, -90.0, 181))
     for phi_deg in (0.0, 40.0, 74.0, 110.0, 150.0):
         lvl = card.level_uav(card.inputs(30.0, np.radians(phi_deg), theta, 1.1 * card.reference_power_w))
@@ -98,7 +98,7 @@ def test_wrong_parameter_count_names_parameters():
 
 def test_an_extension_chain_is_built_by_name_with_its_parameters_in_order():
     # "base+e1+e2": the base's parameters, then each effect's, in the order named
-    from gisnoise.effects import get_effect
+    from gisnoise.model.effects import get_effect
 
     a = get_ansatz("paper-offset+bank_angle+doppler")
     base = get_ansatz("paper-offset")

@@ -11,11 +11,12 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
-from gisnoise.cards import ModelCard, save  # noqa: E402
 from gisnoise.errors import InputError  # noqa: E402
-from gisnoise.frames import LocalFrame  # noqa: E402
-from gisnoise.grid import GridSpec  # noqa: E402
-from gisnoise.operations import (  # noqa: E402
+from gisnoise.flight.trajectory import Trajectory  # noqa: E402
+from gisnoise.geo.frames import LocalFrame  # noqa: E402
+from gisnoise.geo.grid import GridSpec  # noqa: E402
+from gisnoise.model.cards import ModelCard, save  # noqa: E402
+from gisnoise.ops.operations import (  # noqa: E402
     Flight,
     Schedule,
     evaluate_operations,
@@ -25,7 +26,6 @@ from gisnoise.operations import (  # noqa: E402
     schedule_from_dict,
     tile_windows,
 )
-from gisnoise.trajectory import Trajectory  # noqa: E402
 
 LAT0, LON0 = 52.27, 10.52
 TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"

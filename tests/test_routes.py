@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from gisnoise.errors import InputError, TrajectoryError
-from gisnoise.frames import LocalFrame
-from gisnoise.routes import (
+from gisnoise.flight.routes import (
     GRAVITY,
     VehicleModel,
     read_route,
@@ -16,7 +15,8 @@ from gisnoise.routes import (
     route_from_waypoints,
     trajectory_to_geojson,
 )
-from gisnoise.trajectory import Trajectory
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo.frames import LocalFrame
 
 LAT0, LON0 = 52.27, 10.52
 FRAME = LocalFrame(LAT0, LON0, 0.0)
@@ -223,7 +223,7 @@ def test_missing_and_malformed_files(tmp_path):
 def test_sample_route_is_a_delivery_flight():
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "sample_data" / "route" / "delivery_route.geojson"
+    path = Path(__file__).resolve().parents[1] / "gisnoise" / "data" / "routes" / "delivery_route.geojson"
     route = read_route(path)
     traj = route.trajectory
     runs = [p for i, p in enumerate(traj.phase) if i == 0 or p != traj.phase[i - 1]]
@@ -252,7 +252,7 @@ def test_agl_altitudes_stand_on_the_dem(tmp_path):
     import rasterio
     from affine import Affine
 
-    from gisnoise.grid import apply_affine
+    from gisnoise.geo.grid import apply_affine
 
     x0, y0 = 634000.0, 5794500.0  # UTM 32N near the test origin
     tr = Affine(10.0, 0, x0, 0, -10.0, y0)
@@ -261,7 +261,7 @@ def test_agl_altitudes_stand_on_the_dem(tmp_path):
     with rasterio.open(tmp_path / "dem.tif", "w", driver="GTiff", width=150, height=150, count=1,
                        dtype="float64", crs="EPSG:32632", transform=tr) as ds:
         ds.write(100.0 + 0.02 * (xs - x0), 1)  # a slope rising eastwards, 2 %
-    from gisnoise.grid import WGS84, parse_crs, transformer
+    from gisnoise.geo.grid import WGS84, parse_crs, transformer
 
     lon, lat = transformer(parse_crs("EPSG:32632"), WGS84).transform([x0 + 300.0, x0 + 1200.0],
                                                                        [y0 - 700.0, y0 - 700.0])

@@ -1,7 +1,7 @@
 """Campaign simulator: truth bookkeeping, flight physics and each injected effect.
 
 Expected values come from the coordinated-turn formula, the truth card evaluated at
-a known geometry, ISO 9613-1 (through ``gisnoise.acoustics``) and the documented
+a known geometry, ISO 9613-1 (through ``gisnoise.acoustics.physics``) and the documented
 form of each effect evaluated here from the written flight log, never from numbers
 the simulator produced once.
 """
@@ -17,12 +17,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from gisnoise import cards
 from gisnoise.cli.main import cli
 from gisnoise.errors import ScenarioError
-from gisnoise.frames import LocalFrame
-from gisnoise.model import level_sum
-from gisnoise.simulate import (
+from gisnoise.flight.trajectory import read_flight_csv
+from gisnoise.geo.frames import LocalFrame
+from gisnoise.model import cards
+from gisnoise.model.ansatz import level_sum
+from gisnoise.simulate.simulate import (
     EFFECTS,
     load_scenario,
     resolve_scenario,
@@ -31,10 +32,9 @@ from gisnoise.simulate import (
     simulate_samples,
     synthesize_wav,
 )
-from gisnoise.trajectory import read_flight_csv
 
 G = 9.80665
-CARDS = Path(__file__).resolve().parent.parent / "sample_data" / "cards"
+CARDS = Path(__file__).resolve().parent.parent / "gisnoise" / "data" / "cards"
 SCENARIOS = Path(__file__).resolve().parent.parent / "sample_data" / "scenarios"
 QUIET_VEHICLE = {"power": {"jitter_pct": 0.0}, "rpm": {"jitter_pct": 0.0},
                  "log_noise": {"position_m": 0.0, "attitude_deg": 0.0, "power_pct": 0.0}}
@@ -230,7 +230,7 @@ def test_bank_angle_adds_the_documented_level_in_turns():
 
 
 def test_atmospheric_absorption_attenuates_each_band_by_alpha_d():
-    from gisnoise.acoustics import atmospheric_absorption
+    from gisnoise.acoustics.physics import atmospheric_absorption
 
     doc = hover_doc(background={"level_dba": -20.0})
     off, on = _pair(doc, "atmospheric_absorption", {"scale": 1.0})
@@ -450,7 +450,7 @@ def test_synthesized_wav_blocks_hold_the_target_energy():
 
 def test_wav_campaign_recovers_true_block_la(tmp_path):
     """A simulated WAV campaign through the whole chain recovers the true block LA within 0.3 dB RMS."""
-    campaign = pytest.importorskip("gisnoise.campaign")
+    campaign = pytest.importorskip("gisnoise.measure.campaign")
     doc = base(output={"format": "wav", "block_s": 0.125, "fs_hz": 48000},
                microphones=[{"id": "m1", "e": 0.0, "n": 0.0, "mount": "ground_plate", "noise_std_db": 0.0},
                             {"id": "m2", "e": 60.0, "n": 30.0, "mount": "free_field", "height_m": 1.5,

@@ -7,10 +7,10 @@ from collections import Counter
 import click
 import numpy as np
 
-from ..campaign import DEFAULT_EVENT_DB, DEFAULT_SNR_DB, inspect_campaign, write_levels
-from ..errors import GisnoiseError
-from ..samples import Samples
-from .options import progress
+from gisnoise.cli.options import progress
+from gisnoise.errors import GisnoiseError
+from gisnoise.measure.campaign import DEFAULT_EVENT_DB, DEFAULT_SNR_DB, inspect_campaign, write_levels
+from gisnoise.measure.samples import Samples
 
 campaign_arg = click.argument("campaign", type=click.Path(file_okay=False))
 

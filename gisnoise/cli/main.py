@@ -16,8 +16,8 @@ from typing import Any
 
 import click
 
-from .. import __version__
-from ..errors import GisnoiseError
+from gisnoise import __version__
+from gisnoise.errors import GisnoiseError
 
 _SKIP = {"main", "options"}
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-from .contour import _echo_bands_and_files
-from .options import out_dir_option, progress
+from gisnoise.cli.contour import _echo_bands_and_files
+from gisnoise.cli.options import out_dir_option, progress
 
 
 @click.command("operations")
@@ -47,8 +47,8 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     """
     import os
 
-    from ..contours import parse_levels
-    from ..operations import evaluate_operations, load_schedule, write_operations
+    from gisnoise.maps.contours import parse_levels
+    from gisnoise.ops.operations import evaluate_operations, load_schedule, write_operations
 
     if single_process and (scheduler or workers):
         raise click.UsageError("--single-process excludes --scheduler and --workers")

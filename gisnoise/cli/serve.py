@@ -10,7 +10,7 @@ import os
 
 import click
 
-from ..errors import InputError
+from gisnoise.errors import InputError
 
 
 @click.command("serve")
@@ -34,8 +34,8 @@ def command(host: str, port: int, data_dir: str | None, workers: int | None, log
     try:
         import uvicorn
 
-        from api.app import create_app
-        from api.settings import Settings
+        from gisnoise.service.app import create_app
+        from gisnoise.service.settings import Settings
     except ImportError as exc:
         raise InputError(f"the service needs the 'api' extra (pip install 'gisnoise[api]'): {exc}",
                          field="serve") from None

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import click
 
-from ..simulate import load_scenario, simulate
-from .options import progress
+from gisnoise.cli.options import progress
+from gisnoise.simulate.simulate import load_scenario, simulate
 
 
 @click.command("simulate")

@@ -162,7 +162,7 @@ def ensure_core():
                                          + "; ".join(problems))
     try:
         gisnoise = importlib.import_module("gisnoise")
-        importlib.import_module("gisnoise.contour")
+        importlib.import_module("gisnoise.maps.pipeline")
     except ImportError as exc:
         raise QgsProcessingException(
             f"the gisnoise core is not importable in QGIS's Python ({exc}); install the plugin from the zip "

@@ -17,7 +17,7 @@ with warnings.catch_warnings():  # starlette's notice about its httpx-based clie
 
 from service_helpers import CARDS  # noqa: E402
 
-from api import Settings, create_app  # noqa: E402
+from gisnoise.service import Settings, create_app  # noqa: E402
 
 
 def make_settings(tmp_path: Path, **kw: Any) -> Settings:

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
-CARDS = REPO / "sample_data" / "cards"
+CARDS = REPO / "gisnoise" / "data" / "cards"
 KEY = "test-key-0123456789"
 
 
@@ -66,7 +66,7 @@ class Server:
                     str(self.port), "--data-dir", str(data_dir), "--workers", str(workers), "--log-level", "warning"]
         else:  # uvicorn itself on the app factory (settings from the environment, as `serve` does)
             e.update({"GISNOISE_DATA_DIR": str(data_dir), "GISNOISE_WORKERS": str(workers)})
-            args = [sys.executable, "-m", "uvicorn", "api.app:create_app", "--factory", "--host", "127.0.0.1",
+            args = [sys.executable, "-m", "uvicorn", "gisnoise.service.app:create_app", "--factory", "--host", "127.0.0.1",
                     "--port", str(self.port), "--log-level", "warning"]
         self.proc = subprocess.Popen(args, env=e, stdout=self._logf, stderr=subprocess.STDOUT, cwd=str(REPO))
         self.wait_up()

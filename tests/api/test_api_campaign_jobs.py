@@ -33,8 +33,8 @@ def campaign_zip() -> bytes:
 
 
 def test_fit_job_returns_the_librarys_card(client, campaign_zip, tmp_path):
-    from gisnoise import cards as gcards
-    from gisnoise.fit import fit_campaign
+    from gisnoise.identify.fit import fit_campaign
+    from gisnoise.model import cards as gcards
 
     r = client.post("/jobs/fit", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
                     data={"phase": "horizontal", "card_id": "fitted-horizontal", "report": "true"})

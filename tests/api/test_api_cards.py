@@ -111,7 +111,7 @@ def test_writes_need_a_key_when_keys_are_configured(make_client):
 
 
 def test_keys_from_the_environment(monkeypatch, tmp_path):
-    from api import Settings
+    from gisnoise.service import Settings
 
     monkeypatch.setenv("GISNOISE_API_KEYS", " k1 ,k2,, ")
     monkeypatch.setenv("GISNOISE_DATA_DIR", str(tmp_path / "d"))

@@ -109,7 +109,7 @@ def test_http_result_equals_the_cli_for_the_sample_route(client, tmp_path):
 
     from gisnoise.cli.main import cli
 
-    route = REPO / "sample_data" / "route" / "delivery_route.geojson"
+    route = REPO / "gisnoise" / "data" / "routes" / "delivery_route.geojson"
     if not route.is_file():
         pytest.skip("no sample route in this checkout")
     out = tmp_path / "cli"

@@ -8,8 +8,8 @@ import time
 import pytest
 from service_helpers import KEY, assert_names_field, wait_job
 
-from api.jobs import JobStore, WorkerPool
 from gisnoise.errors import Cancelled, CardError, GridTooLargeError
+from gisnoise.service.jobs import JobStore, WorkerPool
 
 
 def _store(tmp_path, **kw):

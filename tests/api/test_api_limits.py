@@ -9,8 +9,8 @@ import zipfile
 import pytest
 from service_helpers import CARDS, KEY, assert_names_field
 
-from api.errors import STATUS, status_for
 from gisnoise import errors as ge
+from gisnoise.service.errors import STATUS, status_for
 
 
 def test_every_core_error_has_a_4xx_status_and_specific_beats_general():

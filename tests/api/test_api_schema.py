@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, settings  # noqa: E402
 from schemathesis import checks as st_checks  # noqa: E402
 from service_helpers import CARDS, KEY  # noqa: E402
 
-from api import Settings, create_app  # noqa: E402
+from gisnoise.service import Settings, create_app  # noqa: E402
 
 _tmp = Path(tempfile.mkdtemp(prefix="gisnoise-schema-"))
 atexit.register(shutil.rmtree, _tmp, True)

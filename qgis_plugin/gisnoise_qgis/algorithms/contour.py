@@ -1,4 +1,4 @@
-"""Noise grid and contours of a trajectory: ``gisnoise.contour.make_map`` in QGIS."""
+"""Noise grid and contours of a trajectory: ``gisnoise.maps.pipeline.make_map`` in QGIS."""
 
 from __future__ import annotations
 
@@ -167,7 +167,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
 
     # ------------------------------------------------------------------ inputs
     def _trajectory(self, parameters, context, feedback):
-        from gisnoise import trajectory as gtraj
+        from gisnoise.flight import trajectory as gtraj
 
         source = self.parameterAsSource(parameters, self.TRAJECTORY, context)
         path = self.parameterAsFile(parameters, self.TRAJECTORY_FILE, context)
@@ -178,7 +178,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             raise QgsProcessingException("no trajectory: give a trajectory layer (TRAJECTORY) or a trajectory "
                                          "file (TRAJECTORY_FILE)")
         if path:
-            from gisnoise.routes import read_trajectory
+            from gisnoise.flight.routes import read_trajectory
 
             return read_trajectory(path)
         fields = {col: self.parameterAsString(parameters, key, context)
@@ -191,7 +191,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         return gtraj.from_columns(cols, source=f"trajectory layer '{name}'")
 
     def _cards(self, parameters, context):
-        from gisnoise import cards as gcards
+        from gisnoise.model import cards as gcards
 
         paths = self.parameterAsFileList(parameters, self.CARDS, context)
         if not paths:
@@ -200,8 +200,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
 
     # ------------------------------------------------------------------ run
     def compute(self, parameters, context, feedback):
-        from gisnoise.contour import make_map
-        from gisnoise.contours import parse_levels
+        from gisnoise.maps.contours import parse_levels
+        from gisnoise.maps.pipeline import make_map
 
         levels = parse_levels(self.parameterAsString(parameters, self.LEVELS, context), field="LEVELS")
         traj = self._trajectory(parameters, context, feedback)

@@ -1,4 +1,4 @@
-"""Fit a model card to a measurement campaign: ``gisnoise.fit.fit_campaign`` in QGIS."""
+"""Fit a model card to a measurement campaign: ``gisnoise.identify.fit.fit_campaign`` in QGIS."""
 
 from __future__ import annotations
 
@@ -71,8 +71,8 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
         self.addOutput(QgsProcessingOutputString(self.CARD_ID, "card id"))
 
     def compute(self, parameters, context, feedback):
-        from gisnoise import cards as gcards
-        from gisnoise.fit import fit_campaign
+        from gisnoise.identify.fit import fit_campaign
+        from gisnoise.model import cards as gcards
 
         folder = self.parameterAsFile(parameters, self.CAMPAIGN, context)
         if not folder:
@@ -96,7 +96,7 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
                self.CARD_ID: card.id}
         report = self.parameterAsString(parameters, self.OUTPUT_REPORT, context)
         if report and parameters.get(self.OUTPUT_REPORT) not in (None, ""):
-            from gisnoise.fitreport import write_report
+            from gisnoise.identify.report import write_report
 
             feedback.pushInfo(f"writing the fit report into {report}")
             write_report(result, report)

@@ -1,7 +1,7 @@
 """Trajectory columns from a QGIS vector layer (points, or lines with Z and M).
 
 The result is the flight-CSV column dictionary that
-``gisnoise.trajectory.from_columns`` takes; positions are transformed to WGS84
+``gisnoise.flight.trajectory.from_columns`` takes; positions are transformed to WGS84
 longitude and latitude through QGIS's own transform of the layer's CRS.
 
 Point layers have one feature per log sample: time, attitude, power and phase

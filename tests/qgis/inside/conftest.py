@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(os.environ.get("GISNOISE_REPO") or Path(__file__).resolve().parents[3])
-CARDS = REPO / "sample_data" / "cards"
+CARDS = REPO / "gisnoise" / "data" / "cards"
 PLUGIN = "gisnoise_qgis"
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")

@@ -13,7 +13,7 @@ SAMPLE_CAMPAIGN = REPO / "sample_data" / "campaign"
 
 def truth_card(campaign, tmp_path):
     """The horizontal card the campaign was simulated with (from its truth.json), as a file."""
-    from gisnoise import cards
+    from gisnoise.model import cards
 
     doc = json.loads((campaign / "truth.json").read_text(encoding="utf-8"))["cards"]["horizontal"]
     return cards.save(cards.from_dict(doc), tmp_path / "truth_horizontal.json")
@@ -39,7 +39,7 @@ def control_fit(plugin, control_campaign, tmp_path_factory):
 
 
 def test_fit_recovers_the_simulated_truth(control_fit, control_campaign, tmp_path):
-    from gisnoise import cards
+    from gisnoise.model import cards
 
     res, path = control_fit
     card, truth = cards.load(path), cards.load(truth_card(control_campaign, tmp_path))
@@ -69,7 +69,7 @@ def test_diagnose_names_bank_angle_and_maps_the_flagged_segments(plugin, tmp_pat
     import processing
     from qgis.core import QgsVectorLayer
 
-    from gisnoise.campaign import read_campaign
+    from gisnoise.measure.campaign import read_campaign
 
     res = processing.run("gisnoise:diagnose", {
         "CAMPAIGN": str(SAMPLE_CAMPAIGN), "CARD": str(truth_card(SAMPLE_CAMPAIGN, tmp_path)), "OUTPUT_JSON": str(tmp_path / "diagnosis.json"),

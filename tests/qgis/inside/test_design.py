@@ -16,7 +16,7 @@ def small_plan(tmp_path_factory):
     doc["objectives"] = ["paper"]
     doc.pop("study", None)
     doc["verify"] = {"seeds": 0}
-    doc["card"] = str(REPO / "sample_data" / "cards" / "demo_horizontal.json")
+    doc["card"] = str(REPO / "gisnoise" / "data" / "cards" / "demo_horizontal.json")
     path = tmp_path_factory.mktemp("plan") / "plan.json"
     path.write_text(json.dumps(doc), encoding="utf-8")
     return path, doc

@@ -1,0 +1,252 @@
+"""Trajectories: time-stamped position, attitude, power and phase of a UAV.
+
+The flight CSV (one row per log sample, sorted by time) has the columns
+``t`` (s), ``lat``, ``lon`` (deg), ``h`` (m, ellipsoidal), ``roll``, ``pitch``,
+``yaw`` (deg), ``power_w`` (W) and optionally ``rpm``, ``airspeed_m_s`` and
+``phase``.  :class:`Trajectory` keeps angles in degrees as in the file; use
+:meth:`Trajectory.enu` and :meth:`Trajectory.attitude_rad` for the model.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import MissingColumnError, TrajectoryError
+from gisnoise.geo.frames import LocalFrame, wrap_angle, wrap_deg
+from gisnoise.model.cards import PHASES
+
+__all__ = ["Trajectory", "read_flight_csv", "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
+
+REQUIRED_COLUMNS = ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w")
+OPTIONAL_COLUMNS = ("rpm", "airspeed_m_s", "phase")
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A UAV trajectory; arrays of equal length ``n``.
+
+    Attributes
+    ----------
+    t : ndarray
+        Time, s, strictly increasing.
+    lat, lon : ndarray
+        WGS84 position, deg.
+    h : ndarray
+        Ellipsoidal height, m.
+    roll, pitch, yaw : ndarray
+        Z-Y-X Euler angles, deg (yaw wrapped into (-180, 180]).
+    power_w : ndarray
+        Electric power, W.
+    phase : ndarray of str
+        Flight phase of each sample (``horizontal`` when the source has none).
+    rpm, airspeed_m_s : ndarray or None
+        Optional propeller speed (1/min) and airspeed (m/s).
+    """
+
+    t: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+    roll: np.ndarray
+    pitch: np.ndarray
+    yaw: np.ndarray
+    power_w: np.ndarray
+    phase: np.ndarray
+    rpm: np.ndarray | None = None
+    airspeed_m_s: np.ndarray | None = None
+    source: str = field(default="trajectory", compare=False)
+
+    def __post_init__(self) -> None:
+        src = self.source
+        n = None
+        for f in fields(self):
+            if f.name in ("source",):
+                continue
+            v = getattr(self, f.name)
+            if v is None:
+                continue
+            if f.name == "phase":
+                arr = np.asarray(v, dtype=object).astype(str)
+            else:
+                arr = np.asarray(v, dtype=float)
+                if arr.ndim != 1:
+                    raise TrajectoryError(f"{src}: field '{f.name}' must be one-dimensional", field=f.name)
+                bad = ~np.isfinite(arr)
+                if bad.any():
+                    i = int(np.flatnonzero(bad)[0])
+                    raise TrajectoryError(
+                        f"{src}: field '{f.name}' has NaN or infinite value at sample {i}", field=f.name
+                    )
+            if n is None:
+                n = arr.shape[0]
+            elif arr.shape[0] != n:
+                raise TrajectoryError(f"{src}: field '{f.name}' has {arr.shape[0]} samples, expected {n}",
+                                      field=f.name)
+            if f.name == "yaw":
+                arr = wrap_deg(arr)
+            object.__setattr__(self, f.name, arr)
+        if not n:
+            raise TrajectoryError(f"{src}: the trajectory is empty", field="t")
+        dt = np.diff(self.t)
+        if np.any(dt <= 0):
+            i = int(np.flatnonzero(dt <= 0)[0]) + 1
+            raise TrajectoryError(f"{src}: field 't' is not strictly increasing at sample {i} "
+                                  f"(t={self.t[i]:g} s after {self.t[i - 1]:g} s)", field="t")
+        if np.any(np.abs(self.lat) > 90):
+            raise TrajectoryError(f"{src}: field 'lat' outside [-90, 90] deg", field="lat")
+        if np.any(self.power_w <= 0):
+            i = int(np.flatnonzero(self.power_w <= 0)[0])
+            raise TrajectoryError(f"{src}: field 'power_w' must be positive, got {self.power_w[i]:g} at sample {i}",
+                                  field="power_w")
+        bad = [p for p in np.unique(self.phase) if p not in PHASES]
+        if bad:
+            raise TrajectoryError(f"{src}: field 'phase' has unknown value {bad[0]!r}; known: {', '.join(PHASES)}",
+                                  field="phase")
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    def origin(self) -> LocalFrame:
+        """A local frame at the first sample's ground point (h0 = min height)."""
+        return LocalFrame(float(self.lat[0]), float(self.lon[0]), float(np.min(self.h)))
+
+    def enu(self, frame: LocalFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Positions in ``frame``, m."""
+        return frame.to_enu(self.lat, self.lon, self.h)
+
+    def attitude_rad(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(yaw, pitch, roll) in radians."""
+        return np.radians(self.yaw), np.radians(self.pitch), np.radians(self.roll)
+
+    def interpolate(self, t: Any) -> dict[str, np.ndarray]:
+        """Linear interpolation of the state at times ``t`` (s); angles on the circle.
+
+        Phase is taken from the nearest earlier sample.  Times outside the
+        trajectory are clamped to its ends.
+        """
+        t = np.asarray(t, dtype=float)
+        out: dict[str, np.ndarray] = {}
+        for name in ("lat", "lon", "h", "power_w", "rpm", "airspeed_m_s"):
+            v = getattr(self, name)
+            if v is not None:
+                out[name] = np.interp(t, self.t, v)
+        for name in ("roll", "pitch", "yaw"):
+            v = np.radians(getattr(self, name))
+            c = np.interp(t, self.t, np.cos(v))
+            s = np.interp(t, self.t, np.sin(v))
+            out[name] = np.degrees(wrap_angle(np.arctan2(s, c)))
+        idx = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self) - 1)
+        out["phase"] = self.phase[idx]
+        return out
+
+    def select(self, mask: Any) -> Trajectory:
+        """A trajectory of the samples where ``mask`` is true."""
+        m = np.asarray(mask)
+        kw = {f.name: (None if getattr(self, f.name) is None else getattr(self, f.name)[m])
+              for f in fields(self) if f.name != "source"}
+        return Trajectory(**kw, source=self.source)
+
+    def with_(self, **changes: Any) -> Trajectory:
+        return replace(self, **changes)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The flight-CSV columns as arrays."""
+        out = {k: getattr(self, k) for k in REQUIRED_COLUMNS}
+        for k in ("rpm", "airspeed_m_s"):
+            if getattr(self, k) is not None:
+                out[k] = getattr(self, k)
+        out["phase"] = self.phase
+        return out
+
+    def to_csv(self, path: str | os.PathLike[str] | None = None) -> str:
+        """Write the flight CSV (to ``path`` if given); returns the text."""
+        cols = self.columns()
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(list(cols))
+        fmt = {"lat": "{:.9f}", "lon": "{:.9f}"}
+        for i in range(len(self)):
+            w.writerow([v[i] if k == "phase" else fmt.get(k, "{:.6g}").format(v[i]) for k, v in cols.items()])
+        text = buf.getvalue()
+        if path is not None:
+            Path(path).write_text(text, encoding="utf-8")
+        return text
+
+
+def from_columns(cols: Mapping[str, Any], *, source: str = "trajectory") -> Trajectory:
+    """Build a trajectory from named columns (the flight-CSV names); errors name the column."""
+    missing = [c for c in REQUIRED_COLUMNS if c not in cols]
+    if missing:
+        raise MissingColumnError(f"{source}: missing column(s) {', '.join(missing)}", field=missing[0])
+    kw: dict[str, Any] = {}
+    n = len(cols["t"])
+    for c in REQUIRED_COLUMNS + ("rpm", "airspeed_m_s"):
+        if c not in cols:
+            continue
+        try:
+            kw[c] = np.asarray(cols[c], dtype=float)
+        except (TypeError, ValueError):
+            raise TrajectoryError(f"{source}: column '{c}' has a non-numeric value", field=c) from None
+    kw["phase"] = np.asarray(cols["phase"], dtype=str) if "phase" in cols else np.full(n, "horizontal")
+    return Trajectory(**kw, source=source)
+
+
+def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str | None = None) -> Trajectory:
+    """Read a flight CSV (see module docstring); errors name the file and column."""
+    if isinstance(path, (str, os.PathLike)):
+        src = source or str(path)
+        try:
+            text = Path(path).read_text(encoding="utf-8-sig")
+        except FileNotFoundError:
+            raise TrajectoryError(f"{src}: no such file", field="trajectory") from None
+    else:
+        src = source or "flight CSV"
+        text = path.read()
+    reader = csv.reader(io.StringIO(text, newline=None))
+    try:
+        header = [h.strip() for h in next(reader)]
+        rows = [r for r in reader if r and any(x.strip() for x in r)]
+    except StopIteration:
+        raise TrajectoryError(f"{src}: the file is empty", field="t") from None
+    except csv.Error as exc:
+        raise TrajectoryError(f"{src}: malformed CSV at line {reader.line_num}: {exc}", field="csv") from None
+    cols: dict[str, list[str]] = {h: [] for h in header}
+    for ln, r in enumerate(rows, start=2):
+        if len(r) != len(header):
+            raise TrajectoryError(f"{src}: line {ln} has {len(r)} fields, header has {len(header)}", field="csv")
+        for h, v in zip(header, r, strict=True):
+            cols[h].append(v.strip())
+    out: dict[str, Any] = {}
+    for h, vals in cols.items():
+        if h == "phase":
+            out[h] = vals
+            continue
+        if h not in REQUIRED_COLUMNS + OPTIONAL_COLUMNS:
+            continue
+        try:
+            out[h] = np.array([float(v) if v != "" else np.nan for v in vals])
+        except ValueError:
+            bad = next(i for i, v in enumerate(vals) if not _isfloat(v))
+            raise TrajectoryError(f"{src}: column '{h}' line {bad + 2}: not a number: {vals[bad]!r}",
+                                  field=h) from None
+    return from_columns(out, source=src)
+
+
+def _isfloat(v: str) -> bool:
+    try:
+        float(v)
+    except ValueError:
+        return False
+    return True

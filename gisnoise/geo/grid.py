@@ -1,0 +1,376 @@
+"""Receiver grids: a raster (CRS, transform, shape) whose cell centres are the receivers.
+
+A :class:`GridSpec` is a small frozen value object in the manner of rasterio's
+``Window``: it knows its CRS, its affine transform (north-up, no rotation), its
+width and height, and the coordinates of its cell centres.  The evaluator places
+one receiver at the centre of every cell, at a height above the ground.
+
+:func:`grid_for_trajectory` chooses the grid of a trajectory: its bounding box plus
+a margin, snapped to multiples of the resolution, in a local UTM zone unless a CRS is
+given.  The number of cells is limited by the environment variable
+``GISNOISE_MAX_CELLS`` (default 25 000 000).
+
+Examples
+--------
+>>> g = GridSpec.from_bounds("EPSG:32632", 600000.0, 5800000.0, 600100.0, 5800050.0, 10.0)
+>>> g.width, g.height, g.n_cells
+(10, 5, 50)
+>>> x, y = g.centres()
+>>> float(x[0, 0]), float(y[0, 0])  # the north-west cell's centre
+(600005.0, 5800045.0)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from affine import Affine
+from pyproj import CRS, Transformer
+from pyproj.exceptions import CRSError as _PyprojCRSError
+
+from gisnoise.errors import CRSError, GridTooLargeError, InvalidGridError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from gisnoise.flight.trajectory import Trajectory
+    from gisnoise.geo.raster import Dem
+
+__all__ = [
+    "GridSpec",
+    "DEFAULT_MAX_CELLS",
+    "max_cells",
+    "parse_crs",
+    "utm_crs",
+    "grid_for_trajectory",
+    "resample_dem",
+    "transformer",
+    "crs_label",
+    "apply_affine",
+]
+
+DEFAULT_MAX_CELLS = 25_000_000
+WGS84 = CRS.from_epsg(4326)
+_local = threading.local()
+
+
+def transformer(src: CRS, dst: CRS) -> Transformer:
+    """A cached ``always_xy`` transformer ``src -> dst`` (one cache per thread: transformers are not shared).
+
+    Keyed by the identity of the CRS objects (hashing a CRS formats its WKT, which is slow).
+    """
+    cache = getattr(_local, "cache", None)
+    if cache is None:
+        cache = _local.cache = {}
+    key = (id(src), id(dst))
+    hit = cache.get(key)
+    if hit is not None and hit[0] is src and hit[1] is dst:
+        return hit[2]
+    if len(cache) > 64:
+        cache.clear()
+    tr = Transformer.from_crs(src, dst, always_xy=True)
+    cache[key] = (src, dst, tr)
+    return tr
+
+
+def apply_affine(t: Affine, x: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Apply an affine transform to coordinate arrays (``t * (x, y)`` without the operator's deprecation)."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    return t.a * x + t.b * y + t.c, t.d * x + t.e * y + t.f
+
+
+@lru_cache(maxsize=64)
+def crs_label(crs: CRS) -> str:
+    """``AUTH:CODE`` of a CRS when it has one, else its WKT (cached: the look-up is slow)."""
+    auth = crs.to_authority()
+    return ":".join(auth) if auth else crs.to_wkt()
+
+
+def max_cells() -> int:
+    """The cell limit: ``GISNOISE_MAX_CELLS`` from the environment, default 25 000 000."""
+    raw = os.environ.get("GISNOISE_MAX_CELLS")
+    if raw is None or raw.strip() == "":
+        return DEFAULT_MAX_CELLS
+    try:
+        n = int(raw)
+    except ValueError:
+        raise InvalidGridError(f"GISNOISE_MAX_CELLS must be a positive integer, got {raw!r}",
+                               field="GISNOISE_MAX_CELLS") from None
+    if n <= 0:
+        raise InvalidGridError(f"GISNOISE_MAX_CELLS must be a positive integer, got {raw!r}",
+                               field="GISNOISE_MAX_CELLS")
+    return n
+
+
+def parse_crs(crs: Any, *, field: str = "crs") -> CRS:
+    """A projected CRS in metres from anything pyproj understands (``"EPSG:25832"``, WKT, ...).
+
+    Raises :class:`~gisnoise.errors.CRSError` naming ``field`` when the CRS is unknown,
+    geographic or not in metres.
+    """
+    if isinstance(crs, CRS):
+        out = crs
+    else:
+        try:
+            out = CRS.from_user_input(crs)
+        except (_PyprojCRSError, TypeError, ValueError):
+            raise CRSError(f"{field}: unknown coordinate reference system {crs!r}", field=field) from None
+    if not out.is_projected:
+        raise CRSError(f"{field}: {crs!r} is not a projected CRS; the grid needs one in metres "
+                       "(e.g. a UTM zone)", field=field)
+    unit = out.axis_info[0].unit_name if out.axis_info else ""
+    if unit not in ("metre", "meter"):
+        raise CRSError(f"{field}: {crs!r} has axis unit {unit!r}; the grid needs metres", field=field)
+    return out
+
+
+def utm_crs(lon: float, lat: float) -> CRS:
+    """The WGS84 UTM zone CRS (EPSG 326xx north, 327xx south) containing ``lon, lat`` (deg).
+
+    >>> utm_crs(9.99, 53.55).to_epsg()  # Hamburg
+    32632
+    """
+    if not (math.isfinite(lon) and math.isfinite(lat)) or abs(lat) > 90:
+        raise CRSError(f"no UTM zone for lon={lon!r}, lat={lat!r}", field="crs")
+    zone = int(math.floor((((lon + 180.0) % 360.0)) / 6.0)) + 1
+    zone = min(max(zone, 1), 60)
+    return CRS.from_epsg((32600 if lat >= 0 else 32700) + zone)
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """A north-up raster of receivers.
+
+    Parameters
+    ----------
+    crs : pyproj.CRS or str
+        Projected CRS in metres (anything :func:`parse_crs` accepts).
+    transform : affine.Affine
+        Pixel-corner transform ``(col, row) -> (x, y)``; ``a > 0``, ``e < 0``, no rotation.
+    width, height : int
+        Number of columns and rows.
+
+    Notes
+    -----
+    The receiver of cell ``(row, col)`` is the cell centre
+    ``transform * (col + 0.5, row + 0.5)``; row 0 is the northern edge.
+    """
+
+    crs: Any
+    transform: Affine
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "crs", parse_crs(self.crs))
+        t = self.transform
+        if not isinstance(t, Affine):
+            try:
+                t = Affine(*tuple(t)[:6])
+            except TypeError:
+                raise InvalidGridError(f"grid: transform must be an affine transform, got {t!r}",
+                                       field="transform") from None
+            object.__setattr__(self, "transform", t)
+        if not all(math.isfinite(v) for v in tuple(t)[:6]):
+            raise InvalidGridError(f"grid: transform has non-finite entries {tuple(t)[:6]}", field="transform")
+        if t.b != 0 or t.d != 0:
+            raise InvalidGridError("grid: rotated transforms are not supported", field="transform")
+        if not (t.a > 0 and t.e < 0):
+            raise InvalidGridError(f"grid: transform must be north-up with positive cell size, got a={t.a}, e={t.e}",
+                                   field="transform")
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
+                raise InvalidGridError(f"grid: {name} must be a positive integer, got {v!r}", field=name)
+            object.__setattr__(self, name, int(v))
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_bounds(cls, crs: Any, left: float, bottom: float, right: float, top: float,
+                    resolution: float) -> GridSpec:
+        """The grid covering ``[left, right] x [bottom, top]`` (m) with square cells of ``resolution`` m.
+
+        The upper-left corner is kept; width and height are rounded up.
+        """
+        _check_positive(resolution, "resolution_m")
+        if not (right > left and top > bottom):
+            raise InvalidGridError(f"grid: empty bounds ({left}, {bottom}, {right}, {top})", field="bounds")
+        width = max(1, int(math.ceil((right - left) / resolution - 1e-9)))
+        height = max(1, int(math.ceil((top - bottom) / resolution - 1e-9)))
+        return cls(crs, Affine(resolution, 0.0, left, 0.0, -resolution, top), width, height)
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(height, width)``: the shape of the bands."""
+        return (self.height, self.width)
+
+    @property
+    def n_cells(self) -> int:
+        return self.width * self.height
+
+    @property
+    def resolution(self) -> tuple[float, float]:
+        """Cell size ``(dx, dy)``, m."""
+        return (self.transform.a, -self.transform.e)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(left, bottom, right, top)`` of the raster's outer edges, CRS units (m)."""
+        t = self.transform
+        return (t.c, t.f + t.e * self.height, t.c + t.a * self.width, t.f)
+
+    @property
+    def xs(self) -> np.ndarray:
+        """Easting of the cell centres of each column, m, shape ``(width,)``."""
+        t = self.transform
+        return t.c + t.a * (np.arange(self.width) + 0.5)
+
+    @property
+    def ys(self) -> np.ndarray:
+        """Northing of the cell centres of each row, m, shape ``(height,)`` (decreasing)."""
+        t = self.transform
+        return t.f + t.e * (np.arange(self.height) + 0.5)
+
+    def centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """Cell-centre coordinates ``(x, y)``, each of shape ``(height, width)``, m."""
+        return np.meshgrid(self.xs, self.ys)
+
+    def flat_centres(self, start: int, stop: int) -> tuple[np.ndarray, np.ndarray]:
+        """Cell centres ``(x, y)`` of flat (row-major) cell indices ``start <= k < stop``."""
+        k = np.arange(start, stop)
+        row, col = np.divmod(k, self.width)
+        t = self.transform
+        return t.c + t.a * (col + 0.5), t.f + t.e * (row + 0.5)
+
+    def to_wgs84(self, x: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Grid coordinates (m) -> ``(lon, lat)`` in degrees.  Arrays broadcast."""
+        lon, lat = transformer(self.crs, WGS84).transform(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        return np.asarray(lon), np.asarray(lat)
+
+    def from_wgs84(self, lon: Any, lat: Any) -> tuple[np.ndarray, np.ndarray]:
+        """``(lon, lat)`` degrees -> grid coordinates (m).  Arrays broadcast."""
+        x, y = transformer(WGS84, self.crs).transform(np.asarray(lon, dtype=float), np.asarray(lat, dtype=float))
+        return np.asarray(x), np.asarray(y)
+
+    def centre_wgs84(self) -> tuple[float, float]:
+        """``(lon, lat)`` of the grid's centre, deg."""
+        left, bottom, right, top = self.bounds
+        lon, lat = self.to_wgs84(0.5 * (left + right), 0.5 * (bottom + top))
+        return float(lon), float(lat)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-able description (CRS as ``AUTH:CODE`` when it has one, else WKT)."""
+        return {"crs": crs_label(self.crs), "transform": list(tuple(self.transform)[:6]),
+                "width": self.width, "height": self.height}
+
+
+def _check_positive(v: Any, name: str) -> float:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise InvalidGridError(f"{name} must be a positive number of metres, got {v!r}", field=name) from None
+    if not math.isfinite(f) or f <= 0:
+        raise InvalidGridError(f"{name} must be a positive number of metres, got {v!r}", field=name)
+    return f
+
+
+def check_cell_limit(width: int, height: int, *, field: str = "resolution_m") -> None:
+    """Raise :class:`~gisnoise.errors.GridTooLargeError` when ``width * height`` exceeds :func:`max_cells`."""
+    limit = max_cells()
+    n = width * height
+    if n > limit:
+        raise GridTooLargeError(
+            f"{field}: a grid of {width} x {height} = {n:,} cells exceeds the limit of {limit:,} cells "
+            "(GISNOISE_MAX_CELLS); use a coarser resolution or a smaller margin", field=field)
+
+
+def grid_for_trajectory(traj: Trajectory, resolution_m: float = 10.0, margin_m: float = 500.0,
+                        crs: Any = None) -> GridSpec:
+    """The receiver grid around a trajectory.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        The flight; its horizontal extent sets the grid.
+    resolution_m : float
+        Cell size, m (> 0).
+    margin_m : float
+        Distance added on every side of the track's bounding box, m (>= 0).
+    crs : str or pyproj.CRS, optional
+        Projected CRS in metres; default the WGS84 UTM zone of the track's centre.
+
+    Returns
+    -------
+    GridSpec
+        Edges snapped to multiples of ``resolution_m`` in the CRS.
+
+    Raises
+    ------
+    CRSError
+        ``crs`` is unknown, geographic or not in metres (field ``crs``).
+    InvalidGridError
+        Resolution or margin out of range.
+    GridTooLargeError
+        More cells than ``GISNOISE_MAX_CELLS`` (field ``resolution_m``).
+    """
+    res = _check_positive(resolution_m, "resolution_m")
+    try:
+        margin = float(margin_m)
+    except (TypeError, ValueError):
+        raise InvalidGridError(f"margin_m must be a number of metres >= 0, got {margin_m!r}", field="margin_m") from None
+    if not math.isfinite(margin) or margin < 0:
+        raise InvalidGridError(f"margin_m must be a number of metres >= 0, got {margin_m!r}", field="margin_m")
+    lon = np.asarray(traj.lon, dtype=float)
+    lat = np.asarray(traj.lat, dtype=float)
+    if crs is None:
+        lon_c = float(np.degrees(np.arctan2(np.mean(np.sin(np.radians(lon))), np.mean(np.cos(np.radians(lon))))))
+        out_crs = utm_crs(lon_c, float(np.mean(lat)))
+    else:
+        out_crs = parse_crs(crs)
+    x, y = transformer(WGS84, out_crs).transform(lon, lat)
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise CRSError(f"crs: the trajectory lies outside the area of use of {out_crs.name!r}", field="crs")
+    left = math.floor((x.min() - margin) / res) * res
+    right = math.ceil((x.max() + margin) / res) * res
+    bottom = math.floor((y.min() - margin) / res) * res
+    top = math.ceil((y.max() + margin) / res) * res
+    if right <= left:
+        right = left + res
+    if top <= bottom:
+        top = bottom + res
+    width = int(round((right - left) / res))
+    height = int(round((top - bottom) / res))
+    check_cell_limit(width, height)
+    return GridSpec(out_crs, Affine(res, 0.0, left, 0.0, -res, top), width, height)
+
+
+def resample_dem(dem: Dem, grid: GridSpec) -> np.ndarray:
+    """Ground heights at the grid's cell centres from a DEM, bilinear, m.
+
+    Uses :func:`rasterio.warp.reproject` with bilinear resampling onto the grid;
+    cells outside the DEM or on its nodata are NaN.
+
+    Returns
+    -------
+    ndarray, shape ``grid.shape``
+    """
+    from rasterio.warp import Resampling, reproject
+
+    out = np.full(grid.shape, np.nan, dtype=np.float64)
+    src = np.asarray(dem.heights, dtype=np.float64)
+    reproject(
+        source=src, destination=out,
+        src_transform=dem.transform, src_crs=dem.crs.to_wkt(), src_nodata=dem.nodata if dem.nodata is not None
+        else np.nan,
+        dst_transform=grid.transform, dst_crs=grid.crs.to_wkt(), dst_nodata=np.nan,
+        resampling=Resampling.bilinear,
+    )
+    return out

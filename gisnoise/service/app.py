@@ -1,0 +1,105 @@
+"""The gisnoise web service: ``create_app(settings)`` builds the FastAPI application.
+
+Run it with ``gisnoise serve`` (uvicorn).  OpenAPI at ``/docs`` and ``/openapi.json``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+
+from fastapi import FastAPI
+
+from gisnoise import __version__
+from gisnoise.service import routes_campaign, routes_cards, routes_contours, routes_jobs, routes_web
+from gisnoise.service.cardstore import CardStore
+from gisnoise.service.deps import State
+from gisnoise.service.errors import install_handlers
+from gisnoise.service.jobs import Handler, JobStore, WorkerPool
+from gisnoise.service.limits import BodySizeLimit
+from gisnoise.service.models import ErrorBody
+from gisnoise.service.responses import AsciiJSONResponse
+from gisnoise.service.settings import Settings, get_settings
+
+__all__ = ["create_app", "ERROR_RESPONSES"]
+
+log = logging.getLogger(__name__)
+
+STATIC_DIR = Path(__file__).resolve().parent / "static"
+
+ERROR_RESPONSES: dict[int | str, dict] = {
+    s: {"model": ErrorBody, "description": d}
+    for s, d in [(400, "Bad request"), (401, "API key missing"), (403, "API key not valid"), (404, "Not found"),
+                 (409, "Conflict"), (413, "Too large (body, upload or grid)"), (422, "Invalid input")]
+}
+
+
+def _handlers() -> dict[str, Handler]:
+    """The job handler of each job kind."""
+    return {"contours": routes_contours.run_contour_job, "fit": routes_campaign.run_fit_job,
+            "diagnose": routes_campaign.run_diagnose_job}
+
+
+def create_app(settings: Settings | None = None, *, start_workers: bool = True) -> FastAPI:
+    """Build the application.
+
+    Parameters
+    ----------
+    settings : Settings, optional
+        Default: from the environment (``GISNOISE_*``).
+    start_workers : bool
+        Start the job worker threads with the application (tests may run jobs by hand).
+    """
+    settings = settings or get_settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        st: State = app.state.gisnoise
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        n = st.cards.seed(settings.seed_cards_dir)
+        if n:
+            log.info("card store seeded with %d cards", n)
+        orphans = st.jobs.remove_orphans()
+        if orphans:
+            log.warning("removed %d job folder(s) without a job (left by a stop during a submission)", orphans)
+        requeued = st.jobs.requeue_interrupted()
+        if requeued:
+            log.warning("%d job(s) interrupted by the last stop were re-queued", requeued)
+        if start_workers:
+            st.pool.start()
+        try:
+            yield
+        finally:
+            st.pool.stop()
+
+    app = FastAPI(
+        title="gisnoise",
+        version=__version__,
+        description="Noise contours of small electric VTOL drones: model cards, noise maps (GeoJSON, GeoTIFF), "
+                    "fit and diagnose jobs. Errors: one JSON body naming the field. Writes need an `X-API-Key` "
+                    "when the service has keys.",
+        lifespan=lifespan,
+        responses=ERROR_RESPONSES,
+        default_response_class=AsciiJSONResponse,
+        docs_url=None,  # served below from the vendored swagger-ui: no network needed
+        redoc_url=None,
+    )
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    jobs = JobStore(settings.db_path, settings.jobs_dir)
+    app.state.gisnoise = State(settings=settings, cards=CardStore(settings.cards_dir), jobs=jobs,
+                               pool=WorkerPool(jobs, _handlers(), settings.workers))
+    install_handlers(app)
+    for r in (routes_cards.router, routes_contours.router, routes_jobs.router, routes_campaign.router,
+              routes_web.router):
+        app.include_router(r)
+    routes_web.mount_static(app, STATIC_DIR)
+
+    upload_paths = ("/jobs/fit", "/jobs/diagnose")
+
+    def limit_for(path: str) -> int:
+        return settings.max_upload_bytes if path in upload_paths else settings.max_request_bytes
+
+    app.add_middleware(BodySizeLimit, limit_for=limit_for)
+    return app

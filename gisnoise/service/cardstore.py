@@ -1,0 +1,167 @@
+"""The service's model-card store: versioned card files in ``<data_dir>/cards/<id>/v<N>.json``.
+
+An upload never overwrites: a card whose id is new becomes version 1; an
+identical re-upload returns the existing version; a different card with an
+existing id is refused (409) unless a new version is asked for, which then
+becomes version N + 1.  ``get`` returns the latest version unless one is named.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+from gisnoise.model import cards as gcards
+from gisnoise.model.cards import ModelCard
+from gisnoise.service.errors import ApiError
+
+__all__ = ["CardStore", "StoredCard", "ID_PATTERN"]
+
+ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$"
+_ID_RE = re.compile(ID_PATTERN)
+_VERSION_RE = re.compile(r"^v(\d+)\.json$")
+
+
+@dataclass(frozen=True)
+class StoredCard:
+    card: ModelCard
+    version: int
+    path: Path
+
+
+def check_id(card_id: str, field: str = "id") -> str:
+    if not isinstance(card_id, str) or not _ID_RE.match(card_id):
+        raise ApiError(422, f"{field}: card id must match {ID_PATTERN} (letters, digits, '.', '_', '-'), "
+                            f"got {card_id!r}", field=field)
+    return card_id
+
+
+class CardStore:
+    """Versioned model cards on disk."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+        self._lock = threading.Lock()
+        self._cache: dict[Path, tuple[int, int, ModelCard]] = {}
+
+    def seed(self, folder: Path | None) -> int:
+        """Copy the cards of ``folder`` into a store that does not exist yet; returns how many."""
+        if self.root.exists():
+            return 0
+        self.root.mkdir(parents=True)
+        n = 0
+        if folder is None:
+            return 0
+        for p in sorted(Path(folder).glob("*.json")):
+            try:
+                card = gcards.load(p)
+            except gcards.CardError:
+                continue
+            if _ID_RE.match(card.id):
+                self.put(card)
+                n += 1
+        return n
+
+    def _versions(self, card_id: str) -> list[int]:
+        d = self.root / card_id
+        if not d.is_dir():
+            return []
+        out = []
+        for p in d.iterdir():
+            m = _VERSION_RE.match(p.name)
+            if m:
+                out.append(int(m.group(1)))
+        return sorted(out)
+
+    def ids(self) -> list[str]:
+        if not self.root.is_dir():
+            return []
+        return sorted(p.name for p in self.root.iterdir() if p.is_dir() and self._versions(p.name))
+
+    def versions(self, card_id: str) -> list[int]:
+        return self._versions(check_id(card_id))
+
+    def get(self, card_id: str, version: int | None = None, *, field: str = "id") -> StoredCard:
+        check_id(card_id, field)
+        vs = self._versions(card_id)
+        if not vs:
+            raise ApiError(404, f"{field}: no card with id {card_id!r}", field=field)
+        v = vs[-1] if version is None else version
+        if v not in vs:
+            raise ApiError(404, f"version: card {card_id!r} has no version {v} (versions: "
+                                f"{', '.join(map(str, vs))})", field="version")
+        path = self.root / card_id / f"v{v}.json"
+        return StoredCard(self._load(path), v, path)
+
+    def _load(self, path: Path) -> ModelCard:
+        """A card file, parsed once (versions are never rewritten; the cache key is also the file's stat)."""
+        st = path.stat()
+        hit = self._cache.get(path)
+        if hit is not None and hit[:2] == (st.st_mtime_ns, st.st_size):
+            return hit[2]
+        card = gcards.load(path)
+        self._cache[path] = (st.st_mtime_ns, st.st_size, card)
+        return card
+
+    def resolve(self, ref: str, *, field: str) -> ModelCard:
+        """A card from a reference ``id`` or ``id@version``; errors name ``field``."""
+        card_id, _, ver = ref.partition("@")
+        version = None
+        if ver:
+            if not ver.isdigit():
+                raise ApiError(422, f"{field}: version after '@' must be a number, got {ver!r}", field=field)
+            version = int(ver)
+        try:
+            return self.get(card_id, version, field=field).card
+        except ApiError as exc:
+            if exc.status == 404:
+                raise ApiError(422, f"{field}: {exc}", field=field) from None
+            raise
+
+    def put(self, card: ModelCard, *, new_version: bool = False) -> tuple[StoredCard, bool]:
+        """Store a card; returns (stored card, created).
+
+        Identical to the latest version: nothing is written (created False).
+        Different from an existing id: 409 unless ``new_version``.
+        """
+        check_id(card.id)
+        with self._lock:
+            vs = self._versions(card.id)
+            if vs:
+                latest = self.get(card.id)
+                if latest.card == card:
+                    return latest, False
+                if not new_version:
+                    raise ApiError(409, f"id: a different card {card.id!r} exists (version {vs[-1]}); "
+                                        f"upload with new_version=true to add version {vs[-1] + 1}, "
+                                        f"or choose another id", field="id")
+            v = (vs[-1] + 1) if vs else 1
+            d = self.root / card.id
+            d.mkdir(parents=True, exist_ok=True)
+            path = d / f"v{v}.json"
+            tmp = d / f".v{v}.json.tmp"
+            tmp.write_text(gcards.dumps(card), encoding="utf-8")
+            os.link(tmp, path)  # fails if the version appeared meanwhile: never overwrite
+            tmp.unlink()
+            return StoredCard(card, v, path), True
+
+    def delete(self, card_id: str, version: int | None = None) -> list[int]:
+        """Delete one version or all; returns the deleted versions."""
+        check_id(card_id)
+        with self._lock:
+            vs = self._versions(card_id)
+            if not vs:
+                raise ApiError(404, f"id: no card with id {card_id!r}", field="id")
+            if version is None:
+                shutil.rmtree(self.root / card_id)
+                return vs
+            if version not in vs:
+                raise ApiError(404, f"version: card {card_id!r} has no version {version}", field="version")
+            (self.root / card_id / f"v{version}.json").unlink()
+            if len(vs) == 1:
+                shutil.rmtree(self.root / card_id, ignore_errors=True)
+            return [version]

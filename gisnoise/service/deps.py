@@ -1,0 +1,50 @@
+"""Dependencies shared by the routers: the service state and the API-key check."""
+
+from __future__ import annotations
+
+import hmac
+from dataclasses import dataclass
+from typing import Annotated
+
+from fastapi import Depends, Request, Security
+from fastapi.security import APIKeyHeader
+
+from gisnoise.service.cardstore import CardStore
+from gisnoise.service.errors import ApiError
+from gisnoise.service.jobs import JobStore, WorkerPool
+from gisnoise.service.settings import Settings
+
+__all__ = ["State", "StateDep", "get_state", "require_key", "WRITE"]
+
+_key_header = APIKeyHeader(name="X-API-Key", auto_error=False,
+                           description="Needed for writes (uploads, jobs, deletes) when the service has keys.")
+
+
+@dataclass
+class State:
+    settings: Settings
+    cards: CardStore
+    jobs: JobStore
+    pool: WorkerPool
+
+
+def get_state(request: Request) -> State:
+    return request.app.state.gisnoise
+
+
+StateDep = Annotated[State, Depends(get_state)]
+
+
+def require_key(request: Request, key: str | None = Security(_key_header)) -> None:
+    """Refuse a write without a valid ``X-API-Key`` when keys are configured (401 missing, 403 wrong)."""
+    keys = get_state(request).settings.api_keys
+    if not keys:
+        return
+    if not key:
+        raise ApiError(401, "X-API-Key: this write needs an API key in the X-API-Key header", field="X-API-Key",
+                       headers={"WWW-Authenticate": "APIKey"})
+    if not any(hmac.compare_digest(key.encode(), k.encode()) for k in keys):
+        raise ApiError(403, "X-API-Key: the key is not valid", field="X-API-Key")
+
+
+WRITE = [Depends(require_key)]

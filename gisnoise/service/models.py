@@ -1,0 +1,235 @@
+"""Pydantic request and response models of the service, and its media types."""
+
+from __future__ import annotations
+
+from enum import Enum
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from gisnoise.model.cards import PHASES
+
+__all__ = [
+    "MediaType", "ErrorBody", "FieldError", "CardDocument", "CardInfo", "CardList", "CardVersions",
+    "JobInfo", "JobList", "JobError", "GridRequest", "ContourRequest", "Health", "PhaseName",
+    "TrajectoryInput", "Metric", "OutputFormat",
+]
+
+
+class MediaType(str, Enum):
+    """Every media type the service reads or writes."""
+
+    json = "application/json"
+    geojson = "application/geo+json"
+    geotiff = "image/tiff; application=geotiff"
+    zip = "application/zip"
+    csv = "text/csv"
+    html = "text/html"
+    png = "image/png"
+    octet = "application/octet-stream"
+
+
+class OutputFormat(str, Enum):
+    geojson = "geojson"
+    geotiff = "geotiff"
+
+
+PhaseName = Literal["horizontal", "climb", "sink", "hover", "transition"]
+assert set(PhaseName.__args__) == set(PHASES)  # type: ignore[attr-defined]
+
+Metric = Literal["LAmax", "LAeq", "SEL"]
+
+
+# ---------------------------------------------------------------- errors
+class FieldError(BaseModel):
+    field: str = Field(description="Dotted path of the invalid field, e.g. 'grid.resolution_m'.")
+    message: str
+    type: str = ""
+
+
+class ErrorBody(BaseModel):
+    """Body of every 4xx/5xx response."""
+
+    detail: str = Field(description="One line naming the field and the bad value.")
+    field: str | None = Field(description="The field the error is about (dotted path), or null.")
+    errors: list[FieldError] | None = Field(default=None, description="Every invalid field of a rejected body.")
+
+
+# ---------------------------------------------------------------- cards
+class CardDocument(BaseModel):
+    """A model card (``gisnoise/model-card/1``, SPEC section 4); validated by the core on upload."""
+
+    model_config = ConfigDict(extra="allow", populate_by_name=True, strict=True, json_schema_extra={"example": {
+        "schema": "gisnoise/model-card/1", "id": "my-horizontal", "vehicle": "demo 35 kg cargo eVTOL",
+        "phase": "horizontal", "ansatz": "paper-offset",
+        "parameters": {"p0": 64.0, "p1": 20.0, "p2": 0.03, "p3": -0.28, "p4": -0.05, "p5": 1.05, "p6": 1.0,
+                       "p7": 40.0},
+        "reference_power_w": 3000.0, "reference_distance_m": 40.0, "covariance": None, "notes": "",
+        "phases": ["transition"]}})
+
+    schema_: str = Field(alias="schema", description="'gisnoise/model-card/1'")
+    id: str
+    vehicle: str
+    phase: str
+    ansatz: str
+    parameters: dict[str, float]
+    reference_power_w: float
+    reference_distance_m: float = 40.0
+    covariance: list[list[float]] | None = None
+    statistics: dict[str, Any] = Field(default_factory=dict)
+    provenance: dict[str, Any] = Field(default_factory=dict)
+    notes: str = ""
+    phases: list[str] = Field(default_factory=list)
+
+
+class CardInfo(BaseModel):
+    id: str
+    version: int = Field(description="Latest version (1, 2, ...).")
+    versions: list[int]
+    vehicle: str
+    phase: str
+    phases: list[str] = Field(description="Every phase the card serves (its phase first).")
+    ansatz: str
+    reference_power_w: float
+    has_covariance: bool
+    notes: str
+    url: str
+
+
+class CardList(BaseModel):
+    cards: list[CardInfo]
+
+
+class CardVersions(BaseModel):
+    id: str
+    versions: list[int]
+
+
+# ---------------------------------------------------------------- jobs
+class JobError(BaseModel):
+    detail: str
+    field: str | None
+    status: int | None = Field(description="HTTP status the same error has in a synchronous request.")
+
+
+class JobInfo(BaseModel):
+    id: str
+    kind: Literal["contours", "fit", "diagnose"]
+    status: Literal["queued", "running", "succeeded", "failed", "cancelled"]
+    progress: float = Field(ge=0, le=1, description="Fraction done, 0..1.")
+    message: str
+    created: float = Field(description="Unix time, s.")
+    started: float | None
+    finished: float | None
+    attempts: int = Field(description="Starts of the job; more than 1 after a restart re-ran it.")
+    cancel_requested: bool
+    error: JobError | None
+    summary: dict[str, Any] | None
+    files: list[str] = Field(description="Result files, downloadable at /jobs/{id}/files/{name}.")
+    url: str
+    result_url: str | None
+
+
+class JobList(BaseModel):
+    jobs: list[JobInfo]
+    total: int
+
+
+class Health(BaseModel):
+    status: Literal["ok"]
+    version: str
+    queued: int
+    running: int
+
+
+# ---------------------------------------------------------------- contours
+class CsvTrajectory(BaseModel):
+    """A flight CSV (SPEC section 3 columns) as text."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    format: Literal["csv"]
+    text: str = Field(min_length=1, description="Flight CSV text: t, lat, lon, h, roll, pitch, yaw, power_w[, phase]")
+
+
+class ColumnsTrajectory(BaseModel):
+    """Flight-CSV columns as arrays."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    format: Literal["columns"]
+    columns: dict[str, list[float | str]] = Field(
+        description="Column name (t, lat, lon, h, roll, pitch, yaw, power_w, phase, rpm, airspeed_m_s) -> values")
+
+
+class RowsTrajectory(BaseModel):
+    """Flight-CSV rows as objects."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    format: Literal["rows"]
+    rows: list[dict[str, float | str]] = Field(min_length=1, description="One object per log sample.")
+
+
+class GeoJSONTrajectory(BaseModel):
+    """A GeoJSON LineString with Z and times, or waypoints (SPEC section 7) as GeoJSON or JSON."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    format: Literal["geojson", "waypoints"]
+    data: dict[str, Any] = Field(description="GeoJSON object (Feature, FeatureCollection, LineString) or "
+                                             "waypoint document, as read by gisnoise.flight.routes.read_trajectory")
+
+
+TrajectoryInput = Annotated[CsvTrajectory | ColumnsTrajectory | RowsTrajectory | GeoJSONTrajectory,
+                            Field(discriminator="format")]
+
+
+class GridRequest(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+    resolution_m: float = Field(default=10.0, ge=0.1, le=100_000, description="Cell size, m (0.1 m or more).")
+    margin_m: float = Field(default=500.0, ge=0, le=1_000_000, description="Margin around the track, m.")
+    crs: str | None = Field(default=None, description="Grid CRS (e.g. 'EPSG:25832'); default a local UTM zone.")
+
+
+CardRef = Annotated[str, Field(min_length=1, max_length=160, description="Card id in the store, or 'id@version'.")]
+
+
+_ROUTE_EXAMPLE = {"type": "FeatureCollection", "route": {"altitude_reference": "agl"}, "features": [
+    {"type": "Feature", "geometry": {"type": "Point", "coordinates": c}, "properties": p}
+    for c, p in [([10.540, 52.243], {"alt": 0}), ([10.540, 52.243], {"alt": 60}),
+                 ([10.550, 52.250], {"alt": 60, "speed": 22}), ([10.550, 52.250], {"alt": 0})]]}
+
+
+class ContourRequest(BaseModel):
+    """A noise map of one trajectory."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, json_schema_extra={"example": {
+        "trajectory": {"format": "waypoints", "data": _ROUTE_EXAMPLE},
+        "cards": ["demo-horizontal", "demo-climb", "demo-sink"], "grid": {"resolution_m": 20, "margin_m": 400},
+        "metrics": ["LAmax", "LAeq"], "levels": [45, 50, 55, 60]}})
+    trajectory: TrajectoryInput
+    cards: list[CardRef | CardDocument] = Field(
+        default_factory=list, max_length=32,
+        description="Cards by id ('demo-horizontal', 'demo-horizontal@2') or inline documents; each serves "
+                    "its phase and phases.")
+    phase_cards: dict[PhaseName, CardRef] = Field(
+        default_factory=dict, description="Phase -> card id: the card serves exactly that phase "
+                                          "(overrides the phases the card states).")
+    grid: GridRequest = Field(default_factory=GridRequest)
+    metrics: list[Metric] = Field(default=["LAmax", "LAeq", "SEL"], max_length=3,
+                                  description="Bands LAmax, LAeq, SEL (dB(A)); time above and snapshot are asked "
+                                              "for with threshold_db and snapshot_t.")
+    levels: list[float] = Field(default=[45.0, 50.0, 55.0, 60.0], min_length=1, max_length=40,
+                                description="Contour levels, dB(A).")
+    receiver_height_m: float = Field(default=1.5, ge=0, le=1000, description="Receiver height above ground, m.")
+    ground_h_m: float | None = Field(default=None, ge=-1000, le=9000,
+                                     description="Flat ground's ellipsoidal height, m; default the trajectory's "
+                                                 "lowest point.")
+    background: bool = Field(default=False, description="Add the card's background level (Eq. 8).")
+    period_s: float | None = Field(default=None, gt=0, le=1e7, description="LAeq period, s (default duration).")
+    threshold_db: list[Annotated[float, Field(ge=-50, le=200)]] | None = Field(
+        default=None, max_length=10, description="Levels of time-above bands TA<level> (s), dB(A).")
+    snapshot_t: float | None = Field(default=None, ge=-1e7, le=1e7,
+                                     description="Instant of a snapshot band LA@<t>s, s (within the trajectory).")
+    substeps: int = Field(default=1, ge=1, le=50, description="Time steps per trajectory sample interval.")
+    uncertainty: bool = Field(default=False, description="Add LAmax/LAeq standard-deviation bands "
+                                                         "(cards need a covariance).")
+    output: Literal["geojson", "geotiff"] | None = Field(default=None, description="Response format; default from the Accept "
+                                                                  "header, else GeoJSON.")

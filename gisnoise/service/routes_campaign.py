@@ -1,0 +1,251 @@
+"""Fit and diagnose jobs on an uploaded campaign (a zip of the SPEC section 3 folder)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import stat
+import tempfile
+import zipfile
+from pathlib import Path, PurePosixPath
+from typing import Annotated, Any
+
+from fastapi import APIRouter, File, Form, Request, UploadFile
+from fastapi.concurrency import run_in_threadpool
+
+from gisnoise.model import cards as gcards
+from gisnoise.service.deps import WRITE, State, StateDep
+from gisnoise.service.errors import ApiError
+from gisnoise.service.jobs import JobContext
+from gisnoise.service.models import JobInfo, PhaseName
+from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
+from gisnoise.service.routes_jobs import JOB_LINKS, job_info
+
+__all__ = ["router", "unpack_campaign", "run_fit_job", "run_diagnose_job"]
+
+router = APIRouter(prefix="/jobs", tags=["jobs"])
+
+_MAX_MEMBERS = 100_000
+
+
+def unpack_campaign(upload: Path, dest: Path, *, max_bytes: int, field: str = "campaign") -> Path:
+    """Unzip a campaign safely into ``dest``; returns the folder holding ``campaign.json``.
+
+    Refuses what is not a zip, paths leaving the folder, links, more than
+    ``max_bytes`` unzipped (413) and archives without ``campaign.json``.
+    """
+    try:
+        zf = zipfile.ZipFile(upload)
+    except (zipfile.BadZipFile, OSError):
+        raise ApiError(422, f"{field}: not a zip archive", field=field) from None
+    with zf:
+        infos = zf.infolist()
+        if len(infos) > _MAX_MEMBERS:
+            raise ApiError(413, f"{field}: {len(infos)} files exceed the limit of {_MAX_MEMBERS}", field=field)
+        total = sum(i.file_size for i in infos)
+        if total > max_bytes:
+            raise ApiError(413, f"{field}: {total} bytes unzipped exceed the limit of {max_bytes}", field=field)
+        for i in infos:
+            p = PurePosixPath(i.filename)
+            if p.is_absolute() or ".." in p.parts or "\\" in i.filename:
+                raise ApiError(422, f"{field}: member {i.filename!r} leaves the archive folder", field=field)
+            if stat.S_ISLNK(i.external_attr >> 16):
+                raise ApiError(422, f"{field}: member {i.filename!r} is a link", field=field)
+        try:
+            zf.extractall(dest)
+        except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError) as exc:
+            raise ApiError(422, f"{field}: cannot unzip: {exc}", field=field) from None
+    found = sorted(dest.rglob("campaign.json"), key=lambda p: len(p.parts))
+    found = [p for p in found if "__MACOSX" not in p.parts]
+    if not found:
+        raise ApiError(422, f"{field}: the archive has no campaign.json", field=field)
+    return found[0].parent
+
+
+async def _receive_campaign(state: State, campaign: UploadFile) -> Path:
+    """The upload unzipped into a fresh folder (moved into the job's input by ``submit``)."""
+    s = state.settings
+    tmp = Path(tempfile.mkdtemp(prefix="upload-", dir=s.jobs_dir))
+    try:
+        zpath = tmp / "campaign.zip"
+        n = 0
+        with zpath.open("wb") as f:
+            while chunk := await campaign.read(1 << 20):
+                n += len(chunk)
+                if n > s.max_upload_bytes:
+                    raise ApiError(413, f"campaign: upload exceeds the limit of {s.max_upload_bytes} bytes",
+                                   field="campaign")
+                f.write(chunk)
+        folder = await run_in_threadpool(unpack_campaign, zpath, tmp / "unzipped", max_bytes=s.max_unzipped_bytes)
+        zpath.unlink()
+        # keep only the campaign folder itself
+        final = tmp / "campaign"
+        shutil.move(str(folder), str(final))
+        shutil.rmtree(tmp / "unzipped", ignore_errors=True)
+        return final
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _submit(request: Request, state: State, kind: str, params: dict[str, Any], campaign_dir: Path,
+            extra: dict[str, bytes] | None = None) -> JSONResponse:
+    try:
+        job = state.jobs.submit(kind, params, {"campaign": campaign_dir, **(extra or {})})
+    finally:
+        shutil.rmtree(campaign_dir.parent, ignore_errors=True)
+    info = job_info(request, job)
+    return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
+
+
+@router.post("/fit", status_code=202, response_model=JobInfo, dependencies=WRITE, responses={202: {"links": JOB_LINKS}},
+             summary="Fit a model card to an uploaded campaign (job)")
+async def fit_job(request: Request, state: StateDep,
+                  campaign: Annotated[UploadFile, File(description="Zipped campaign folder (campaign.json, "
+                                                                   "flights/, mics/).")],
+                  phase: Annotated[PhaseName, Form(description="Flight phase to fit.")],
+                  ansatz: Annotated[str, Form(max_length=100, description="Ansatz name.")] = "paper-offset",
+                  card_id: Annotated[str | None, Form(max_length=128, description="Id of the fitted card.")] = None,
+                  report: Annotated[bool, Form(description="Also write the fit report (report.html, "
+                                                           "figures).")] = False,
+                  ) -> JSONResponse:
+    from gisnoise.model.ansatz import get_ansatz
+
+    try:
+        get_ansatz(ansatz)
+    except Exception as exc:  # noqa: BLE001 - an unknown name, reported with the field
+        raise ApiError(422, f"ansatz: {exc}", field="ansatz") from None
+    if card_id is not None:
+        from gisnoise.service.cardstore import check_id
+
+        check_id(card_id, "card_id")
+    folder = await _receive_campaign(state, campaign)
+    return _submit(request, state, "fit", {"phase": phase, "ansatz": ansatz, "card_id": card_id,
+                                           "report": report}, folder)
+
+
+@router.post("/diagnose", status_code=202, response_model=JobInfo, dependencies=WRITE,
+             responses={202: {"links": JOB_LINKS}},
+             summary="Diagnose a card against an uploaded campaign (job)")
+async def diagnose_job(request: Request, state: StateDep,
+                       campaign: Annotated[UploadFile, File(description="Zipped campaign folder.")],
+                       card_id: Annotated[str | None, Form(max_length=160, description="Card in the store "
+                                                                                       "('id' or 'id@version').")] = None,
+                       card: Annotated[UploadFile | None, File(description="Or a card JSON file.")] = None,
+                       report: Annotated[bool, Form(description="Also write report.html and its "
+                                                                "figures.")] = True,
+                       ) -> JSONResponse:
+    if (card_id is None) == (card is None):
+        raise ApiError(422, "card_id: give either card_id or a card file", field="card_id")
+    if card is not None:
+        text = await card.read(10_000_001)
+        if len(text) > 10_000_000:
+            raise ApiError(413, "card: card file exceeds 10 MB", field="card")
+        try:
+            mc = gcards.loads(text, source="card")
+        except gcards.CardError as exc:
+            raise ApiError(422, str(exc), field=f"card.{exc.field}" if exc.field else "card") from None
+    else:
+        assert card_id is not None
+        mc = state.cards.resolve(card_id, field="card_id")
+    folder = await _receive_campaign(state, campaign)
+    return _submit(request, state, "diagnose", {"card": mc.id, "report": report}, folder,
+                   {"card.json": gcards.dumps(mc).encode()})
+
+
+# ------------------------------------------------------------------ handlers
+def run_fit_job(ctx: JobContext) -> dict[str, Any]:
+    """Fit the stored campaign; writes card.json (the fitted card) and fit.json (a summary)."""
+    from gisnoise.identify.fit import fit_campaign
+
+    p = ctx.params
+    max_iter = 100
+
+    def progress(iteration: int, cost: float) -> None:
+        ctx.progress(min(0.1 + 0.85 * iteration / max_iter, 0.95), f"iteration {iteration}, cost {cost:.6g}")
+
+    ctx.progress(0.0, "reading the campaign")
+    result = fit_campaign(ctx.input_dir / "campaign", p["phase"], ansatz=p["ansatz"], max_iter=max_iter,
+                          progress=progress, cancel=ctx.cancel)
+    ctx.check_cancel()
+    data = result.info.get("data")
+    if isinstance(data, dict):  # the server's folder means nothing to the client
+        data["campaign"] = f"uploaded campaign (job {ctx.job.id})"
+    card = result.to_card(id=p.get("card_id") or None, phase=p["phase"])
+    gcards.save(card, ctx.output_dir / "card.json")
+    summary: dict[str, Any] = {"card_id": card.id, "phase": card.phase, "ansatz": card.ansatz,
+                               "parameters": dict(card.parameters), "std": card.std}
+    for k in ("success", "n", "cost", "aic", "bic", "message"):
+        v = getattr(result, k, None)
+        if isinstance(v, (bool, int, float, str)):
+            summary[k] = v
+    if p.get("report"):
+        ctx.progress(0.96, "writing the report")
+        summary["report"] = _report("gisnoise.identify.report", result, ctx.output_dir / "report")
+    (ctx.output_dir / "fit.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return summary
+
+
+def _report(module: str, *args: Any, **kw: Any) -> str:
+    """Call ``write_report`` of a report module; a missing plotting library is said, not hidden."""
+    import importlib
+
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        return "not written: matplotlib is not installed (the 'plot' extra)"
+    importlib.import_module(module).write_report(*args, **kw)
+    return "written"
+
+
+def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
+    """Diagnose the stored card against the stored campaign: diagnosis.json (and report.html), as the CLI."""
+    from gisnoise.diagnose.diagnose import run_diagnosis
+
+    card = gcards.load(ctx.input_dir / "card.json")
+    ctx.progress(0.0, "reading the campaign")
+
+    def progress(done: int, total: int, what: str = "") -> None:
+        ctx.progress(0.9 * done / max(total, 1), what or "diagnosing")
+
+    diag = run_diagnosis(ctx.input_dir / "campaign", card, progress=progress, cancel=ctx.cancel)
+    ctx.check_cancel()
+    doc = dict(diag.result)
+    doc["campaign"] = f"uploaded campaign (job {ctx.job.id})"
+    _strip_server_paths(doc, str(ctx.input_dir))
+    text = json.dumps(doc, indent=2, allow_nan=False, default=_json_default)
+    (ctx.output_dir / "diagnosis.json").write_text(text + "\n", encoding="utf-8")
+    summary = {"card": card.id, "verdict": doc.get("verdict"), "baseline": doc.get("baseline")}
+    if ctx.params.get("report", True):
+        ctx.progress(0.9, "writing the report")
+        summary["report"] = _report("gisnoise.diagnose.report", diag, ctx.output_dir,
+                                    progress=lambda d, t: ctx.progress(0.9 + 0.1 * d / max(t, 1), "writing the report"))
+    return summary
+
+
+def _json_default(v: Any) -> Any:
+    import numpy as np
+
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, Path):
+        return str(v)
+    raise TypeError(f"not JSON serializable: {type(v).__name__}")
+
+
+def _strip_server_paths(doc: Any, prefix: str) -> None:
+    """Replace the server's job folder in strings of a result document (in place)."""
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            if isinstance(v, str) and prefix in v:
+                doc[k] = v.replace(prefix, "upload")
+            else:
+                _strip_server_paths(v, prefix)
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            if isinstance(v, str) and prefix in v:
+                doc[i] = v.replace(prefix, "upload")
+            else:
+                _strip_server_paths(v, prefix)

@@ -1,0 +1,270 @@
+"""Contours: a noise map of one trajectory as GeoJSON or GeoTIFF; large maps become jobs.
+
+The request is turned into the core's objects (trajectory, cards, grid) once,
+here; the map is made by :func:`gisnoise.maps.pipeline.make_map`, the same call the
+command line makes, so the HTTP result equals the CLI's for the same input.
+A job stores the request with its cards resolved to full documents, so a
+later change of the card store does not change a queued job's result.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import tempfile
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from fastapi import APIRouter, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+
+from gisnoise.errors import GisnoiseError, GridTooLargeError, InputError, TrajectoryError
+from gisnoise.flight.trajectory import Trajectory, from_columns, read_flight_csv
+from gisnoise.model import cards as gcards
+from gisnoise.model.cards import ModelCard
+from gisnoise.service.cardstore import CardStore
+from gisnoise.service.deps import WRITE, State, StateDep, require_key
+from gisnoise.service.errors import ApiError
+from gisnoise.service.jobs import JobContext
+from gisnoise.service.models import (
+    CardDocument,
+    ColumnsTrajectory,
+    ContourRequest,
+    CsvTrajectory,
+    GeoJSONTrajectory,
+    JobInfo,
+    MediaType,
+    OutputFormat,
+    RowsTrajectory,
+)
+from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
+from gisnoise.service.routes_jobs import JOB_LINKS, job_info
+
+__all__ = ["router", "run_contour_job", "build_trajectory", "resolve_cards", "make_map_files"]
+
+router = APIRouter(tags=["contours"])
+
+_sync_slots = threading.BoundedSemaphore(2)
+
+
+# ------------------------------------------------------------------ request -> core objects
+@contextmanager
+def _prefixed(prefix: str) -> Iterator[None]:
+    """Re-raise core errors with their field under ``prefix`` (``t`` -> ``trajectory.t``)."""
+    try:
+        yield
+    except GisnoiseError as exc:
+        fld = exc.field
+        exc.field = prefix if not fld else (fld if fld.startswith(prefix) else f"{prefix}.{fld}")
+        raise
+
+
+_CORE_FIELDS = {"resolution_m": "grid.resolution_m", "margin_m": "grid.margin_m", "crs": "grid.crs",
+                "ground_h": "ground_h_m", "receiver_height": "receiver_height_m", "card": "cards", "phase": "cards",
+                "trajectory": "trajectory", "out": "body"}
+"""Core argument names -> request fields, for the errors of ``make_map``."""
+
+
+@contextmanager
+def _core_fields() -> Iterator[None]:
+    try:
+        yield
+    except GisnoiseError as exc:
+        exc.field = _CORE_FIELDS.get(exc.field or "", exc.field or "body")
+        raise
+
+
+def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
+    """The trajectory of a request (csv text, columns, rows, GeoJSON or waypoints)."""
+    with _prefixed("trajectory"):
+        if isinstance(spec, CsvTrajectory):
+            # universal newlines, as reading the same file from disk (the CLI) would give
+            text = spec.text.replace("\r\n", "\n").replace("\r", "\n")
+            try:
+                traj = read_flight_csv(io.StringIO(text), source="trajectory")
+            except csv.Error as exc:
+                raise TrajectoryError(f"trajectory: not a readable CSV: {exc}", field="text") from None
+        elif isinstance(spec, ColumnsTrajectory):
+            cols = spec.columns
+            lengths = {k: len(v) for k, v in cols.items()}
+            ref = "t" if "t" in cols else next(iter(cols), None)
+            bad = [k for k, n in lengths.items() if ref is not None and n != lengths[ref]]
+            if bad:
+                raise TrajectoryError(f"trajectory: column '{bad[0]}' has {lengths[bad[0]]} values, column "
+                                      f"'{ref}' has {lengths[ref]}", field=f"columns.{bad[0]}")
+            traj = from_columns(_numeric_columns(cols), source="trajectory")
+        elif isinstance(spec, RowsTrajectory):
+            keys = list(spec.rows[0])
+            for i, row in enumerate(spec.rows):
+                if set(row) != set(keys):
+                    missing = sorted(set(keys) ^ set(row))
+                    raise TrajectoryError(f"trajectory: rows[{i}] has different fields than rows[0] "
+                                          f"({', '.join(missing)})", field=f"rows[{i}].{missing[0]}")
+            cols = {k: [r[k] for r in spec.rows] for k in keys}
+            traj = from_columns(_numeric_columns(cols), source="trajectory")
+        elif isinstance(spec, GeoJSONTrajectory):
+            from gisnoise.flight import routes
+
+            traj = routes.read_trajectory(spec.data)
+        else:  # pragma: no cover - the request model admits no other
+            raise InputError("trajectory: unknown format", field="format")
+    if len(traj) > max_samples:
+        raise ApiError(413, f"trajectory: {len(traj)} samples exceed the limit of {max_samples}",
+                       field="trajectory")
+    return traj
+
+
+def _numeric_columns(cols: Mapping[str, list[Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, vals in cols.items():
+        if k == "phase":
+            if not all(isinstance(v, str) for v in vals):
+                raise TrajectoryError("trajectory: column 'phase' must hold strings", field="phase")
+            out[k] = list(vals)
+            continue
+        bad = next((i for i, v in enumerate(vals) if isinstance(v, str)), None)
+        if bad is not None:
+            raise TrajectoryError(f"trajectory: column '{k}' value {bad} is not a number: {vals[bad]!r}", field=k)
+        out[k] = vals
+    return out
+
+
+def resolve_cards(req: ContourRequest, store: CardStore) -> list[ModelCard]:
+    """The request's cards: ids from the store, inline documents validated, ``phase_cards`` bound to a phase."""
+    out: list[ModelCard] = []
+    for i, ref in enumerate(req.cards):
+        fld = f"cards[{i}]"
+        if isinstance(ref, str):
+            out.append(store.resolve(ref, field=fld))
+        else:
+            with _prefixed(fld):
+                out.append(gcards.from_dict(ref.model_dump(by_alias=True), source=fld))
+    for phase, ref in req.phase_cards.items():
+        card = store.resolve(ref, field=f"phase_cards.{phase}")
+        out.append(dataclasses.replace(card, phase=phase, phases=()))
+    if not out:
+        raise ApiError(422, "cards: give at least one card (id or inline document) or phase_cards", field="cards")
+    return out
+
+
+def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
+    from gisnoise.geo.grid import grid_for_trajectory
+
+    with _prefixed("grid"):
+        try:
+            grid = grid_for_trajectory(traj, req.grid.resolution_m, req.grid.margin_m, crs=req.grid.crs)
+        except GridTooLargeError as exc:
+            raise GridTooLargeError(str(exc), field="grid.resolution_m") from None
+    cells = int(grid.width) * int(grid.height)
+    if cells > max_cells:
+        raise GridTooLargeError(f"grid.resolution_m: the grid has {cells} cells ({grid.width} x {grid.height}), "
+                                f"more than the limit of {max_cells}; use a coarser resolution_m or a smaller "
+                                f"margin_m", field="grid.resolution_m")
+    return cells
+
+
+def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path, *,
+                   progress: Callable[..., None] | None = None,
+                   cancel: Callable[[], bool] | None = None) -> dict[str, Path]:
+    """Write levels.tif and contours.geojson for a request with the core's ``make_map``.
+
+    Returns the paths by file name.
+    """
+    from gisnoise.maps.pipeline import make_map
+
+    with _core_fields():
+        paths = make_map(traj, cards, out_dir, resolution_m=req.grid.resolution_m, margin_m=req.grid.margin_m,
+                         levels=tuple(req.levels), metrics=tuple(req.metrics), crs=req.grid.crs, dem=None,
+                         receiver_height=req.receiver_height_m, ground_h=req.ground_h_m,
+                         uncertainty=req.uncertainty, plot=False,
+                         period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
+                         substeps=req.substeps, background=req.background, progress=progress, cancel=cancel)
+    return {"levels.tif": Path(paths["levels"]), "contours.geojson": Path(paths["contours"])}
+
+
+def _want_tiff(req: ContourRequest, accept: str) -> bool:
+    if req.output is not None:
+        return req.output == OutputFormat.geotiff
+    return "image/tiff" in accept and "geo+json" not in accept
+
+
+def _job_request(req: ContourRequest, cards: list[ModelCard]) -> dict[str, Any]:
+    doc = req.model_dump(mode="json", by_alias=True)
+    doc["cards"] = [c.to_dict() for c in cards]
+    doc["phase_cards"] = {}
+    return doc
+
+
+# ------------------------------------------------------------------ routes
+_CONTOUR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    200: {"description": "The map: GeoJSON contours (isobands and isolines, WGS84) or a GeoTIFF, one band per metric.",
+          "content": {MediaType.geojson.value: {"schema": {"type": "object"}}, MediaType.geotiff.value: {}}},
+    202: {"model": JobInfo, "description": "The map is large: a job was queued (see Location).",
+          "links": JOB_LINKS},
+}
+
+
+def _prepare(req: ContourRequest, state: State) -> tuple[Trajectory, list[ModelCard], int]:
+    """Trajectory, cards and grid size of a request (in a worker thread: routes and grids take CPU)."""
+    s = state.settings
+    traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
+    cards = resolve_cards(req, state.cards)
+    return traj, cards, _grid_cells(traj, req, s.max_cells)
+
+
+def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory, cards: list[ModelCard],
+           cells: int) -> JSONResponse:
+    j = state.jobs.submit("contours", {"cells": cells, "samples": len(traj)},
+                          {"request.json": json.dumps(_job_request(req, cards)).encode()})
+    info = job_info(request, j)
+    return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
+
+
+@router.post("/contours", response_class=Response, responses=_CONTOUR_RESPONSES,
+             summary="Noise map of a trajectory (small at once, large as a job)")
+async def contours(req: ContourRequest, request: Request, state: StateDep,
+                   job: bool = Query(False, description="Always answer with a job (202).")) -> Response:
+    traj, cards, cells = await run_in_threadpool(_prepare, req, state)
+    work = float(cells) * len(traj) * req.substeps
+    if job or work > state.settings.sync_work_limit:
+        require_key(request, request.headers.get("x-api-key"))  # a job is a write
+        return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
+    tiff = _want_tiff(req, request.headers.get("accept", ""))
+    data = await run_in_threadpool(_sync_map, traj, cards, req, tiff)
+    if tiff:
+        return Response(data, media_type=MediaType.geotiff.value,
+                        headers={"Content-Disposition": 'attachment; filename="levels.tif"'})
+    return Response(data, media_type=MediaType.geojson.value)
+
+
+def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool) -> bytes:
+    with _sync_slots, tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
+        paths = make_map_files(traj, cards, req, Path(tmp))
+        return paths["levels.tif" if tiff else "contours.geojson"].read_bytes()
+
+
+@router.post("/jobs/contours", status_code=202, response_model=JobInfo, dependencies=WRITE,
+             responses={202: {"links": JOB_LINKS}},
+             summary="Queue a noise map as a job")
+async def contour_job(req: ContourRequest, request: Request, state: StateDep) -> JSONResponse:
+    traj, cards, cells = await run_in_threadpool(_prepare, req, state)
+    return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
+
+
+# ------------------------------------------------------------------ job handler
+def run_contour_job(ctx: JobContext) -> dict[str, Any]:
+    """Job handler: the stored request -> levels.tif and contours.geojson in the result folder."""
+    doc = json.loads((ctx.input_dir / "request.json").read_text(encoding="utf-8"))
+    req = ContourRequest.model_validate(doc)
+    traj = build_trajectory(req.trajectory, max_samples=10**9)
+    cards = [gcards.from_dict(c.model_dump(by_alias=True) if isinstance(c, CardDocument) else c)
+             for c in req.cards if not isinstance(c, str)]
+    ctx.progress(0.0, "evaluating the grid")
+    paths = make_map_files(traj, cards, req, ctx.output_dir, progress=ctx.progress, cancel=ctx.cancel)
+    return {"files": sorted(paths), "samples": len(traj),
+            "metrics": list(req.metrics), "levels": list(req.levels)}

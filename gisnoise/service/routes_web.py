@@ -1,0 +1,72 @@
+"""The web page at ``/`` (Leaflet map), its static files, its config, the sample route and health."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from fastapi import APIRouter, FastAPI, Response
+from fastapi.responses import FileResponse, HTMLResponse
+from fastapi.staticfiles import StaticFiles
+
+from gisnoise import __version__
+from gisnoise.data import data_path
+from gisnoise.service.deps import StateDep
+from gisnoise.service.errors import ApiError
+from gisnoise.service.models import Health, MediaType
+
+router = APIRouter()
+
+SAMPLE_ROUTE = data_path("routes")
+
+
+@router.get("/", response_class=HTMLResponse, include_in_schema=False)
+def index() -> FileResponse:
+    return FileResponse(Path(__file__).resolve().parent / "static" / "index.html", media_type=MediaType.html.value)
+
+
+@router.get("/docs", response_class=HTMLResponse, include_in_schema=False)
+def docs() -> HTMLResponse:
+    """The OpenAPI documentation (swagger-ui served by the service itself)."""
+    from fastapi.openapi.docs import get_swagger_ui_html
+
+    return get_swagger_ui_html(openapi_url="/openapi.json", title="gisnoise API",
+                               swagger_js_url="/static/vendor/swagger-ui/swagger-ui-bundle.js",
+                               swagger_css_url="/static/vendor/swagger-ui/swagger-ui.css",
+                               swagger_favicon_url="/static/vendor/swagger-ui/favicon-32x32.png")
+
+
+@router.get("/health", response_model=Health, tags=["service"], summary="Liveness and queue length")
+def health(state: StateDep) -> Health:
+    return Health(status="ok", version=__version__, queued=state.jobs.count(status="queued"),
+                  running=state.jobs.count(status="running"))
+
+
+@router.get("/config.json", tags=["service"], summary="Settings the web page needs",
+            responses={200: {"content": {MediaType.json.value: {"schema": {"type": "object"}}}}})
+def config(state: StateDep) -> Response:
+    s = state.settings
+    body = {"version": __version__, "tile_url": s.tile_url, "api_key_required": bool(s.api_keys),
+            "sample_route": _sample_route_path() is not None}
+    return Response(json.dumps(body), media_type=MediaType.json.value)
+
+
+def _sample_route_path() -> Path | None:
+    for name in ("delivery_route.geojson", "delivery_route.json"):
+        p = SAMPLE_ROUTE / name
+        if p.is_file():
+            return p
+    return None
+
+
+@router.get("/samples/route", tags=["service"], summary="The sample delivery route (waypoints GeoJSON)",
+            responses={200: {"content": {MediaType.geojson.value: {"schema": {"type": "object"}}}}})
+def sample_route() -> Response:
+    p = _sample_route_path()
+    if p is None:
+        raise ApiError(404, "path: this installation has no sample route", field="path")
+    return Response(p.read_bytes(), media_type=MediaType.geojson.value)
+
+
+def mount_static(app: FastAPI, folder: Path) -> None:
+    app.mount("/static", StaticFiles(directory=folder), name="static")
