@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.acoustics import _filterbank
+from gisnoise.acoustics._filterbank import band_edges
 from gisnoise.errors import InputError
 
 __all__ = [
@@ -54,6 +55,7 @@ __all__ = [
     "nominal_frequency",
     "exact_frequency",
     "band_name",
+    "band_edges",
     "band_frequency",
     "is_band_name",
     "band_levels",

@@ -81,9 +81,9 @@ from gisnoise import __version__
 from gisnoise.errors import Cancelled, DesignError, FitError, InputError, ScenarioError
 from gisnoise.flight.patterns import PathBuilder, fwd, right
 from gisnoise.geo.frames import LocalFrame, emission_angles
-from gisnoise.jsondoc import JsonObject, load_card
-from gisnoise.jsonio import read_json_file
+from gisnoise.jsonio import JsonObject, read_json_file
 from gisnoise.model import cards as _cards
+from gisnoise.model.cards import load_card
 
 __all__ = [
     "SCHEMA",

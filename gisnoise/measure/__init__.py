@@ -3,6 +3,6 @@
 
 from __future__ import annotations
 
-from gisnoise.measure.samples import Samples
+from gisnoise.measure.samples import Samples, series_ids, series_key
 
-__all__ = ['Samples']
+__all__ = ['Samples', 'series_key', 'series_ids']

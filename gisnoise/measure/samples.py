@@ -15,7 +15,31 @@ import numpy as np
 
 from gisnoise.errors import InputError
 
-__all__ = ["Samples"]
+__all__ = ["Samples", "series_key", "series_ids"]
+
+
+def series_key(mic: Any, flight: Any) -> np.ndarray:
+    """Key of the time series (one microphone, one flight) of each row: ``"<mic>\\x1f<flight>"``.
+
+    The one definition of a series for the reader, the fit, the effects and the diagnosis.
+
+    Examples
+    --------
+    >>> series_key(["m1", "m2"], ["f1", "f1"]).tolist()
+    ['m1\\x1ff1', 'm2\\x1ff1']
+    """
+    return np.char.add(np.char.add(np.asarray(mic, dtype=str), "\x1f"), np.asarray(flight, dtype=str))
+
+
+def series_ids(mic: Any, flight: Any) -> np.ndarray:
+    """Integer id (0, 1, ...) of the series of each row, in the sorted order of :func:`series_key`.
+
+    Examples
+    --------
+    >>> series_ids(["m2", "m1", "m2"], ["f1", "f1", "f1"]).tolist()
+    [1, 0, 1]
+    """
+    return np.unique(series_key(mic, flight), return_inverse=True)[1].ravel()
 
 
 @dataclass(frozen=True, eq=False)

@@ -26,10 +26,12 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import CardError, SchemaVersionError
+from gisnoise.data import bundled_card_ids, card_path
+from gisnoise.errors import CardError, InputError, SchemaVersionError
+from gisnoise.jsonio import JsonObject, read_json_file
 from gisnoise.model.ansatz import REFERENCE_DISTANCE_M, Ansatz, get_ansatz
 
-__all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "save"]
+__all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "save", "load_card"]
 
 SCHEMA = "gisnoise/model-card/1"
 SCHEMA_PREFIX = "gisnoise/model-card/"
@@ -237,9 +239,6 @@ def load(path: str | os.PathLike[str]) -> ModelCard:
     >>> load("demo-horizontal").phase
     'horizontal'
     """
-    from gisnoise.data import bundled_card_ids, card_path
-    from gisnoise.jsonio import read_json_file
-
     name = os.fspath(path)
     if not Path(name).exists() and not Path(name).suffix and "/" not in name and os.sep not in name:
         try:
@@ -271,3 +270,33 @@ def with_parameters(card: ModelCard, p: Any, **changes: Any) -> ModelCard:
     """A copy of ``card`` with the parameter vector ``p`` (ansatz order) and other changes."""
     params = {k: float(v) for k, v in zip(card.model.params, np.asarray(p, dtype=float), strict=True)}
     return replace(card, parameters=params, **changes)
+
+
+def load_card(ref: Any, fld: str, base_dir: Path | None, reader: type[JsonObject]) -> ModelCard:
+    """The model card a document's field ``fld`` names.
+
+    ``ref`` is a card object (mapping), a card file (``.json`` or a path; relative to
+    ``base_dir``) or the name of a bundled card (:func:`gisnoise.data.card_path`).  Errors are
+    ``reader.error`` naming ``fld``, with messages starting ``reader.what``.
+    """
+    error, what = reader.error, reader.what
+    try:
+        if isinstance(ref, Mapping):
+            return from_dict(ref, source=f"{what} field '{fld}'")
+        if not isinstance(ref, str) or not ref:
+            raise error(f"{what}: field '{fld}' must be a card file, a bundled card name or a card object, "
+                        f"got {ref!r}", field=fld)
+        if ref.endswith(".json") or "/" in ref or os.sep in ref:
+            p = Path(ref)
+            if not p.is_absolute() and base_dir is not None:
+                p = base_dir / p
+        else:
+            try:
+                p = card_path(ref)
+            except KeyError:
+                raise error(f"{what}: field '{fld}': no bundled card {ref!r}", field=fld) from None
+        return load(p)
+    except error:
+        raise
+    except InputError as exc:
+        raise error(f"{what}: field '{fld}': {exc}", field=fld) from None

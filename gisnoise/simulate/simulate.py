@@ -149,10 +149,10 @@ from gisnoise.errors import InputError, ScenarioError
 from gisnoise.flight.patterns import G, PathBuilder
 from gisnoise.flight.trajectory import from_columns
 from gisnoise.geo.frames import LocalFrame, emission_angles, wrap_angle
-from gisnoise.jsondoc import JsonObject, load_card
-from gisnoise.jsonio import read_json_file
+from gisnoise.jsonio import JsonObject, read_json_file
 from gisnoise.measure.samples import Samples
 from gisnoise.model import cards as _cards
+from gisnoise.model.cards import load_card
 
 __all__ = [
     "SCHEMA",
