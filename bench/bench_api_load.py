@@ -121,7 +121,7 @@ def load(url: str, method: str, path: str, body: dict | None, n: int, clients: i
 
 def direct_baseline(repeats: int) -> float:
     """Seconds per typical map made in-process by the library (no HTTP)."""
-    from gisnoise.maps.pipeline import make_map
+    from gisnoise.maps import make_map
     from gisnoise.model import cards as gcards
 
     cards = [gcards.load(REPO / "gisnoise" / "data" / "cards" / f"{c.replace('-', '_')}.json") for c in CARDS]

@@ -20,11 +20,10 @@ import tracemalloc
 import numpy as np
 from affine import Affine
 
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame, emission_angles
-from gisnoise.geo.grid import WGS84, GridSpec, transformer
-from gisnoise.maps.evaluate import evaluate_grid
-from gisnoise.model.cards import ModelCard
+from gisnoise.flight import Trajectory
+from gisnoise.geo import WGS84, GridSpec, LocalFrame, emission_angles, transformer
+from gisnoise.maps import evaluate_grid
+from gisnoise.model import ModelCard
 
 LAT0, LON0 = 52.27, 10.52
 CARD = ModelCard(id="bench", vehicle="bench", phase="horizontal", ansatz="paper-offset",

@@ -18,8 +18,8 @@ import time
 import numpy as np
 from scipy.optimize import least_squares
 
-from gisnoise.identify.fit import fit_arrays
-from gisnoise.model.ansatz import get_ansatz
+from gisnoise.identify import fit_arrays
+from gisnoise.model import get_ansatz
 
 
 def data(n: int, seed: int = 0):

@@ -31,12 +31,10 @@ import time
 import numpy as np
 from affine import Affine
 
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame, emission_angles
-from gisnoise.geo.grid import WGS84, GridSpec, transformer
-from gisnoise.maps.evaluate import evaluate_grid
-from gisnoise.maps.fastkernel import evaluate_grid_fast
-from gisnoise.model.cards import ModelCard, load
+from gisnoise.flight import Trajectory
+from gisnoise.geo import WGS84, GridSpec, LocalFrame, emission_angles, transformer
+from gisnoise.maps import evaluate_grid, evaluate_grid_fast
+from gisnoise.model import ModelCard, load
 
 LAT0, LON0 = 52.27, 10.52
 CRS = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
@@ -200,8 +198,8 @@ def run_aim(side: int, n: int) -> None:
 
 def city(n_flights: int, extent_km: tuple[float, float], res_m: float):
     """Delivery flights between random hubs of a city: take-off, cruise at 100 m, landing."""
-    from gisnoise.flight.routes import route_from_waypoints
-    from gisnoise.ops.operations import Flight, Schedule
+    from gisnoise.flight import route_from_waypoints
+    from gisnoise.ops import Flight, Schedule
 
     rng = np.random.default_rng(2024)
     frame = LocalFrame(LAT0, LON0, 100.0)
@@ -227,8 +225,7 @@ def city(n_flights: int, extent_km: tuple[float, float], res_m: float):
 
 
 def run_city(n_flights: int, extent_km: tuple[float, float], res_m: float) -> None:
-    from gisnoise.ops.operations import evaluate_operations
-    from gisnoise.ops.scale import local_cluster
+    from gisnoise.ops import evaluate_operations, local_cluster
 
     sched = city(n_flights, extent_km, res_m)
     g = sched.grid

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from gisnoise.geo.frames import emission_angles
-from gisnoise.measure.samples import Samples
-from gisnoise.model.ansatz import get_ansatz
+from gisnoise.geo import emission_angles
+from gisnoise.measure import Samples
+from gisnoise.model import get_ansatz
 
 TRUTH = {"p0": 64.0, "p1": 20.0, "p2": 0.08, "p3": -0.28, "p4": -0.2, "p5": 1.05, "p6": 1.0, "p7": 40.0}
 NOISE = {"m1": 0.8, "m2": 1.2, "m3": 1.6}

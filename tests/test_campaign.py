@@ -14,8 +14,8 @@ import pytest
 
 from gisnoise.acoustics import physics as acoustics
 from gisnoise.errors import CampaignError
-from gisnoise.geo.frames import LocalFrame
-from gisnoise.measure.campaign import (
+from gisnoise.geo import LocalFrame
+from gisnoise.measure import (
     Exclusion,
     check_campaign,
     emission_time,
@@ -564,8 +564,8 @@ def test_microphone_height_above_ground_reaches_the_samples(tmp_path):
     """campaign.json's height_agl_m is passed to Samples.meta, where the ground-reflection effect reads it."""
     import json
 
-    from gisnoise.measure.campaign import read_campaign
-    from gisnoise.model.effects import mic_height_agl
+    from gisnoise.measure import read_campaign
+    from gisnoise.model import mic_height_agl
     from gisnoise.simulate.simulate import simulate
 
     root = __import__("pathlib").Path(__file__).resolve().parents[1]

@@ -7,7 +7,7 @@ import pytest
 from click.testing import CliRunner
 
 from gisnoise.cli.main import cli
-from gisnoise.maps.plots import directivity_grid
+from gisnoise.maps import directivity_grid
 from gisnoise.model import cards
 
 ROOT = Path(__file__).resolve().parents[1]

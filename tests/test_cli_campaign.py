@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from test_campaign import make_campaign, make_wav_campaign, straight_track, write_flight_csv
 
 from gisnoise.cli.main import cli
-from gisnoise.measure.campaign import read_campaign, read_level_csv
+from gisnoise.measure import read_campaign, read_level_csv
 
 
 def run(*args: str):

@@ -8,9 +8,9 @@ import rasterio
 from click.testing import CliRunner
 
 from gisnoise.cli.main import cli
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame
-from gisnoise.model.cards import ModelCard, save
+from gisnoise.flight import Trajectory
+from gisnoise.geo import LocalFrame
+from gisnoise.model import ModelCard, save
 
 FRAME = LocalFrame(52.27, 10.52, 80.0)
 G0 = 70.0

@@ -10,12 +10,10 @@ from hypothesis import strategies as st
 from shapely.geometry import LinearRing, shape
 
 from gisnoise.errors import InputError
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame
-from gisnoise.geo.grid import grid_for_trajectory
-from gisnoise.maps.contours import contours_geojson, isobands, isolines, parse_levels, write_geojson
-from gisnoise.maps.evaluate import evaluate_grid
-from gisnoise.model.cards import ModelCard
+from gisnoise.flight import Trajectory
+from gisnoise.geo import LocalFrame, grid_for_trajectory
+from gisnoise.maps import contours_geojson, evaluate_grid, isobands, isolines, parse_levels, write_geojson
+from gisnoise.model import ModelCard
 
 LAT0, LON0 = 48.137, 11.575  # lat and lon far apart: a swapped order cannot pass
 

@@ -41,9 +41,9 @@ from gisnoise.design.design import (
     study,
     verify,
 )
-from gisnoise.geo.frames import LocalFrame
+from gisnoise.geo import LocalFrame
 from gisnoise.model import cards
-from gisnoise.simulate.simulate import run
+from gisnoise.simulate import run
 
 ROOT = Path(__file__).resolve().parent.parent
 PLAN = ROOT / "sample_data" / "plans" / "paper_racetrack.json"

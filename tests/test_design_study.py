@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gisnoise.design.design import load_plan, run_design
+from gisnoise.design import load_plan, run_design
 
 pytestmark = pytest.mark.slow
 

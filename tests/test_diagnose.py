@@ -29,9 +29,8 @@ from gisnoise.diagnose.diagnose import (
     run_diagnosis,
 )
 from gisnoise.errors import Cancelled, InputError
-from gisnoise.measure.samples import Samples
-from gisnoise.model import cards
-from gisnoise.model.ansatz import level_sum
+from gisnoise.measure import Samples
+from gisnoise.model import cards, level_sum
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "sample_data" / "scenarios" / "diagnosis_base.json"

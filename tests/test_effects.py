@@ -5,9 +5,7 @@ import pytest
 from scipy.integrate import quad
 
 from gisnoise.errors import InputError
-from gisnoise.model import effects
-from gisnoise.model.ansatz import get_ansatz
-from gisnoise.model.effects import bind, check_testable, extend, get_effect
+from gisnoise.model import bind, check_testable, effects, extend, get_ansatz, get_effect
 
 BASE = np.array([62.0, 13.4, 0.18, -0.28, -0.37, 1.05, 0.94, 40.4])  # paper-offset
 C = 331.3 * np.sqrt(1.0 + 11.0 / 273.15)

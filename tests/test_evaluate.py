@@ -6,13 +6,11 @@ import shapely
 from affine import Affine
 
 from gisnoise.errors import CardError, InputError, TrajectoryError
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame
-from gisnoise.geo.grid import GridSpec, grid_for_trajectory
-from gisnoise.maps.contours import contour_features
+from gisnoise.flight import Trajectory
+from gisnoise.geo import GridSpec, LocalFrame, grid_for_trajectory
+from gisnoise.maps import contour_features
 from gisnoise.maps.evaluate import Z95, CardSet, _levels_chunk, evaluate_grid
-from gisnoise.model.ansatz import level_sum
-from gisnoise.model.cards import ModelCard, with_parameters
+from gisnoise.model import ModelCard, level_sum, with_parameters
 
 LAT0, LON0 = 52.27, 10.52
 # a transverse Mercator centred at the origin: grid x, y = local east, north (scale 1 at the centre)
@@ -262,7 +260,7 @@ def test_levels_chunk_matches_the_ansatz_pointwise():
                      parameters=dict(p1=13.4, p2=0.18, p3=-0.28, p4=-0.37, p5=1.05, p6=0.94, p7=40.4),
                      reference_power_w=1500.0)
     L, _ = _levels_chunk(rcv, src, att, pw, np.zeros(5, int), [card])
-    from gisnoise.geo.frames import emission_angles
+    from gisnoise.geo import emission_angles
 
     for i in range(7):
         for j in range(5):
@@ -344,7 +342,7 @@ def test_uncertainty_needs_a_covariance(flyover):
 def test_extended_ansatz_reads_the_bank_angle():
     # paper-offset+bank_angle adds k_bank |sin(bank)| dB to every instant: a constant 20 deg bank
     # raises LAmax and LAeq everywhere by k_bank sin(20 deg)
-    from gisnoise.model.ansatz import get_ansatz
+    from gisnoise.model import get_ansatz
 
     ansatz = get_ansatz("paper-offset+bank_angle")
     traj = straight_flight(dt=1.0)

@@ -11,12 +11,15 @@ from hypothesis import strategies as st
 pytest.importorskip("numba")
 
 from gisnoise.errors import CardError, InputError  # noqa: E402
-from gisnoise.flight.trajectory import Trajectory  # noqa: E402
-from gisnoise.geo.frames import LocalFrame  # noqa: E402
-from gisnoise.geo.grid import GridSpec, utm_crs  # noqa: E402
+from gisnoise.flight import Trajectory  # noqa: E402
+from gisnoise.geo import (  # noqa: E402
+    GridSpec,
+    LocalFrame,  # noqa: E402
+    utm_crs,
+)
+from gisnoise.maps import evaluate_grid  # noqa: E402
 from gisnoise.maps import fastkernel as fk  # noqa: E402
-from gisnoise.maps.evaluate import evaluate_grid  # noqa: E402
-from gisnoise.model.cards import ModelCard  # noqa: E402
+from gisnoise.model import ModelCard  # noqa: E402
 
 LAT0, LON0 = 52.27, 10.52
 TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"

@@ -11,8 +11,7 @@ from scipy.optimize import least_squares
 
 from gisnoise.errors import Cancelled, FitError, InputError, NotIdentifiableError
 from gisnoise.identify.fit import fit, fit_arrays, fit_campaign
-from gisnoise.model import cards
-from gisnoise.model.ansatz import get_ansatz
+from gisnoise.model import cards, get_ansatz
 
 MODEL = get_ansatz("paper-offset")
 P_TRUE = np.array([TRUTH[k] for k in MODEL.params])
@@ -293,8 +292,8 @@ def make_campaign_folder(root, *, seed=0, truth=None):
     """
     from _fit_synth import MICS, racetrack
 
-    from gisnoise.geo.frames import LocalFrame
-    from gisnoise.measure.campaign import read_campaign
+    from gisnoise.geo import LocalFrame
+    from gisnoise.measure import read_campaign
 
     truth = TRUTH if truth is None else truth
     frame = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"])
@@ -413,7 +412,7 @@ def test_fit_campaign_can_be_cancelled_while_reading(campaign_folder):
 def test_simulated_sample_campaign_without_effects_recovers_the_truth_card():
     # the simulator's sample campaign with no injected effect, no log noise and a steady background:
     # the model is then exactly right, and the ML estimate must sit within 3 std of the truth card
-    from gisnoise.simulate.simulate import load_scenario, scenario_copy, simulate_samples
+    from gisnoise.simulate import load_scenario, scenario_copy, simulate_samples
 
     root = __import__("pathlib").Path(__file__).parents[1]
     sc = load_scenario(root / "sample_data/scenarios/sample_campaign.json")
@@ -421,7 +420,7 @@ def test_simulated_sample_campaign_without_effects_recovers_the_truth_card():
     doc = scenario_copy(sc, effects={}, vehicle=veh, background=dict(sc["background"], fluctuation_db=0.0))
     samples = simulate_samples(doc, base_dir=root / "sample_data/scenarios")
     truth = cards.load(root / "gisnoise/data/cards/demo_horizontal.json")
-    from gisnoise.identify.fit import usable_rows
+    from gisnoise.identify import usable_rows
 
     res = fit(usable_rows(samples, "horizontal"), reference_power_w=samples.meta["reference_power_w"])
     z = (res.p - truth.p) / res.std_array

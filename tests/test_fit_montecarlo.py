@@ -20,7 +20,7 @@ import pytest
 from _fit_synth import NOISE, REF_W, TRUTH, synthetic_samples
 
 from gisnoise.identify.fit import fit
-from gisnoise.model.ansatz import get_ansatz
+from gisnoise.model import get_ansatz
 
 pytestmark = pytest.mark.slow
 

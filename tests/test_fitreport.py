@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from _fit_synth import REF_W, synthetic_samples
 
+from gisnoise.identify import correlation_data, directivity_data, write_report
 from gisnoise.identify.fit import fit
-from gisnoise.identify.report import correlation_data, directivity_data, write_report
 
 pytest.importorskip("matplotlib")
 

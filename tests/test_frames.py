@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gisnoise.geo.frames import LocalFrame, emission_angles, wrap_deg
+from gisnoise.geo import LocalFrame, emission_angles, wrap_deg
 
 
 @settings(max_examples=50, deadline=None)

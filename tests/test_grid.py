@@ -8,10 +8,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gisnoise.errors import CRSError, GridTooLargeError, InvalidGridError
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.grid import GridSpec, apply_affine, grid_for_trajectory, parse_crs, resample_dem, utm_crs
-from gisnoise.geo.raster import NODATA, read_dem, sample_dem, write_geotiff
-from gisnoise.maps.evaluate import MapResult
+from gisnoise.flight import Trajectory
+from gisnoise.geo import (
+    NODATA,
+    GridSpec,
+    apply_affine,
+    grid_for_trajectory,
+    parse_crs,
+    read_dem,
+    resample_dem,
+    sample_dem,
+    utm_crs,
+    write_geotiff,
+)
+from gisnoise.maps import MapResult
 
 
 def track(lon, lat):

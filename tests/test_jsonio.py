@@ -2,11 +2,11 @@
 
 import pytest
 
-from gisnoise.design.design import load_plan
+from gisnoise.design import load_plan
 from gisnoise.errors import CardError, DesignError, InputError, ScenarioError
 from gisnoise.model import cards
-from gisnoise.ops.operations import load_schedule
-from gisnoise.simulate.simulate import load_scenario
+from gisnoise.ops import load_schedule
+from gisnoise.simulate import load_scenario
 
 LOADERS = [(cards.load, CardError, "card"), (load_scenario, ScenarioError, "scenario"),
            (load_plan, DesignError, "plan"), (load_schedule, InputError, "schedule")]

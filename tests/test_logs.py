@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 from gisnoise.errors import InputError, MissingColumnError
-from gisnoise.flight import logs
-from gisnoise.flight.logs import gps_to_unix, phase_by_speed, quaternion_to_euler, read_flight
+from gisnoise.flight import gps_to_unix, logs, phase_by_speed, quaternion_to_euler, read_flight
 
 pyulog = pytest.importorskip("pyulog")
 pytest.importorskip("pymavlink")

@@ -6,8 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gisnoise.errors import InputError
-from gisnoise.model import cards
-from gisnoise.model.ansatz import ansatz_names, get_ansatz, level_sum
+from gisnoise.model import ansatz_names, cards, get_ansatz, level_sum
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 TABLE1_HORIZONTAL = [13.409, 0.176, -0.280, -0.365, 1.049, 0.939, 40.393]
@@ -98,7 +97,7 @@ def test_wrong_parameter_count_names_parameters():
 
 def test_an_extension_chain_is_built_by_name_with_its_parameters_in_order():
     # "base+e1+e2": the base's parameters, then each effect's, in the order named
-    from gisnoise.model.effects import get_effect
+    from gisnoise.model import get_effect
 
     a = get_ansatz("paper-offset+bank_angle+doppler")
     base = get_ansatz("paper-offset")

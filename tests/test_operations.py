@@ -12,11 +12,13 @@ from hypothesis import strategies as st
 pytest.importorskip("numba")
 
 from gisnoise.errors import InputError  # noqa: E402
-from gisnoise.flight.trajectory import Trajectory  # noqa: E402
-from gisnoise.geo.frames import LocalFrame  # noqa: E402
-from gisnoise.geo.grid import GridSpec  # noqa: E402
-from gisnoise.model.cards import ModelCard, save  # noqa: E402
-from gisnoise.ops.operations import (  # noqa: E402
+from gisnoise.flight import Trajectory  # noqa: E402
+from gisnoise.geo import (
+    GridSpec,  # noqa: E402
+    LocalFrame,  # noqa: E402
+)
+from gisnoise.model import ModelCard, save  # noqa: E402
+from gisnoise.ops import (  # noqa: E402
     Flight,
     Schedule,
     evaluate_operations,

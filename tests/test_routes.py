@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 
 from gisnoise.errors import InputError, TrajectoryError
-from gisnoise.flight.routes import (
+from gisnoise.flight import (
     GRAVITY,
+    Trajectory,
     VehicleModel,
     read_route,
     read_trajectory,
     route_from_waypoints,
     trajectory_to_geojson,
 )
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame
+from gisnoise.geo import LocalFrame
 
 LAT0, LON0 = 52.27, 10.52
 FRAME = LocalFrame(LAT0, LON0, 0.0)
@@ -252,7 +252,7 @@ def test_agl_altitudes_stand_on_the_dem(tmp_path):
     import rasterio
     from affine import Affine
 
-    from gisnoise.geo.grid import apply_affine
+    from gisnoise.geo import apply_affine
 
     x0, y0 = 634000.0, 5794500.0  # UTM 32N near the test origin
     tr = Affine(10.0, 0, x0, 0, -10.0, y0)
@@ -261,7 +261,7 @@ def test_agl_altitudes_stand_on_the_dem(tmp_path):
     with rasterio.open(tmp_path / "dem.tif", "w", driver="GTiff", width=150, height=150, count=1,
                        dtype="float64", crs="EPSG:32632", transform=tr) as ds:
         ds.write(100.0 + 0.02 * (xs - x0), 1)  # a slope rising eastwards, 2 %
-    from gisnoise.geo.grid import WGS84, parse_crs, transformer
+    from gisnoise.geo import WGS84, parse_crs, transformer
 
     lon, lat = transformer(parse_crs("EPSG:32632"), WGS84).transform([x0 + 300.0, x0 + 1200.0],
                                                                        [y0 - 700.0, y0 - 700.0])

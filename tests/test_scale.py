@@ -9,13 +9,17 @@ from affine import Affine
 pytest.importorskip("numba")
 distributed = pytest.importorskip("distributed")
 
-from gisnoise.flight.trajectory import Trajectory  # noqa: E402
-from gisnoise.geo.frames import LocalFrame  # noqa: E402
-from gisnoise.geo.grid import GridSpec  # noqa: E402
-from gisnoise.maps.fastkernel import segment_cells  # noqa: E402
-from gisnoise.model.cards import ModelCard  # noqa: E402
-from gisnoise.ops.operations import Flight, Schedule, evaluate_operations, tile_windows  # noqa: E402
-from gisnoise.ops.scale import local_cluster  # noqa: E402
+from gisnoise.flight import Trajectory  # noqa: E402
+from gisnoise.geo import GridSpec, LocalFrame  # noqa: E402
+from gisnoise.maps import segment_cells  # noqa: E402
+from gisnoise.model import ModelCard  # noqa: E402
+from gisnoise.ops import (  # noqa: E402
+    Flight,
+    Schedule,
+    evaluate_operations,
+    local_cluster,  # noqa: E402
+    tile_windows,
+)
 
 LAT0, LON0 = 52.27, 10.52
 TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"

@@ -19,10 +19,9 @@ from click.testing import CliRunner
 
 from gisnoise.cli.main import cli
 from gisnoise.errors import ScenarioError
-from gisnoise.flight.trajectory import read_flight_csv
-from gisnoise.geo.frames import LocalFrame
-from gisnoise.model import cards
-from gisnoise.model.ansatz import level_sum
+from gisnoise.flight import read_flight_csv
+from gisnoise.geo import LocalFrame
+from gisnoise.model import cards, level_sum
 from gisnoise.simulate.simulate import (
     EFFECTS,
     load_scenario,
@@ -230,7 +229,7 @@ def test_bank_angle_adds_the_documented_level_in_turns():
 
 
 def test_atmospheric_absorption_attenuates_each_band_by_alpha_d():
-    from gisnoise.acoustics.physics import atmospheric_absorption
+    from gisnoise.acoustics import atmospheric_absorption
 
     doc = hover_doc(background={"level_dba": -20.0})
     off, on = _pair(doc, "atmospheric_absorption", {"scale": 1.0})

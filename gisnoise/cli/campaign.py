@@ -9,8 +9,7 @@ import numpy as np
 
 from gisnoise.cli.options import progress
 from gisnoise.errors import GisnoiseError
-from gisnoise.measure.campaign import DEFAULT_EVENT_DB, DEFAULT_SNR_DB, inspect_campaign, write_levels
-from gisnoise.measure.samples import Samples
+from gisnoise.measure import DEFAULT_EVENT_DB, DEFAULT_SNR_DB, Samples, inspect_campaign, write_levels
 
 campaign_arg = click.argument("campaign", type=click.Path(file_okay=False))
 

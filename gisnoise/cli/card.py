@@ -23,7 +23,7 @@ def command() -> None:
               help="Nondimensional power for the level summary (the paper's Fig. 7: 1.1).")
 def show(card: str, as_json: bool, p_el: float) -> None:
     """Print CARD: phases, ansatz, parameters with standard deviations, statistics, provenance, notes."""
-    from gisnoise.maps.plots import directivity_grid
+    from gisnoise.maps import directivity_grid
 
     c = gcards.load(card)
     if as_json:
@@ -78,7 +78,7 @@ def show(card: str, as_json: bool, p_el: float) -> None:
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Output PNG.")
 def plot(card: str, p_el: float, distance: float, out: str) -> None:
     """Plot the directivity of CARD: L_UAV over azimuth and polar angle at one distance and power."""
-    from gisnoise.maps.plots import plot_directivity
+    from gisnoise.maps import plot_directivity
 
     c = gcards.load(card)
     path = plot_directivity(c, out, p_el=p_el, distance_m=distance)

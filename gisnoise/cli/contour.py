@@ -9,7 +9,7 @@ import click
 
 from gisnoise.cli.options import card_option, out_dir_option, progress
 from gisnoise.errors import InputError
-from gisnoise.maps.contours import parse_levels
+from gisnoise.maps import parse_levels
 
 
 def _levels(ctx: click.Context, param: click.Parameter, value: Any) -> list[float] | None:
@@ -90,7 +90,7 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
     LineString with times, or waypoints (JSON or GeoJSON points).  Give one --card per flight
     phase; a card serves its phase and the phases it lists.
     """
-    from gisnoise.maps.pipeline import make_map
+    from gisnoise.maps import make_map
 
     with progress(ctx, "evaluating", 1.0) as update:
         paths = make_map(

@@ -31,13 +31,13 @@ def command(ctx: click.Context, plan: str, out: str, objectives: tuple[str, ...]
     layout and altitudes (design.json, layout.geojson), the objective of the base and of
     each optimum, and a report with the paper's views.
     """
-    from gisnoise.design.design import load_plan, run_design, write_outputs
+    from gisnoise.design import load_plan, run_design, write_outputs
 
     p = load_plan(plan)
     if seed is not None:
         doc = dict(p.doc)
         doc["optimizer"] = {**doc["optimizer"], "seed": seed}
-        from gisnoise.design.design import resolve_plan
+        from gisnoise.design import resolve_plan
 
         p = resolve_plan(doc, card=p.card)
     with progress(ctx, "designing", 100.0) as update:

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from gisnoise.cli.options import progress
-from gisnoise.model.cards import load
+from gisnoise.model import load
 
 
 @click.command("diagnose")
@@ -34,7 +34,7 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     and OUT/report.html with the figures.
     """
     from gisnoise.diagnose.diagnose import _with_mic_heights, run_diagnosis
-    from gisnoise.measure.campaign import read_campaign
+    from gisnoise.measure import read_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     card = load(card_path)
@@ -52,7 +52,7 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     doc["campaign"] = str(campaign)
     path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     if not no_report:
-        from gisnoise.diagnose.report import write_report
+        from gisnoise.diagnose import write_report
 
         with progress(ctx, "writing the report", 1.0) as update:
             write_report(diag, folder, progress=lambda done, total: update(done / max(total, 1)))

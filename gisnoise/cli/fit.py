@@ -8,7 +8,7 @@ import click
 
 from gisnoise.cli.options import progress
 from gisnoise.errors import InputError
-from gisnoise.model.cards import PHASES, load, save
+from gisnoise.model import PHASES, load, save
 
 
 def _parse_fix(items: tuple[str, ...]) -> dict[str, float]:
@@ -56,7 +56,7 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
     converge, or whose parameters the data cannot tell apart, writes no card and
     says why.
     """
-    from gisnoise.identify.fit import fit_campaign
+    from gisnoise.identify import fit_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     template = load(start) if start else None
@@ -69,7 +69,7 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
                        covariance=covariance)
     path = save(card, out)
     if report:
-        from gisnoise.identify.report import write_report
+        from gisnoise.identify import write_report
 
         write_report(res, report)
     if not quiet:

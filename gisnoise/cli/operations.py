@@ -47,8 +47,8 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     """
     import os
 
-    from gisnoise.maps.contours import parse_levels
-    from gisnoise.ops.operations import evaluate_operations, load_schedule, write_operations
+    from gisnoise.maps import parse_levels
+    from gisnoise.ops import evaluate_operations, load_schedule, write_operations
 
     if single_process and (scheduler or workers):
         raise click.UsageError("--single-process excludes --scheduler and --workers")

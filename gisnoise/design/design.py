@@ -79,11 +79,11 @@ import numpy as np
 
 from gisnoise import __version__
 from gisnoise.errors import Cancelled, DesignError, FitError, InputError, ScenarioError
-from gisnoise.flight.patterns import PathBuilder, fwd, right
-from gisnoise.geo.frames import LocalFrame, emission_angles
+from gisnoise.flight import PathBuilder, fwd, right
+from gisnoise.geo import LocalFrame, emission_angles
 from gisnoise.jsonio import JsonObject, read_json_file
 from gisnoise.model import cards as _cards
-from gisnoise.model.cards import load_card
+from gisnoise.model import load_card
 
 __all__ = [
     "SCHEMA",
@@ -379,7 +379,7 @@ def resolve_plan(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[str] | N
     card : ModelCard, optional
         Use this card in place of the plan's ``card`` field.
     """
-    from gisnoise.simulate.simulate import resolve_scenario
+    from gisnoise.simulate import resolve_scenario
 
     bdir = Path(base_dir) if base_dir is not None else None
     top = _Doc(doc, "", _PLAN_KEYS)
@@ -654,7 +654,7 @@ def snr_distance(card: _cards.ModelCard, level_db: float, *, power_w: float | No
 
     pw = card.reference_power_w if power_w is None else float(power_w)
     if "+" in card.ansatz:  # an extension (bank angle, Doppler, ...): the base model in steady level flight
-        from gisnoise.model.ansatz import get_ansatz
+        from gisnoise.model import get_ansatz
 
         base_model = get_ansatz(card.ansatz.split("+", 1)[0])
         card = dataclasses.replace(card, ansatz=base_model.name, covariance=None,
@@ -823,7 +823,7 @@ class DesignModel:
         random part, the same draws for the same seed), so a design's power follows
         its climbs without a second statement of the power law.
         """
-        from gisnoise.simulate.simulate import run
+        from gisnoise.simulate import run
 
         pat = plan.doc["pattern"]
         heading = math.radians(pat["heading_deg"])
@@ -1563,7 +1563,7 @@ def verify(model: DesignModel, designs: Mapping[str, Design], seeds: Sequence[in
     microphone).  Seeds whose fit fails are listed, not hidden.
     """
     from gisnoise.identify.fit import fit, usable_rows
-    from gisnoise.simulate.simulate import run, simulate_samples
+    from gisnoise.simulate import run, simulate_samples
 
     plan = model.plan
     card = plan.card

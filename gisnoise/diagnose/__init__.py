@@ -3,3 +3,11 @@
 
 from __future__ import annotations
 
+from gisnoise.diagnose.diagnose import (
+    run_diagnosis,
+)
+from gisnoise.diagnose.report import (
+    write_report,
+)
+
+__all__ = ['run_diagnosis', 'write_report']

@@ -53,11 +53,10 @@ import numpy as np
 from scipy import stats
 
 from gisnoise.errors import Cancelled, FitError, GisnoiseError, InputError, NotIdentifiableError
-from gisnoise.identify.fit import FitResult, fit_arrays
-from gisnoise.measure.samples import Samples
+from gisnoise.identify import FitResult, fit_arrays
+from gisnoise.measure import Samples
+from gisnoise.model import Ansatz, ModelCard, level_sum
 from gisnoise.model import effects as _effects
-from gisnoise.model.ansatz import Ansatz, level_sum
-from gisnoise.model.cards import ModelCard
 
 __all__ = [
     "SCHEMA",
@@ -98,7 +97,7 @@ def load_samples(source: Any) -> Samples:
     if isinstance(source, Samples):
         return source
     if isinstance(source, (str, os.PathLike)):
-        from gisnoise.measure.campaign import read_campaign
+        from gisnoise.measure import read_campaign
 
         return _with_mic_heights(read_campaign(source).samples(), source)
     if hasattr(source, "samples") and callable(source.samples):
@@ -620,7 +619,7 @@ def _ev_absorption(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
     if s.bands is None or s.band_f is None:
         return {"supports": None, "summary": "no band levels"}
     try:
-        from gisnoise.acoustics.physics import atmospheric_absorption
+        from gisnoise.acoustics import atmospheric_absorption
     except ImportError:
         return {"supports": None, "summary": "ISO 9613-1 absorption not available"}
     w = (s.meta or {}).get("weather") or {}

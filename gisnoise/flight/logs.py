@@ -58,7 +58,7 @@ import numpy as np
 
 from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
 from gisnoise.flight.trajectory import Trajectory, read_flight_csv
-from gisnoise.geo.frames import LocalFrame, wrap_angle, wrap_deg
+from gisnoise.geo import LocalFrame, wrap_angle, wrap_deg
 
 __all__ = [
     "read_flight",

@@ -74,8 +74,8 @@ import numpy as np
 
 from gisnoise.errors import InputError, TrajectoryError
 from gisnoise.flight.trajectory import Trajectory, read_flight_csv
-from gisnoise.geo.frames import LocalFrame, wrap_angle
-from gisnoise.model.cards import PHASES
+from gisnoise.geo import LocalFrame, wrap_angle
+from gisnoise.model import PHASES
 
 __all__ = [
     "VehicleModel",
@@ -364,7 +364,7 @@ def _heights(alt: np.ndarray, lon: np.ndarray, lat: np.ndarray, st: Mapping[str,
         return alt + st["geoid_undulation_m"], None
     if dem is None:
         return alt + st["ground_h_m"], st["ground_h_m"]
-    from gisnoise.geo.raster import Dem, read_dem, sample_dem
+    from gisnoise.geo import Dem, read_dem, sample_dem
 
     d = dem if isinstance(dem, Dem) else read_dem(dem)
     g = sample_dem(d, lon, lat) + float(dem_offset_m)

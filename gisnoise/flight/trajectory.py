@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import MissingColumnError, TrajectoryError
-from gisnoise.geo.frames import LocalFrame, wrap_angle, wrap_deg
-from gisnoise.model.cards import PHASES
+from gisnoise.geo import LocalFrame, wrap_angle, wrap_deg
+from gisnoise.model import PHASES
 
 __all__ = ["Trajectory", "read_flight_csv", "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
 

@@ -3,11 +3,20 @@
 
 from __future__ import annotations
 
-from gisnoise.geo.frames import LocalFrame, body_vector, dcm_ned_to_body, emission_angles, wrap_angle, wrap_deg
+from gisnoise.geo.frames import (
+    LocalFrame,
+    body_vector,
+    dcm_ned_to_body,
+    emission_angles,
+    wrap_angle,
+    wrap_deg,
+)
 from gisnoise.geo.grid import (
     DEFAULT_MAX_CELLS,
+    WGS84,
     GridSpec,
     apply_affine,
+    check_cell_limit,
     crs_label,
     grid_for_trajectory,
     max_cells,
@@ -16,5 +25,12 @@ from gisnoise.geo.grid import (
     transformer,
     utm_crs,
 )
+from gisnoise.geo.raster import (
+    NODATA,
+    Dem,
+    read_dem,
+    sample_dem,
+    write_geotiff,
+)
 
-__all__ = ['LocalFrame', 'dcm_ned_to_body', 'body_vector', 'emission_angles', 'wrap_angle', 'wrap_deg', 'GridSpec', 'DEFAULT_MAX_CELLS', 'max_cells', 'parse_crs', 'utm_crs', 'grid_for_trajectory', 'resample_dem', 'transformer', 'crs_label', 'apply_affine']
+__all__ = ['DEFAULT_MAX_CELLS', 'Dem', 'GridSpec', 'LocalFrame', 'NODATA', 'WGS84', 'apply_affine', 'body_vector', 'check_cell_limit', 'crs_label', 'dcm_ned_to_body', 'emission_angles', 'grid_for_trajectory', 'max_cells', 'parse_crs', 'read_dem', 'resample_dem', 'sample_dem', 'transformer', 'utm_crs', 'wrap_angle', 'wrap_deg', 'write_geotiff']

@@ -37,7 +37,7 @@ from pyproj.exceptions import CRSError as _PyprojCRSError
 from gisnoise.errors import CRSError, GridTooLargeError, InvalidGridError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from gisnoise.flight.trajectory import Trajectory
+    from gisnoise.flight import Trajectory
     from gisnoise.geo.raster import Dem
 
 __all__ = [

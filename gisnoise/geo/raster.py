@@ -23,7 +23,7 @@ from pyproj import CRS
 from gisnoise.errors import CRSError, InputError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from gisnoise.maps.evaluate import MapResult
+    from gisnoise.maps import MapResult
 
 __all__ = ["Dem", "read_dem", "sample_dem", "write_geotiff", "NODATA"]
 

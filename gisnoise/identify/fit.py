@@ -60,9 +60,8 @@ import numpy as np
 from gisnoise import __version__
 from gisnoise.errors import Cancelled, FitError, InputError, NotIdentifiableError
 from gisnoise.identify import _oem
-from gisnoise.measure.samples import Samples
-from gisnoise.model.ansatz import Ansatz, get_ansatz
-from gisnoise.model.cards import PHASES, ModelCard
+from gisnoise.measure import Samples
+from gisnoise.model import PHASES, Ansatz, ModelCard, get_ansatz
 
 __all__ = ["FitResult", "fit", "fit_arrays", "fit_campaign", "usable_rows", "start_values", "DEFAULT_BOUNDS", "DEFAULT_RCOND"]
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.identify.fit import FitResult
-from gisnoise.model.ansatz import get_ansatz
+from gisnoise.model import get_ansatz
 from gisnoise.reporting import correlation_axes, dump_json, figure, safe_name, with_gaps, write_view
 
 __all__ = ["write_report", "timeseries_data", "directivity_data", "correlation_data", "residual_data",

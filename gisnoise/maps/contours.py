@@ -41,7 +41,7 @@ from shapely.geometry import LineString, MultiLineString, MultiPolygon, Polygon,
 from shapely.geometry.polygon import orient
 
 from gisnoise.errors import InputError
-from gisnoise.geo.grid import WGS84, transformer
+from gisnoise.geo import WGS84, transformer
 
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.maps.evaluate import MapResult

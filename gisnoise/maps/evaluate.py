@@ -62,11 +62,10 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import Cancelled, CardError, GisnoiseError, InputError, TrajectoryError
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame, emission_angles
-from gisnoise.geo.grid import WGS84, GridSpec, apply_affine, resample_dem, transformer
+from gisnoise.flight import Trajectory
+from gisnoise.geo import WGS84, GridSpec, LocalFrame, apply_affine, emission_angles, resample_dem, transformer
+from gisnoise.model import ModelCard
 from gisnoise.model import cards as _cards
-from gisnoise.model.cards import ModelCard
 
 __all__ = [
     "CardSet",
@@ -909,7 +908,7 @@ def _unit(name: str) -> str:
 
 
 def _dem_on_grid(dem: Any, grid: GridSpec) -> np.ndarray:
-    from gisnoise.geo.raster import Dem, read_dem
+    from gisnoise.geo import Dem, read_dem
 
     if isinstance(dem, np.ndarray):
         a = np.asarray(dem, dtype=float)

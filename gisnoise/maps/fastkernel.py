@@ -64,11 +64,10 @@ except ImportError:  # pragma: no cover - numba is the optional extra "fast"
     numba = None
 
 from gisnoise.errors import CardError, InputError
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame, dcm_ned_to_body
-from gisnoise.geo.grid import WGS84, GridSpec, transformer
+from gisnoise.flight import Trajectory
+from gisnoise.geo import WGS84, GridSpec, LocalFrame, dcm_ned_to_body, transformer
+from gisnoise.model import ModelCard
 from gisnoise.model import ansatz as _model
-from gisnoise.model.cards import ModelCard
 
 __all__ = [
     "FAST_ANSATZES",

@@ -22,13 +22,11 @@ from pathlib import Path
 from typing import Any
 
 from gisnoise.errors import InputError
-from gisnoise.flight.routes import read_route
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.grid import grid_for_trajectory
-from gisnoise.geo.raster import write_geotiff
+from gisnoise.flight import Trajectory, read_route
+from gisnoise.geo import grid_for_trajectory, write_geotiff
 from gisnoise.maps.contours import parse_levels, write_geojson
 from gisnoise.maps.evaluate import METRICS, CardSet, MapResult, evaluate_grid
-from gisnoise.model.cards import ModelCard
+from gisnoise.model import ModelCard
 
 __all__ = ["make_map", "DEFAULT_LEVELS"]
 

@@ -18,9 +18,9 @@ import numpy as np
 from gisnoise.errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from gisnoise.flight.trajectory import Trajectory
+    from gisnoise.flight import Trajectory
     from gisnoise.maps.evaluate import MapResult
-    from gisnoise.model.cards import ModelCard
+    from gisnoise.model import ModelCard
 
 __all__ = ["require_matplotlib", "plot_map", "directivity_grid", "plot_directivity", "PHASE_COLOURS"]
 

@@ -3,6 +3,22 @@
 
 from __future__ import annotations
 
-from gisnoise.measure.samples import Samples, series_ids, series_key
+from gisnoise.measure.campaign import (
+    DEFAULT_EVENT_DB,
+    DEFAULT_SNR_DB,
+    Exclusion,
+    check_campaign,
+    emission_time,
+    inspect_campaign,
+    read_campaign,
+    read_level_csv,
+    write_level_csv,
+    write_levels,
+)
+from gisnoise.measure.samples import (
+    Samples,
+    series_ids,
+    series_key,
+)
 
-__all__ = ['Samples', 'series_key', 'series_ids']
+__all__ = ['DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'Exclusion', 'Samples', 'check_campaign', 'emission_time', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'write_level_csv', 'write_levels']

@@ -71,9 +71,8 @@ import numpy as np
 
 from gisnoise.acoustics import physics as acoustics
 from gisnoise.errors import CampaignError, GisnoiseError
-from gisnoise.flight.logs import FLIGHT_SUFFIXES, as_unix_time, read_flight
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.frames import LocalFrame, emission_angles
+from gisnoise.flight import FLIGHT_SUFFIXES, Trajectory, as_unix_time, read_flight
+from gisnoise.geo import LocalFrame, emission_angles
 from gisnoise.measure.samples import Samples
 
 __all__ = [

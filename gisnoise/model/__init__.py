@@ -12,6 +12,24 @@ from gisnoise.model.ansatz import (
     level_sum,
     register_ansatz,
 )
-from gisnoise.model.cards import PHASES, SCHEMA, ModelCard, dump, dumps, load, loads, save
+from gisnoise.model.cards import (
+    PHASES,
+    SCHEMA,
+    ModelCard,
+    dump,
+    dumps,
+    load,
+    load_card,
+    loads,
+    save,
+    with_parameters,
+)
+from gisnoise.model.effects import (
+    bind,
+    check_testable,
+    extend,
+    get_effect,
+    mic_height_agl,
+)
 
-__all__ = ['Ansatz', 'REFERENCE_DISTANCE_M', 'register_ansatz', 'get_ansatz', 'ansatz_names', 'add_background', 'level_sum', 'ModelCard', 'SCHEMA', 'PHASES', 'load', 'loads', 'dump', 'dumps', 'save']
+__all__ = ['Ansatz', 'ModelCard', 'PHASES', 'REFERENCE_DISTANCE_M', 'SCHEMA', 'add_background', 'ansatz_names', 'bind', 'check_testable', 'dump', 'dumps', 'extend', 'get_ansatz', 'get_effect', 'level_sum', 'load', 'load_card', 'loads', 'mic_height_agl', 'register_ansatz', 'save', 'with_parameters']

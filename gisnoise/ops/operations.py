@@ -78,8 +78,8 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import Cancelled, InputError
-from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo.grid import GridSpec, check_cell_limit, grid_for_trajectory, parse_crs
+from gisnoise.flight import Trajectory
+from gisnoise.geo import GridSpec, check_cell_limit, grid_for_trajectory, parse_crs
 from gisnoise.jsonio import read_json_file
 
 __all__ = [
@@ -305,7 +305,7 @@ def _num(doc: Mapping[str, Any], key: str, default: Any, source: str, *, minimum
 
 
 def _levels(doc: Mapping[str, Any], key: str, default: Sequence[float], source: str) -> tuple[float, ...]:
-    from gisnoise.maps.contours import parse_levels
+    from gisnoise.maps import parse_levels
 
     v = doc.get(key, default)
     if v is None or (isinstance(v, list) and not v):
@@ -319,8 +319,8 @@ def _levels(doc: Mapping[str, Any], key: str, default: Sequence[float], source: 
 def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".",
                        source: str = "schedule") -> Schedule:
     """A :class:`Schedule` from its JSON document; relative paths are taken from ``base_dir``."""
-    from gisnoise.flight.routes import read_route
-    from gisnoise.maps.evaluate import CardSet
+    from gisnoise.flight import read_route
+    from gisnoise.maps import CardSet
 
     if not isinstance(doc, Mapping):
         raise InputError(f"{source}: expected a JSON object", field="schedule")
@@ -522,8 +522,8 @@ class _Plan:
 
 
 def _plan(schedule: Schedule, grid: GridSpec) -> _Plan:
+    from gisnoise.maps import CardSet
     from gisnoise.maps import fastkernel as fk
-    from gisnoise.maps.evaluate import CardSet
 
     fk._require_numba()
     ground_h = schedule.ground_h_m
@@ -698,8 +698,8 @@ def write_operations(result: Any, out_dir: str | os.PathLike[str], levels: Any =
                      contour_bands: Sequence[str] = ("Lden", "Lnight")) -> dict[str, Path]:
     """Write ``DIR/operations.tif`` (every band), ``DIR/contours.geojson`` (of ``contour_bands``)
     and ``DIR/summary.json`` (metadata and per-band ranges)."""
-    from gisnoise.geo.raster import write_geotiff
-    from gisnoise.maps.contours import write_geojson
+    from gisnoise.geo import write_geotiff
+    from gisnoise.maps import write_geojson
 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():

@@ -15,8 +15,8 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
+from gisnoise.model import ModelCard
 from gisnoise.model import cards as gcards
-from gisnoise.model.cards import ModelCard
 from gisnoise.service.errors import ApiError
 
 __all__ = ["CardStore", "StoredCard", "ID_PATTERN"]

@@ -109,7 +109,7 @@ async def fit_job(request: Request, state: StateDep,
                   report: Annotated[bool, Form(description="Also write the fit report (report.html, "
                                                            "figures).")] = False,
                   ) -> JSONResponse:
-    from gisnoise.model.ansatz import get_ansatz
+    from gisnoise.model import get_ansatz
 
     try:
         get_ansatz(ansatz)
@@ -156,7 +156,7 @@ async def diagnose_job(request: Request, state: StateDep,
 # ------------------------------------------------------------------ handlers
 def run_fit_job(ctx: JobContext) -> dict[str, Any]:
     """Fit the stored campaign; writes card.json (the fitted card) and fit.json (a summary)."""
-    from gisnoise.identify.fit import fit_campaign
+    from gisnoise.identify import fit_campaign
 
     p = ctx.params
     max_iter = 100
@@ -200,7 +200,7 @@ def _report(module: str, *args: Any, **kw: Any) -> str:
 
 def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
     """Diagnose the stored card against the stored campaign: diagnosis.json (and report.html), as the CLI."""
-    from gisnoise.diagnose.diagnose import run_diagnosis
+    from gisnoise.diagnose import run_diagnosis
 
     card = gcards.load(ctx.input_dir / "card.json")
     ctx.progress(0.0, "reading the campaign")

@@ -24,9 +24,9 @@ from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
 from gisnoise.errors import GisnoiseError, GridTooLargeError, InputError, TrajectoryError
-from gisnoise.flight.trajectory import Trajectory, from_columns, read_flight_csv
+from gisnoise.flight import Trajectory, from_columns, read_flight_csv
+from gisnoise.model import ModelCard
 from gisnoise.model import cards as gcards
-from gisnoise.model.cards import ModelCard
 from gisnoise.service.cardstore import CardStore
 from gisnoise.service.deps import WRITE, State, StateDep, require_key
 from gisnoise.service.errors import ApiError
@@ -153,7 +153,7 @@ def resolve_cards(req: ContourRequest, store: CardStore) -> list[ModelCard]:
 
 
 def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
-    from gisnoise.geo.grid import grid_for_trajectory
+    from gisnoise.geo import grid_for_trajectory
 
     with _prefixed("grid"):
         try:
@@ -175,7 +175,7 @@ def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest
 
     Returns the paths by file name.
     """
-    from gisnoise.maps.pipeline import make_map
+    from gisnoise.maps import make_map
 
     with _core_fields():
         paths = make_map(traj, cards, out_dir, resolution_m=req.grid.resolution_m, margin_m=req.grid.margin_m,

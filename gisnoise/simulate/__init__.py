@@ -3,3 +3,12 @@
 
 from __future__ import annotations
 
+from gisnoise.simulate.simulate import (
+    load_scenario,
+    resolve_scenario,
+    run,
+    scenario_copy,
+    simulate_samples,
+)
+
+__all__ = ['load_scenario', 'resolve_scenario', 'run', 'scenario_copy', 'simulate_samples']

@@ -146,13 +146,12 @@ import numpy as np
 from gisnoise import __version__
 from gisnoise.acoustics import physics as acoustics
 from gisnoise.errors import InputError, ScenarioError
-from gisnoise.flight.patterns import G, PathBuilder
-from gisnoise.flight.trajectory import from_columns
-from gisnoise.geo.frames import LocalFrame, emission_angles, wrap_angle
+from gisnoise.flight import G, PathBuilder, from_columns
+from gisnoise.geo import LocalFrame, emission_angles, wrap_angle
 from gisnoise.jsonio import JsonObject, read_json_file
-from gisnoise.measure.samples import Samples
+from gisnoise.measure import Samples
 from gisnoise.model import cards as _cards
-from gisnoise.model.cards import load_card
+from gisnoise.model import load_card
 
 __all__ = [
     "SCHEMA",
@@ -1237,7 +1236,7 @@ def simulate_samples(scenario: Mapping[str, Any] | str | os.PathLike[str] | Simu
     """
     if isinstance(scenario, (str, os.PathLike)):
         scenario = load_scenario(scenario)
-    from gisnoise.measure.campaign import emission_time  # the reader's solver: one definition
+    from gisnoise.measure import emission_time  # the reader's solver: one definition
 
     res = scenario if isinstance(scenario, SimulationResult) else run(scenario, base_dir=base_dir)
     sc = res.scenario

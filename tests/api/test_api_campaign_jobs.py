@@ -33,7 +33,7 @@ def campaign_zip() -> bytes:
 
 
 def test_fit_job_returns_the_librarys_card(client, campaign_zip, tmp_path):
-    from gisnoise.identify.fit import fit_campaign
+    from gisnoise.identify import fit_campaign
     from gisnoise.model import cards as gcards
 
     r = client.post("/jobs/fit", files={"campaign": ("c.zip", campaign_zip, "application/zip")},

@@ -178,7 +178,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             raise QgsProcessingException("no trajectory: give a trajectory layer (TRAJECTORY) or a trajectory "
                                          "file (TRAJECTORY_FILE)")
         if path:
-            from gisnoise.flight.routes import read_trajectory
+            from gisnoise.flight import read_trajectory
 
             return read_trajectory(path)
         fields = {col: self.parameterAsString(parameters, key, context)
@@ -200,8 +200,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
 
     # ------------------------------------------------------------------ run
     def compute(self, parameters, context, feedback):
-        from gisnoise.maps.contours import parse_levels
-        from gisnoise.maps.pipeline import make_map
+        from gisnoise.maps import make_map, parse_levels
 
         levels = parse_levels(self.parameterAsString(parameters, self.LEVELS, context), field="LEVELS")
         traj = self._trajectory(parameters, context, feedback)

@@ -92,7 +92,7 @@ class DesignLayoutAlgorithm(GisnoiseAlgorithm):
             self.addOutput(QgsProcessingOutputNumber(key, label))
 
     def compute(self, parameters, context, feedback):
-        from gisnoise.design.design import load_plan, run_design, write_outputs
+        from gisnoise.design import load_plan, run_design, write_outputs
 
         path = self.parameterAsFile(parameters, self.PLAN, context)
         if not path:

@@ -102,8 +102,8 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.HOLDOUT_SHRINKAGE_PCT, "held-out shrinkage of the verdict (%)"))
 
     def compute(self, parameters, context, feedback):
-        from gisnoise.diagnose.diagnose import run_diagnosis
-        from gisnoise.measure.campaign import read_campaign
+        from gisnoise.diagnose import run_diagnosis
+        from gisnoise.measure import read_campaign
         from gisnoise.model import cards as gcards
 
         folder = self.parameterAsFile(parameters, self.CAMPAIGN, context)
@@ -140,7 +140,7 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
                self.HOLDOUT_SHRINKAGE_PCT: shrink if isinstance(shrink, (int, float)) else float("nan")}
         report = self.parameterAsString(parameters, self.OUTPUT_REPORT, context)
         if report and parameters.get(self.OUTPUT_REPORT) not in (None, ""):
-            from gisnoise.diagnose.report import write_report
+            from gisnoise.diagnose import write_report
 
             feedback.pushInfo(f"writing the report into {report}")
             write_report(diag, report)

@@ -71,7 +71,7 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
         self.addOutput(QgsProcessingOutputString(self.CARD_ID, "card id"))
 
     def compute(self, parameters, context, feedback):
-        from gisnoise.identify.fit import fit_campaign
+        from gisnoise.identify import fit_campaign
         from gisnoise.model import cards as gcards
 
         folder = self.parameterAsFile(parameters, self.CAMPAIGN, context)
@@ -96,7 +96,7 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
                self.CARD_ID: card.id}
         report = self.parameterAsString(parameters, self.OUTPUT_REPORT, context)
         if report and parameters.get(self.OUTPUT_REPORT) not in (None, ""):
-            from gisnoise.identify.report import write_report
+            from gisnoise.identify import write_report
 
             feedback.pushInfo(f"writing the fit report into {report}")
             write_report(result, report)

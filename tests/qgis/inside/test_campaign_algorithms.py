@@ -69,7 +69,7 @@ def test_diagnose_names_bank_angle_and_maps_the_flagged_segments(plugin, tmp_pat
     import processing
     from qgis.core import QgsVectorLayer
 
-    from gisnoise.measure.campaign import read_campaign
+    from gisnoise.measure import read_campaign
 
     res = processing.run("gisnoise:diagnose", {
         "CAMPAIGN": str(SAMPLE_CAMPAIGN), "CARD": str(truth_card(SAMPLE_CAMPAIGN, tmp_path)), "OUTPUT_JSON": str(tmp_path / "diagnosis.json"),
