@@ -8,7 +8,6 @@ written from worker threads.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
+from gisnoise.jsonio import dumps
 
 
 def figure(w: float, h: float, *, dpi: int, report: str) -> Any:
@@ -61,8 +61,8 @@ def safe_name(name: str) -> str:
 
 
 def dump_json(obj: Any, path: Path) -> None:
-    """Write ``obj`` as one line of strict JSON (no NaN) and a newline, UTF-8."""
-    path.write_text(json.dumps(obj, allow_nan=False) + "\n", encoding="utf-8")
+    """Write ``obj`` as one line of strict JSON (numpy values converted, no NaN) and a newline, UTF-8."""
+    path.write_text(dumps(obj), encoding="utf-8")
 
 
 def write_view(out: Path, name: str, data: Any, plot: Callable[[Any, Path], None], files: dict[str, Path]) -> None:

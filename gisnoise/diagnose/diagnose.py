@@ -659,10 +659,10 @@ def _ev_ground(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
     if cand.fit is None:
         return {"supports": None, "summary": "not fitted"}
     p = cand.fit.params
-    tau = _effects._reflection_delay(ctx.x)
+    tau = _effects.reflection_delay(ctx.x)
     up = np.isfinite(tau)
     r = ctx.resid_base
-    cb, _ = _effects._band_cos(2.0 * np.pi * p["f_ground"] * tau[up], False)
+    cb, _ = _effects.band_cos(2.0 * np.pi * p["f_ground"] * tau[up], False)
     pattern = 10.0 * np.log10(1.0 + p["r_ground"] ** 2 + 2.0 * p["r_ground"] * cb)
     c = _corr(pattern, r[up])
     lift = float(np.mean(r[up]) - np.mean(r[~up])) if (~up).any() else None
@@ -677,7 +677,7 @@ def _ev_ground(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
 
 
 def _ev_doppler(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
-    m = _effects._mach_towards(ctx.x)
+    m = _effects.mach_towards(ctx.x)
     hi = np.max(np.abs(m)) if len(m) else 0.0
     fore, aft = m > 0.3 * hi, m < -0.3 * hi
     if not fore.any() or not aft.any():
@@ -690,12 +690,12 @@ def _ev_doppler(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
 
 
 def _ev_emission(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
-    cov = _effects._emission_covariates({**ctx.x})
+    cov = _effects.emission_covariates({**ctx.x})
     rate = np.zeros(len(ctx.s))
     base = ctx.base_model
     x = {**ctx.x, **cov}
-    lp = base.level(ctx.p_base, _effects._shift(x, 0.05))
-    lm = base.level(ctx.p_base, _effects._shift(x, -0.05))
+    lp = base.level(ctx.p_base, _effects.shifted_inputs(x, 0.05))
+    lm = base.level(ctx.p_base, _effects.shifted_inputs(x, -0.05))
     rate = (lp - lm) / 0.1
     c = _corr(rate, ctx.resid_base)
     out = {"supports": None if c is None else bool(abs(c) > 0.1), "corr_residual_model_rate": c,

@@ -82,10 +82,10 @@ def candidate_inputs(diag: Diagnosis) -> dict[str, np.ndarray]:
         "time_s": s.t_e,
     }
     if _effects.speed_of_sound(s.meta) is not None:
-        out["mach_towards"] = _effects._mach_towards(x)
+        out["mach_towards"] = _effects.mach_towards(x)
         if _effects.mic_height_agl(x) is not None:
             try:
-                out["reflection_delay_ms"] = 1000.0 * _effects._reflection_delay(x)
+                out["reflection_delay_ms"] = 1000.0 * _effects.reflection_delay(x)
             except InputError:
                 pass
     w = (s.meta or {}).get("weather") or {}

@@ -520,7 +520,7 @@ ATMOSPHERIC_ABSORPTION = Effect(
 # --------------------------------------------------------------------------- ground reflection
 
 
-def _band_cos(u, want_deriv):
+def band_cos(u, want_deriv):
     """Cosine ``cos(u)`` averaged over a one-third-octave band about ``u`` (relative band edges).
 
     Returns ``C(u)`` and ``dC/du``; exact series near ``u = 0``.
@@ -538,7 +538,7 @@ def _band_cos(u, want_deriv):
     return c, dc
 
 
-def _reflection_delay(x):
+def reflection_delay(x):
     """Delay of the ground-reflected path behind the direct one, s (flat ground under the microphone)."""
     h_m = mic_height_agl(x)
     if h_m is None:
@@ -563,11 +563,11 @@ MIN_REFLECTION_HEIGHT_M = 0.3
 
 def _ground_term(q, x, d_ref, want_jac):
     r, f = q[0], q[1]
-    tau = np.asarray(x["tau_ground"], dtype=float) if "tau_ground" in x else _reflection_delay(x)
+    tau = np.asarray(x["tau_ground"], dtype=float) if "tau_ground" in x else reflection_delay(x)
     off = np.isnan(tau)
     tau = np.where(off, 0.0, tau)
     u = 2.0 * np.pi * f * tau
-    cb, dcb = _band_cos(u, want_jac)
+    cb, dcb = band_cos(u, want_jac)
     g = 1.0 + r * r + 2.0 * r * cb
     dl = np.where(off, 0.0, 10.0 * np.log10(g))
     if not want_jac:
@@ -590,11 +590,11 @@ def _ground_check(x):
 
 def _ground_initial(x, resid):
     """Grid search of (R, f_g) on the residual (the offset is free), best least-squares match."""
-    tau = _reflection_delay(x)
+    tau = reflection_delay(x)
     ok = np.isfinite(resid) & np.isfinite(tau)
     best, arg = np.inf, (0.0, 200.0)
     for f in np.geomspace(40.0, 4000.0, 90):
-        cb, _ = _band_cos(2.0 * np.pi * f * tau[ok], False)
+        cb, _ = band_cos(2.0 * np.pi * f * tau[ok], False)
         for r in (0.3, 0.6, 0.9):
             z = 10.0 * np.log10(1.0 + r * r + 2.0 * r * cb)
             z = z - z.mean()
@@ -624,14 +624,14 @@ GROUND_REFLECTION = Effect(
 # --------------------------------------------------------------------------- Doppler
 
 
-def _mach_towards(x):
+def mach_towards(x):
     e, _ = _unit_to_mic(x)
     v = np.asarray(x["vel_enu"], dtype=float)
     return np.sum(v * e, axis=-1) / _c(x)
 
 
 def _doppler_term(q, x, d_ref, want_jac):
-    m = np.asarray(x["mach_r"], dtype=float) if "mach_r" in x else _mach_towards(x)
+    m = np.asarray(x["mach_r"], dtype=float) if "mach_r" in x else mach_towards(x)
     s = -10.0 * np.log10(1.0 - m)
     return q[0] * s, (s[..., None] if want_jac else None)
 
@@ -664,7 +664,7 @@ DOPPLER = Effect(
 _SHIFTED = ("d", "phi", "theta", "p_el")
 
 
-def _emission_covariates(x):
+def emission_covariates(x):
     sid = series_ids(x)
     t = np.asarray(x["t_e"], dtype=float)
     out = {}
@@ -687,7 +687,7 @@ def _unwrap_series(v, t, sid):
     return out
 
 
-def _shift(x, delta):
+def shifted_inputs(x, delta):
     xs = dict(x)
     xs["d"] = np.maximum(np.asarray(x["d"], dtype=float) + delta * x["rate_d"], 0.1)
     xs["phi"] = np.asarray(x["phi"], dtype=float) + delta * x["rate_phi"]
@@ -701,14 +701,14 @@ _DT = 1e-3  # s, step of the central difference along the time derivative of the
 
 def _emission_apply(base_kernel, p_base, q, x, d_ref, want_jac):
     if "rate_d" not in x:
-        x = {**x, **_emission_covariates(x)}
+        x = {**x, **emission_covariates(x)}
     tprop = np.asarray(x["t_prop"], dtype=float)
     delta = q[0] + q[1] * tprop
-    l_uav, jb = base_kernel(p_base, _shift(x, delta), d_ref, want_jac)
+    l_uav, jb = base_kernel(p_base, shifted_inputs(x, delta), d_ref, want_jac)
     if not want_jac:
         return l_uav, None, None
-    lp, _ = base_kernel(p_base, _shift(x, delta + _DT), d_ref, False)
-    lm, _ = base_kernel(p_base, _shift(x, delta - _DT), d_ref, False)
+    lp, _ = base_kernel(p_base, shifted_inputs(x, delta + _DT), d_ref, False)
+    lm, _ = base_kernel(p_base, shifted_inputs(x, delta - _DT), d_ref, False)
     dl = (lp - lm) / (2.0 * _DT)
     return l_uav, jb, np.stack([dl, dl * tprop], axis=-1)
 
@@ -733,7 +733,7 @@ EMISSION_TIME = Effect(
     apply=_emission_apply,
     description="time-base error: model at t_e + dt_clock + k_delay d/c (first order in the input rates)",
     check=_emission_check,
-    covariates=_emission_covariates,
+    covariates=emission_covariates,
 )
 
 # --------------------------------------------------------------------------- wind
