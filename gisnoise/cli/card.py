@@ -83,3 +83,16 @@ def plot(card: str, p_el: float, distance: float, out: str) -> None:
     c = gcards.load(card)
     path = plot_directivity(c, out, p_el=p_el, distance_m=distance)
     click.echo(f"wrote {path}")
+
+
+@command.command("list")
+def list_cards() -> None:
+    """List the cards the package bundles: id, phase, vehicle and the file it is in.
+
+    Any of these ids can be given where a card file is asked for (``--card demo-horizontal``).
+    """
+    from gisnoise.data import bundled_card_ids, card_path
+
+    for cid in bundled_card_ids():
+        c = gcards.load(card_path(cid))
+        click.echo(f"{cid:<22} {c.phase:<11} {c.vehicle[:28]:<28} {card_path(cid)}")
