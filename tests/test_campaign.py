@@ -566,7 +566,7 @@ def test_microphone_height_above_ground_reaches_the_samples(tmp_path):
 
     from gisnoise.measure import read_campaign
     from gisnoise.model import mic_height_agl
-    from gisnoise.simulate.simulate import simulate
+    from gisnoise.simulate import simulate
 
     root = __import__("pathlib").Path(__file__).resolve().parents[1]
     scen = json.loads((root / "sample_data/scenarios/diagnosis_base.json").read_text())

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import gisnoise.simulate.simulate as simulate
+from gisnoise import simulate
 from gisnoise.cli.main import cli
 from gisnoise.diagnose.diagnose import (
     _window_mean_error,

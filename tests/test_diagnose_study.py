@@ -52,7 +52,7 @@ def effect_params(effect: str, value: float) -> dict:
 
 def one_run(job: tuple[str | None, float | None, int]) -> dict:
     """Simulate one campaign and diagnose it blind; return what the study tabulates."""
-    import gisnoise.simulate.simulate as simulate
+    from gisnoise import simulate
     from gisnoise.diagnose import run_diagnosis
     from gisnoise.model import cards
 

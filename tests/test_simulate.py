@@ -22,7 +22,7 @@ from gisnoise.errors import ScenarioError
 from gisnoise.flight import read_flight_csv
 from gisnoise.geo import LocalFrame
 from gisnoise.model import cards, level_sum
-from gisnoise.simulate.simulate import (
+from gisnoise.simulate import (
     EFFECTS,
     load_scenario,
     resolve_scenario,

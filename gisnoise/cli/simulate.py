@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from gisnoise.cli.options import progress
-from gisnoise.simulate.simulate import load_scenario, simulate
+from gisnoise.simulate import load_scenario, simulate
 
 
 @click.command("simulate")
