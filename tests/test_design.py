@@ -22,13 +22,10 @@ import shapely
 from click.testing import CliRunner
 
 from gisnoise.cli.main import cli
-from gisnoise.design.design import (
+from gisnoise.design import (
     PATTERN_PAIRS,
     Design,
-    DesignError,
     DesignModel,
-    _corr_batch,
-    _objective_batch,
     campaign_scenario,
     correlation_matrix,
     evaluate,
@@ -41,6 +38,8 @@ from gisnoise.design.design import (
     study,
     verify,
 )
+from gisnoise.design.objectives import _corr_batch, _objective_batch
+from gisnoise.errors import DesignError
 from gisnoise.geo import LocalFrame
 from gisnoise.model import cards
 from gisnoise.simulate import run

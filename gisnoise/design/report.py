@@ -21,7 +21,7 @@
 ``report.html``
     all of it on one page with the numbers.
 
-The numbers come from :meth:`gisnoise.design.design.DesignResult.to_dict` (also written as
+The numbers come from :meth:`gisnoise.design.result.DesignResult.to_dict` (also written as
 ``design.json``); :func:`study_curves` and :func:`std_ratios` are the pure functions
 behind the two line and bar views.  The plots use matplotlib's Agg canvas without
 pyplot (reports can be written from worker threads).  Needs the ``plot`` extra.
@@ -36,10 +36,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gisnoise.design.objectives import CORRELATION_VARIABLES
+from gisnoise.jsonio import to_jsonable
 from gisnoise.reporting import correlation_axes, figure
 
 if TYPE_CHECKING:  # pragma: no cover
-    from gisnoise.design.design import DesignResult
+    from gisnoise.design.result import DesignResult
 
 __all__ = ["write_report", "study_curves", "std_ratios"]
 
@@ -199,7 +201,8 @@ def _alts(d: dict[str, Any]) -> str:
 
 def _plot_std(ratios: dict[str, Any], path: Path) -> None:
     names = ratios["parameters"]
-    series = [(f"{k} (expected)", v, _COLOURS.get(k, "tab:green"), None) for k, v in ratios["expected"].items()]
+    series: list[tuple[str, Any, str, str | None]] = [
+        (f"{k} (expected)", v, _COLOURS.get(k, "tab:green"), None) for k, v in ratios["expected"].items()]
     series += [(f"{k} (measured)", v, _COLOURS.get(k, "tab:green"), "//") for k, v in ratios["measured"].items()]
     fig = _figure(8.0, 4.2)
     ax = fig.subplots()
@@ -224,11 +227,9 @@ def _plot_std(ratios: dict[str, Any], path: Path) -> None:
 
 def write_report(result: DesignResult, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
     """Write the design report (PNGs and ``report.html``) into ``out_dir``; returns name -> path."""
-    from gisnoise.design.design import CORRELATION_VARIABLES, _finite
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    doc = _finite(result.to_dict())
+    doc = to_jsonable(result.to_dict())
     files: dict[str, Path] = {}
     variables = list(CORRELATION_VARIABLES)
 

@@ -1,4 +1,4 @@
-"""Optimize a measurement layout: ``gisnoise.design.design.run_design`` in QGIS."""
+"""Optimize a measurement layout: ``gisnoise.design.run_design`` in QGIS."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from qgis.core import (
 
 from .base import GisnoiseAlgorithm
 
-#: Objectives of the core (``gisnoise.design.design.OBJECTIVES``); the core checks them again.
+#: Objectives of the core (``gisnoise.design.OBJECTIVES``); the core checks them again.
 OBJECTIVES = ("paper", "d-optimal")
 
 
