@@ -143,8 +143,7 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise import __version__
-from gisnoise.acoustics import physics as acoustics
+from gisnoise import __version__, acoustics
 from gisnoise.errors import InputError, ScenarioError
 from gisnoise.flight import G, PathBuilder, from_columns
 from gisnoise.geo import LocalFrame, emission_angles, wrap_angle
