@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gisnoise import acoustics
 from gisnoise.acoustics import _filterbank
-from gisnoise.acoustics import physics as acoustics
 from gisnoise.errors import InputError
 
 # --------------------------------------------------------------------------- A-weighting

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gisnoise.acoustics import physics as acoustics
+from gisnoise import acoustics
 from gisnoise.errors import CampaignError
 from gisnoise.geo import LocalFrame
 from gisnoise.measure import (

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from gisnoise.errors import InputError, MissingColumnError
-from gisnoise.flight import gps_to_unix, logs, phase_by_speed, quaternion_to_euler, read_flight
+from gisnoise.flight import gps_to_unix, phase_by_speed, quaternion_to_euler, read_flight
+from gisnoise.flight import ulog as logs
 
 pyulog = pytest.importorskip("pyulog")
 pytest.importorskip("pymavlink")

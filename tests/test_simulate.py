@@ -1,7 +1,7 @@
 """Campaign simulator: truth bookkeeping, flight physics and each injected effect.
 
 Expected values come from the coordinated-turn formula, the truth card evaluated at
-a known geometry, ISO 9613-1 (through ``gisnoise.acoustics.physics``) and the documented
+a known geometry, ISO 9613-1 (through ``gisnoise.acoustics``) and the documented
 form of each effect evaluated here from the written flight log, never from numbers
 the simulator produced once.
 """

@@ -1,31 +1,53 @@
 """Acoustics: one-third-octave bands, A-weighting, atmospheric absorption, speed of sound, band levels of audio.
+
+The chain of the paper's section 3 (SPEC section 2), as pure array functions:
+
+* :mod:`~gisnoise.acoustics.bands` -- one-third-octave bands of IEC 61260-1 (base 10)
+  and the ``L_<nominal Hz>`` column names of level files;
+* :mod:`~gisnoise.acoustics.weighting` -- IEC 61672-1 A-weighting, the A-weighted
+  overall level of band levels, the free-field correction of the microphone mount;
+* :mod:`~gisnoise.acoustics.atmosphere` -- speed of sound, ISO 9613-1 absorption and
+  its per-band correction (only bands clear of background);
+* :mod:`~gisnoise.acoustics.audio` -- a multirate IIR filter bank (IEC 61260-1
+  class 1) giving unweighted band levels per averaging block, of pressure or of WAV files;
+* :mod:`~gisnoise.acoustics.wav` -- WAV audio in volts and its calibration to pascals.
+
+Levels are dB re 20 uPa.  Functions accept floats or arrays and broadcast.
 """
 
 from __future__ import annotations
 
-from gisnoise.acoustics.physics import (
-    MOUNT_CORRECTIONS_DB,
-    P_REF,
-    a_weighting,
+from gisnoise.acoustics.atmosphere import (
     absorption_corrected_level,
     absorption_correction,
     atmospheric_absorption,
     background_levels,
+    speed_of_sound,
+)
+from gisnoise.acoustics.audio import (
+    P_REF,
+    band_levels,
+    wav_band_levels,
+)
+from gisnoise.acoustics.bands import (
     band_edges,
     band_frequency,
-    band_levels,
     band_name,
-    calibrate,
     exact_frequency,
     is_band_name,
-    mount_correction,
     nominal_frequency,
-    overall_a_level,
-    read_wav,
-    speed_of_sound,
     third_octave_centres,
-    wav_band_levels,
+)
+from gisnoise.acoustics.wav import (
+    calibrate,
+    read_wav,
     write_wav,
+)
+from gisnoise.acoustics.weighting import (
+    MOUNT_CORRECTIONS_DB,
+    a_weighting,
+    mount_correction,
+    overall_a_level,
 )
 
 __all__ = ['MOUNT_CORRECTIONS_DB', 'P_REF', 'a_weighting', 'absorption_corrected_level', 'absorption_correction', 'atmospheric_absorption', 'background_levels', 'band_edges', 'band_frequency', 'band_levels', 'band_name', 'calibrate', 'exact_frequency', 'is_band_name', 'mount_correction', 'nominal_frequency', 'overall_a_level', 'read_wav', 'speed_of_sound', 'third_octave_centres', 'wav_band_levels', 'write_wav']

@@ -1,6 +1,6 @@
 """Private kernels of the one-third-octave filter bank (multirate IIR).
 
-The public face is :func:`gisnoise.acoustics.physics.band_levels`.  Design (IEC 61260-1,
+The public face is :func:`gisnoise.acoustics.audio.band_levels`.  Design (IEC 61260-1,
 base-10, the ANSI S1.11 multirate approach):
 
 * every band is a Butterworth band-pass of prototype order :data:`ORDER`
@@ -32,10 +32,9 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
-__all__ = ["G", "ORDER", "AA_ORDER", "BETA", "FilterBank", "design", "chain_response", "run"]
+from gisnoise.acoustics.bands import G, band_edges
 
-G = 10.0 ** 0.3
-"""Base-10 octave frequency ratio of IEC 61260-1."""
+__all__ = ["G", "ORDER", "AA_ORDER", "BETA", "FilterBank", "design", "chain_response", "run"]
 
 ORDER = 4
 """Butterworth prototype order of each band (band-pass order 8, four biquads)."""
@@ -84,12 +83,6 @@ class FilterBank:
     def n_levels(self) -> int:
         """Number of decimation stages the deepest band needs."""
         return int(self.level.max()) if self.level.size else 0
-
-
-def band_edges(f_hz: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper band-edge frequencies (Hz) of one-third-octave bands, base 10."""
-    f = np.asarray(f_hz, dtype=float)
-    return f * G ** (-1.0 / 6.0), f * G ** (1.0 / 6.0)
 
 
 def max_centre(fs_hz: float) -> float:

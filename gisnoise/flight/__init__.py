@@ -3,13 +3,20 @@
 
 from __future__ import annotations
 
-from gisnoise.flight.logs import (
-    FLIGHT_SUFFIXES,
+from gisnoise.flight.clock import (
     as_unix_time,
     gps_to_unix,
-    phase_by_speed,
-    quaternion_to_euler,
+)
+from gisnoise.flight.dataflash import (
+    read_dataflash,
+)
+from gisnoise.flight.logs import (
+    FLIGHT_SUFFIXES,
     read_flight,
+)
+from gisnoise.flight.paths import (
+    derive_states,
+    trajectory_from_path,
 )
 from gisnoise.flight.patterns import (
     G,
@@ -17,12 +24,16 @@ from gisnoise.flight.patterns import (
     fwd,
     right,
 )
+from gisnoise.flight.phases import (
+    HOVER_MAX_SPEED_M_S,
+    MULTICOPTER_PHASES,
+    PHASES,
+    VERTICAL_MIN_SPEED_M_S,
+    phase_by_speed,
+)
 from gisnoise.flight.routes import (
-    GRAVITY,
-    VehicleModel,
     read_route,
     read_trajectory,
-    route_from_waypoints,
     trajectory_to_geojson,
 )
 from gisnoise.flight.trajectory import (
@@ -32,5 +43,18 @@ from gisnoise.flight.trajectory import (
     from_columns,
     read_flight_csv,
 )
+from gisnoise.flight.ulog import (
+    quaternion_to_euler,
+    read_ulog,
+)
+from gisnoise.flight.vehicle import (
+    GRAVITY,
+    VehicleModel,
+)
+from gisnoise.flight.waypoints import (
+    WAYPOINTS_SCHEMA,
+    Route,
+    route_from_waypoints,
+)
 
-__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'OPTIONAL_COLUMNS', 'PathBuilder', 'REQUIRED_COLUMNS', 'Trajectory', 'VehicleModel', 'as_unix_time', 'from_columns', 'fwd', 'gps_to_unix', 'phase_by_speed', 'quaternion_to_euler', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'right', 'route_from_waypoints', 'trajectory_to_geojson']
+__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'HOVER_MAX_SPEED_M_S', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'trajectory_from_path', 'trajectory_to_geojson']

@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import MissingColumnError, TrajectoryError
+from gisnoise.flight.phases import PHASES
 from gisnoise.geo import LocalFrame, wrap_angle, wrap_deg
-from gisnoise.model import PHASES
 
-__all__ = ["Trajectory", "read_flight_csv", "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
+__all__ = ["Trajectory", "read_flight_csv", "from_columns", "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
 
 REQUIRED_COLUMNS = ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w")
 OPTIONAL_COLUMNS = ("rpm", "airspeed_m_s", "phase")
@@ -154,7 +154,7 @@ class Trajectory:
     def select(self, mask: Any) -> Trajectory:
         """A trajectory of the samples where ``mask`` is true."""
         m = np.asarray(mask)
-        kw = {f.name: (None if getattr(self, f.name) is None else getattr(self, f.name)[m])
+        kw: dict[str, Any] = {f.name: (None if getattr(self, f.name) is None else getattr(self, f.name)[m])
               for f in fields(self) if f.name != "source"}
         return Trajectory(**kw, source=self.source)
 

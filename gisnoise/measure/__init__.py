@@ -4,21 +4,46 @@
 from __future__ import annotations
 
 from gisnoise.measure.campaign import (
-    DEFAULT_EVENT_DB,
-    DEFAULT_SNR_DB,
-    Exclusion,
     check_campaign,
-    emission_time,
     inspect_campaign,
     read_campaign,
+)
+from gisnoise.measure.document import (
+    SCHEMA,
+)
+from gisnoise.measure.emission import (
+    emission_time,
+)
+from gisnoise.measure.events import (
+    DEFAULT_EVENT_DB,
+    DEFAULT_SNR_DB,
+    detect_events,
+    fit_level_trend,
+)
+from gisnoise.measure.levels import (
+    DEFAULT_BLOCK_S,
+    band_column,
     read_level_csv,
+    wav_levels,
     write_level_csv,
     write_levels,
+)
+from gisnoise.measure.parts import (
+    Campaign,
+    Exclusion,
+    Flight,
+    LevelSeries,
+    Microphone,
+    Problem,
 )
 from gisnoise.measure.samples import (
     Samples,
     series_ids,
     series_key,
 )
+from gisnoise.measure.table import (
+    SIGNAL_BAND_MARGIN_DB,
+    build_samples,
+)
 
-__all__ = ['DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'Exclusion', 'Samples', 'check_campaign', 'emission_time', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'write_level_csv', 'write_levels']
+__all__ = ['DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'build_samples', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'wav_levels', 'write_level_csv', 'write_levels']

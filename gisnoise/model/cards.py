@@ -36,7 +36,7 @@ __all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "s
 SCHEMA = "gisnoise/model-card/1"
 SCHEMA_PREFIX = "gisnoise/model-card/"
 SUPPORTED_VERSIONS = (1,)
-PHASES = ("horizontal", "climb", "sink", "hover", "transition")
+from gisnoise.flight import PHASES  # noqa: E402  (the flight phases are defined in flight)
 
 
 @dataclass(frozen=True)

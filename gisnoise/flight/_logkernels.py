@@ -1,0 +1,67 @@
+"""Kernels the flight-log readers share: the common time base, optional columns that cover it,
+the phase, and the trajectory with its times referred to the flight's start."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
+from gisnoise.flight.clock import as_unix_time
+from gisnoise.flight.phases import phase_by_speed
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo import LocalFrame
+
+log = logging.getLogger(__name__)
+
+
+def _time_base(src: str, tb: np.ndarray, spans: Sequence[tuple[float, float]], rate_hz: float | None) -> np.ndarray:
+    t0 = max(s[0] for s in spans)
+    t1 = min(s[1] for s in spans)
+    if not t1 > t0:
+        raise TrajectoryError(f"{src}: position, attitude and power are never logged at the same time",
+                              field="t")
+    if rate_hz is not None:
+        if not (np.isfinite(rate_hz) and rate_hz > 0):
+            raise InputError(f"rate_hz must be positive, got {rate_hz!r}", field="rate_hz")
+        return t0 + np.arange(int(np.floor((t1 - t0) * rate_hz)) + 1) / rate_hz
+    t = tb[(tb >= t0) & (tb <= t1)]
+    if len(t) < 2:
+        raise TrajectoryError(f"{src}: fewer than 2 position samples while attitude and power are logged",
+                              field="t")
+    return t
+
+
+def _covering(t: np.ndarray, ts: np.ndarray, v: Any, name: str) -> np.ndarray | None:
+    v = np.asarray(v, dtype=float)
+    ok = np.isfinite(v)
+    ts, v = ts[ok], v[ok]
+    if len(ts) < 2 or ts[0] > t[0] or ts[-1] < t[-1]:
+        log.info("optional %s left out: it does not cover the flight's time span", name)
+        return None
+    return np.interp(t, ts, v)
+
+
+def _phase(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray, vtol: np.ndarray | None) -> np.ndarray:
+    frame = LocalFrame(float(lat[0]), float(lon[0]), float(h[0]))
+    enu = np.stack(frame.to_enu(lat, lon, h), axis=-1)
+    vel = np.gradient(enu, t, axis=0)
+    phase = phase_by_speed(t, vel)
+    if vtol is not None:
+        phase = np.where(vtol == "fw", "horizontal", np.where(vtol == "transition", "transition", phase))
+    return phase
+
+
+def _finish(src: str, t: np.ndarray, cols: dict[str, Any], start_utc: Any, utc_offset: float | None,
+            utc_field: str) -> Trajectory:
+    if start_utc is not None:
+        if utc_offset is None:
+            raise MissingColumnError(f"{src}: no GPS time in the log ('{utc_field}'), cannot align with start_utc",
+                                     field=utc_field)
+        t_rel = t + utc_offset - as_unix_time(start_utc)
+    else:
+        t_rel = t - t[0]
+    return Trajectory(t=t_rel, source=src, **cols)

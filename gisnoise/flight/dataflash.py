@@ -1,0 +1,192 @@
+"""ArduPilot DataFlash flight logs (``.bin``, through pymavlink) as trajectories.
+
+Position from ``POS`` when logged, else ``GPS`` (3D fixes only); attitude from
+``ATT``; power from ``BAT`` (one battery per ``Instance``) or ``CURR`` (+ ``CUR2``).
+Old logs store ``CURR`` voltage and current as integer hundredths of a volt and
+ampere; they are recognised by the integer format character of the field and
+scaled, newer float fields are taken as V and A.  The GPS clock is the GPS week and
+milliseconds minus the leap seconds.  ArduPilot logs heights above mean sea level
+only, and no VTOL state: the phase follows
+:func:`~gisnoise.flight.phases.phase_by_speed`.  See :mod:`gisnoise.flight.logs` for
+the time base.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
+from gisnoise.flight._logkernels import _covering, _finish, _phase, _time_base
+from gisnoise.flight.clock import gps_to_unix
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo import wrap_angle
+
+__all__ = ["read_dataflash"]
+
+_INTEGER_FORMATS = set("bBhHiIqQ")
+
+
+def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undulation_m: float | None = None,
+                   rate_hz: float | None = None) -> Trajectory:
+    """Read an ArduPilot DataFlash ``.bin`` log as a trajectory (see the module docstring).
+
+    ArduPilot logs heights above mean sea level only, so ``geoid_undulation_m``
+    (ellipsoidal minus orthometric height at the site, m) is required.
+    """
+    try:
+        from pymavlink import DFReader
+    except ImportError:  # pragma: no cover - optional extra
+        raise InputError("reading ArduPilot logs needs pymavlink (pip install 'gisnoise[logs]')",
+                         field="path") from None
+    src = str(path)
+    if not Path(src).is_file():
+        raise TrajectoryError(f"{src}: no such file", field="path")
+    try:
+        reader = DFReader.DFReader_binary(src, zero_time_base=True)
+    except Exception as exc:
+        raise TrajectoryError(f"{src}: not a readable DataFlash log ({exc})", field="path") from None
+    wanted = ["GPS", "POS", "ATT", "BAT", "CURR", "CUR2", "RPM", "ARSP"]
+    rows: dict[str, list[tuple[Any, ...]]] = {k: [] for k in wanted}
+    fmts: dict[str, tuple[str, list[str]]] = {}
+    try:
+        while True:
+            try:
+                m = reader.recv_match(type=wanted)
+            except Exception as exc:
+                raise TrajectoryError(f"{src}: corrupt DataFlash log ({exc})", field="path") from None
+            if m is None:
+                break
+            name = m.get_type()
+            if name not in fmts:
+                fmts[name] = (m.fmt.format, list(m.fmt.columns))
+            rows[name].append(tuple(getattr(m, c) for c in m.fmt.columns))
+    finally:
+        reader.close()
+
+    def table(name: str) -> dict[str, np.ndarray] | None:
+        if not rows.get(name):
+            return None
+        cols = fmts[name][1]
+        arr = list(zip(*rows[name], strict=True))
+        out = {}
+        for c, v in zip(cols, arr, strict=True):
+            try:
+                out[c] = np.asarray(v, dtype=float)
+            except (TypeError, ValueError):
+                continue
+        return out
+
+    # position
+    gps = table("GPS")
+    utc_offset = _ardupilot_utc_offset(gps) if gps is not None else None
+    pos = table("POS")
+    if pos is not None:
+        tb = _ardupilot_boot_time("POS", pos)
+        lat, lon, h_msl = pos["Lat"], pos["Lng"], pos["Alt"]
+        pos_name = "POS"
+    elif gps is not None:
+        ok = gps["Status"] >= 3
+        tb = _ardupilot_boot_time("GPS", gps)[ok]
+        lat, lon, h_msl = gps["Lat"][ok], gps["Lng"][ok], gps["Alt"][ok]
+        pos_name = "GPS"
+    else:
+        raise MissingColumnError(f"{src}: message 'GPS' missing (no position)", field="GPS")
+    if len(tb) < 2:
+        raise TrajectoryError(f"{src}: message '{pos_name}' has fewer than 2 samples with a 3D fix",
+                              field=pos_name)
+    keep = np.concatenate([[True], np.diff(tb) > 0])  # duplicated stamps
+    tb, lat, lon, h_msl = tb[keep], lat[keep], lon[keep], h_msl[keep]
+    if geoid_undulation_m is None:
+        raise MissingColumnError(f"{src}: message '{pos_name}' gives heights above mean sea level only; "
+                                 "give geoid_undulation_m", field="geoid_undulation_m")
+    h = h_msl + float(geoid_undulation_m)
+
+    att = table("ATT")
+    if att is None:
+        raise MissingColumnError(f"{src}: message 'ATT' missing (no attitude)", field="ATT")
+    t_att = _ardupilot_boot_time("ATT", att)
+
+    batteries = _ardupilot_batteries(src, table, fmts)
+    spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
+    t = _time_base(src, tb, spans, rate_hz)
+    lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
+    roll, pitch, yaw = (_interp_deg(t, t_att, att[k]) for k in ("Roll", "Pitch", "Yaw"))
+    power = np.zeros_like(t)
+    for tt, pw in batteries:
+        power += np.interp(t, tt, pw)
+    cols: dict[str, Any] = {"lat": lat_i, "lon": lon_i, "h": h_i, "roll": roll, "pitch": pitch, "yaw": yaw,
+                            "power_w": power}
+    arsp = table("ARSP")
+    if arsp is not None and "Airspeed" in arsp:
+        cols["airspeed_m_s"] = _covering(t, _ardupilot_boot_time("ARSP", arsp), arsp["Airspeed"], "ARSP")
+    rpm = table("RPM")
+    if rpm is not None and "rpm1" in rpm:
+        cols["rpm"] = _covering(t, _ardupilot_boot_time("RPM", rpm), rpm["rpm1"], "RPM")
+    cols = {k: v for k, v in cols.items() if v is not None}
+    cols["phase"] = _phase(t, lat_i, lon_i, h_i, None)
+    return _finish(src, t, cols, start_utc, utc_offset, "GPS.Week")
+
+
+def _ardupilot_boot_time(name: str, tab: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Boot time, s: ``TimeUS``; old logs: ``TimeMS`` (``T`` for GPS, whose TimeMS is GPS time)."""
+    if "TimeUS" in tab:
+        return tab["TimeUS"] / 1e6
+    if name == "GPS" and "T" in tab:
+        return tab["T"] / 1e3
+    return tab["TimeMS"] / 1e3
+
+
+def _ardupilot_utc_offset(gps: Mapping[str, np.ndarray]) -> float | None:
+    week = gps.get("GWk", gps.get("Week"))
+    ms = gps.get("GMS", gps.get("TimeMS") if "TimeUS" not in gps else None)
+    if week is None or ms is None:
+        return None
+    ok = (gps["Status"] >= 3) & (week > 0)
+    if not ok.any():
+        return None
+    boot = _ardupilot_boot_time("GPS", gps)
+    return float(np.median(gps_to_unix(week[ok], ms[ok]) - boot[ok]))
+
+
+def _ardupilot_batteries(src: str, table: Callable[[str], dict[str, np.ndarray] | None],
+                         fmts: Mapping[str, tuple[str, list[str]]]) -> list[tuple[np.ndarray, np.ndarray]]:
+    out = []
+    bat = table("BAT")
+    if bat is not None:
+        t = _ardupilot_boot_time("BAT", bat)
+        inst = bat.get("Instance", np.zeros(len(t)))
+        for i in np.unique(inst):
+            m = inst == i
+            v, c = _scaled(fmts["BAT"], "Volt", bat), _scaled(fmts["BAT"], "Curr", bat)
+            out.append((t[m], v[m] * c[m]))
+        return out
+    for name in ("CURR", "CUR2"):
+        cur = table(name)
+        if cur is None:
+            continue
+        if "Volt" not in cur or "Curr" not in cur:
+            raise MissingColumnError(f"{src}: message '{name}' lacks field 'Volt' or 'Curr'", field=name)
+        t = _ardupilot_boot_time(name, cur)
+        out.append((t, _scaled(fmts[name], "Volt", cur) * _scaled(fmts[name], "Curr", cur)))
+    if not out:
+        raise MissingColumnError(f"{src}: message 'BAT' or 'CURR' missing (no electric power)", field="BAT")
+    return out
+
+
+def _scaled(fmt: tuple[str, list[str]], field: str, tab: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Field in SI units: integer-typed voltage/current fields hold hundredths (old CURR)."""
+    fchars, cols = fmt
+    ch = fchars[cols.index(field)]
+    v = tab[field]
+    return v / 100.0 if ch in _INTEGER_FORMATS else v
+
+
+def _interp_deg(t: np.ndarray, ts: np.ndarray, deg: np.ndarray) -> np.ndarray:
+    """Angles (deg) interpolated on the circle, wrapped into (-180, 180]."""
+    r = np.radians(deg)
+    return np.degrees(wrap_angle(np.arctan2(np.interp(t, ts, np.sin(r)), np.interp(t, ts, np.cos(r)))))

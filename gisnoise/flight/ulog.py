@@ -1,0 +1,263 @@
+"""PX4 ULog flight logs (through pyulog) as trajectories.
+
+Position from ``vehicle_global_position`` when logged, else from
+``vehicle_gps_position`` / ``sensor_gps`` (3D fixes only); attitude from the
+``vehicle_attitude`` quaternion (Hamilton, body FRD -> NED) as Z-Y-X Euler angles;
+electric power as the sum over ``battery_status`` instances of voltage x current;
+optional ``rpm`` (``rpm`` or ``esc_status``) and airspeed (``airspeed_validated`` or
+``airspeed``).  Heights are ellipsoidal (``alt_ellipsoid``) where logged.  The GPS
+clock is ``time_utc_usec``.  A VTOL's state (``vtol_vehicle_status``, else
+``vehicle_status``) gives ``horizontal`` in fixed-wing mode and ``transition`` while
+transitioning; multicopter flight follows :func:`~gisnoise.flight.phases.phase_by_speed`.
+See :mod:`gisnoise.flight.logs` for the time base.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
+from gisnoise.flight._logkernels import _covering, _finish, _phase, _time_base
+from gisnoise.flight.trajectory import Trajectory
+from gisnoise.geo import wrap_deg
+
+__all__ = ["read_ulog", "quaternion_to_euler"]
+
+_ULOG_TOPICS = ("vehicle_global_position", "vehicle_gps_position", "sensor_gps", "vehicle_attitude",
+                "battery_status", "vtol_vehicle_status", "vehicle_status", "airspeed_validated", "airspeed",
+                "rpm", "esc_status")
+
+
+def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undulation_m: float | None = None,
+              rate_hz: float | None = None) -> Trajectory:
+    """Read a PX4 ULog as a trajectory (see the module docstring for the topics used).
+
+    Parameters
+    ----------
+    path : path-like
+        ``.ulg`` file.
+    start_utc : datetime, str or float, optional
+        Instant of ``t = 0``; needs GPS UTC time in the log.
+    geoid_undulation_m : float, optional
+        Used only when no ellipsoidal height is logged, m.
+    rate_hz : float, optional
+        Uniform resampling rate, Hz.
+    """
+    try:
+        from pyulog import ULog
+    except ImportError:  # pragma: no cover - optional extra
+        raise InputError("reading PX4 ULog needs pyulog (pip install 'gisnoise[logs]')", field="path") from None
+    src = str(path)
+    try:
+        ulog = ULog(src, list(_ULOG_TOPICS))
+    except FileNotFoundError:
+        raise TrajectoryError(f"{src}: no such file", field="path") from None
+    except Exception as exc:  # pyulog raises bare exceptions on corrupt files
+        raise TrajectoryError(f"{src}: not a readable ULog ({exc})", field="path") from None
+    topics: dict[str, list[dict[str, np.ndarray]]] = {}
+    for d in ulog.data_list:
+        topics.setdefault(d.name, []).append(d.data)
+
+    def first(*names: str) -> tuple[str, dict[str, np.ndarray]] | None:
+        for n in names:
+            if n in topics:
+                return n, topics[n][0]
+        return None
+
+    # position
+    gps = first("vehicle_gps_position", "sensor_gps")
+    gps_cols = _px4_gps_columns(*gps) if gps else None
+    glob = first("vehicle_global_position")
+    if glob is not None:
+        g = glob[1]
+        tb = g["timestamp"] / 1e6
+        lat, lon = g["lat"].astype(float), g["lon"].astype(float)
+        if "alt_ellipsoid" in g:
+            h = g["alt_ellipsoid"].astype(float)
+        else:
+            n_und = _undulation(src, gps_cols, geoid_undulation_m, "vehicle_global_position.alt_ellipsoid")
+            h = g["alt"].astype(float) + n_und
+        pos_name = "vehicle_global_position"
+    elif gps_cols is not None:
+        tb, lat, lon, h_ell, h_msl = (gps_cols[k] for k in ("t", "lat", "lon", "h_ell", "h_msl"))
+        h = h_ell if h_ell is not None else h_msl + _undulation(src, None, geoid_undulation_m,
+                                                               f"{gps[0]}.alt_ellipsoid")  # type: ignore[index]
+        pos_name = gps[0]  # type: ignore[index]
+    else:
+        raise MissingColumnError(f"{src}: topic 'vehicle_global_position' or 'vehicle_gps_position' missing "
+                                 "(no position)", field="vehicle_global_position")
+    if len(tb) < 2:
+        raise TrajectoryError(f"{src}: topic '{pos_name}' has fewer than 2 valid samples", field=pos_name)
+
+    # attitude
+    att = first("vehicle_attitude")
+    if att is None:
+        raise MissingColumnError(f"{src}: topic 'vehicle_attitude' missing (no attitude)", field="vehicle_attitude")
+    a = att[1]
+    t_att = a["timestamp"] / 1e6
+    q = np.stack([a[f"q[{i}]"] for i in range(4)], axis=-1).astype(float)
+
+    # power: sum over battery instances of V * I
+    if "battery_status" not in topics:
+        raise MissingColumnError(f"{src}: topic 'battery_status' missing (no electric power)", field="battery_status")
+    batteries = []
+    for b in topics["battery_status"]:
+        if "connected" in b and not np.any(b["connected"]):
+            continue
+        batteries.append((b["timestamp"] / 1e6, b["voltage_v"].astype(float) * b["current_a"].astype(float)))
+    if not batteries:
+        raise MissingColumnError(f"{src}: topic 'battery_status' has no connected battery", field="battery_status")
+
+    spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
+    t = _time_base(src, tb, spans, rate_hz)
+    lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
+    roll, pitch, yaw = quaternion_to_euler(_interp_quaternion(t, t_att, q))
+    power = np.zeros_like(t)
+    for tt, pw in batteries:
+        power += np.interp(t, tt, pw)
+
+    cols: dict[str, Any] = {"lat": lat_i, "lon": lon_i, "h": h_i, "roll": roll, "pitch": pitch, "yaw": yaw,
+                            "power_w": power}
+    # optional columns, when the topic covers the whole span
+    for name in ("airspeed_validated", "airspeed"):
+        if name in topics and "true_airspeed_m_s" in topics[name][0]:
+            d = topics[name][0]
+            cols["airspeed_m_s"] = _covering(t, d["timestamp"] / 1e6, d["true_airspeed_m_s"], name)
+            if cols["airspeed_m_s"] is not None:
+                break
+    rpm = _px4_rpm(topics)
+    if rpm is not None:
+        cols["rpm"] = _covering(t, rpm[0], rpm[1], "rpm")
+    cols = {k: v for k, v in cols.items() if v is not None}
+
+    vtol = _px4_vtol_state(topics, t)
+    cols["phase"] = _phase(t, lat_i, lon_i, h_i, vtol)
+
+    utc_offset = None
+    if gps_cols is not None and gps_cols["utc_offset"] is not None:
+        utc_offset = gps_cols["utc_offset"]
+    return _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec")
+
+
+def quaternion_to_euler(q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Z-Y-X Euler angles (roll, pitch, yaw), deg, of Hamilton quaternions ``(w, x, y, z)``.
+
+    The quaternion rotates body (FRD) vectors into NED, as PX4 logs it.  Yaw is
+    wrapped into (-180, 180].
+
+    Parameters
+    ----------
+    q : array_like, shape (..., 4)
+        Quaternions ``w, x, y, z``; normalised here.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> h = np.radians(30.0) / 2
+    >>> r, p, y = quaternion_to_euler([np.cos(h), 0.0, 0.0, np.sin(h)])  # 30 deg right turn
+    >>> round(float(r), 9), round(float(p), 9), round(float(y), 9)
+    (0.0, 0.0, 30.0)
+    """
+    q = np.asarray(q, dtype=float)
+    if q.shape[-1] != 4:
+        raise InputError(f"quaternion must have 4 components, got shape {q.shape}", field="q")
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2.0 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return np.degrees(roll), np.degrees(pitch), wrap_deg(np.degrees(yaw))
+
+
+def _px4_gps_columns(name: str, g: Mapping[str, np.ndarray]) -> dict[str, Any]:
+    if "latitude_deg" in g:
+        lat, lon = g["latitude_deg"].astype(float), g["longitude_deg"].astype(float)
+        h_msl = g["altitude_msl_m"].astype(float) if "altitude_msl_m" in g else None
+        h_ell = g["altitude_ellipsoid_m"].astype(float) if "altitude_ellipsoid_m" in g else None
+    else:
+        lat, lon = g["lat"] / 1e7, g["lon"] / 1e7
+        h_msl = g["alt"] / 1e3 if "alt" in g else None
+        h_ell = g["alt_ellipsoid"] / 1e3 if "alt_ellipsoid" in g else None
+    ok = g["fix_type"] >= 3 if "fix_type" in g else np.ones(len(lat), dtype=bool)
+    ts = g["timestamp"].astype(float)
+    utc_offset = None
+    if "time_utc_usec" in g:
+        has = ok & (g["time_utc_usec"] > 0)
+        if has.any():
+            utc_offset = float(np.median(g["time_utc_usec"][has].astype(float) - ts[has])) / 1e6
+    sel = (lambda v: None if v is None else v[ok])  # noqa: E731
+    return {"t": ts[ok] / 1e6, "lat": lat[ok], "lon": lon[ok], "h_ell": sel(h_ell), "h_msl": sel(h_msl),
+            "utc_offset": utc_offset}
+
+
+def _undulation(src: str, gps_cols: Mapping[str, Any] | None, given: float | None, what: str) -> float:
+    if given is not None:
+        return float(given)
+    if gps_cols is not None and gps_cols["h_ell"] is not None and gps_cols["h_msl"] is not None \
+            and len(gps_cols["h_ell"]):
+        return float(np.median(gps_cols["h_ell"] - gps_cols["h_msl"]))
+    raise MissingColumnError(f"{src}: '{what}' missing (only heights above mean sea level); "
+                             "give geoid_undulation_m", field="geoid_undulation_m")
+
+
+def _px4_rpm(topics: Mapping[str, list[dict[str, np.ndarray]]]) -> tuple[np.ndarray, np.ndarray] | None:
+    if "rpm" in topics and "indicated_frequency_rpm" in topics["rpm"][0]:
+        r = topics["rpm"][0]
+        return r["timestamp"] / 1e6, r["indicated_frequency_rpm"].astype(float)
+    if "esc_status" in topics:
+        e = topics["esc_status"][0]
+        keys = [k for k in e if k.startswith("esc[") and k.endswith("].esc_rpm")]
+        if keys:
+            n = e["esc_count"].astype(int) if "esc_count" in e else np.full(len(e["timestamp"]), len(keys))
+            vals = np.stack([e[k].astype(float) for k in sorted(keys)], axis=-1)
+            used = np.arange(len(keys))[None, :] < n[:, None]
+            mean = np.where(used, np.abs(vals), 0.0).sum(axis=1) / np.maximum(used.sum(axis=1), 1)
+            return e["timestamp"] / 1e6, mean
+    return None
+
+
+def _px4_vtol_state(topics: Mapping[str, list[dict[str, np.ndarray]]], t: np.ndarray) -> np.ndarray | None:
+    """Per time: 'mc', 'fw', 'transition', or None when the vehicle is not a VTOL."""
+    if "vtol_vehicle_status" in topics:
+        v = topics["vtol_vehicle_status"][0]
+        tv = v["timestamp"] / 1e6
+        if "vehicle_vtol_state" in v:
+            s = v["vehicle_vtol_state"].astype(int)
+            state = np.where(s == 4, "fw", np.where((s == 1) | (s == 2), "transition", "mc"))
+        else:
+            rw = v["vtol_in_rw_mode"].astype(bool)
+            tr = v["vtol_in_trans_mode"].astype(bool)
+            state = np.where(tr, "transition", np.where(rw, "mc", "fw"))
+        return _step(t, tv, state)
+    if "vehicle_status" in topics:
+        v = topics["vehicle_status"][0]
+        tv = v["timestamp"] / 1e6
+        if "is_vtol" in v and np.any(v["is_vtol"]):
+            fw = v["vehicle_type"].astype(int) == 2
+            tr = v["in_transition_mode"].astype(bool) if "in_transition_mode" in v else np.zeros(len(tv), bool)
+            state = np.where(tr, "transition", np.where(fw, "fw", "mc"))
+            return _step(t, tv, state)
+        if "vehicle_type" in v and np.all(v["vehicle_type"].astype(int) == 2):
+            return np.full(len(t), "fw")
+    return None
+
+
+def _step(t: np.ndarray, tv: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The last value published at or before each t (the first before the first publication)."""
+    i = np.clip(np.searchsorted(tv, t, side="right") - 1, 0, len(tv) - 1)
+    return np.asarray(values)[i]
+
+
+def _interp_quaternion(t: np.ndarray, tq: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Normalised linear interpolation of quaternions with sign continuity."""
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    s = np.ones(len(q))
+    flips = np.sum(q[1:] * q[:-1], axis=1) < 0
+    s[1:] = np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)
+    q = q * s[:, None]
+    out = np.stack([np.interp(t, tq, q[:, i]) for i in range(4)], axis=-1)
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
