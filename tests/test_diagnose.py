@@ -19,7 +19,7 @@ from click.testing import CliRunner
 
 import gisnoise.simulate.simulate as simulate
 from gisnoise.cli.main import cli
-from gisnoise.diagnose.diagnose import (
+from gisnoise.diagnose.diagnosis import (
     _window_mean_error,
     detect_events,
     diagnose,

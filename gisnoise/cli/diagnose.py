@@ -33,7 +33,7 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     candidate effect with its significance and held-out shrinkage, the verdict)
     and OUT/report.html with the figures.
     """
-    from gisnoise.diagnose.diagnose import _with_mic_heights, run_diagnosis
+    from gisnoise.diagnose.diagnosis import _with_mic_heights, run_diagnosis
     from gisnoise.measure import read_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from gisnoise.diagnose.diagnose import (
+from gisnoise.diagnose.diagnosis import (
     run_diagnosis,
 )
 from gisnoise.diagnose.report import (
