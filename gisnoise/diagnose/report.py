@@ -1,6 +1,6 @@
 """The diagnosis report: figures, the numbers behind them and ``report.html``.
 
-:func:`write_report` turns a :class:`gisnoise.diagnose.diagnosis.Diagnosis` into
+:func:`write_report` turns a :class:`gisnoise.diagnose.Diagnosis` into
 
 ``timeline_<flight>.png``
     Residual of the card against emission time, one axis per microphone, flight
