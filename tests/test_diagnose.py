@@ -19,15 +19,19 @@ from click.testing import CliRunner
 
 from gisnoise import simulate
 from gisnoise.cli.main import cli
-from gisnoise.diagnose.diagnose import (
-    _window_mean_error,
-    detect_events,
+from gisnoise.diagnose import (
+    DIAGNOSIS_FILE,
+    SCHEMA,
+    Diagnosis,
     diagnose,
     fold_labels,
     localize,
     measurement_noise,
+    residual_events,
     run_diagnosis,
+    write_diagnosis,
 )
+from gisnoise.diagnose._series import _window_mean_error
 from gisnoise.errors import Cancelled, InputError
 from gisnoise.measure import Samples
 from gisnoise.model import cards, level_sum
@@ -132,13 +136,13 @@ def test_added_sound_is_an_event_a_louder_uav_is_not():
     inside = lambda t: (t > 40.0) & (t < 70.0)  # noqa: E731
     # a distant source at 60 dB heard by all: +0.04 dB at the loud microphone, +5.5 and +14.6 dB at the quiet ones
     s, r, nz, lu, bg = three_mics(lambda t, l_uav, b: level_sum(level_sum(l_uav, b), np.where(inside(t), 60.0, -99)))
-    win, found = detect_events(s, r, nz, lu, bg)
+    win, found = residual_events(s, r, nz, lu, bg)
     assert len(found) == 1 and found[0]["source"] == "detector"
     assert found[0]["t0"] == pytest.approx(40.0, abs=1.0) and found[0]["t1"] == pytest.approx(70.0, abs=1.0)
     assert np.all(win[inside(s.t_e) & (s.mic != "m1")] >= 0)
     # the UAV 6 dB louder for the same 30 s: every microphone it dominates rises by the same dB -> no event
     s, r, nz, lu, bg = three_mics(lambda t, l_uav, b: level_sum(l_uav + np.where(inside(t), 6.0, 0.0), b))
-    win, found = detect_events(s, r, nz, lu, bg)
+    win, found = residual_events(s, r, nz, lu, bg)
     assert found == [] and np.all(win < 0)
 
 
@@ -294,3 +298,17 @@ def test_cli_names_a_missing_card(tmp_path):
     run = CliRunner().invoke(cli, ["diagnose", str(tmp_path), "--card", str(tmp_path / "no.json"),
                                    "--out", str(tmp_path / "o")])
     assert run.exit_code == 2 and "no such card file" in run.output
+
+
+def test_one_writer_of_diagnosis_json(tmp_path):
+    """Every face writes diagnosis.json through write_diagnosis: strict JSON, indent 2, the campaign named."""
+    diag = Diagnosis(result={"schema": SCHEMA, "verdict": {"effect": None, "p_value": float("nan")}},
+                     samples=None, arrays={})
+    path = write_diagnosis(diag, tmp_path, campaign="field day")
+    assert path == tmp_path / DIAGNOSIS_FILE
+    expected = {"schema": SCHEMA, "verdict": {"effect": None, "p_value": None}, "campaign": "field day"}
+    assert path.read_text(encoding="utf-8") == json.dumps(expected, indent=2) + "\n"
+    other = write_diagnosis(diag, tmp_path / "other.json", campaign="c")
+    assert other == tmp_path / "other.json" and json.loads(other.read_text())["campaign"] == "c"
+    assert "campaign" not in diag.result
+    assert sorted(p.name for p in tmp_path.iterdir()) == [DIAGNOSIS_FILE, "other.json"]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
@@ -33,13 +32,13 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     candidate effect with its significance and held-out shrinkage, the verdict)
     and OUT/report.html with the figures.
     """
-    from gisnoise.diagnose.diagnose import _with_mic_heights, run_diagnosis
+    from gisnoise.diagnose import run_diagnosis, with_mic_heights, write_diagnosis, write_report
     from gisnoise.measure import read_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     card = load(card_path)
     camp = read_campaign(campaign, absorption=absorption)
-    samples = _with_mic_heights(camp.samples(), campaign)
+    samples = with_mic_heights(camp.samples(), campaign)
     names = list(effects) or None
     n_steps = 3 + (len(names) if names else 8)
     with progress(ctx, "diagnosing", float(n_steps)) as update:
@@ -47,13 +46,8 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
                              progress=lambda done, total, what: update(float(done)))
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / "diagnosis.json"
-    doc = dict(diag.result)
-    doc["campaign"] = str(campaign)
-    path.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    path = write_diagnosis(diag, folder, campaign=str(campaign))
     if not no_report:
-        from gisnoise.diagnose import write_report
-
         with progress(ctx, "writing the report", 1.0) as update:
             write_report(diag, folder, progress=lambda done, total: update(done / max(total, 1)))
     if not quiet:

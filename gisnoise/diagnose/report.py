@@ -1,6 +1,6 @@
 """The diagnosis report: figures, the numbers behind them and ``report.html``.
 
-:func:`write_report` turns a :class:`gisnoise.diagnose.diagnose.Diagnosis` into
+:func:`write_report` turns a :class:`gisnoise.diagnose.Diagnosis` into
 
 ``timeline_<flight>.png``
     Residual of the card against emission time, one axis per microphone, flight
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.diagnose.diagnose import Diagnosis
+from gisnoise.diagnose.diagnosis import Diagnosis
 from gisnoise.errors import InputError
 from gisnoise.model import effects as _effects
 from gisnoise.reporting import dump_json, figure, safe_name, with_gaps, write_view

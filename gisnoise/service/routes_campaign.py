@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import shutil
 import stat
 import tempfile
@@ -13,6 +12,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, File, Form, Request, UploadFile
 from fastapi.concurrency import run_in_threadpool
 
+from gisnoise.jsonio import write_json
 from gisnoise.model import cards as gcards
 from gisnoise.service.deps import WRITE, State, StateDep
 from gisnoise.service.errors import ApiError
@@ -182,7 +182,7 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
     if p.get("report"):
         ctx.progress(0.96, "writing the report")
         summary["report"] = _report("gisnoise.identify.report", result, ctx.output_dir / "report")
-    (ctx.output_dir / "fit.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    write_json(summary, ctx.output_dir / "fit.json", indent=2)
     return summary
 
 
@@ -200,7 +200,7 @@ def _report(module: str, *args: Any, **kw: Any) -> str:
 
 def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
     """Diagnose the stored card against the stored campaign: diagnosis.json (and report.html), as the CLI."""
-    from gisnoise.diagnose import run_diagnosis
+    from gisnoise.diagnose import run_diagnosis, write_diagnosis
 
     card = gcards.load(ctx.input_dir / "card.json")
     ctx.progress(0.0, "reading the campaign")
@@ -210,29 +210,14 @@ def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
 
     diag = run_diagnosis(ctx.input_dir / "campaign", card, progress=progress, cancel=ctx.cancel)
     ctx.check_cancel()
-    doc = dict(diag.result)
-    doc["campaign"] = f"uploaded campaign (job {ctx.job.id})"
-    _strip_server_paths(doc, str(ctx.input_dir))
-    text = json.dumps(doc, indent=2, allow_nan=False, default=_json_default)
-    (ctx.output_dir / "diagnosis.json").write_text(text + "\n", encoding="utf-8")
-    summary = {"card": card.id, "verdict": doc.get("verdict"), "baseline": doc.get("baseline")}
+    _strip_server_paths(diag.result, str(ctx.input_dir))  # the server's folder means nothing to the client
+    write_diagnosis(diag, ctx.output_dir, campaign=f"uploaded campaign (job {ctx.job.id})")
+    summary = {"card": card.id, "verdict": diag.result.get("verdict"), "baseline": diag.result.get("baseline")}
     if ctx.params.get("report", True):
         ctx.progress(0.9, "writing the report")
         summary["report"] = _report("gisnoise.diagnose.report", diag, ctx.output_dir,
                                     progress=lambda d, t: ctx.progress(0.9 + 0.1 * d / max(t, 1), "writing the report"))
     return summary
-
-
-def _json_default(v: Any) -> Any:
-    import numpy as np
-
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, Path):
-        return str(v)
-    raise TypeError(f"not JSON serializable: {type(v).__name__}")
 
 
 def _strip_server_paths(doc: Any, prefix: str) -> None:

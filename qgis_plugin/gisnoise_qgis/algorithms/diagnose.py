@@ -1,8 +1,6 @@
-"""Diagnose a model card against a campaign: ``gisnoise.diagnose.diagnose.diagnose`` in QGIS."""
+"""Diagnose a model card against a campaign: ``gisnoise.diagnose.run_diagnosis`` in QGIS."""
 
 from __future__ import annotations
-
-import json
 
 from qgis.core import (
     QgsCoordinateReferenceSystem,
@@ -102,7 +100,7 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(self.HOLDOUT_SHRINKAGE_PCT, "held-out shrinkage of the verdict (%)"))
 
     def compute(self, parameters, context, feedback):
-        from gisnoise.diagnose import run_diagnosis
+        from gisnoise.diagnose import run_diagnosis, write_diagnosis
         from gisnoise.measure import read_campaign
         from gisnoise.model import cards as gcards
 
@@ -124,11 +122,8 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
 
         feedback.pushInfo(f"diagnosing {card.id} against the campaign {folder}")
         diag = run_diagnosis(folder, card, candidates=candidates, progress=progress, cancel=feedback.isCanceled)
-        result = dict(diag.result)
-        result["campaign"] = folder
-        with open(dest, "w", encoding="utf-8") as fh:
-            json.dump(result, fh, indent=1, allow_nan=False)
-            fh.write("\n")
+        write_diagnosis(diag, dest, campaign=folder)
+        result = diag.result
         verdict = result.get("verdict") or {}
         effect = verdict.get("effect")
         shrink = verdict.get("holdout_shrinkage_pct")

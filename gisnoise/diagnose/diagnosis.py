@@ -1,0 +1,313 @@
+"""The diagnosis of the sim-to-real gap: where the model misses, which effect explains it, how far it shrinks.
+
+Given measured samples and a model card, :func:`diagnose` answers three questions
+(paper sections 5.3.1-5.3.3, done there by hand):
+
+Localization (:mod:`gisnoise.diagnose.localization`)
+    The card's residual (measured minus model, dB) is smoothed per microphone
+    and flight over a window of ``window_s`` seconds; where the smoothed residual
+    is larger than the measurement noise explains (``z`` standard errors of a
+    window mean, estimated from differences of adjacent window means so that
+    coloured noise counts with its correlation), the samples are flagged and
+    joined into segments.  The measurement noise per microphone is the robust
+    spread of first differences of the residual (``1.4826 MAD / sqrt 2``): fast
+    scatter is noise, slow structure is model error.  Each segment carries its
+    regime (turn, straight, climb, sink, hover, transition), range (near, far)
+    and microphone; statistics are given by regime, microphone and geometry bins.
+
+Attribution (:mod:`gisnoise.diagnose.candidates`, :mod:`gisnoise.diagnose.verdict`)
+    Every candidate of the effect library (:mod:`gisnoise.model.effects`) that the
+    data can test is fitted as an extension of the card's ansatz with the
+    output-error fitter (:func:`gisnoise.identify.fit_arrays`) on all data and in a
+    two-fold cross-validation (folds are whole flights, or alternating time
+    blocks when there is one flight).  A candidate is *significant* when the
+    Wald statistic of its extension parameters, with the covariance corrected
+    for residual autocorrelation (Morelli & Klein), rejects "no effect" at
+    ``alpha`` divided by the number of candidates tested (Bonferroni).
+    Candidates are ranked by their held-out improvement of the mean squared
+    residual; the verdict names the best significant candidate whose held-out
+    improvement reaches :data:`~gisnoise.diagnose.verdict.MIN_IMPROVEMENT_DB2` and is
+    significant in a paired test over time blocks, with physical evidence
+    (:mod:`gisnoise.diagnose.evidence`: turn excess, band slopes, comb pattern,
+    fore/aft asymmetry, ...) breaking near ties.  Otherwise the verdict is null.
+    Transient sound from other sources is found in the residual first
+    (:mod:`gisnoise.diagnose.events`) and tested as the ``background_event`` candidate.
+
+Shrinkage
+    Baseline and extended RMS residual on the fitted data and on held-out data
+    (out-of-fold predictions: every sample is predicted by a model not fitted to
+    it), overall and per segment; the base parameters each effect had biased are
+    named (shift larger than ``bias_z`` corrected standard deviations).
+
+The output is a JSON-able dict in the shape of the product specification,
+section 6 (``baseline``, ``segments``, ``effects``, ``verdict``) with more detail;
+:func:`write_diagnosis` writes it as ``diagnosis.json``, the one format of every face.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gisnoise.diagnose.candidates import CancelFn, _Context, _fit, _fit_candidates, _predict, fold_labels
+from gisnoise.diagnose.events import residual_events
+from gisnoise.diagnose.localization import _statistics, localize, measurement_noise, sample_regimes
+from gisnoise.diagnose.samples import load_samples
+from gisnoise.diagnose.verdict import MIN_IMPROVEMENT_DB2, _judge, _rms
+from gisnoise.errors import Cancelled, FitError, InputError
+from gisnoise.jsonio import to_jsonable, write_json
+from gisnoise.measure import Samples, series_ids
+from gisnoise.model import ModelCard
+from gisnoise.model import effects as _effects
+
+__all__ = ["SCHEMA", "DIAGNOSIS_FILE", "Diagnosis", "diagnose", "run_diagnosis", "write_diagnosis"]
+
+SCHEMA = "gisnoise/diagnosis/1"
+"""Schema name of the diagnosis document."""
+DIAGNOSIS_FILE = "diagnosis.json"
+"""File name of the diagnosis document in an output folder."""
+ProgressFn = Callable[[int, int, str], None]
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`run_diagnosis`: the JSON document and the per-sample arrays behind it.
+
+    Attributes
+    ----------
+    result : dict
+        The diagnosis document (see :func:`diagnose`).
+    samples : Samples
+        The rows diagnosed.
+    arrays : dict
+        Per-sample arrays: ``resid_card``, ``resid_baseline`` (in-sample refit),
+        ``oof_baseline`` and ``oof/<effect>`` (held-out residuals), ``flagged``,
+        ``regime``, ``fold``, ``event_window``.
+    """
+
+    result: dict[str, Any]
+    samples: Samples
+    arrays: dict[str, np.ndarray]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The diagnosis document."""
+        return self.result
+
+
+def diagnose(campaign_or_samples: Any, card: ModelCard, *, progress: ProgressFn | None = None,
+             cancel: CancelFn | None = None, **kw: Any) -> dict[str, Any]:
+    """Where the card misses the measurements, which effect explains it, how far the gap shrinks.
+
+    Parameters
+    ----------
+    campaign_or_samples : path, Campaign or Samples
+        The measurements (a campaign folder is read with :func:`gisnoise.measure.campaign.read_campaign`).
+    card : ModelCard
+        The model card to diagnose; its ansatz is the base of every extension and
+        only samples of the phases it serves are used.
+    progress : callable, optional
+        ``progress(done, total, what)`` after each step.
+    cancel : callable, optional
+        Polled between steps and inside fits; True raises :class:`gisnoise.errors.Cancelled`.
+    **kw
+        See :func:`run_diagnosis`.
+
+    Returns
+    -------
+    dict
+        ``{"schema", "card", "data", "noise_std_db", "baseline": {"rms_db", ...},
+        "segments": [...], "statistics": {...}, "event_windows": [...],
+        "effects": [{"name", "rank", "testable", "significant", "rms_db_fit",
+        "rms_db_holdout", "shrinkage_pct", ...}], "verdict": {"effect", "holdout_shrinkage_pct", ...}}``
+    """
+    return run_diagnosis(campaign_or_samples, card, progress=progress, cancel=cancel, **kw).result
+
+
+def run_diagnosis(
+    campaign_or_samples: Any,
+    card: ModelCard,
+    *,
+    candidates: Sequence[str] | None = None,
+    alpha: float = 0.01,
+    window_s: float = 2.0,
+    z: float = 4.0,
+    block_s: float = 30.0,
+    bias_z: float = 3.0,
+    include_events: bool = True,
+    min_improvement_db2: float = MIN_IMPROVEMENT_DB2,
+    progress: ProgressFn | None = None,
+    cancel: CancelFn | None = None,
+) -> Diagnosis:
+    """The diagnosis with its per-sample arrays (for reports); see :func:`diagnose`.
+
+    Parameters
+    ----------
+    candidates : sequence of str, optional
+        Effect names to test (default: the whole library).
+    alpha : float
+        Family-wise significance level of the extension tests (Bonferroni over candidates).
+    window_s, z : float
+        Localization window (s) and threshold (standard errors).
+    block_s : float
+        Time block of the cross-validation with one flight and of the paired held-out test, s.
+    bias_z : float
+        A base parameter counts as biased by an effect when the extension moves it
+        by more than this many corrected standard deviations.
+    include_events : bool
+        Diagnose samples the campaign reader masked as ``event`` too (they are
+        part of the gap and the evidence for ``background_event``).
+    min_improvement_db2 : float
+        Smallest held-out improvement of the mean squared residual a verdict needs, dB^2.
+    """
+    if not isinstance(card, ModelCard):
+        raise InputError(f"card must be a ModelCard, got {type(card).__name__}", field="card")
+    if not (0.0 < alpha < 1.0):
+        raise InputError(f"alpha must be in (0, 1), got {alpha!r}", field="alpha")
+    for name, v in (("window_s", window_s), ("z", z), ("block_s", block_s), ("bias_z", bias_z),
+                    ("min_improvement_db2", min_improvement_db2)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise InputError(f"{name} must be a positive number, got {v!r}", field=name)
+    names = list(_effects.effect_names() if candidates is None else candidates)
+    for nme in names:
+        _effects.get_effect(nme)
+
+    def check_cancel() -> None:
+        if cancel is not None and cancel():
+            raise Cancelled("diagnosis cancelled", field="cancel")
+
+    total = 3 + len(names)
+    step = 0
+
+    def tick(what: str) -> None:
+        nonlocal step
+        step += 1
+        if progress is not None:
+            progress(step, total, what)
+        check_cancel()
+
+    all_s = load_samples(campaign_or_samples)
+    use = np.isin(all_s.phase.astype(str), list(card.served_phases))
+    keep = all_s.valid | (all_s.mask_reason.astype(str) == "event") if include_events else all_s.valid.copy()
+    s = all_s.select(use & keep)
+    if len(s) < 20:
+        have = sorted(set(all_s.phase[all_s.valid].astype(str).tolist()))
+        raise InputError(f"diagnosis needs usable samples of the card's phase(s) {', '.join(card.served_phases)}; "
+                         f"found {len(s)} (phases with usable samples: {', '.join(have) or 'none'})", field="phase")
+    n = len(s)
+    ref = float(card.reference_power_w)
+    x: dict[str, Any] = dict(s.inputs(ref))
+    x["mic"] = s.mic.astype(str)
+    x["flight"] = s.flight.astype(str)
+    base = card.model
+    level = np.asarray(s.level, dtype=float)
+    rows_all = np.arange(n)
+
+    # ---------------------------------------------------------------- localization on the card's residual
+    pred_card = np.broadcast_to(base.level(card.p, x, d_ref=card.reference_distance_m), (n,))
+    resid_card = level - pred_card
+    sid = series_ids(s.mic, s.flight)
+    noise = measurement_noise(resid_card, sid, s.t_e, s.mic.astype(str))
+    reg = sample_regimes(s)
+    segments, flagged = localize(s, resid_card, noise, window_s=window_s, z=z, regimes=reg)
+    statistics = _statistics(s, resid_card, flagged, reg)
+    tick("localization")
+
+    # ---------------------------------------------------------------- baseline refit, folds
+    try:
+        base_fit = _fit(level, x, base, s, rows_all, p0=card.p, cancel=cancel)
+    except FitError as exc:
+        raise FitError(f"diagnosis: the card's ansatz {base.name!r} cannot be refitted to these data: {exc}",
+                       field="card") from None
+    resid_base = base_fit.residuals
+    fold, block, how = fold_labels(s, block_s=block_s)
+    if len(np.unique(fold)) < 2:
+        raise InputError(f"diagnosis needs data in two cross-validation folds; the data span less than "
+                         f"2 x block_s = {2 * block_s:g} s", field="block_s")
+    oof_base = np.empty(n)
+    for f in (0, 1):
+        tr, te = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+        r = _fit(level, x, base, s, tr, p0=base_fit.p, cancel=cancel)
+        oof_base[te] = level[te] - _predict(base, r.p, x, te, n)
+    tick("baseline")
+
+    # ---------------------------------------------------------------- events
+    l_uav_card = np.broadcast_to(base.level_uav(card.p, x, d_ref=card.reference_distance_m), (n,))
+    bg_rows = np.full(n, card.background_db if card.background_db is not None else -np.inf)
+    ev_win, ev_list = residual_events(s, resid_card, noise, l_uav_card, bg_rows)
+    x_ev = dict(x, event_window=ev_win)
+
+    bg = card.background_db
+    ctx = _Context(s=s, x=x, regimes=reg, resid_base=resid_base, base_model=base, p_base=base_fit.p,
+                   background_db=bg, event_windows=ev_list)
+
+    # ---------------------------------------------------------------- candidates
+    cands = _fit_candidates(names, ctx, level, x, x_ev, base_fit, oof_base, fold, cancel=cancel, bias_z=bias_z,
+                            tick=tick)
+
+    # ---------------------------------------------------------------- ranking, verdict, shrinkage per segment
+    verdict, effects_out, level_alpha = _judge(cands, ctx, segments, oof_base, block, noise, base_fit, alpha=alpha,
+                                               min_improvement_db2=min_improvement_db2)
+
+    result = {
+        "schema": SCHEMA,
+        "card": {"id": card.id, "ansatz": card.ansatz, "phase": card.phase, "phases": list(card.served_phases)},
+        "data": {"n_samples": n, "flights": sorted(set(s.flight.astype(str).tolist())),
+                 "microphones": sorted(set(s.mic.astype(str).tolist())),
+                 "n_reader_events": int(np.sum(s.mask_reason.astype(str) == "event")),
+                 "holdout": how, "block_s": block_s, "window_s": window_s},
+        "noise_std_db": noise,
+        "baseline": {"rms_db": base_fit.rms_db, "rms_db_card": _rms(resid_card),
+                     "rms_db_fit": base_fit.rms_db, "rms_db_holdout": _rms(oof_base),
+                     "noise_std_db_fit": dict(base_fit.noise_std), "parameters": base_fit.params,
+                     "std_corrected": base_fit.std_corrected, "aic": base_fit.aic, "bic": base_fit.bic},
+        "segments": segments,
+        "statistics": statistics,
+        "event_windows": ev_list,
+        "effects": effects_out,
+        "alpha": alpha,
+        "alpha_per_test": level_alpha,
+        "verdict": verdict,
+    }
+    arrays = {"resid_card": resid_card, "resid_baseline": resid_base, "oof_baseline": oof_base,
+              "flagged": flagged, "regime": reg, "fold": fold, "event_window": ev_win, "fitted_card": pred_card}
+    for c in cands:
+        if c.oof is not None and c.fit is not None:
+            arrays[f"oof/{c.name}"] = c.oof
+            arrays[f"fit/{c.name}"] = c.fit.residuals
+    tick("verdict")
+    return Diagnosis(result=to_jsonable(result), samples=s, arrays=arrays)
+
+
+def write_diagnosis(diagnosis: Diagnosis, path: str | os.PathLike[str], *, campaign: str) -> Path:
+    """Write the diagnosis document, the one format of ``diagnosis.json`` for every face.
+
+    Strict JSON (non-finite numbers as null) with an indent of 2, written to a
+    temporary file and moved into place, so that a reader never sees half a file.
+
+    Parameters
+    ----------
+    diagnosis : Diagnosis
+        The result of :func:`run_diagnosis`.
+    path : path
+        The file to write, or an existing folder to write :data:`DIAGNOSIS_FILE` in.
+    campaign : str
+        What the document names as its campaign (``"campaign"``): the folder as the
+        user gave it, or a description where a path would mean nothing to the reader.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
+    target = Path(path)
+    if target.is_dir():
+        target = target / DIAGNOSIS_FILE
+    doc = dict(diagnosis.result)
+    doc["campaign"] = campaign
+    return write_json(doc, target, indent=2)
