@@ -16,6 +16,7 @@ from affine import Affine
 from pyproj import CRS
 
 from gisnoise.errors import CRSError, InputError
+from gisnoise.geo.grid import apply_affine
 
 __all__ = ["Dem", "read_dem", "sample_dem"]
 
@@ -78,8 +79,6 @@ def sample_dem(dem: Dem, lon: Any, lat: Any) -> np.ndarray:
     """
     from pyproj import Transformer
     from scipy.ndimage import map_coordinates
-
-    from gisnoise.geo.grid import apply_affine
 
     lon, lat = np.broadcast_arrays(np.asarray(lon, dtype=float), np.asarray(lat, dtype=float))
     tr = Transformer.from_crs(CRS.from_epsg(4326), dem.crs, always_xy=True)

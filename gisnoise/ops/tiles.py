@@ -62,7 +62,6 @@ def tile_windows(shape: tuple[int, int], seg: int, tile_cells: int = DEFAULT_TIL
     return out
 
 
-
 @dataclass(frozen=True, eq=False)
 class Plan:
     """What every tile needs: receivers and the flights' instants in their frame."""
@@ -76,6 +75,11 @@ class Plan:
 
 
 def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
+    """The receivers of ``grid`` and every flight with a count in their frame, in schedule order.
+
+    Without a DEM or a ground height, flat ground lies at the lowest ground height the
+    routes state, else at the lowest point of the flights.
+    """
     require_numba()
     ground_h = schedule.ground_h_m
     if ground_h is None and schedule.dem is None:
@@ -83,7 +87,7 @@ def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
         if stated:
             ground_h = min(stated)
     rc = receivers_for(grid, [f.trajectory for f in schedule.flights], receiver_height=schedule.receiver_height_m,
-                          dem=schedule.dem, ground_h=ground_h, dem_offset_m=schedule.dem_offset_m)
+                       dem=schedule.dem, ground_h=ground_h, dem_offset_m=schedule.dem_offset_m)
     frame = rc.frame
     flights, counts, ids = [], [], []
     for f in schedule.flights:
@@ -93,7 +97,7 @@ def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
         cards = f.cards if f.cards is not None else schedule.cards
         cards = cards if isinstance(cards, CardSet) else CardSet(cards)
         flights.append(prepare_flight(f.trajectory, cards, frame, substeps=schedule.substeps,
-                                         min_distance_m=schedule.min_distance_m, floor_db=schedule.floor_db))
+                                      min_distance_m=schedule.min_distance_m, floor_db=schedule.floor_db))
         counts.append(dict(f.counts))
         ids.append(f.id)
     if not flights:
