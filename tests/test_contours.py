@@ -11,8 +11,16 @@ from shapely.geometry import LinearRing, shape
 
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
-from gisnoise.geo import LocalFrame, grid_for_trajectory
-from gisnoise.maps import contours_geojson, evaluate_grid, isobands, isolines, parse_levels, write_geojson
+from gisnoise.geo import LocalFrame
+from gisnoise.maps import (
+    contours_geojson,
+    evaluate_grid,
+    grid_for_trajectory,
+    isobands,
+    isolines,
+    parse_levels,
+    write_geojson,
+)
 from gisnoise.model import ModelCard
 
 LAT0, LON0 = 48.137, 11.575  # lat and lon far apart: a swapped order cannot pass

@@ -7,9 +7,9 @@ from affine import Affine
 
 from gisnoise.errors import CardError, InputError, TrajectoryError
 from gisnoise.flight import Trajectory
-from gisnoise.geo import GridSpec, LocalFrame, grid_for_trajectory
-from gisnoise.maps import contour_features
-from gisnoise.maps.evaluate import Z95, CardSet, _levels_chunk, evaluate_grid
+from gisnoise.geo import GridSpec, LocalFrame
+from gisnoise.maps import Z95, CardSet, contour_features, evaluate_grid, grid_for_trajectory
+from gisnoise.maps.reference import _levels_chunk
 from gisnoise.model import ModelCard, level_sum, with_parameters
 
 LAT0, LON0 = 52.27, 10.52

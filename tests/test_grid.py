@@ -10,18 +10,15 @@ from hypothesis import strategies as st
 from gisnoise.errors import CRSError, GridTooLargeError, InvalidGridError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import (
-    NODATA,
     GridSpec,
     apply_affine,
-    grid_for_trajectory,
     parse_crs,
     read_dem,
     resample_dem,
     sample_dem,
     utm_crs,
-    write_geotiff,
 )
-from gisnoise.maps import MapResult
+from gisnoise.maps import NODATA, MapResult, grid_for_trajectory, write_geotiff
 
 
 def track(lon, lat):

@@ -1,4 +1,4 @@
-"""Geodesy and rasters: local ENU frames, receiver grids, GeoTIFF and DEM input/output.
+"""Geodesy and rasters: local ENU frames, receiver grids, DEM input.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from gisnoise.geo.grid import (
     apply_affine,
     check_cell_limit,
     crs_label,
-    grid_for_trajectory,
+    grid_for_points,
     max_cells,
     parse_crs,
     resample_dem,
@@ -26,11 +26,9 @@ from gisnoise.geo.grid import (
     utm_crs,
 )
 from gisnoise.geo.raster import (
-    NODATA,
     Dem,
     read_dem,
     sample_dem,
-    write_geotiff,
 )
 
-__all__ = ['DEFAULT_MAX_CELLS', 'Dem', 'GridSpec', 'LocalFrame', 'NODATA', 'WGS84', 'apply_affine', 'body_vector', 'check_cell_limit', 'crs_label', 'dcm_ned_to_body', 'emission_angles', 'grid_for_trajectory', 'max_cells', 'parse_crs', 'read_dem', 'resample_dem', 'sample_dem', 'transformer', 'utm_crs', 'wrap_angle', 'wrap_deg', 'write_geotiff']
+__all__ = ['DEFAULT_MAX_CELLS', 'Dem', 'GridSpec', 'LocalFrame', 'WGS84', 'apply_affine', 'body_vector', 'check_cell_limit', 'crs_label', 'dcm_ned_to_body', 'emission_angles', 'grid_for_points', 'max_cells', 'parse_crs', 'read_dem', 'resample_dem', 'sample_dem', 'transformer', 'utm_crs', 'wrap_angle', 'wrap_deg']

@@ -5,10 +5,10 @@ A :class:`GridSpec` is a small frozen value object in the manner of rasterio's
 width and height, and the coordinates of its cell centres.  The evaluator places
 one receiver at the centre of every cell, at a height above the ground.
 
-:func:`grid_for_trajectory` chooses the grid of a trajectory: its bounding box plus
-a margin, snapped to multiples of the resolution, in a local UTM zone unless a CRS is
-given.  The number of cells is limited by the environment variable
-``GISNOISE_MAX_CELLS`` (default 25 000 000).
+:func:`grid_for_points` chooses the grid around points (a flight's track, several
+flights): their bounding box plus a margin, snapped to multiples of the resolution, in a
+local UTM zone unless a CRS is given.  The number of cells is limited by the environment
+variable ``GISNOISE_MAX_CELLS`` (default 25 000 000).
 
 Examples
 --------
@@ -37,7 +37,6 @@ from pyproj.exceptions import CRSError as _PyprojCRSError
 from gisnoise.errors import CRSError, GridTooLargeError, InvalidGridError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from gisnoise.flight import Trajectory
     from gisnoise.geo.raster import Dem
 
 __all__ = [
@@ -46,7 +45,7 @@ __all__ = [
     "max_cells",
     "parse_crs",
     "utm_crs",
-    "grid_for_trajectory",
+    "grid_for_points",
     "resample_dem",
     "transformer",
     "crs_label",
@@ -290,20 +289,20 @@ def check_cell_limit(width: int, height: int, *, field: str = "resolution_m") ->
             "(GISNOISE_MAX_CELLS); use a coarser resolution or a smaller margin", field=field)
 
 
-def grid_for_trajectory(traj: Trajectory, resolution_m: float = 10.0, margin_m: float = 500.0,
-                        crs: Any = None) -> GridSpec:
-    """The receiver grid around a trajectory.
+def grid_for_points(lon: Any, lat: Any, resolution_m: float = 10.0, margin_m: float = 500.0,
+                    crs: Any = None) -> GridSpec:
+    """The receiver grid around points.
 
     Parameters
     ----------
-    traj : Trajectory
-        The flight; its horizontal extent sets the grid.
+    lon, lat : array_like
+        WGS84 longitude and latitude of the points, deg; their horizontal extent sets the grid.
     resolution_m : float
         Cell size, m (> 0).
     margin_m : float
-        Distance added on every side of the track's bounding box, m (>= 0).
+        Distance added on every side of the points' bounding box, m (>= 0).
     crs : str or pyproj.CRS, optional
-        Projected CRS in metres; default the WGS84 UTM zone of the track's centre.
+        Projected CRS in metres; default the WGS84 UTM zone of the points' centre.
 
     Returns
     -------
@@ -318,6 +317,12 @@ def grid_for_trajectory(traj: Trajectory, resolution_m: float = 10.0, margin_m: 
         Resolution or margin out of range.
     GridTooLargeError
         More cells than ``GISNOISE_MAX_CELLS`` (field ``resolution_m``).
+
+    Examples
+    --------
+    >>> g = grid_for_points([9.99, 10.0], [53.55, 53.55], 10.0, 100.0)
+    >>> g.crs.to_epsg(), g.resolution
+    (32632, (10.0, 10.0))
     """
     res = _check_positive(resolution_m, "resolution_m")
     try:
@@ -326,8 +331,8 @@ def grid_for_trajectory(traj: Trajectory, resolution_m: float = 10.0, margin_m: 
         raise InvalidGridError(f"margin_m must be a number of metres >= 0, got {margin_m!r}", field="margin_m") from None
     if not math.isfinite(margin) or margin < 0:
         raise InvalidGridError(f"margin_m must be a number of metres >= 0, got {margin_m!r}", field="margin_m")
-    lon = np.asarray(traj.lon, dtype=float)
-    lat = np.asarray(traj.lat, dtype=float)
+    lon = np.asarray(lon, dtype=float)
+    lat = np.asarray(lat, dtype=float)
     if crs is None:
         lon_c = float(np.degrees(np.arctan2(np.mean(np.sin(np.radians(lon))), np.mean(np.cos(np.radians(lon))))))
         out_crs = utm_crs(lon_c, float(np.mean(lat)))

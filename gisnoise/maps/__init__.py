@@ -1,8 +1,11 @@
-"""Maps: the evaluator (NumPy and numba engines), metrics over a grid, contours, plots, the map pipeline.
+"""Maps: the evaluator (NumPy and numba engines), metrics over a grid, contours, rasters, plots, the map pipeline.
 """
 
 from __future__ import annotations
 
+from gisnoise.maps.cardset import (
+    CardSet,
+)
 from gisnoise.maps.contours import (
     contour_features,
     contours_geojson,
@@ -12,13 +15,27 @@ from gisnoise.maps.contours import (
     write_geojson,
 )
 from gisnoise.maps.evaluate import (
-    CardSet,
-    MapResult,
+    ENGINES,
     evaluate_grid,
+    evaluate_grid_fast,
 )
 from gisnoise.maps.fastkernel import (
-    evaluate_grid_fast,
-    segment_cells,
+    WindowResult,
+    require_numba,
+    run_grid,
+    run_window,
+    window_lattice,
+)
+from gisnoise.maps.geotiff import (
+    NODATA,
+    write_geotiff,
+)
+from gisnoise.maps.grids import (
+    grid_for_trajectory,
+)
+from gisnoise.maps.instants import (
+    FlightInstants,
+    prepare_flight,
 )
 from gisnoise.maps.pipeline import (
     make_map,
@@ -27,5 +44,24 @@ from gisnoise.maps.plots import (
     directivity_grid,
     plot_directivity,
 )
+from gisnoise.maps.receivers import (
+    Receivers,
+    receivers_for,
+    segment_cells,
+)
+from gisnoise.maps.reference import (
+    Z95,
+)
+from gisnoise.maps.result import (
+    METRICS,
+    MapResult,
+    band_unit,
+    snapshot_name,
+    threshold_name,
+)
+from gisnoise.maps.threads import (
+    default_threads,
+    map_threads,
+)
 
-__all__ = ['CardSet', 'MapResult', 'contour_features', 'contours_geojson', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'isobands', 'isolines', 'make_map', 'parse_levels', 'plot_directivity', 'segment_cells', 'write_geojson']
+__all__ = ['CardSet', 'ENGINES', 'FlightInstants', 'METRICS', 'MapResult', 'NODATA', 'Receivers', 'WindowResult', 'Z95', 'band_unit', 'contour_features', 'contours_geojson', 'default_threads', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'grid_for_trajectory', 'isobands', 'isolines', 'make_map', 'map_threads', 'parse_levels', 'plot_directivity', 'prepare_flight', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'snapshot_name', 'threshold_name', 'window_lattice', 'write_geojson', 'write_geotiff']

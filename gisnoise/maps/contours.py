@@ -29,7 +29,6 @@ Examples
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -42,9 +41,10 @@ from shapely.geometry.polygon import orient
 
 from gisnoise.errors import InputError
 from gisnoise.geo import WGS84, transformer
+from gisnoise.maps._checks import as_float
 
 if TYPE_CHECKING:  # pragma: no cover
-    from gisnoise.maps.evaluate import MapResult
+    from gisnoise.maps.result import MapResult
 
 __all__ = ["isobands", "isolines", "contour_features", "contours_geojson", "write_geojson", "parse_levels"]
 
@@ -64,21 +64,13 @@ def parse_levels(levels: Any, *, field: str = "levels") -> list[float]:
         parts = [levels]
     else:
         parts = list(levels)
-    out = []
-    for p in parts:
-        try:
-            v = float(p)
-        except (TypeError, ValueError):
-            raise InputError(f"{field}: not a number: {p!r}", field=field) from None
-        if not math.isfinite(v):
-            raise InputError(f"{field}: levels must be finite, got {p!r}", field=field)
-        out.append(v)
+    out = [as_float(p, field) for p in parts]
     if not out:
         raise InputError(f"{field}: give at least one level", field=field)
     return sorted(set(out))
 
 
-def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray):  # type: ignore[no-untyped-def]
+def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
     import contourpy
 
     x = np.asarray(x, dtype=float)

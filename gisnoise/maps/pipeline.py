@@ -3,11 +3,11 @@
 The command line (``gisnoise contour``), the service and the QGIS plugin all call
 :func:`make_map`; it reads the trajectory (flight CSV, GeoJSON LineString with times
 or waypoints: :func:`gisnoise.flight.routes.read_trajectory`), chooses the receiver grid
-(:func:`gisnoise.geo.grid.grid_for_trajectory`), evaluates the metrics
+(:func:`gisnoise.maps.grids.grid_for_trajectory`), evaluates the metrics
 (:func:`gisnoise.maps.evaluate.evaluate_grid`) and writes
 
 ``DIR/levels.tif``
-    one float32 band per metric (:func:`gisnoise.geo.raster.write_geotiff`);
+    one float32 band per metric (:func:`gisnoise.maps.geotiff.write_geotiff`);
 ``DIR/contours.geojson``
     isobands and isolines of the level bands in WGS84 (:mod:`gisnoise.maps.contours`);
 ``DIR/map.png``
@@ -23,9 +23,12 @@ from typing import Any
 
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory, read_route
-from gisnoise.geo import grid_for_trajectory, write_geotiff
+from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.contours import parse_levels, write_geojson
-from gisnoise.maps.evaluate import METRICS, CardSet, MapResult, evaluate_grid
+from gisnoise.maps.evaluate import evaluate_grid
+from gisnoise.maps.geotiff import write_geotiff
+from gisnoise.maps.grids import grid_for_trajectory
+from gisnoise.maps.result import METRICS, MapResult
 from gisnoise.model import ModelCard
 
 __all__ = ["make_map", "DEFAULT_LEVELS"]
@@ -116,7 +119,7 @@ def make_map(
     traj = route.trajectory
     if ground_h is None and dem is None:
         ground_h = route.ground_h_m
-    cardset = cards if isinstance(cards, CardSet) else CardSet(cards)
+    cardset = as_cardset(cards)
     grid = grid_for_trajectory(traj, resolution_m, margin_m, crs)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():

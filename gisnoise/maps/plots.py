@@ -19,7 +19,7 @@ from gisnoise.errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.flight import Trajectory
-    from gisnoise.maps.evaluate import MapResult
+    from gisnoise.maps.result import MapResult
     from gisnoise.model import ModelCard
 
 __all__ = ["require_matplotlib", "plot_map", "directivity_grid", "plot_directivity", "PHASE_COLOURS"]

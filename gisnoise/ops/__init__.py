@@ -4,19 +4,30 @@
 from __future__ import annotations
 
 from gisnoise.ops.operations import (
-    # noqa: E402     Flight,
-    Flight,
-    Schedule,
     evaluate_operations,
-    lden,
-    load_schedule,
-    period_of,
-    schedule_from_dict,
-    tile_windows,
+)
+from gisnoise.ops.output import (
     write_operations,
+)
+from gisnoise.ops.periods import (
+    PENALTY_DB,
+    PERIOD_HOURS,
+    PERIODS,
+    lden,
+    period_of,
 )
 from gisnoise.ops.scale import (
     local_cluster,
 )
+from gisnoise.ops.schedule import (
+    SCHEMA,
+    Flight,
+    Schedule,
+    load_schedule,
+    schedule_from_dict,
+)
+from gisnoise.ops.tiles import (
+    tile_windows,
+)
 
-__all__ = ['# noqa: E402     Flight', 'Flight', 'Schedule', 'evaluate_operations', 'lden', 'load_schedule', 'local_cluster', 'period_of', 'schedule_from_dict', 'tile_windows', 'write_operations']
+__all__ = ['Flight', 'PENALTY_DB', 'PERIODS', 'PERIOD_HOURS', 'SCHEMA', 'Schedule', 'evaluate_operations', 'lden', 'load_schedule', 'local_cluster', 'period_of', 'schedule_from_dict', 'tile_windows', 'write_operations']

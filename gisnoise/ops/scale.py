@@ -3,7 +3,7 @@
 :func:`gisnoise.ops.operations.evaluate_operations` hands its work here when given a
 scheduler address or a number of workers (or when ``GISNOISE_DASK_SCHEDULER`` names a
 scheduler, the setting a service passes on).  The grid is cut into tiles whose column
-edges fall on the fast kernel's segments (:func:`gisnoise.ops.operations.tile_windows`).
+edges fall on the fast kernel's segments (:func:`gisnoise.ops.tiles.tile_windows`).
 Every (tile, flight) pair is one task: it runs the kernel for that flight on that tile and
 adds the result, with the flight's counts per period, to the tile's accumulators, which
 the tile's previous task produced.  So each tile is a chain over the flights in schedule
@@ -33,6 +33,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from gisnoise.errors import Cancelled, InputError
+from gisnoise.ops.tiles import Plan, _tile_step
 
 __all__ = ["chain_keys", "local_cluster", "run_on_dask", "SCHEDULER_ENV"]
 
@@ -72,14 +73,14 @@ def local_cluster(workers: int, *, memory_limit: str | None = None) -> Any:
                                     host="127.0.0.1", dashboard_address=":0", **kw)
 
 
-def run_on_dask(plan: Any, windows: Sequence[tuple[int, ...]], put: Callable[[tuple[int, ...], dict], None], *,
+def run_on_dask(plan: Plan, windows: Sequence[tuple[int, ...]], put: Callable[[tuple[int, ...], dict], None], *,
                 scheduler: str | None = None, workers: int | None = None, memory_limit: str | None = None,
                 cancel: Callable[[], bool] | None = None) -> dict[str, Any]:
     """Run the (tile, flight) chains of an operations plan on a Dask cluster.
 
     Parameters
     ----------
-    plan : gisnoise.ops.operations._Plan
+    plan : Plan
         Receivers, flights' instants and counts, thresholds.
     windows : sequence of (r0, r1, c0, c1)
         Tiles, aligned to the kernel's segments.
@@ -101,8 +102,6 @@ def run_on_dask(plan: Any, windows: Sequence[tuple[int, ...]], put: Callable[[tu
         How it ran: ``executor``, ``scheduler`` address, ``workers``, ``tasks``.
     """
     distributed = _require_distributed()
-    from gisnoise.ops.operations import _tile_step
-
     cluster = None
     if scheduler is None:
         cluster = local_cluster(2 if workers is None else workers, memory_limit=memory_limit)

@@ -95,6 +95,7 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
             ref = "t" if "t" in cols else next(iter(cols), None)
             bad = [k for k, n in lengths.items() if ref is not None and n != lengths[ref]]
             if bad:
+                assert ref is not None
                 raise TrajectoryError(f"trajectory: column '{bad[0]}' has {lengths[bad[0]]} values, column "
                                       f"'{ref}' has {lengths[ref]}", field=f"columns.{bad[0]}")
             traj = from_columns(_numeric_columns(cols), source="trajectory")
@@ -153,7 +154,7 @@ def resolve_cards(req: ContourRequest, store: CardStore) -> list[ModelCard]:
 
 
 def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
-    from gisnoise.geo import grid_for_trajectory
+    from gisnoise.maps import grid_for_trajectory
 
     with _prefixed("grid"):
         try:

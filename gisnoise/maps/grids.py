@@ -1,0 +1,47 @@
+"""The receiver grid of a map: around a trajectory's track, plus a margin.
+
+The grid covers the track's bounding box plus ``margin_m`` on every side, snapped to
+multiples of the resolution, in the local UTM zone unless a CRS is given
+(:func:`gisnoise.geo.grid_for_points`); its size is limited by ``GISNOISE_MAX_CELLS``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from gisnoise.flight import Trajectory
+from gisnoise.geo import GridSpec, grid_for_points
+
+__all__ = ["grid_for_trajectory"]
+
+
+def grid_for_trajectory(traj: Trajectory, resolution_m: float = 10.0, margin_m: float = 500.0,
+                        crs: Any = None) -> GridSpec:
+    """The receiver grid around a trajectory.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        The flight; its horizontal extent sets the grid.
+    resolution_m : float
+        Cell size, m (> 0).
+    margin_m : float
+        Distance added on every side of the track's bounding box, m (>= 0).
+    crs : str or pyproj.CRS, optional
+        Projected CRS in metres; default the WGS84 UTM zone of the track's centre.
+
+    Returns
+    -------
+    GridSpec
+        Edges snapped to multiples of ``resolution_m`` in the CRS.
+
+    Raises
+    ------
+    CRSError
+        ``crs`` is unknown, geographic or not in metres (field ``crs``).
+    InvalidGridError
+        Resolution or margin out of range.
+    GridTooLargeError
+        More cells than ``GISNOISE_MAX_CELLS`` (field ``resolution_m``).
+    """
+    return grid_for_points(traj.lon, traj.lat, resolution_m, margin_m, crs)
