@@ -1,4 +1,4 @@
-"""Fit time: gisnoise.identify.fit (analytic Jacobian, Gauss-Newton/LM) vs scipy least_squares (finite differences).
+"""Fit time: gisnoise.identify.fit_arrays (analytic Jacobian, Gauss-Newton/LM) vs scipy least_squares (FD).
 
 100 000 samples x 7 parameters (the paper's ansatz Eq. 8-11, P_el 5-10), three
 microphones with different noise.  Both solvers start from the same values and
@@ -59,7 +59,7 @@ def main(n: int = 100_000) -> None:
         t_fd, ref = _best(lambda x0=x0, wres=wres: least_squares(wres, x0, jac="2-point", method="trf"))
         ours_cost = 0.5 * float(np.sum(wres(res.p) ** 2))
         print(f"-- {label}")
-        print(f"   gisnoise.identify.fit (ML, per-mic noise, analytic Jacobian): {t_ours:7.3f} s  {res.iterations} GN "
+        print(f"   gisnoise.identify.fit_arrays (ML, per-mic noise, analytic Jacobian): {t_ours:7.3f} s  {res.iterations} GN "
               f"iterations, {res.nfev} model evaluations, {res.cycles} relaxation cycles")
         print(f"   scipy least_squares trf, 2-point Jacobian (fixed weights): {t_fd:7.3f} s  {ref.nfev} "
               f"evaluations + {ref.njev} Jacobians of {model.n_params + 1} residual calls")

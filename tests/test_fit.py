@@ -10,7 +10,7 @@ from _fit_synth import NOISE, REF_W, TRUTH, synthetic_samples
 from scipy.optimize import least_squares
 
 from gisnoise.errors import Cancelled, FitError, InputError, NotIdentifiableError
-from gisnoise.identify.fit import fit, fit_arrays, fit_campaign
+from gisnoise.identify import fit, fit_arrays, fit_campaign
 from gisnoise.model import cards, get_ansatz
 
 MODEL = get_ansatz("paper-offset")

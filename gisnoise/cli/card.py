@@ -8,6 +8,7 @@ import math
 import click
 import numpy as np
 
+from gisnoise.jsonio import to_jsonable
 from gisnoise.model import cards as gcards
 
 
@@ -59,12 +60,12 @@ def show(card: str, as_json: bool, p_el: float) -> None:
         click.echo(f"L_UAV at {c.reference_distance_m:g} m, P_el = {p_el:g}: {lvl.min():.1f} to {lvl.max():.1f} dB(A) "
                    f"over all emission angles ({where})")
     if c.statistics:
-        short = {k: v for k, v in c.statistics.items() if len(json.dumps(v, default=str)) <= 120}
+        short = {k: v for k, v in c.statistics.items() if len(json.dumps(to_jsonable(v))) <= 120}
         more = len(c.statistics) - len(short)
-        click.echo("statistics " + json.dumps(short, default=str)
+        click.echo("statistics " + json.dumps(to_jsonable(short))
                    + (f" (+{more} longer entries: --json)" if more else ""))
     if c.provenance:
-        click.echo("provenance " + json.dumps(dict(c.provenance), default=str))
+        click.echo("provenance " + json.dumps(to_jsonable(c.provenance)))
     if c.notes:
         click.echo(f"notes     {c.notes}")
 

@@ -3,16 +3,30 @@
 
 from __future__ import annotations
 
-from gisnoise.identify.fit import (
-    FitResult,
+from gisnoise.identify.estimate import (
+    DEFAULT_BOUNDS,
+    DEFAULT_RCOND,
+    CancelFn,
+    ProgressFn,
     fit_arrays,
+    start_values,
+)
+from gisnoise.identify.fit import (
+    fit,
     fit_campaign,
     usable_rows,
 )
 from gisnoise.identify.report import (
+    CORRELATION_VARIABLES,
     correlation_data,
     directivity_data,
+    parameter_table,
+    residual_data,
+    timeseries_data,
     write_report,
 )
+from gisnoise.identify.result import FitResult
 
-__all__ = ['FitResult', 'correlation_data', 'directivity_data', 'fit_arrays', 'fit_campaign', 'usable_rows', 'write_report']
+__all__ = ['CORRELATION_VARIABLES', 'CancelFn', 'DEFAULT_BOUNDS', 'DEFAULT_RCOND', 'FitResult', 'ProgressFn',
+           'correlation_data', 'directivity_data', 'fit', 'fit_arrays', 'fit_campaign', 'parameter_table',
+           'residual_data', 'start_values', 'timeseries_data', 'usable_rows', 'write_report']

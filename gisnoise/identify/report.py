@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.identify.fit import FitResult
+from gisnoise.identify.result import FitResult
 from gisnoise.model import get_ansatz
 from gisnoise.reporting import correlation_axes, dump_json, figure, safe_name, with_gaps, write_view
 
@@ -73,7 +73,7 @@ def timeseries_data(result: FitResult) -> dict[str, Any]:
         idx = np.nonzero(s.mic == mic)[0]
         fl = s.flight[idx].astype(str)
         rank = {f: i for i, f in enumerate(out["flights"])}
-        order = idx[np.lexsort((s.t_e[idx], [rank[f] for f in fl]))]
+        order = idx[np.lexsort((s.t_e[idx], np.array([rank[f] for f in fl])))]
         out["microphones"][str(mic)] = {
             "flight": s.flight[order].astype(str).tolist(),
             "t_s": s.t_e[order].tolist(),

@@ -4,11 +4,12 @@
 from __future__ import annotations
 
 from gisnoise.model.ansatz import (
+    PAPER,
+    PAPER_OFFSET,
     REFERENCE_DISTANCE_M,
     Ansatz,
     add_background,
     ansatz_names,
-    get_ansatz,
     level_sum,
     register_ansatz,
 )
@@ -18,6 +19,7 @@ from gisnoise.model.cards import (
     ModelCard,
     dump,
     dumps,
+    from_dict,
     load,
     load_card,
     loads,
@@ -25,11 +27,42 @@ from gisnoise.model.cards import (
     with_parameters,
 )
 from gisnoise.model.effects import (
+    ATMOSPHERIC_ABSORPTION,
+    BACKGROUND_EVENT,
+    BANK_ANGLE,
+    DOPPLER,
+    EFFECT_NAMES,
+    EMISSION_TIME,
+    GROUND_REFLECTION,
+    MIN_REFLECTION_HEIGHT_M,
+    RPM,
+    THIRD_OCTAVE,
+    WIND,
+    Effect,
+    additive,
+    band_cos,
     bind,
     check_testable,
+    effect_names,
+    emission_covariates,
     extend,
+    get_ansatz,
     get_effect,
+    mach_towards,
     mic_height_agl,
+    reflection_delay,
+    register_effect,
+    series_ids,
+    shifted_inputs,
+    speed_of_sound,
 )
 
-__all__ = ['Ansatz', 'ModelCard', 'PHASES', 'REFERENCE_DISTANCE_M', 'SCHEMA', 'add_background', 'ansatz_names', 'bind', 'check_testable', 'dump', 'dumps', 'extend', 'get_ansatz', 'get_effect', 'level_sum', 'load', 'load_card', 'loads', 'mic_height_agl', 'register_ansatz', 'save', 'with_parameters']
+__all__ = [
+    "ATMOSPHERIC_ABSORPTION", "Ansatz", "BACKGROUND_EVENT", "BANK_ANGLE", "DOPPLER", "EFFECT_NAMES", "EMISSION_TIME",
+    "Effect", "GROUND_REFLECTION", "MIN_REFLECTION_HEIGHT_M", "ModelCard", "PAPER", "PAPER_OFFSET", "PHASES",
+    "REFERENCE_DISTANCE_M", "RPM", "SCHEMA", "THIRD_OCTAVE", "WIND", "add_background", "additive", "ansatz_names",
+    "band_cos", "bind", "check_testable", "dump", "dumps", "effect_names", "emission_covariates", "extend",
+    "from_dict", "get_ansatz", "get_effect", "level_sum", "load", "load_card", "loads", "mach_towards",
+    "mic_height_agl", "reflection_delay", "register_ansatz", "register_effect", "save", "series_ids",
+    "shifted_inputs", "speed_of_sound", "with_parameters",
+]

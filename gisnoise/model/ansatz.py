@@ -17,12 +17,14 @@ Inputs are a mapping of arrays that broadcast against each other:
     nondimensional electric power (electric power / reference power)
 
 Extensions (see :mod:`gisnoise.model.effects`) may require further inputs such as
-``bank`` (rad) or ``rpm``; an ansatz lists what it needs in ``inputs``.
+``bank`` (rad) or ``rpm``; an ansatz lists what it needs in ``inputs``.  The
+registry here holds ansatzes by name; :func:`gisnoise.model.effects.get_ansatz`
+looks them up, building the extended ones (``"paper-offset+bank_angle"``) on demand.
 
 Examples
 --------
 >>> import numpy as np
->>> a = get_ansatz("paper")
+>>> a = PAPER
 >>> p = np.array([13.409, 0.176, -0.280, -0.365, 1.049, 0.939, 40.393])
 >>> x = {"d": 30.0, "phi": np.radians(74.0), "theta": -0.3, "p_el": 1.1}
 >>> round(float(a.level(p, x)), 2)  # Table 1 horizontal: UAV level far below p7
@@ -43,8 +45,9 @@ __all__ = [
     "Ansatz",
     "REFERENCE_DISTANCE_M",
     "register_ansatz",
-    "get_ansatz",
     "ansatz_names",
+    "PAPER",
+    "PAPER_OFFSET",
     "add_background",
     "level_sum",
 ]
@@ -171,27 +174,6 @@ def register_ansatz(ansatz: Ansatz, *, replace: bool = False) -> Ansatz:
         raise InputError(f"ansatz {ansatz.name!r} is already registered", field="ansatz")
     _REGISTRY[ansatz.name] = ansatz
     return ansatz
-
-
-def get_ansatz(name: str) -> Ansatz:
-    """Look an ansatz up by name; the error lists the known names."""
-    if name not in _REGISTRY:
-        # extensions register on import; a chain "base+e1+e2" is built from its parts on demand
-        from gisnoise.model import effects
-
-        base, *chain = name.split("+")
-        if chain and base in _REGISTRY and name not in _REGISTRY:
-            try:
-                effects.extend(base, *chain, register=True)
-            except InputError as exc:
-                raise InputError(f"unknown ansatz {name!r}: {exc}", field="ansatz") from None
-
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise InputError(
-            f"unknown ansatz {name!r}; known: {', '.join(sorted(_REGISTRY))}", field="ansatz"
-        ) from None
 
 
 def ansatz_names() -> list[str]:

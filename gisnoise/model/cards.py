@@ -26,12 +26,15 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise import jsonio
 from gisnoise.data import bundled_card_ids, card_path
 from gisnoise.errors import CardError, InputError, SchemaVersionError
 from gisnoise.jsonio import JsonObject, read_json_file
-from gisnoise.model.ansatz import REFERENCE_DISTANCE_M, Ansatz, get_ansatz
+from gisnoise.model.ansatz import REFERENCE_DISTANCE_M, Ansatz
+from gisnoise.model.effects import get_ansatz
 
-__all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "save", "load_card"]
+__all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "save", "load_card", "from_dict",
+           "with_parameters"]
 
 SCHEMA = "gisnoise/model-card/1"
 SCHEMA_PREFIX = "gisnoise/model-card/"
@@ -224,8 +227,8 @@ def loads(text: str | bytes, *, source: str = "model card") -> ModelCard:
 
 
 def dumps(card: ModelCard) -> str:
-    """Serialize a card to JSON text."""
-    return json.dumps(card.to_dict(), indent=2, allow_nan=False) + "\n"
+    """Serialize a card to JSON text (strict JSON, indent 2, :func:`gisnoise.jsonio.dumps`)."""
+    return jsonio.dumps(card.to_dict(), indent=2)
 
 
 def load(path: str | os.PathLike[str]) -> ModelCard:
@@ -251,6 +254,7 @@ def load(path: str | os.PathLike[str]) -> ModelCard:
 
 
 def dump(card: ModelCard, fp: Any) -> None:
+    """Write :func:`dumps` of ``card`` to the text file object ``fp``."""
     fp.write(dumps(card))
 
 
@@ -260,10 +264,7 @@ def save(card: ModelCard, path: str | os.PathLike[str], *, overwrite: bool = Tru
     if p.exists() and not overwrite:
         raise CardError(f"{p}: exists; refusing to overwrite", field="card")
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(dumps(card), encoding="utf-8")
-    os.replace(tmp, p)
-    return p
+    return jsonio.write_json(card.to_dict(), p, indent=2)
 
 
 def with_parameters(card: ModelCard, p: Any, **changes: Any) -> ModelCard:
