@@ -9,6 +9,7 @@ same way.  A byte-order mark at the start is accepted.
 
 from __future__ import annotations
 
+import builtins
 import json
 import math
 import os
@@ -163,11 +164,11 @@ class JsonObject:
     def str(self, key: str, default: Any = REQUIRED, choices: tuple[str, ...] | None = None) -> Any:
         """A non-empty string, one of ``choices`` when given."""
         v = self.get(key, default)
-        if not isinstance(v, str) or not v or (choices is not None and v not in choices):
+        if not isinstance(v, builtins.str) or not v or (choices is not None and v not in choices):
             self.fail(key, f"one of {', '.join(choices)}" if choices else "a non-empty string", v)
         return v
 
-    def point(self, key: str, default: Any = REQUIRED) -> list[float]:
+    def point(self, key: builtins.str, default: Any = REQUIRED) -> list[float]:
         """A point ``[east_m, north_m]`` of two finite numbers, m."""
         v = self.get(key, default)
         if (not isinstance(v, (list, tuple)) or len(v) != 2

@@ -7,6 +7,7 @@ command runs, so the core never imports FastAPI.
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import click
 
@@ -46,7 +47,7 @@ def command(host: str, port: int, data_dir: str | None, workers: int | None, log
     try:
         settings = Settings()
     except Exception as exc:  # pydantic's ValidationError: a bad GISNOISE_* variable
-        errors = getattr(exc, "errors", lambda: [])()
+        errors: list[dict[str, Any]] = getattr(exc, "errors", lambda: [])()
         if not errors:
             raise
         e = errors[0]

@@ -17,31 +17,8 @@ __all__ = ["grid_for_trajectory"]
 
 def grid_for_trajectory(traj: Trajectory, resolution_m: float = 10.0, margin_m: float = 500.0,
                         crs: Any = None) -> GridSpec:
-    """The receiver grid around a trajectory.
-
-    Parameters
-    ----------
-    traj : Trajectory
-        The flight; its horizontal extent sets the grid.
-    resolution_m : float
-        Cell size, m (> 0).
-    margin_m : float
-        Distance added on every side of the track's bounding box, m (>= 0).
-    crs : str or pyproj.CRS, optional
-        Projected CRS in metres; default the WGS84 UTM zone of the track's centre.
-
-    Returns
-    -------
-    GridSpec
-        Edges snapped to multiples of ``resolution_m`` in the CRS.
-
-    Raises
-    ------
-    CRSError
-        ``crs`` is unknown, geographic or not in metres (field ``crs``).
-    InvalidGridError
-        Resolution or margin out of range.
-    GridTooLargeError
-        More cells than ``GISNOISE_MAX_CELLS`` (field ``resolution_m``).
+    """The receiver grid around a trajectory's track: :func:`gisnoise.geo.grid_for_points` of its
+    longitudes and latitudes, with the same parameters (the margin about the track's bounding box),
+    result and errors.
     """
     return grid_for_points(traj.lon, traj.lat, resolution_m, margin_m, crs)

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise import acoustics
+from gisnoise import acoustics, measure
 from gisnoise.errors import InputError
 
 __all__ = ["speed_of_sound", "mic_height_agl", "series_ids"]
@@ -97,9 +97,6 @@ def series_ids(x: Mapping[str, Any]) -> np.ndarray:
     """
     t = np.asarray(x["t_e"], dtype=float)
     if x.get("mic") is not None and x.get("flight") is not None:
-        # imported here: gisnoise.measure reads flights, and gisnoise.flight takes its PHASES from this package
-        from gisnoise import measure
-
         return measure.series_ids(x["mic"], x["flight"])
     m = np.asarray(x["mic_enu"], dtype=float)
     new = np.ones(len(t), dtype=bool)

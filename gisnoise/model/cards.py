@@ -29,6 +29,7 @@ import numpy as np
 from gisnoise import jsonio
 from gisnoise.data import bundled_card_ids, card_path
 from gisnoise.errors import CardError, InputError, SchemaVersionError
+from gisnoise.flight import PHASES
 from gisnoise.jsonio import JsonObject, read_json_file
 from gisnoise.model.ansatz import REFERENCE_DISTANCE_M, Ansatz
 from gisnoise.model.effects import get_ansatz
@@ -39,7 +40,6 @@ __all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "s
 SCHEMA = "gisnoise/model-card/1"
 SCHEMA_PREFIX = "gisnoise/model-card/"
 SUPPORTED_VERSIONS = (1,)
-from gisnoise.flight import PHASES  # noqa: E402  (the flight phases are defined in flight)
 
 
 @dataclass(frozen=True)

@@ -206,7 +206,7 @@ class JobStore:
     def list(self, *, status: str | None = None, kind: str | None = None, limit: int = 100,
              offset: int = 0) -> list[Job]:
         """Jobs, newest first."""
-        q, args = "SELECT * FROM jobs", []
+        q, args = "SELECT * FROM jobs", list[Any]()
         conds = []
         if status:
             conds.append("status = ?")
@@ -223,7 +223,8 @@ class JobStore:
         return [self._row(r) for r in rows]
 
     def count(self, *, status: str | None = None, kind: str | None = None) -> int:
-        conds, args = [], []
+        conds: list[str] = []
+        args: list[Any] = []
         if status:
             conds.append("status = ?")
             args.append(status)

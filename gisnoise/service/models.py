@@ -191,7 +191,7 @@ class GridRequest(BaseModel):
 CardRef = Annotated[str, Field(min_length=1, max_length=160, description="Card id in the store, or 'id@version'.")]
 
 
-_ROUTE_EXAMPLE = {"type": "FeatureCollection", "route": {"altitude_reference": "agl"}, "features": [
+_ROUTE_EXAMPLE: dict[str, Any] = {"type": "FeatureCollection", "route": {"altitude_reference": "agl"}, "features": [
     {"type": "Feature", "geometry": {"type": "Point", "coordinates": c}, "properties": p}
     for c, p in [([10.540, 52.243], {"alt": 0}), ([10.540, 52.243], {"alt": 60}),
                  ([10.550, 52.250], {"alt": 60, "speed": 22}), ([10.550, 52.250], {"alt": 0})]]}

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import mimetypes
 from pathlib import Path
+from typing import Any
 
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import FileResponse
@@ -80,7 +81,7 @@ def _result_path(state: State, job: Job, name: str) -> Path:
     return path
 
 
-_RESULT_RESPONSES = {200: {"content": {m.value: {} for m in (MediaType.geojson, MediaType.geotiff, MediaType.json,
+_RESULT_RESPONSES: dict[int | str, dict[str, Any]] = {200: {"content": {m.value: {} for m in (MediaType.geojson, MediaType.geotiff, MediaType.json,
                                                                MediaType.zip, MediaType.html, MediaType.png)},
                            "description": "The result file."}}
 
