@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import site
 import socket
 import subprocess
@@ -43,7 +44,13 @@ def installed(tmp_path_factory):
     pytest.importorskip("setuptools", minversion="77")
     base = tmp_path_factory.mktemp("wheel")
     dist = base / "dist"
-    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(dist), str(ROOT)],
+    # build from a copy of the sources: setuptools' build/ folder in the checkout could hold stale modules
+    src = base / "src"
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.nbi", "*.nbc", "*.egg-info")
+    shutil.copytree(ROOT / "gisnoise", src / "gisnoise", ignore=ignore)
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy2(ROOT / name, src / name)
+    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(dist), str(src)],
          cwd=base)
     wheels = sorted(dist.glob("gisnoise-*.whl"))
     assert len(wheels) == 1, wheels
