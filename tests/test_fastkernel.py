@@ -88,15 +88,56 @@ def test_kernel_level_equals_the_registry_ansatz(ansatz):
     assert np.max(np.abs(fast - ref)) < 1e-3
 
 
-def test_unsupported_ansatz_is_refused():
-    ext = ModelCard(id="bank", vehicle="t", phase="horizontal", ansatz="paper-offset+bank_angle",
-                    parameters=dict(p0=66.0, p1=20.0, p2=0.1, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0, k_bank=3.0),
+def test_receiver_dependent_extension_is_refused():
+    ext = ModelCard(id="abs", vehicle="t", phase="horizontal", ansatz="paper-offset+atmospheric_absorption",
+                    parameters=dict(p0=66.0, p1=20.0, p2=0.1, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0, a_abs=3.0),
                     reference_power_w=3000.0)
-    with pytest.raises(CardError, match="engine 'fast' implements") as err:
-        fk.card_coefficients(ext)
-    assert err.value.field == "ansatz"
-    with pytest.raises(CardError, match="use engine='numpy'"):
+    with pytest.raises(CardError, match="depends on the receiver") as err:
         evaluate_grid(circle_flight(5), [ext], grid_around(50.0, 3, 3), ground_h=0.0, engine="fast")
+    assert err.value.field == "ansatz"
+    dop = ModelCard(id="dop", vehicle="t", phase="horizontal", ansatz="paper-offset+doppler",
+                    parameters=dict(p0=66.0, p1=20.0, p2=0.1, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0,
+                                    q_doppler=1.0), reference_power_w=3000.0)
+    with pytest.raises(CardError, match="use engine='numpy'"):
+        evaluate_grid(circle_flight(5), [dop], grid_around(50.0, 3, 3), ground_h=0.0, engine="fast")
+    # the default engine maps both on the NumPy engine and says so
+    res = evaluate_grid(circle_flight(5), [ext], grid_around(50.0, 3, 3), ground_h=0.0)
+    assert res.metadata["engine"] == "numpy"
+
+
+def test_default_engine_is_the_fast_one():
+    from gisnoise.maps import DEFAULT_ENGINE, fast_engine_serves
+
+    traj, g = circle_flight(8), grid_around(50.0, 4, 4)
+    traj = Trajectory(**{k: getattr(traj, k) for k in ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w",
+                                                         "phase")}, rpm=np.linspace(3000.0, 5000.0, 8))
+    for c in (card(), card(ansatz="paper"), bank_card(), bank_card("paper+bank_angle+rpm")):
+        assert fast_engine_serves([c]) is None
+        assert evaluate_grid(traj, [c], g, ground_h=0.0).metadata["engine"] == "fast"
+    assert DEFAULT_ENGINE == "auto"
+    # the uncertainty bands are the NumPy engine's: the default engine takes it for them
+    assert "uncertainty" in fast_engine_serves([card()], uncertainty=True)
+
+
+def bank_card(ansatz="paper-offset+bank_angle", k_bank=3.0, **p):
+    c = card(**p)
+    params = dict(c.parameters)
+    if ansatz.startswith("paper+"):
+        params.pop("p0")
+    params["k_bank"] = k_bank
+    if "rpm" in ansatz:
+        params.update(k_rpm=1.5, rpm_ref=4000.0)
+    return ModelCard(id=ansatz, vehicle="test", phase=c.phase, ansatz=ansatz, parameters=params,
+                     reference_power_w=3000.0)
+
+
+def test_bank_angle_term_is_the_model_own():
+    # a level turn at 30 deg bank: k_bank |sin 30 deg| = 1.5 dB on every cell and instant (paper 5.3.1)
+    traj, g = circle_flight(20, roll=30.0), grid_around(40.0, 6, 5)
+    base = evaluate_grid(traj, [card()], g, ground_h=0.0, engine="fast")
+    ext = evaluate_grid(traj, [bank_card(k_bank=3.0)], g, ground_h=0.0, engine="fast")
+    for name in ("LAmax", "LAeq", "SEL"):
+        assert np.max(np.abs(ext.bands[name] - base.bands[name] - 1.5)) < 1e-3, name
 
 
 def test_fast_engine_refuses_what_it_does_not_compute():
@@ -108,7 +149,7 @@ def test_fast_engine_refuses_what_it_does_not_compute():
         evaluate_grid(traj, [card()], g, ground_h=0.0, engine="vulkan")
     assert err.value.field == "engine"
     with pytest.raises(InputError) as err:
-        evaluate_grid(traj, [card()], g, ground_h=0.0, floor_db=20.0)  # a fast-engine option
+        evaluate_grid(traj, [card()], g, ground_h=0.0, engine="numpy", floor_db=20.0)  # a fast-engine option
     assert err.value.field == "floor_db"
 
 
@@ -144,7 +185,7 @@ def test_flyover_matches_numpy_with_thresholds_and_snapshot():
     cards = [card(), card("climb", ansatz="paper", p1=80.0, p2=-0.1, p3=1.0)]
     g = grid_around(12.5, 61, 47)
     kw = dict(ground_h=0.0, threshold_db=[55.0, 62.0], snapshot_t=33.3)
-    ref = evaluate_grid(traj, cards, g, **kw)
+    ref = evaluate_grid(traj, cards, g, engine="numpy", **kw)
     fast = evaluate_grid(traj, cards, g, engine="fast", **kw)
     assert list(fast.bands) == list(ref.bands)
     assert_levels_equal(ref, fast, ("LAmax", "LAeq", "SEL", "LA@33.3s"))
@@ -160,7 +201,7 @@ def test_background_substeps_and_dem():
     dem = 5.0 + 30.0 * rng.random(g.shape)  # rough ground: receivers at their own heights
     dem[:2, :5] = np.nan  # outside the DEM: nodata in both engines
     kw = dict(dem=dem, background=True, substeps=3, threshold_db=45.0, period_s=600.0)
-    ref = evaluate_grid(traj, [card()], g, **kw)
+    ref = evaluate_grid(traj, [card()], g, engine="numpy", **kw)
     fast = evaluate_grid(traj, [card()], g, engine="fast", **kw)
     assert_levels_equal(ref, fast)
     for name in fast.bands:
@@ -179,7 +220,7 @@ def test_near_field_takeoff_from_a_pad_among_receivers():
                       power_w=np.full(n, 5000.0), phase=np.full(n, "climb"))
     c = card("climb", p2=0.3, p4=-0.5)
     g = grid_around(1.0, 41, 41)
-    ref = evaluate_grid(traj, [c], g, ground_h=0.0)
+    ref = evaluate_grid(traj, [c], g, ground_h=0.0, engine="numpy")
     fast = evaluate_grid(traj, [c], g, ground_h=0.0, engine="fast")
     assert_levels_equal(ref, fast)
 
@@ -190,7 +231,7 @@ def test_cells_beyond_audibility_are_skipped_and_certainly_below_the_floor():
     g = grid_around(60.0, 101, 101, x0=2800.0, y0=2800.0)
     c = card(p2=0.03, p4=-0.05)  # about the demo cards' directivity
     floor = 35.0
-    ref = evaluate_grid(traj, [c], g, ground_h=0.0, threshold_db=[40.0, 20.0])
+    ref = evaluate_grid(traj, [c], g, ground_h=0.0, threshold_db=[40.0, 20.0], engine="numpy")
     fast = evaluate_grid(traj, [c], g, ground_h=0.0, threshold_db=[40.0, 20.0], engine="fast", floor_db=floor)
     skipped = np.isnan(fast.bands["LAmax"])
     assert 0 < skipped.sum() == fast.metadata["cells_below_floor"] < skipped.size
@@ -272,7 +313,7 @@ def cases(draw):
 @given(cases())
 def test_fast_equals_numpy_on_random_trajectories_and_grids(case):
     traj, cards, grid, kw, floor_q = case
-    ref = evaluate_grid(traj, cards, grid, **kw)
+    ref = evaluate_grid(traj, cards, grid, engine="numpy", **kw)
     floor = None
     if floor_q is not None:  # a floor across the map's range: some cells may fall below it
         lo, hi = np.nanmin(ref.bands["LAmax"]), np.nanmax(ref.bands["LAmax"])
@@ -284,3 +325,36 @@ def test_fast_equals_numpy_on_random_trajectories_and_grids(case):
     for name in ("LAmax", "LAeq", "SEL"):
         a, b = ref.bands[name][~skipped], fast.bands[name][~skipped]
         assert np.max(np.abs(a - b), initial=0.0) <= TOL_DB, name
+
+
+@st.composite
+def extension_cases(draw):
+    traj, cards, grid, kw, floor_q = draw(cases())
+    n = len(traj)
+    rpm = np.array(draw(st.lists(st.floats(2000.0, 6000.0), min_size=n, max_size=n)))
+    traj = Trajectory(t=traj.t, lat=traj.lat, lon=traj.lon, h=traj.h, roll=traj.roll, pitch=traj.pitch,
+                      yaw=traj.yaw, power_w=traj.power_w, phase=traj.phase, rpm=rpm)
+    kinds = draw(st.sampled_from(["+bank_angle", "+rpm", "+bank_angle+rpm", "+rpm+bank_angle"]))
+    out = []
+    for c in cards:
+        params = dict(c.parameters)
+        if "bank_angle" in kinds:
+            params["k_bank"] = draw(st.floats(-5.0, 10.0))
+        if "rpm" in kinds:
+            params.update(k_rpm=draw(st.floats(-3.0, 3.0)), rpm_ref=draw(st.floats(2500.0, 5000.0)))
+        out.append(ModelCard(id=c.id + kinds, vehicle="test", phase=c.phase, ansatz=c.ansatz + kinds,
+                             parameters=params, reference_power_w=c.reference_power_w))
+    return traj, out, grid, kw, floor_q
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(extension_cases())
+def test_fast_equals_numpy_for_effect_extensions(case):
+    traj, cards, grid, kw, floor_q = case
+    ref = evaluate_grid(traj, cards, grid, engine="numpy", snapshot_t=float(traj.t[len(traj) // 2]), **kw)
+    fast = evaluate_grid(traj, cards, grid, snapshot_t=float(traj.t[len(traj) // 2]), **kw)
+    assert fast.metadata["engine"] == "fast"
+    for name in ("LAmax", "LAeq", "SEL", next(k for k in ref.bands if k.startswith("LA@"))):
+        a, b = ref.bands[name], fast.bands[name]
+        assert np.array_equal(np.isnan(a), np.isnan(b))
+        assert np.max(np.abs(a - b), initial=0.0, where=np.isfinite(a)) <= TOL_DB, name

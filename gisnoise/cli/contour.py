@@ -75,9 +75,11 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
               help="Add LAmax_std, LAeq_std and the 95 %-confidence levels LAmax_p95, LAeq_p95 "
                    "(cards need a covariance).")
 @click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png.")
-@click.option("--engine", "engine", type=click.Choice(["numpy", "fast"]), default="numpy", show_default=True,
-              help="Evaluator: 'numpy' is the reference (any ansatz, uncertainty); 'fast' is the numba float32 "
-                   "kernel for the paper ansatzes, equal within 0.01 dB and tens of times faster on large grids.")
+@click.option("--engine", "engine", type=click.Choice(["auto", "numpy", "fast"]), default="auto", show_default=True,
+              help="Evaluator.  'fast': the numba float32 kernel (paper ansatzes and their per-instant effect "
+                   "extensions such as +bank_angle, +rpm), equal to 'numpy' within 0.01 dB and tens of times "
+                   "faster.  'numpy': the reference (any ansatz, the --uncertainty bands).  'auto': 'fast' "
+                   "unless --uncertainty or a card with a receiver-dependent term needs 'numpy'.")
 @click.pass_context
 def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float,
             levels: list[float], dem: str | None, dem_offset: float, receiver_height: float, ground_h: float | None,
@@ -103,5 +105,6 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
     g = res.grid
     auth = g.crs.to_authority()
     click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m in "
-               f"{':'.join(auth) if auth else g.crs.name}; {res.metadata['evaluation_instants']} instants")
+               f"{':'.join(auth) if auth else g.crs.name}; {res.metadata['evaluation_instants']} instants; "
+               f"engine {res.metadata.get('engine', engine)}")
     _echo_bands_and_files(res, paths, ("levels", "contours", "map"))

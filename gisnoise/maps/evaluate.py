@@ -26,12 +26,19 @@ positions, power linearly, angles on the circle, phase from the earlier sample).
 :func:`evaluate_grid` chooses the engine; both read the request the same way
 (:mod:`gisnoise.maps.prepare`):
 
+``engine="auto"`` (the default)
+    the fast engine whenever it computes what is asked (:func:`fast_engine_serves`), else
+    the NumPy engine: for the uncertainty bands, a ``kernel=`` replacement, or cards whose
+    terms depend on the receiver.  ``metadata["engine"]`` names the engine that ran;
+
 ``engine="numpy"``
     the reference (:mod:`gisnoise.maps.reference`): any ansatz, the uncertainty bands
     (delta method with the cards' covariance), bounded memory in blocks of cells x instants;
 ``engine="fast"``
     the numba kernel in float32 (:mod:`gisnoise.maps.fastkernel`): the ansatzes ``paper``
-    and ``paper-offset``, the same bands within 0.01 dB, an optional audibility floor.
+    and ``paper-offset`` and their extensions by per-instant effects (``bank_angle``,
+    ``rpm``; :mod:`gisnoise.maps.fast_effects`), the same bands within 0.01 dB, an optional
+    audibility floor.
 """
 
 from __future__ import annotations
@@ -39,22 +46,52 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
+import logging
+
 import numpy as np
 
-from gisnoise.errors import InputError
+from gisnoise.errors import CardError, InputError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import GridSpec
-from gisnoise.maps.cardset import CardSet
+from gisnoise.maps import _numba
+from gisnoise.maps.cardset import CardSet, as_cardset
+from gisnoise.maps.fast_effects import NotOnFastEngine, base_card
 from gisnoise.maps.fastkernel import evaluate_fast
 from gisnoise.maps.prepare import MapOptions
 from gisnoise.maps.reference import DEFAULT_BLOCK, evaluate_numpy
 from gisnoise.maps.result import METRICS, MapResult
 from gisnoise.model import ModelCard
 
-__all__ = ["ENGINES", "evaluate_grid", "evaluate_grid_fast"]
+__all__ = ["DEFAULT_ENGINE", "ENGINES", "evaluate_grid", "evaluate_grid_fast", "fast_engine_serves"]
 
-ENGINES = ("numpy", "fast")
-"""The evaluator's engines."""
+log = logging.getLogger(__name__)
+
+ENGINES = ("auto", "numpy", "fast")
+"""The evaluator's engines (``auto``: the fast one whenever it computes what is asked)."""
+
+DEFAULT_ENGINE = "auto"
+
+
+def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, uncertainty: bool = False,
+                       kernel: Any = None) -> str | None:
+    """Why the fast engine cannot compute a request (one line), or None when it can.
+
+    It cannot without numba, with the uncertainty bands or a ``kernel=`` replacement, or
+    for a card whose ansatz is neither ``paper``/``paper-offset`` nor one of their
+    extensions by per-instant effects.
+    """
+    if _numba.numba is None:
+        return "numba is not installed"
+    if uncertainty:
+        return "the uncertainty bands need the NumPy engine"
+    if kernel is not None:
+        return "a kernel replacement belongs to the NumPy engine"
+    for c in as_cardset(cards).cards:
+        try:
+            base_card(c)
+        except CardError as exc:
+            return str(exc)
+    return None
 
 
 def evaluate_grid(
@@ -80,7 +117,7 @@ def evaluate_grid(
     kernel: Callable[..., tuple[np.ndarray, np.ndarray | None]] | None = None,
     progress: Callable[[float], Any] | None = None,
     cancel: Callable[[], bool] | None = None,
-    engine: str = "numpy",
+    engine: str = DEFAULT_ENGINE,
     floor_db: float | None = None,
     threads: int | None = None,
 ) -> MapResult:
@@ -139,9 +176,12 @@ def evaluate_grid(
         Called with the fraction done (0-1) after every block.
     cancel : callable, optional
         Polled between blocks; returning true raises :class:`~gisnoise.errors.Cancelled`.
-    engine : {"numpy", "fast"}
+    engine : {"auto", "numpy", "fast"}
         ``"fast"``: the numba kernel of :mod:`gisnoise.maps.fastkernel` (same bands within
-        0.01 dB; ansatzes ``paper`` and ``paper-offset``; no uncertainty).
+        0.01 dB; ansatzes ``paper``, ``paper-offset`` and their per-instant extensions; no
+        uncertainty).  ``"auto"`` (default): the fast engine when
+        :func:`fast_engine_serves` finds nothing against it, else the NumPy engine (logged;
+        ``metadata["engine"]`` names the engine that ran).
     floor_db : float, optional
         With ``engine="fast"``: audibility floor, dB(A).  Cells whose level is, by a bound
         over all emission angles, below it at every instant are not computed: NaN in the
@@ -163,11 +203,23 @@ def evaluate_grid(
         substeps=substeps, uncertainty=uncertainty, chunk_cells=chunk_cells, block_size=block_size,
         min_distance_m=min_distance_m, temperature_c=temperature_c, kernel=kernel, progress=progress,
         cancel=cancel, floor_db=floor_db, threads=threads)
+    if engine == "auto":
+        cards = as_cardset(cards)
+        why = fast_engine_serves(cards, uncertainty=uncertainty, kernel=kernel)
+        if why is None:
+            try:
+                return evaluate_fast(traj, cards, grid, opts)
+            except NotOnFastEngine as exc:  # refused while reading the flight, before any cell is computed
+                why = str(exc)
+        log.info("NumPy engine: %s", why)
+        engine = "numpy"
     if engine == "numpy":
-        return evaluate_numpy(traj, cards, grid, opts)
+        res = evaluate_numpy(traj, cards, grid, opts)
+        res.metadata.setdefault("engine", "numpy")
+        return res
     if engine == "fast":
         return evaluate_fast(traj, cards, grid, opts)
-    raise InputError(f"engine must be 'numpy' or 'fast', got {engine!r}", field="engine")
+    raise InputError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}", field="engine")
 
 
 def evaluate_grid_fast(traj: Trajectory, cards: CardSet | Iterable[ModelCard] | ModelCard, grid: GridSpec, *,

@@ -27,6 +27,7 @@ from gisnoise.errors import CardError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import LocalFrame, dcm_ned_to_body
 from gisnoise.maps.cardset import as_cardset
+from gisnoise.maps.fast_effects import NotOnFastEngine, base_card, instant_offsets
 from gisnoise.maps.prepare import eval_states, snapshot_state, trapezoid_weights
 from gisnoise.model import ModelCard, get_ansatz
 
@@ -56,7 +57,7 @@ def _fast_ansatz(card: ModelCard) -> str:
     """The card's ansatz name if the kernel implements it; :class:`CardError` otherwise."""
     model = card.model
     if card.ansatz not in _KERNEL_ANSATZES or model is not _KERNEL_ANSATZES[card.ansatz]:
-        raise CardError(f"card {card.id!r}: engine 'fast' implements the ansatzes {', '.join(FAST_ANSATZES)} of "
+        raise NotOnFastEngine(f"card {card.id!r}: engine 'fast' implements the ansatzes {', '.join(FAST_ANSATZES)} of "
                         f"gisnoise.model.ansatz, not {card.ansatz!r}; use engine='numpy'", field="ansatz")
     return card.ansatz
 
@@ -168,12 +169,14 @@ def directivity_range(p2: float, p4: float, p5: float, *, n: int = 2049) -> tupl
 
 def _audibility_radius(gain: np.ndarray, p2: np.ndarray, p4: np.ndarray, p5: np.ndarray, p6: np.ndarray,
                        p7: np.ndarray, d_ref: np.ndarray, d_min: float, floor_db: float | None,
-                       background: bool) -> np.ndarray:
+                       background: bool, offset: np.ndarray | None = None) -> np.ndarray:
     """Distance beyond which an upper bound of the level over all emission angles is below the floor, m.
 
     The bound is ``g hi`` for ``g >= 0`` and ``g lo`` for ``g < 0`` with
     :func:`directivity_range`; spreading decreases with distance when ``p6 > 0`` (else
     no radius: ``inf``).  Negative: below the floor even at the near-field clamp.
+    ``offset``: per-instant terms added to the level (dB, effect extensions).
+    ``offset``: per-instant terms added to the level (dB, effect extensions).
     """
     n = gain.size
     if floor_db is None:
@@ -185,6 +188,8 @@ def _audibility_radius(gain: np.ndarray, p2: np.ndarray, p4: np.ndarray, p5: np.
         lo, hi = directivity_range(*key)
         g = gain[sel]
         bound[sel] = np.where(g >= 0, g * hi, g * lo)  # dB at d_ref over all angles
+    if offset is not None:
+        bound = bound + offset
     target = np.full(n, float(floor_db))
     if background:
         # 10 log10(10^(Lu/10) + 10^(p7/10)) < floor  <=>  Lu < 10 log10(10^(floor/10) - 10^(p7/10))
@@ -203,29 +208,40 @@ def _instants(t: np.ndarray, state: dict[str, np.ndarray], card_idx: np.ndarray,
               source: str) -> FlightInstants:
     n = t.size
     used = sorted(set(card_idx.tolist()))
+    src = np.ascontiguousarray(np.stack(frame.to_enu(state["lat"], state["lon"], state["h"]), axis=-1))
     coef = np.zeros((len(cards), 10))
     p0 = np.zeros(len(cards))
     p1 = np.zeros(len(cards))
     ref_w = np.ones(len(cards))
     raw = np.zeros((len(cards), 5))  # p2, p4, p5, p6, p7 for the audibility bound
     d_ref = np.full(len(cards), 40.0)
+    ci = card_idx.astype(np.int64)
+    offset: np.ndarray | None = None
     for k in used:
-        c = cards[k]
+        c, extended = base_card(cards[k])
         p0[k], p1[k], coef[k] = card_coefficients(c, background=background, min_distance_m=min_distance_m)
+        if extended:  # per-instant terms of effect extensions (gisnoise.maps.fast_effects)
+            sel = ci == k
+            if offset is None:
+                offset = np.zeros(n)
+            offset[sel] = instant_offsets(cards[k], c, t, state, src, sel)[sel]
         pp = dict(zip(c.model.params, c.p, strict=True))
         raw[k] = (pp["p2"], pp["p4"], pp["p5"], pp["p6"], pp["p7"])
         ref_w[k] = c.reference_power_w
         d_ref[k] = c.reference_distance_m
-    ci = card_idx.astype(np.int64)
     p_el = np.asarray(state["power_w"], dtype=float) / ref_w[ci]
     gain = p0[ci] + p1[ci] * np.log10(p_el)
-    src = np.ascontiguousarray(np.stack(frame.to_enu(state["lat"], state["lon"], state["h"]), axis=-1))
     C = dcm_ned_to_body(np.radians(state["yaw"]), np.radians(state["pitch"]), np.radians(state["roll"]))
     C = np.ascontiguousarray(np.broadcast_to(C, (n, 3, 3)) @ _ENU_TO_NED)
     w = trapezoid_weights(t)
     dt = np.concatenate([[0.0], np.diff(t)])
     p2, p4, p5, p6, p7 = raw[ci].T
-    radius = _audibility_radius(gain, p2, p4, p5, p6, p7, d_ref[ci], min_distance_m, floor_db, background)
+    radius = _audibility_radius(gain, p2, p4, p5, p6, p7, d_ref[ci], min_distance_m, floor_db, background,
+                                offset)
+    if offset is not None:  # one coefficient row per instant, its kk shifted by the term
+        coef = coef[ci].copy()
+        coef[:, 7] += offset
+        ci = np.arange(n, dtype=np.int64)
     return FlightInstants(t=np.asarray(t, dtype=float), src=src, C=C, gain=gain, cidx=ci, coef=coef, w=w, dt=dt,
                           radius=radius, source=source)
 

@@ -58,7 +58,7 @@ def make_map(
     snapshot_t: float | None = None,
     substeps: int = 1,
     background: bool = False,
-    engine: str = "numpy",
+    engine: str = "auto",
     progress: Callable[[float], Any] | None = None,
     cancel: Callable[[], bool] | None = None,
 ) -> dict[str, Any]:
