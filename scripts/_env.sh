@@ -15,6 +15,10 @@ if [ ! -f "$stamp" ] || [ "$ROOT/pyproject.toml" -nt "$stamp" ]; then
     echo "gisnoise: installing gisnoise[$1] (first run only)" >&2
     python -m pip install -q --upgrade pip >&2
     python -m pip install -q -e "$ROOT[$1]" >&2
+    if python -c "import numba" 2>/dev/null; then
+        echo "gisnoise: compiling the fast kernels (once; numba caches them)" >&2
+        python -c "from gisnoise.maps import warm_up; warm_up()" >&2
+    fi
     touch "$stamp"
 fi
 cd "$ROOT"

@@ -1,5 +1,7 @@
 """The evaluator against closed-form acoustics of a point source (SPEC section 5)."""
 
+import functools
+
 import numpy as np
 import pytest
 import shapely
@@ -8,9 +10,14 @@ from affine import Affine
 from gisnoise.errors import CardError, InputError, TrajectoryError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import GridSpec, LocalFrame
-from gisnoise.maps import Z95, CardSet, contour_features, evaluate_grid, grid_for_trajectory
+from gisnoise.maps import Z95, CardSet, contour_features, grid_for_trajectory
+from gisnoise.maps import evaluate_grid as _evaluate_grid
 from gisnoise.maps.reference import _levels_chunk
 from gisnoise.model import ModelCard, level_sum, with_parameters
+
+# these tests check the NumPy reference engine (float64, finite differences of its Jacobian);
+# tests/test_fastkernel.py holds the fast engine against it
+evaluate_grid = functools.partial(_evaluate_grid, engine="numpy")
 
 LAT0, LON0 = 52.27, 10.52
 # a transverse Mercator centred at the origin: grid x, y = local east, north (scale 1 at the centre)

@@ -32,13 +32,22 @@ How the kernel is fast (all in float32, where the level keeps about 1e-5 dB):
 * **Accumulators.**  The maximum and the trapezoid energy ``sum w_i 10^(L_i/10)`` per
   cell; float32 partial sums over at most 32 instants are added to the float64 outputs.
 
-The kernels run without the GIL and are compiled on first use (cached on disk).  When
-numba is not installed :data:`numba` is None and no kernel is defined.
+The kernels run without the GIL and are compiled on first use and cached on disk (numba's
+cache: beside the module, else in the user's cache directory, or ``NUMBA_CACHE_DIR``);
+the set-up (``scripts/_env.sh``) compiles them once with
+:func:`~gisnoise.maps.fastkernel.warm_up`, so no run waits for the compiler.  A stale
+cache (other numba, changed source) is recompiled by numba itself; when no cache
+directory is writable the kernels are compiled in memory on every first use, with a
+one-line notice.  When numba is not installed :data:`numba` is None and no kernel is
+defined.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +60,31 @@ except ImportError:  # pragma: no cover - numba is the optional extra "fast"
     numba = None  # type: ignore[assignment]
 
 from gisnoise.maps._poly import _ATAN_C, _EXP2_C, _LOG2_C
+
+log = logging.getLogger(__name__)
+CACHE_NOTICE = "numba: no writable cache directory (set NUMBA_CACHE_DIR); compiling the kernels in memory"
+"""The one-line notice when the kernels cannot be cached on disk."""
+cache_used = True
+"""Whether the kernels are cached on disk (False after :data:`CACHE_NOTICE`)."""
+
+
+def _jit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
+    """``numba.njit(cache=True, **options)``, or without the disk cache when no cache directory is writable."""
+
+    def decorate(fn: Callable[..., Any]) -> Any:
+        global cache_used
+        if cache_used:
+            try:
+                return numba.njit(cache=True, **options)(fn)
+            except RuntimeError as exc:  # numba: "cannot cache function ...: no locator available"
+                if "cannot cache" not in str(exc):
+                    raise
+                cache_used = False
+                log.warning(CACHE_NOTICE)
+        return numba.njit(cache=False, **options)(fn)
+
+    return decorate
+
 
 _LOG2_10 = math.log2(10.0)
 _FM = True  # fastmath: contraction, reassociation; the kernel never sees NaN or inf
@@ -117,7 +151,7 @@ if numba is not None:
 
         return _nbt.none(), codegen
 
-    @numba.njit(fastmath=_FM, error_model="numpy", inline="always", cache=True)
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
     def _exp2(y):
         """``2^y`` for float32 ``y`` (clamped to [-126, 126])."""
         y = min(max(y, _EXP_LO), _EXP_HI)
@@ -127,7 +161,7 @@ if numba is not None:
         # 2^n from its bit pattern (n + 127) 2^23, formed exactly in float32
         return p * _i32_as_f32(np.int32(n * _TWO23 + _BIAS_BITS))
 
-    @numba.njit(fastmath=_FM, error_model="numpy", inline="always", cache=True)
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
     def _log2(x):
         """``log2(x)`` for positive normal float32 ``x``."""
         bits = _f32_as_i32(x)
@@ -140,7 +174,7 @@ if numba is not None:
         p = (((((((_G8 * u + _G7) * u + _G6) * u + _G5) * u + _G4) * u + _G3) * u + _G2) * u + _G1) * u + _G0
         return ef + p
 
-    @numba.njit(fastmath=_FM, error_model="numpy", inline="always", cache=True)
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
     def _atan2_pos(y, x):
         """``atan2(y, x)`` in [0, pi] for ``y >= 0`` (float32)."""
         ax = abs(x)
@@ -152,7 +186,7 @@ if numba is not None:
         r = _HALF_PI - r if y > ax else r
         return _PI - r if x < _ZERO else r
 
-    @numba.njit(fastmath=_FM, error_model="numpy", inline="always", cache=True)
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
     def _cell(xb, yb, zb, g, p2, cp3, sp3, p4, cp5, sp5, c6, kk, e7, dmin2):
         """Level ``L_UAV`` (dB) and energy ``10^(L/10)`` (+ background) from the body vector."""
         h2 = xb * xb + yb * yb
@@ -168,7 +202,7 @@ if numba is not None:
         lev = g * a * b - c6 * _log2(max(d2, dmin2)) + kk
         return lev, _exp2(lev * _K10) + e7
 
-    @numba.njit(fastmath=_FM, error_model="numpy", nogil=True, cache=True)
+    @_jit(fastmath=_FM, error_model="numpy", nogil=True)
     def _level_points(xb, yb, zb, g, coef):
         """The kernel's level for arrays of body vectors (for tests against the ansatz)."""
         n = xb.size
@@ -180,7 +214,7 @@ if numba is not None:
             out[i] = lev
         return out
 
-    @numba.njit(fastmath=_FM, error_model="numpy", nogil=True, cache=True)
+    @_jit(fastmath=_FM, error_model="numpy", nogil=True)
     def _window_kernel(P, U, dh, has_dem, k, m0, c0, ncw, src, C, gain, cidx, coef, w, dt, radius, thr,
                        emax, energy, ta, computed):
         """Accumulate the metrics of one window of rows.

@@ -43,10 +43,9 @@ positions, power linearly, angles on the circle, phase from the earlier sample).
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
-
-import logging
 
 import numpy as np
 

@@ -67,6 +67,7 @@ __all__ = [
     "card_coefficients",
     "directivity_range",
     "evaluate_fast",
+    "warm_up",
     "level_from_body",
     "prepare_flight",
     "receivers_for",
@@ -205,6 +206,48 @@ def db(x: np.ndarray) -> np.ndarray:
     """``10 log10(x)`` with 0 -> -inf and no warning."""
     with np.errstate(divide="ignore"):
         return 10.0 * np.log10(x)
+
+
+# --------------------------------------------------------------------------- compiling ahead
+
+
+def warm_up() -> dict[str, Any]:
+    """Compile the kernels now (and store them in numba's disk cache) on a tiny map.
+
+    The set-up (``scripts/_env.sh``) calls it once after installing, so that the first map
+    does not wait for the compiler; later processes load the kernels from the cache.
+
+    Returns
+    -------
+    dict
+        ``seconds`` taken and ``cached`` (whether the kernels are cached on disk).
+    """
+    import time
+
+    from affine import Affine
+
+    from gisnoise.flight import Trajectory
+    from gisnoise.geo import GridSpec, LocalFrame
+    from gisnoise.model import ModelCard
+
+    require_numba()
+    t0 = time.perf_counter()
+    lat0, lon0 = 52.0, 10.0
+    lat, lon, h = LocalFrame(lat0, lon0, 0.0).to_wgs84(np.array([-20.0, 20.0]), np.zeros(2), np.full(2, 30.0))
+    traj = Trajectory(t=np.array([0.0, 2.0]), lat=lat, lon=lon, h=h, roll=np.zeros(2), pitch=np.zeros(2),
+                      yaw=np.full(2, 90.0), power_w=np.full(2, 1000.0), phase=np.array(["horizontal"] * 2))
+    crs = f"+proj=tmerc +lat_0={lat0} +lon_0={lon0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+    grid = GridSpec(crs, Affine(10.0, 0.0, -20.0, 0.0, -10.0, 20.0), 4, 4)
+    card = ModelCard(id="warm-up", vehicle="warm-up", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=60.0, p1=10.0, p2=0.1, p3=0.0, p4=0.1, p5=0.0, p6=1.0, p7=30.0),
+                     reference_power_w=1000.0)
+    opts = MapOptions(metrics=("LAmax", "LAeq", "SEL"), receiver_height=1.5, dem=None, ground_h=0.0,
+                      dem_offset_m=0.0, period_s=None, threshold_db=50.0, snapshot_t=1.0, background=False,
+                      substeps=1, uncertainty=False, chunk_cells=None, block_size=1, min_distance_m=1.0,
+                      temperature_c=15.0, kernel=None, progress=None, cancel=None, floor_db=None, threads=1)
+    evaluate_fast(traj, card, grid, opts)
+    level_from_body(card, 1.0, 1.0, 1.0, 1000.0)
+    return {"seconds": time.perf_counter() - t0, "cached": bool(_kernels.cache_used)}
 
 
 # --------------------------------------------------------------------------- the engine

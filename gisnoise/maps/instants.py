@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import CardError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import LocalFrame, dcm_ned_to_body
 from gisnoise.maps.cardset import as_cardset
