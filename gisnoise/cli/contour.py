@@ -9,13 +9,14 @@ import click
 
 from gisnoise.cli.options import card_option, out_dir_option, progress
 from gisnoise.errors import InputError
-from gisnoise.maps import parse_levels
 
 
 def _levels(ctx: click.Context, param: click.Parameter, value: Any) -> list[float] | None:
     if value is None:
         return None
     try:
+        from gisnoise.maps import parse_levels  # deferred: --help answers without the map stack
+
         return parse_levels(value, field=param.opts[0] if param.opts else "levels")
     except InputError as exc:
         raise click.BadParameter(str(exc).split(": ", 1)[-1]) from None
