@@ -13,9 +13,16 @@ The chain of the paper's section 3 (SPEC section 2), as pure array functions:
 * :mod:`~gisnoise.acoustics.wav` -- WAV audio in volts and its calibration to pascals.
 
 Levels are dB re 20 uPa.  Functions accept floats or arrays and broadcast.
+
+The audio names (``P_REF``, ``band_levels``, ``wav_band_levels``) are imported on first
+use: their filter bank needs scipy.signal, which takes seconds to import and which a
+noise map never needs.
 """
 
 from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from gisnoise.acoustics.atmosphere import (
     absorption_corrected_level,
@@ -23,11 +30,6 @@ from gisnoise.acoustics.atmosphere import (
     atmospheric_absorption,
     background_levels,
     speed_of_sound,
-)
-from gisnoise.acoustics.audio import (
-    P_REF,
-    band_levels,
-    wav_band_levels,
 )
 from gisnoise.acoustics.bands import (
     band_edges,
@@ -49,5 +51,20 @@ from gisnoise.acoustics.weighting import (
     mount_correction,
     overall_a_level,
 )
+
+if TYPE_CHECKING:
+    from gisnoise.acoustics.audio import P_REF, band_levels, wav_band_levels
+
+_LAZY = {"P_REF": "gisnoise.acoustics.audio", "band_levels": "gisnoise.acoustics.audio",
+         "wav_band_levels": "gisnoise.acoustics.audio"}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
 
 __all__ = ['MOUNT_CORRECTIONS_DB', 'P_REF', 'a_weighting', 'absorption_corrected_level', 'absorption_correction', 'atmospheric_absorption', 'background_levels', 'band_edges', 'band_frequency', 'band_levels', 'band_name', 'calibrate', 'exact_frequency', 'is_band_name', 'mount_correction', 'nominal_frequency', 'overall_a_level', 'read_wav', 'speed_of_sound', 'third_octave_centres', 'wav_band_levels', 'write_wav']
