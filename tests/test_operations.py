@@ -184,7 +184,7 @@ def test_cli_writes_bands_contours_and_summary(tmp_path, day):
 
     path = write_case(tmp_path)
     out = tmp_path / "out"
-    # the default: a local Dask cluster; its bands equal the single-process reference
+    # a local Dask cluster when asked for; its bands equal the single-process reference
     r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(out), "--workers", "1"])
     assert r.exit_code == 0, r.output
     assert "Dask (1 workers" in r.output
@@ -215,3 +215,20 @@ def test_tiles_cover_the_grid_once_with_segment_aligned_columns(h, w, seg, cells
         cover[r0:r1, c0:c1] += 1
         assert c0 % seg == 0 and (c1 % seg == 0 or c1 == w)
     assert (cover == 1).all()
+
+
+def test_cli_runs_in_one_process_by_default(tmp_path, day, monkeypatch):
+    from gisnoise.cli.main import cli
+
+    path = write_case(tmp_path)
+    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "a")])
+    assert r.exit_code == 0, r.output
+    assert "threads" in r.output and "Dask" not in r.output
+    # --single-process wins over a scheduler named in the environment (none runs at this address)
+    monkeypatch.setenv("GISNOISE_DASK_SCHEDULER", "tcp://127.0.0.1:9")
+    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "b"), "--single-process"])
+    assert r.exit_code == 0, r.output
+    assert "threads" in r.output
+    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "c"), "--single-process",
+                                 "--workers", "2"])
+    assert r.exit_code == 2 and "excludes" in r.output

@@ -13,11 +13,13 @@ from gisnoise.cli.options import out_dir_option, progress
 @out_dir_option
 @click.option("--scheduler", "scheduler", default=None, metavar="ADDRESS",
               help="Run on the Dask scheduler at ADDRESS (e.g. tcp://scheduler:8786) "
-                   "[default: $GISNOISE_DASK_SCHEDULER, else this machine].")
+                   "[default: $GISNOISE_DASK_SCHEDULER, else this machine in one process].")
 @click.option("--workers", "workers", type=click.IntRange(min=1), default=None,
-              help="Worker processes of the local Dask cluster started for the run [default: the CPUs, at most 4].")
+              help="Start a local Dask cluster of N worker processes for the run [default: none: on one "
+                   "machine the kernel's threads do the same work with less overhead].")
 @click.option("--single-process", "single_process", is_flag=True,
-              help="No Dask: one process, tiles on threads (faster on one small machine; same bands).")
+              help="No Dask even if $GISNOISE_DASK_SCHEDULER is set: one process, tiles on threads (same bands). "
+                   "The default without --scheduler and --workers.")
 @click.option("--threads", "threads", type=click.IntRange(min=1), default=None,
               help="Threads of the one-process run [default: $GISNOISE_THREADS, else the CPUs].")
 @click.option("--tile-cells", "tile_cells", type=click.IntRange(min=1), default=1 << 18, show_default=True,
@@ -41,24 +43,27 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
 
     \b
     Examples:
-      gisnoise operations day.json --out ops/                   local Dask cluster
-      gisnoise operations day.json --out ops/ --single-process  this machine, threads
+      gisnoise operations day.json --out ops/                   this machine, threads
+      gisnoise operations day.json --out ops/ --workers 4       local Dask cluster
       gisnoise operations day.json --out ops/ --scheduler tcp://sched:8786
+
+    Dask's own log lines show with -v only.
     """
-    import os
+    import logging
 
     from gisnoise.maps import parse_levels
     from gisnoise.ops import evaluate_operations, load_schedule, write_operations
 
     if single_process and (scheduler or workers):
         raise click.UsageError("--single-process excludes --scheduler and --workers")
-    scheduler = scheduler or os.environ.get("GISNOISE_DASK_SCHEDULER") or None
-    if not single_process and scheduler is None and workers is None:
-        workers = max(1, min(os.cpu_count() or 1, 4))
+    if logging.getLogger().getEffectiveLevel() > logging.INFO:  # without -v: no Dask chatter, no shutdown noise
+        for name in ("distributed", "tornado", "asyncio", "bokeh"):
+            logging.getLogger(name).setLevel(logging.CRITICAL)
     sched = load_schedule(schedule)
     lv = None if levels is None else parse_levels(levels, field="levels")
     with progress(ctx, "operations", 1.0) as update:
-        res = evaluate_operations(sched, scheduler=scheduler, workers=workers, threads=threads,
+        res = evaluate_operations(sched, scheduler=scheduler, workers=workers, single_process=single_process,
+                                  threads=threads,
                                   tile_cells=tile_cells, memory_limit=memory_limit, progress=update)
     paths = write_operations(res, out, lv)
     g = res.grid

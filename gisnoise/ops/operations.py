@@ -60,6 +60,7 @@ def evaluate_operations(
     memory_limit: str | None = None,
     progress: Callable[[float], Any] | None = None,
     cancel: Callable[[], bool] | None = None,
+    single_process: bool = False,
 ) -> MapResult:
     """Noise of a day of operations on a grid (see the module docstring).
 
@@ -83,6 +84,9 @@ def evaluate_operations(
         Called with the fraction of tiles done (0-1).
     cancel : callable, optional
         Polled between flights; true raises :class:`~gisnoise.errors.Cancelled`.
+    single_process : bool
+        One process, tiles on threads, even when ``GISNOISE_DASK_SCHEDULER`` is set
+        (``scheduler`` and ``workers`` must then be None).
 
     Returns
     -------
@@ -108,7 +112,9 @@ def evaluate_operations(
         if progress is not None:
             progress(done / len(windows))
 
-    address = scheduler or (None if workers else os.environ.get(SCHEDULER_ENV) or None)
+    if single_process and (scheduler or workers):
+        raise InputError("single_process excludes scheduler and workers", field="single_process")
+    address = scheduler or (None if workers or single_process else os.environ.get(SCHEDULER_ENV) or None)
     if address is not None or workers:
         how = run_on_dask(plan, windows, put, scheduler=address, workers=workers, memory_limit=memory_limit,
                           cancel=cancel)
