@@ -221,9 +221,11 @@ def test_cli_runs_in_one_process_by_default(tmp_path, day, monkeypatch):
     from gisnoise.cli.main import cli
 
     path = write_case(tmp_path)
-    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "a")])
+    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "a"), "--plot"])
     assert r.exit_code == 0, r.output
     assert "threads" in r.output and "Dask" not in r.output
+    png = tmp_path / "a" / "map.png"
+    assert f"wrote {png}" in r.output and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # --single-process wins over a scheduler named in the environment (none runs at this address)
     monkeypatch.setenv("GISNOISE_DASK_SCHEDULER", "tcp://127.0.0.1:9")
     r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "b"), "--single-process"])

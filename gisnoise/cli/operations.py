@@ -28,9 +28,11 @@ from gisnoise.cli.options import out_dir_option, progress
               help="Memory per worker of a local cluster, e.g. 2GiB [default: Dask's].")
 @click.option("--levels", "levels", default=None,
               help="Contour levels of Lden and Lnight, dB(A), comma-separated [default: the schedule's].")
+@click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png: Lden with its contours.")
 @click.pass_context
 def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, workers: int | None,
-            single_process: bool, threads: int | None, tile_cells: int, memory_limit: str | None, levels: str | None) -> None:
+            single_process: bool, threads: int | None, tile_cells: int, memory_limit: str | None, levels: str | None,
+            plot: bool) -> None:
     """Noise of a day of operations: DIR/operations.tif, DIR/contours.geojson, DIR/summary.json.
 
     SCHEDULE is a JSON file (schema gisnoise/operations/1): model cards, the receiver grid
@@ -65,11 +67,11 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
         res = evaluate_operations(sched, scheduler=scheduler, workers=workers, single_process=single_process,
                                   threads=threads,
                                   tile_cells=tile_cells, memory_limit=memory_limit, progress=update)
-    paths = write_operations(res, out, lv)
+    paths = write_operations(res, out, lv, plot=plot)
     g = res.grid
     ex = res.metadata["execution"]
     how = (f"Dask ({ex['workers']} workers, {ex['tasks']} tasks)" if ex["executor"] == "dask"
            else f"{ex['threads']} threads")
     click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m; {len(res.metadata['flights'])} "
                f"flights; {res.metadata['tiles']} tiles on {how}")
-    _echo_bands_and_files(res, paths, ("levels", "contours", "summary"))
+    _echo_bands_and_files(res, paths, ("levels", "contours", "summary", "map"))

@@ -46,6 +46,7 @@ from gisnoise.maps.pipeline import (
 from gisnoise.maps.plots import (
     directivity_grid,
     plot_directivity,
+    plot_map,
 )
 from gisnoise.maps.receivers import (
     Receivers,
@@ -67,4 +68,4 @@ from gisnoise.maps.threads import (
     map_threads,
 )
 
-__all__ = ['CardSet', 'DEFAULT_ENGINE', 'ENGINES', 'FlightInstants', 'METRICS', 'MapResult', 'NODATA', 'Receivers', 'WindowResult', 'Z95', 'band_unit', 'contour_features', 'contours_geojson', 'default_threads', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'fast_engine_serves', 'grid_for_trajectory', 'isobands', 'isolines', 'make_map', 'map_threads', 'parse_levels', 'plot_directivity', 'prepare_flight', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'snapshot_name', 'threshold_name', 'warm_up', 'window_lattice', 'write_geojson', 'write_geotiff']
+__all__ = ['CardSet', 'DEFAULT_ENGINE', 'ENGINES', 'FlightInstants', 'METRICS', 'MapResult', 'NODATA', 'Receivers', 'WindowResult', 'Z95', 'band_unit', 'contour_features', 'contours_geojson', 'default_threads', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'fast_engine_serves', 'grid_for_trajectory', 'isobands', 'isolines', 'make_map', 'map_threads', 'parse_levels', 'plot_directivity', 'plot_map', 'prepare_flight', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'snapshot_name', 'threshold_name', 'warm_up', 'window_lattice', 'write_geojson', 'write_geotiff']

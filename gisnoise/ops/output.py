@@ -12,15 +12,16 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.jsonio import to_jsonable
-from gisnoise.maps import MapResult, write_geojson, write_geotiff
+from gisnoise.maps import MapResult, plot_map, write_geojson, write_geotiff
 
 __all__ = ["write_operations"]
 
 
 def write_operations(result: MapResult, out_dir: str | os.PathLike[str], levels: Any = None,
-                     contour_bands: Sequence[str] = ("Lden", "Lnight")) -> dict[str, Path]:
+                     contour_bands: Sequence[str] = ("Lden", "Lnight"), *, plot: bool = False) -> dict[str, Path]:
     """Write ``DIR/operations.tif`` (every band), ``DIR/contours.geojson`` (of ``contour_bands``)
-    and ``DIR/summary.json`` (metadata and per-band ranges)."""
+    and ``DIR/summary.json`` (metadata and per-band ranges); with ``plot`` also ``DIR/map.png``
+    (Lden with its contours at the levels)."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
@@ -39,4 +40,8 @@ def write_operations(result: MapResult, out_dir: str | os.PathLike[str], levels:
     tmp.write_text(json.dumps(to_jsonable(summary), indent=1, allow_nan=False), encoding="utf-8")
     os.replace(tmp, p)
     paths["summary"] = p
+    if plot:
+        if not lv:
+            raise InputError("plot: give contour levels (--levels or the schedule's levels_db)", field="levels")
+        paths["map"] = plot_map(result, out / "map.png", levels=list(lv), metric="Lden")
     return paths
