@@ -178,10 +178,19 @@ def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest
     """
     from gisnoise.maps import make_map
 
+    ground_h = req.ground_h_m
+    if ground_h is None and isinstance(req.trajectory, GeoJSONTrajectory):
+        # the ground a waypoints route states (as the CLI takes it from the same file), not the track's
+        # lowest point recomputed from the flown heights (which differs from it by rounding)
+        from gisnoise.flight import routes
+
+        with _prefixed("trajectory"):
+            route = routes.read_route(req.trajectory.data)
+        ground_h = route.ground_h_m
     with _core_fields():
         paths = make_map(traj, cards, out_dir, resolution_m=req.grid.resolution_m, margin_m=req.grid.margin_m,
                          levels=tuple(req.levels), metrics=tuple(req.metrics), crs=req.grid.crs, dem=None,
-                         receiver_height=req.receiver_height_m, ground_h=req.ground_h_m,
+                         receiver_height=req.receiver_height_m, ground_h=ground_h,
                          uncertainty=req.uncertainty, plot=False,
                          period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
                          substeps=req.substeps, background=req.background, progress=progress, cancel=cancel)
