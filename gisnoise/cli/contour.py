@@ -45,8 +45,9 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
 @out_dir_option
 @click.option("--resolution", "resolution", type=float, default=10.0, show_default=True,
               help="Cell size of the receiver grid, m.")
-@click.option("--margin", "margin", type=float, default=500.0, show_default=True,
-              help="Margin around the track, m.")
+@click.option("--margin", "margin", type=float, default=None,
+              help="Margin around the track, m [default: from the cards, so the lowest level's LAmax and LAeq "
+                   "contours close]; contours the grid's edge cuts carry \"clipped\": true and a warning.")
 @click.option("--levels", "levels", default="45,50,55,60", show_default=True, callback=_levels,
               help="Contour levels, dB(A), comma-separated.")
 @click.option("--dem", "dem", type=click.Path(dir_okay=False), default=None,
@@ -79,7 +80,7 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
               help="Evaluator: 'numpy' is the reference (any ansatz, uncertainty); 'fast' is the numba float32 "
                    "kernel for the paper ansatzes, equal within 0.01 dB and tens of times faster on large grids.")
 @click.pass_context
-def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float,
+def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float | None,
             levels: list[float], dem: str | None, dem_offset: float, receiver_height: float, ground_h: float | None,
             crs: str | None, metrics: list[str], period: float | None, threshold: list[float] | None,
             snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool,
@@ -105,3 +106,5 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
     click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m in "
                f"{':'.join(auth) if auth else g.crs.name}; {res.metadata['evaluation_instants']} instants")
     _echo_bands_and_files(res, paths, ("levels", "contours", "map"))
+    for w in paths.get("warnings", []):
+        click.echo(f"warning: {w}", err=True)

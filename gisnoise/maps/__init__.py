@@ -7,6 +7,8 @@ from gisnoise.maps.cardset import (
     CardSet,
 )
 from gisnoise.maps.contours import (
+    clip_warnings,
+    clipped_levels,
     contour_features,
     contours_geojson,
     isobands,
@@ -31,6 +33,11 @@ from gisnoise.maps.geotiff import (
     write_geotiff,
 )
 from gisnoise.maps.grids import (
+    MAX_DISTANCE_M,
+    SIZED_METRICS,
+    audible_distance,
+    auto_margin,
+    grid_for_map,
     grid_for_trajectory,
 )
 from gisnoise.maps.instants import (
@@ -64,4 +71,4 @@ from gisnoise.maps.threads import (
     map_threads,
 )
 
-__all__ = ['CardSet', 'ENGINES', 'FlightInstants', 'METRICS', 'MapResult', 'NODATA', 'Receivers', 'WindowResult', 'Z95', 'band_unit', 'contour_features', 'contours_geojson', 'default_threads', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'grid_for_trajectory', 'isobands', 'isolines', 'make_map', 'map_threads', 'parse_levels', 'plot_directivity', 'prepare_flight', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'snapshot_name', 'threshold_name', 'window_lattice', 'write_geojson', 'write_geotiff']
+__all__ = ['CardSet', 'ENGINES', 'FlightInstants', 'MAX_DISTANCE_M', 'METRICS', 'MapResult', 'SIZED_METRICS', 'audible_distance', 'auto_margin', 'clip_warnings', 'clipped_levels', 'grid_for_map', 'NODATA', 'Receivers', 'WindowResult', 'Z95', 'band_unit', 'contour_features', 'contours_geojson', 'default_threads', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'grid_for_trajectory', 'isobands', 'isolines', 'make_map', 'map_threads', 'parse_levels', 'plot_directivity', 'prepare_flight', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'snapshot_name', 'threshold_name', 'window_lattice', 'write_geojson', 'write_geotiff']

@@ -187,10 +187,12 @@ function clearAll() {
 function request() {
   const cards = [...document.querySelectorAll("#cards input:checked")].map((cb) => cb.value);
   const levels = $("levels").value.split(",").map((s) => s.trim()).filter((s) => s).map(Number);
+  const grid = { resolution_m: Number($("resolution").value) };
+  if ($("margin").value.trim() !== "") grid.margin_m = Number($("margin").value);
   return {
     trajectory: app.trajectory,
     cards,
-    grid: { resolution_m: Number($("resolution").value), margin_m: Number($("margin").value) },
+    grid,
     metrics: [$("metric").value],
     levels,
   };
@@ -218,7 +220,10 @@ async function compute() {
   if (!resp.ok) { setStatus(await errorText(resp), true); return; }
   const geo = await resp.json();
   drawContours(geo);
-  setStatus(`Contours in ${((performance.now() - t0) / 1000).toFixed(1)} s: ${geo.features.length} features.`);
+  const metric = $("metric").value;
+  const warns = ((geo.gisnoise && geo.gisnoise.warnings) || []).filter((w) => w.startsWith(metric + " "));
+  setStatus(`Contours in ${((performance.now() - t0) / 1000).toFixed(1)} s: ${geo.features.length} features.`
+    + (warns.length ? " Warning: " + warns.join(" ") : ""), warns.length > 0);
 }
 
 function colourFor(level, levels) {
@@ -241,7 +246,8 @@ function drawContours(geo) {
         : { color: c, weight: 0.5, fillColor: c, fillOpacity: 0.55 };
     },
     onEachFeature: (f, layer) => layer.bindTooltip(
-      `${f.properties.metric || ""} ${f.properties.level}${f.properties.level_max != null ? "–" + f.properties.level_max : ""} dB(A)`),
+      `${f.properties.metric || ""} ${f.properties.level}${f.properties.level_max != null ? "–" + f.properties.level_max : ""} dB(A)`
+      + (f.properties.clipped ? " (clipped by the grid's edge)" : "")),
   }).addTo(app.map);
   if (app.routeLayer) app.routeLayer.bringToFront();
   const b = app.contourLayer.getBounds();
