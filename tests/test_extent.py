@@ -8,9 +8,10 @@ import rasterio
 from click.testing import CliRunner
 
 from gisnoise.cli.main import cli
-from gisnoise.data import card_path, sample_route_path as sample_route
-from gisnoise.maps import CardSet, audible_distance, auto_margin, make_map
+from gisnoise.data import card_path
+from gisnoise.data import sample_route_path as sample_route
 from gisnoise.flight import read_route
+from gisnoise.maps import CardSet, audible_distance, auto_margin, make_map
 from gisnoise.model import ModelCard
 
 DEMO = ["demo-horizontal", "demo-climb", "demo-sink"]

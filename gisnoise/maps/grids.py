@@ -112,7 +112,8 @@ def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolut
     The margin is :func:`audible_distance` of the cards at ``lowest_db`` (at least
     ``min_margin_m``, plus one cell), so no edge cell's maximum level reaches ``lowest_db``.
     When that grid would exceed ``cell_limit`` (default ``GISNOISE_MAX_CELLS``) the margin is
-    cut to the largest that fits, and a warning says so.
+    cut to the largest that fits, and a warning says so; when not even ``min_margin_m`` fits,
+    that is returned and the grid's cell check refuses it.
     """
     idx = cardset.assign(traj.phase, traj.t)
     cards, powers = [], []
@@ -136,7 +137,9 @@ def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolut
     disc = (w0 + h0) ** 2 - 4.0 * (w0 * h0 - limit * res * res)
     fit = (-(w0 + h0) + math.sqrt(max(disc, 0.0))) / 4.0 - 2.0 * res
     if margin > fit:
-        cut = max(math.floor(fit / res) * res, 0.0)
+        cut = math.floor(fit / res) * res
+        if cut < min_margin_m:  # not even the least margin fits: the grid's cell check refuses it
+            return float(min_margin_m), warnings
         warnings.append(f"the {lowest_db:g} dB(A) contour of LAmax needs a {margin:,.0f} m margin; the grid is "
                         f"cut to {cut:,.0f} m by the limit of {limit:,} cells; use a coarser resolution to see "
                         "all of it")

@@ -170,6 +170,7 @@ def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
 
     with _prefixed("grid"):
         try:
+            assert req.grid.margin_m is not None, "_auto_margin sets the margin first"
             grid = grid_for_trajectory(traj, req.grid.resolution_m, req.grid.margin_m, crs=req.grid.crs)
         except GridTooLargeError as exc:
             raise GridTooLargeError(str(exc), field="grid.resolution_m") from None
