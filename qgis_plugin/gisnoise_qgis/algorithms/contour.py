@@ -89,7 +89,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             "feature's fields; yaw along the line unless a yaw field is given), or a flight CSV / GeoJSON "
             "trajectory file as the gisnoise command line reads it.\n\n"
             "Outputs: a GeoTIFF with one band per metric (LAmax, LAeq over the flight, SEL), "
-            "isobands and isolines of the chosen levels (properties metric and level), "
+            "isobands and isolines of the chosen levels (properties metric, level and clipped: true where the "
+            "grid's edge cuts the contour; the default margin closes the lowest level of LAmax and LAeq), "
             "styled with graduated colours by level."
         )
 
@@ -120,8 +121,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.RESOLUTION, "Cell size (m)", QgsProcessingParameterNumber.Double, 10.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
-            self.MARGIN, "Margin around the trajectory (m)", QgsProcessingParameterNumber.Double, 500.0,
-            minValue=0.0))
+            self.MARGIN, "Margin around the trajectory (m; empty: from the cards, so the lowest level closes)",
+            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterString(
             self.LEVELS, "Contour levels (dB(A), comma separated)", "45,50,55,60,65"))
         self.addParameter(QgsProcessingParameterEnum(
@@ -237,12 +238,15 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         paths = make_map(
             traj, cards, work,
             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
-            margin_m=self.parameterAsDouble(parameters, self.MARGIN, context),
+            margin_m=(None if parameters.get(self.MARGIN) in (None, "")
+                      else self.parameterAsDouble(parameters, self.MARGIN, context)),
             levels=levels, metrics=metrics, crs=crs_text, dem=dem,
             receiver_height=self.parameterAsDouble(parameters, self.RECEIVER_HEIGHT, context),
             uncertainty=self.parameterAsBoolean(parameters, self.UNCERTAINTY, context), plot=False,
             progress=steps.progress, cancel=steps.cancel, **kw)
         tif, geojson = os.fspath(paths["levels"]), os.fspath(paths["contours"])
+        for warning in paths.get("warnings", []):
+            feedback.reportError(f"warning: {warning}", fatalError=False)
 
         raster_out = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)
         _write_raster(tif, raster_out)
