@@ -26,7 +26,7 @@ def _clipped(path):
 def test_default_margin_closes_the_lowest_level(plugin, flight_csv, tmp_path):
     res = run_map(tmp_path, "auto", TRAJECTORY_FILE=str(flight_csv), MARGIN=None)
     grid, names, *_ = read_raster(res["OUTPUT_RASTER"])
-    assert grid[names.index("LAmax")].max() > 65.0
+    assert grid[names.index("LAmax")].max() > 60.0
     assert _edge_max(grid[names.index("LAmax")]) < 50.0
     flags = _clipped(res["OUTPUT_BANDS"])
     assert flags and not any(flags.values())
@@ -38,4 +38,4 @@ def test_a_small_margin_flags_the_cut_contours(plugin, flight_csv, tmp_path):
     top = _edge_max(grid[names.index("LAmax")])
     flags = _clipped(res["OUTPUT_BANDS"])
     assert flags == {("LAmax", lv): top >= lv for lv in LEVELS if ("LAmax", lv) in flags}
-    assert flags[("LAmax", 50.0)]
+    assert top >= 50.0 and any(flags.values())
