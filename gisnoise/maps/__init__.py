@@ -48,6 +48,7 @@ from gisnoise.maps.palette import (
     ISOLINE_COLOUR,
     NOISE_CLASSES,
     PALETTE_NAME,
+    PHASE_COLOURS,
     class_colours,
     class_labels,
     colour_for,
@@ -80,4 +81,4 @@ from gisnoise.maps.threads import (
     map_threads,
 )
 
-__all__ = ['CardSet', 'ENGINES', 'FlightInstants', 'ISOLINE_COLOUR', 'NOISE_CLASSES', 'PALETTE_NAME', 'class_colours', 'class_labels', 'colour_for', 'palette_doc', 'MAX_DISTANCE_M', 'METRICS', 'MapResult', 'SIZED_METRICS', 'audible_distance', 'auto_margin', 'clip_warnings', 'clipped_levels', 'grid_for_map', 'NODATA', 'Receivers', 'WindowResult', 'Z95', 'band_unit', 'contour_features', 'contours_geojson', 'default_threads', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'grid_for_trajectory', 'isobands', 'isolines', 'make_map', 'map_threads', 'parse_levels', 'plot_directivity', 'prepare_flight', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'snapshot_name', 'threshold_name', 'window_lattice', 'write_geojson', 'write_geotiff']
+__all__ = ['CardSet', 'ENGINES', 'FlightInstants', 'ISOLINE_COLOUR', 'NOISE_CLASSES', 'PALETTE_NAME', 'PHASE_COLOURS', 'class_colours', 'class_labels', 'colour_for', 'palette_doc', 'MAX_DISTANCE_M', 'METRICS', 'MapResult', 'SIZED_METRICS', 'audible_distance', 'auto_margin', 'clip_warnings', 'clipped_levels', 'grid_for_map', 'NODATA', 'Receivers', 'WindowResult', 'Z95', 'band_unit', 'contour_features', 'contours_geojson', 'default_threads', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'grid_for_trajectory', 'isobands', 'isolines', 'make_map', 'map_threads', 'parse_levels', 'plot_directivity', 'prepare_flight', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'snapshot_name', 'threshold_name', 'window_lattice', 'write_geojson', 'write_geotiff']

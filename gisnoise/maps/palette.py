@@ -38,7 +38,7 @@ from collections.abc import Sequence
 from typing import Any
 
 __all__ = ["NOISE_CLASSES", "PALETTE_NAME", "colour_for", "class_colours", "class_labels", "palette_doc",
-           "ISOLINE_COLOUR"]
+           "ISOLINE_COLOUR", "PHASE_COLOURS"]
 
 PALETTE_NAME = "DIN 18005-2:1991 (ISO 1996-2:1987) 5 dB classes"
 
@@ -56,6 +56,10 @@ NOISE_CLASSES: tuple[tuple[float, str, str], ...] = (
     (80.0, "dark blue", "#134367"),
 )
 """(lower bound dB, colour name, sRGB hex) of each class, ascending; the first is open below, the last above."""
+
+PHASE_COLOURS = {"horizontal": "#1f77b4", "transition": "#9467bd", "climb": "#2ca02c", "sink": "#17becf",
+                 "hover": "#d62728"}
+"""Colours of the flight track by phase (map.png, the QGIS track layer)."""
 
 ISOLINE_COLOUR = "#202020"
 """Colour of isolines (drawn over the classes)."""

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.maps.palette import ISOLINE_COLOUR, PALETTE_NAME, class_colours
+from gisnoise.maps.palette import ISOLINE_COLOUR, PALETTE_NAME, PHASE_COLOURS, class_colours
 
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.flight import Trajectory
@@ -25,8 +25,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["require_matplotlib", "plot_map", "directivity_grid", "plot_directivity", "PHASE_COLOURS"]
 
-PHASE_COLOURS = {"horizontal": "#1f77b4", "transition": "#9467bd", "climb": "#2ca02c", "sink": "#17becf",
-                 "hover": "#d62728"}
 
 
 def require_matplotlib() -> Any:
