@@ -52,8 +52,10 @@ def levels_edges(path):
 
 def test_demo_default_extent_closes_the_lowest_level(tmp_path):
     """The demo (scripts/demo) without --margin: no edge cell of LAmax or LAeq at or above 45 dB(A)."""
+    pytest.importorskip("numba")
     r = CliRunner().invoke(cli, ["-q", "contour", str(sample_route()), *sum((["--card", c] for c in DEMO), []),
-                                 "--out", str(tmp_path), "--resolution", "10", "--levels", DEMO_LEVELS],
+                                 "--out", str(tmp_path), "--resolution", "10", "--levels", DEMO_LEVELS,
+                                 "--engine", "fast"],  # the reference engine's equal within 0.01 dB, faster
                            catch_exceptions=False)
     assert r.exit_code == 0, r.output
     edges = levels_edges(tmp_path / "levels.tif")

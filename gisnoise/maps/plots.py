@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.maps.palette import ISOLINE_COLOUR, PALETTE_NAME, PHASE_COLOURS, class_colours
+from gisnoise.maps.palette import ISOLINE_COLOUR, PHASE_COLOURS, class_colours
 
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.flight import Trajectory
@@ -144,7 +144,7 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
         handles.append(Line2D([], [], color="black", lw=0.7, label=f"{metric} contours, dB(A)"))
         ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.85)
         cb = fig.colorbar(im, ax=ax, shrink=0.9, extend="max", ticks=bounds[:-1], aspect=30)
-        cb.set_label(f"{metric}, dB(A) ({PALETTE_NAME} colours)")
+        cb.set_label(f"{metric}, dB(A) (colours of DIN 18005-2, 5 dB classes)")
         _scale_bar(ax, left, bottom, right - left, top - bottom)
         _north_arrow(ax)
         ax.set_xlim(left, right)
