@@ -113,3 +113,22 @@ def test_the_margin_bound_holds_over_the_demo_cards_sphere():
         assert np.nanmax(lv) < 50.0 + 0.05
         lv_in = card.level_uav(card.inputs(np.full(phi.shape, d / 1.1), phi, theta, card.reference_power_w * 1.5))
         assert np.nanmax(lv_in) >= 50.0
+
+
+def test_a_card_with_a_model_extension_is_bounded_by_its_base_with_a_warning(tmp_path):
+    import dataclasses
+
+    from gisnoise.model import get_ansatz
+
+    base = omni()
+    ext = "paper-offset+bank_angle"
+    params = dict(base.parameters)
+    for k in get_ansatz(ext).params:
+        params.setdefault(k, 0.0)  # the effect switched off: the same levels as the base
+    card = dataclasses.replace(base, ansatz=ext, parameters=params)
+    route = read_route(sample_route())
+    traj = route.trajectory.with_(phase=np.full(len(route.trajectory), "horizontal"))
+    m_ext, w = auto_margin(traj, CardSet([card]), 45.0, resolution_m=20.0)
+    m_base, w0 = auto_margin(traj, CardSet([base]), 45.0, resolution_m=20.0)
+    assert m_ext == m_base and w0 == []
+    assert len(w) == 1 and "paper-offset+bank_angle" in w[0] and "clipped" in w[0]

@@ -18,7 +18,7 @@ edge carry ``"clipped": true`` (:mod:`gisnoise.maps.contours`).
 
 Examples
 --------
->>> from gisnoise.model import ModelCard
+>>> from gisnoise.model import ModelCard, get_ansatz
 >>> p = {"p0": 60.0, "p1": 0.0, "p2": 0.0, "p3": 0.0, "p4": 0.0, "p5": 0.0, "p6": 1.0, "p7": 30.0}
 >>> c = ModelCard(id="c", vehicle="v", phase="horizontal", ansatz="paper-offset", parameters=p,
 ...               reference_power_w=1000.0)
@@ -29,6 +29,7 @@ True
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -39,7 +40,7 @@ from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import GridSpec, grid_for_points, max_cells
 from gisnoise.maps.cardset import CardSet
-from gisnoise.model import ModelCard
+from gisnoise.model import ModelCard, get_ansatz
 
 __all__ = ["grid_for_trajectory", "grid_for_map", "auto_margin", "audible_distance", "MAX_DISTANCE_M", "SIZED_METRICS"]
 
@@ -92,6 +93,16 @@ def audible_distance(cards: Sequence[ModelCard], powers_w: Sequence[float], leve
     return far
 
 
+def _base_card(card: ModelCard) -> ModelCard:
+    """``card`` with its ansatz's effects left out (``paper-offset+bank_angle`` -> ``paper-offset``)."""
+    if "+" not in card.ansatz:
+        return card
+    base = card.ansatz.split("+")[0]
+    params = get_ansatz(base).params
+    return dataclasses.replace(card, ansatz=base, parameters={k: card.parameters[k] for k in params},
+                               covariance=None)
+
+
 def _target_uav_level(level_db: float, cards: Sequence[ModelCard], background: bool) -> float | None:
     """The UAV level whose sum with the background equals ``level_db``; None if the background alone reaches it."""
     if not background:
@@ -130,7 +141,14 @@ def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolut
                         "contour; the grid uses a 500 m margin")
         return 500.0, warnings
     res = float(resolution_m)
-    margin = max(audible_distance(cards, powers, target), float(min_margin_m)) + res
+    try:
+        far = audible_distance(cards, powers, target)
+    except InputError:  # a model extension needs inputs of the flight: bound its base ansatz, and say so
+        far = audible_distance([_base_card(c) for c in cards], powers, target)
+        ext = ", ".join(sorted({c.ansatz for c in cards if "+" in c.ansatz}))
+        warnings.append(f"the extent is bounded by the base ansatz of {ext}, without its effects; check the "
+                        "contours' clipped flags")
+    margin = max(far, float(min_margin_m)) + res
     base = grid_for_trajectory(traj, resolution_m, 0.0, crs)
     limit = max_cells() if cell_limit is None else int(cell_limit)
     w0, h0 = base.width * res, base.height * res
