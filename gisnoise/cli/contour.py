@@ -46,8 +46,9 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
 @out_dir_option
 @click.option("--resolution", "resolution", type=float, default=10.0, show_default=True,
               help="Cell size of the receiver grid, m.")
-@click.option("--margin", "margin", type=float, default=500.0, show_default=True,
-              help="Margin around the track, m.")
+@click.option("--margin", "margin", type=float, default=None,
+              help="Margin around the track, m [default: from the cards, so the lowest level's LAmax and LAeq "
+                   "contours close]; contours the grid's edge cuts carry \"clipped\": true and a warning.")
 @click.option("--levels", "levels", default="45,50,55,60", show_default=True, callback=_levels,
               help="Contour levels, dB(A), comma-separated.")
 @click.option("--dem", "dem", type=click.Path(dir_okay=False), default=None,
@@ -82,7 +83,7 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
                    "faster.  'numpy': the reference (any ansatz, the --uncertainty bands).  'auto': 'fast' "
                    "unless --uncertainty or a card with a receiver-dependent term needs 'numpy'.")
 @click.pass_context
-def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float,
+def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float | None,
             levels: list[float], dem: str | None, dem_offset: float, receiver_height: float, ground_h: float | None,
             crs: str | None, metrics: list[str], period: float | None, threshold: list[float] | None,
             snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool,
@@ -109,3 +110,5 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
                f"{':'.join(auth) if auth else g.crs.name}; {res.metadata['evaluation_instants']} instants; "
                f"engine {res.metadata.get('engine', engine)}")
     _echo_bands_and_files(res, paths, ("levels", "contours", "map"))
+    for w in paths.get("warnings", []):
+        click.echo(f"warning: {w}", err=True)

@@ -56,6 +56,7 @@ from gisnoise.design.plan import (
     resolve_plan,
 )
 from gisnoise.design.report import (
+    layout_figure,
     std_ratios,
     study_curves,
     write_report,
@@ -84,4 +85,4 @@ __all__ = ['CORRELATION_VARIABLES', 'Design', 'DesignModel', 'DesignResult', 'Ev
            'PATTERN_PAIRS', 'Plan', 'RESULT_SCHEMA', 'SCHEMA', 'StudyPoint', 'VerifyResult', 'campaign_scenario',
            'correlation_matrix', 'evaluate', 'fisher_information', 'layout_geojson', 'load_plan',
            'max_abs_correlation', 'optimize', 'resolve_plan', 'run_design', 'snr_distance', 'std_ratios',
-           'study', 'study_curves', 'verify', 'write_outputs', 'write_report']
+           'layout_figure', 'study', 'study_curves', 'verify', 'write_outputs', 'write_report']

@@ -43,7 +43,7 @@ from gisnoise.reporting import correlation_axes, figure
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.design.result import DesignResult
 
-__all__ = ["write_report", "study_curves", "std_ratios"]
+__all__ = ["write_report", "study_curves", "std_ratios", "layout_figure"]
 
 _COLOURS = {"base": "0.25", "paper": "tab:orange", "d-optimal": "tab:blue"}
 _LABELS = {"power": "power", "polar": "polar angle", "distance": "distance", "bank": "bank angle"}
@@ -155,6 +155,15 @@ def _corr_panels(panels: list[tuple[str, np.ndarray]], variables: list[str], pat
 
 
 def _plot_layout(result: DesignResult, doc: dict[str, Any], path: Path) -> None:
+    layout_figure(result, doc).savefig(path)
+
+
+def layout_figure(result: DesignResult, doc: dict[str, Any]) -> Any:
+    """The layout figure (``layout.png``): track, exclusions, base and optimal microphones, limits.
+
+    The legend sits beside the axes; the figure's width grows with it, so axis labels, tick
+    labels (minus signs included) and legend all lie inside the canvas.
+    """
     from matplotlib.patches import Polygon as MplPolygon
     from matplotlib.patches import Rectangle
 
@@ -192,7 +201,21 @@ def _plot_layout(result: DesignResult, doc: dict[str, Any], path: Path) -> None:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     ax.set_title(f"Layout: signal-to-noise distance {plan.max_distance_m:.0f} m", fontsize=10)
-    fig.savefig(path)
+    _fit_canvas(fig)
+    return fig
+
+
+def _fit_canvas(fig: Any, pad_in: float = 0.1) -> None:
+    """Widen or heighten ``fig`` until its drawn extent (tight bounding box) lies inside the canvas."""
+    for _ in range(4):
+        fig.canvas.draw()
+        tight = fig.get_tightbbox(fig.canvas.get_renderer())
+        w, h = fig.get_size_inches()
+        over_w = max(0.0, tight.x1 - w, -tight.x0) + pad_in
+        over_h = max(0.0, tight.y1 - h, -tight.y0) + pad_in
+        if over_w <= pad_in and over_h <= pad_in:
+            return
+        fig.set_size_inches(w + 2 * over_w, h + 2 * over_h)
 
 
 def _alts(d: dict[str, Any]) -> str:

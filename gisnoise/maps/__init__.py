@@ -7,6 +7,8 @@ from gisnoise.maps.cardset import (
     CardSet,
 )
 from gisnoise.maps.contours import (
+    clip_warnings,
+    clipped_levels,
     contour_features,
     contours_geojson,
     isobands,
@@ -34,11 +36,26 @@ from gisnoise.maps.geotiff import (
     write_geotiff,
 )
 from gisnoise.maps.grids import (
+    MAX_DISTANCE_M,
+    SIZED_METRICS,
+    audible_distance,
+    auto_margin,
+    grid_for_map,
     grid_for_trajectory,
 )
 from gisnoise.maps.instants import (
     FlightInstants,
     prepare_flight,
+)
+from gisnoise.maps.palette import (
+    ISOLINE_COLOUR,
+    NOISE_CLASSES,
+    PALETTE_NAME,
+    PHASE_COLOURS,
+    class_colours,
+    class_labels,
+    colour_for,
+    palette_doc,
 )
 from gisnoise.maps.pipeline import (
     make_map,
@@ -68,4 +85,4 @@ from gisnoise.maps.threads import (
     map_threads,
 )
 
-__all__ = ['CardSet', 'DEFAULT_ENGINE', 'ENGINES', 'FlightInstants', 'METRICS', 'MapResult', 'NODATA', 'Receivers', 'WindowResult', 'Z95', 'band_unit', 'contour_features', 'contours_geojson', 'default_threads', 'directivity_grid', 'evaluate_grid', 'evaluate_grid_fast', 'fast_engine_serves', 'grid_for_trajectory', 'isobands', 'isolines', 'make_map', 'map_threads', 'parse_levels', 'plot_directivity', 'plot_map', 'prepare_flight', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'snapshot_name', 'threshold_name', 'warm_up', 'window_lattice', 'write_geojson', 'write_geotiff']
+__all__ = ['audible_distance', 'auto_margin', 'band_unit', 'CardSet', 'class_colours', 'class_labels', 'clip_warnings', 'clipped_levels', 'colour_for', 'contour_features', 'contours_geojson', 'DEFAULT_ENGINE', 'default_threads', 'directivity_grid', 'ENGINES', 'evaluate_grid', 'evaluate_grid_fast', 'fast_engine_serves', 'FlightInstants', 'grid_for_map', 'grid_for_trajectory', 'isobands', 'ISOLINE_COLOUR', 'isolines', 'make_map', 'map_threads', 'MapResult', 'MAX_DISTANCE_M', 'METRICS', 'NODATA', 'NOISE_CLASSES', 'palette_doc', 'PALETTE_NAME', 'parse_levels', 'PHASE_COLOURS', 'plot_directivity', 'plot_map', 'prepare_flight', 'Receivers', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'SIZED_METRICS', 'snapshot_name', 'threshold_name', 'warm_up', 'window_lattice', 'WindowResult', 'write_geojson', 'write_geotiff', 'Z95']

@@ -15,7 +15,9 @@ isoline
     ``MultiLineString`` where ``L == level``; ``level_max`` is null.
 
 Each feature has the properties ``metric``, ``level``, ``level_max``, ``kind``,
-``unit`` and a display ``name``.
+``unit``, a display ``name`` and ``clipped``: true when the area at or above the
+feature's ``level`` reaches the grid's outer cells, so the feature is cut by the grid's
+edge rather than closed by the levels (:func:`clipped_levels`, :func:`clip_warnings`).
 
 Examples
 --------
@@ -46,7 +48,8 @@ from gisnoise.maps._checks import as_float
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.maps.result import MapResult
 
-__all__ = ["isobands", "isolines", "contour_features", "contours_geojson", "write_geojson", "parse_levels"]
+__all__ = ["isobands", "isolines", "contour_features", "contours_geojson", "write_geojson", "parse_levels",
+           "clipped_levels", "clip_warnings"]
 
 PRECISION_DEG = 1e-8
 """Coordinates are snapped to this grid (deg, about 1 mm)."""
@@ -68,6 +71,44 @@ def parse_levels(levels: Any, *, field: str = "levels") -> list[float]:
     if not out:
         raise InputError(f"{field}: give at least one level", field=field)
     return sorted(set(out))
+
+
+def _edge_max(z: np.ndarray) -> float:
+    a = np.asarray(z, dtype=float)
+    if a.ndim != 2 or a.size == 0:
+        return float("nan")
+    edge = np.concatenate([a[0], a[-1], a[:, 0], a[:, -1]])
+    edge = edge[np.isfinite(edge)]
+    return float(edge.max()) if edge.size else float("nan")
+
+
+def clipped_levels(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> dict[str, list[float]]:
+    """Metric -> the levels whose contours the grid's edge cuts (some outer cell at or above them).
+
+    Only metrics with at least one such level are listed; ``metrics`` defaults to the level bands.
+    """
+    lv = parse_levels(levels)
+    names = result.level_bands() if metrics is None else list(metrics)
+    out: dict[str, list[float]] = {}
+    for name in names:
+        top = _edge_max(result.band(name))
+        cut = [lo for lo in lv if top >= lo]
+        if cut:
+            out[name] = cut
+    return out
+
+
+def clip_warnings(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[str]:
+    """One line per metric whose contours the grid's edge cuts, naming the metric, levels and edge maximum."""
+    out = []
+    units = result.units
+    for name, cut in clipped_levels(result, levels, metrics=metrics).items():
+        unit = units.get(name, "dB(A)")
+        top = _edge_max(result.band(name))
+        lv = ", ".join(f"{v:g}" for v in cut)
+        out.append(f"{name} {lv} {unit} contours are clipped: the grid's edge reaches {top:.1f} {unit}; "
+                   "they carry \"clipped\": true (a wider margin shows them whole)")
+    return out
 
 
 def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
@@ -178,6 +219,7 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
     for name in names:
         z = result.band(name)
         unit = units.get(name, "dB(A)")
+        top = _edge_max(z)
         bounds = [(lv[i], lv[i + 1] if i + 1 < len(lv) else None) for i in range(len(lv))]
         for lo, hi in bounds:
             polys = isobands(x, y, z, [lo] if hi is None else [lo, hi])
@@ -186,7 +228,7 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
                 continue
             label = f"{name} >= {lo:g} {unit}" if hi is None else f"{name} {lo:g}-{hi:g} {unit}"
             features.append(_feature(geom, {"metric": name, "level": lo, "level_max": hi, "kind": "isoband",
-                                            "unit": unit, "name": label}))
+                                            "unit": unit, "name": label, "clipped": bool(top >= lo)}))
         for lo in lv:
             lines = [_to_wgs84(g, tr) for g in isolines(x, y, z, lo)]
             lines = [shapely.set_precision(g, PRECISION_DEG) for g in lines]
@@ -195,7 +237,7 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
                 continue
             features.append(_feature(MultiLineString(lines), {
                 "metric": name, "level": lo, "level_max": None, "kind": "isoline", "unit": unit,
-                "name": f"{name} {lo:g} {unit}"}))
+                "name": f"{name} {lo:g} {unit}", "clipped": bool(top >= lo)}))
     return features
 
 
@@ -231,6 +273,7 @@ def contours_geojson(result: MapResult, levels: Any, *, metrics: Sequence[str] |
     feats = contour_features(result, levels, metrics=metrics)
     return {"type": "FeatureCollection", "features": feats,
             "gisnoise": {"levels": parse_levels(levels),
+                         "warnings": clip_warnings(result, levels, metrics=metrics),
                          "metrics": sorted({f["properties"]["metric"] for f in feats}),
                          "grid": result.grid.to_dict()}}
 

@@ -1,18 +1,58 @@
-"""The receiver grid of a map: around a trajectory's track, plus a margin.
+"""The receiver grid of a map: around a trajectory's track, large enough for the contours.
 
-The grid covers the track's bounding box plus ``margin_m`` on every side, snapped to
-multiples of the resolution, in the local UTM zone unless a CRS is given
+:func:`grid_for_trajectory` covers the track's bounding box plus ``margin_m`` on every side,
+snapped to multiples of the resolution, in the local UTM zone unless a CRS is given
 (:func:`gisnoise.geo.grid_for_points`); its size is limited by ``GISNOISE_MAX_CELLS``.
+
+:func:`audible_distance` bounds, from the cards, how far from the track the lowest
+requested level can still be reached; :func:`grid_for_map` grows the margin to it, so
+that the lowest contour of the maximum level closes inside the grid.  The bound is an
+upper one: each card's own model (one definition, :meth:`gisnoise.model.ModelCard.level_uav`)
+is evaluated over the whole emission sphere at the loudest electric power the track flies
+with that card, at distances from 1 m to 100 km; spreading is the card's (``p6`` in the
+paper's ansatz); atmospheric absorption, which only lowers levels, is left out, so the
+bound holds with it too.  The time-averaged level ``LAeq`` never exceeds ``LAmax``, so the
+same extent closes its lowest contour as well; the sound exposure level ``SEL`` grows with
+the event's duration and its low contours may lie far outside: features cut by the grid's
+edge carry ``"clipped": true`` (:mod:`gisnoise.maps.contours`).
+
+Examples
+--------
+>>> from gisnoise.model import ModelCard, get_ansatz
+>>> p = {"p0": 60.0, "p1": 0.0, "p2": 0.0, "p3": 0.0, "p4": 0.0, "p5": 0.0, "p6": 1.0, "p7": 30.0}
+>>> c = ModelCard(id="c", vehicle="v", phase="horizontal", ansatz="paper-offset", parameters=p,
+...               reference_power_w=1000.0)
+>>> d = audible_distance([c], [1000.0], 40.0)  # 60 dB at 40 m, 6 dB per doubling: 40 dB at 400 m
+>>> 400.0 <= d <= 400.0 * 1.05  # an upper bound, at most one table step (4.9 %) beyond
+True
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
+from collections.abc import Sequence
 from typing import Any
 
-from gisnoise.flight import Trajectory
-from gisnoise.geo import GridSpec, grid_for_points
+import numpy as np
 
-__all__ = ["grid_for_trajectory"]
+from gisnoise.errors import InputError
+from gisnoise.flight import Trajectory
+from gisnoise.geo import GridSpec, grid_for_points, max_cells
+from gisnoise.maps.cardset import CardSet
+from gisnoise.model import ModelCard, get_ansatz
+
+__all__ = ["grid_for_trajectory", "grid_for_map", "auto_margin", "audible_distance", "MAX_DISTANCE_M", "SIZED_METRICS"]
+
+MAX_DISTANCE_M = 100_000.0
+"""Largest distance the bound looks at, m."""
+
+SIZED_METRICS = ("LAmax", "LAeq")
+"""Metrics whose lowest contour the default extent closes (``LAeq <= LAmax`` everywhere)."""
+
+_DISTANCES = np.geomspace(1.0, MAX_DISTANCE_M, 241)
+_PHI = np.radians(np.arange(0.0, 360.0, 5.0))
+_THETA = np.radians(np.linspace(-90.0, 90.0, 37))
 
 
 def grid_for_trajectory(traj: Trajectory, resolution_m: float = 10.0, margin_m: float = 500.0,
@@ -22,3 +62,118 @@ def grid_for_trajectory(traj: Trajectory, resolution_m: float = 10.0, margin_m: 
     result and errors.
     """
     return grid_for_points(traj.lon, traj.lat, resolution_m, margin_m, crs)
+
+
+def audible_distance(cards: Sequence[ModelCard], powers_w: Sequence[float], level_db: float) -> float:
+    """Upper bound of the slant distance (m) at which any of ``cards`` reaches ``level_db``.
+
+    ``powers_w[i]`` is the loudest electric power card ``i`` flies with.  The level of each
+    card (background excluded) is maximised over the emission sphere (5 deg steps) at 241
+    distances from 1 m to :data:`MAX_DISTANCE_M`; the result is the first tabulated distance
+    beyond the last one still at or above ``level_db`` (0 when none is).  Raises
+    :class:`~gisnoise.errors.InputError` (field ``card``) for a card whose model needs inputs
+    beyond distance, angles and power.
+    """
+    phi, theta, d = np.meshgrid(_PHI, _THETA, _DISTANCES, indexing="ij")
+    far = 0.0
+    for card, pw in zip(cards, powers_w, strict=True):
+        if not math.isfinite(float(pw)) or float(pw) <= 0:
+            continue
+        try:
+            lv = card.level_uav(card.inputs(d, phi, theta, float(pw)))
+        except InputError as exc:
+            raise InputError(f"card {card.id!r}: its model cannot be bounded for the map's extent ({exc}); "
+                             "give --margin", field="card") from None
+        loud = np.nanmax(lv, axis=(0, 1))
+        idx = np.flatnonzero(loud >= level_db)
+        if idx.size == 0:
+            continue
+        k = int(idx[-1])
+        far = max(far, float(_DISTANCES[min(k + 1, _DISTANCES.size - 1)]))
+    return far
+
+
+def _base_card(card: ModelCard) -> ModelCard:
+    """``card`` with its ansatz's effects left out (``paper-offset+bank_angle`` -> ``paper-offset``)."""
+    if "+" not in card.ansatz:
+        return card
+    base = card.ansatz.split("+")[0]
+    params = get_ansatz(base).params
+    return dataclasses.replace(card, ansatz=base, parameters={k: card.parameters[k] for k in params},
+                               covariance=None)
+
+
+def _target_uav_level(level_db: float, cards: Sequence[ModelCard], background: bool) -> float | None:
+    """The UAV level whose sum with the background equals ``level_db``; None if the background alone reaches it."""
+    if not background:
+        return level_db
+    bgs = [b for b in (c.background_db for c in cards) if b is not None]
+    if not bgs:
+        return level_db
+    bg = max(bgs)
+    if bg >= level_db:
+        return None
+    return 10.0 * math.log10(10.0 ** (level_db / 10.0) - 10.0 ** (bg / 10.0))
+
+
+def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolution_m: float = 10.0,
+                crs: Any = None, background: bool = False, min_margin_m: float = 100.0,
+                cell_limit: int | None = None) -> tuple[float, list[str]]:
+    """The default margin (m) of a map's grid, and the warnings that go with it.
+
+    The margin is :func:`audible_distance` of the cards at ``lowest_db`` (at least
+    ``min_margin_m``, plus one cell), so no edge cell's maximum level reaches ``lowest_db``.
+    When that grid would exceed ``cell_limit`` (default ``GISNOISE_MAX_CELLS``) the margin is
+    cut to the largest that fits, and a warning says so; when not even ``min_margin_m`` fits,
+    that is returned and the grid's cell check refuses it.
+    """
+    idx = cardset.assign(traj.phase, traj.t)
+    cards, powers = [], []
+    for i, card in enumerate(cardset.cards):
+        m = idx == i
+        if m.any():
+            cards.append(card)
+            powers.append(float(np.nanmax(np.asarray(traj.power_w, dtype=float)[m])))
+    warnings: list[str] = []
+    target = _target_uav_level(lowest_db, cards, background)
+    if target is None:
+        warnings.append(f"the cards' background level alone reaches {lowest_db:g} dB(A): no extent closes that "
+                        "contour; the grid uses a 500 m margin")
+        return 500.0, warnings
+    res = float(resolution_m)
+    try:
+        far = audible_distance(cards, powers, target)
+    except InputError:  # a model extension needs inputs of the flight: bound its base ansatz, and say so
+        far = audible_distance([_base_card(c) for c in cards], powers, target)
+        ext = ", ".join(sorted({c.ansatz for c in cards if "+" in c.ansatz}))
+        warnings.append(f"the extent is bounded by the base ansatz of {ext}, without its effects; check the "
+                        "contours' clipped flags")
+    margin = max(far, float(min_margin_m)) + res
+    base = grid_for_trajectory(traj, resolution_m, 0.0, crs)
+    limit = max_cells() if cell_limit is None else int(cell_limit)
+    w0, h0 = base.width * res, base.height * res
+    # cells of a margin m: (w0 + 2m)(h0 + 2m) / res^2 <= limit
+    disc = (w0 + h0) ** 2 - 4.0 * (w0 * h0 - limit * res * res)
+    fit = (-(w0 + h0) + math.sqrt(max(disc, 0.0))) / 4.0 - 2.0 * res
+    if margin > fit:
+        cut = math.floor(fit / res) * res
+        if cut < min_margin_m:  # not even the least margin fits: the grid's cell check refuses it
+            return float(min_margin_m), warnings
+        warnings.append(f"the {lowest_db:g} dB(A) contour of LAmax needs a {margin:,.0f} m margin; the grid is "
+                        f"cut to {cut:,.0f} m by the limit of {limit:,} cells; use a coarser resolution to see "
+                        "all of it")
+        margin = cut
+    return margin, warnings
+
+
+def grid_for_map(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolution_m: float = 10.0,
+                 margin_m: float | None = None, crs: Any = None, background: bool = False,
+                 cell_limit: int | None = None) -> tuple[GridSpec, list[str]]:
+    """The receiver grid of a map and the warnings that go with it: :func:`grid_for_trajectory`
+    with ``margin_m``, or with :func:`auto_margin` when it is None.
+    """
+    warnings: list[str] = []
+    if margin_m is None:
+        margin_m, warnings = auto_margin(traj, cardset, lowest_db, resolution_m=resolution_m, crs=crs,
+                                         background=background, cell_limit=cell_limit)
+    return grid_for_trajectory(traj, resolution_m, margin_m, crs), warnings

@@ -24,10 +24,10 @@ from typing import Any
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory, read_route
 from gisnoise.maps.cardset import CardSet, as_cardset
-from gisnoise.maps.contours import parse_levels, write_geojson
+from gisnoise.maps.contours import clip_warnings, parse_levels, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.geotiff import write_geotiff
-from gisnoise.maps.grids import grid_for_trajectory
+from gisnoise.maps.grids import grid_for_map
 from gisnoise.maps.result import METRICS, MapResult
 from gisnoise.model import ModelCard
 
@@ -42,7 +42,7 @@ def make_map(
     out_dir: str | os.PathLike[str],
     *,
     resolution_m: float = 10.0,
-    margin_m: float = 500.0,
+    margin_m: float | None = None,
     levels: Any = DEFAULT_LEVELS,
     metrics: Sequence[str] = METRICS,
     crs: Any = None,
@@ -73,8 +73,12 @@ def make_map(
         One card per phase present in the trajectory.
     out_dir : path
         Output folder (created).
-    resolution_m, margin_m : float
-        Cell size and margin around the track, m.
+    resolution_m : float
+        Cell size, m.
+    margin_m : float, optional
+        Margin around the track, m; default large enough that the lowest level's LAmax and LAeq
+        contours close (:func:`gisnoise.maps.grids.grid_for_map`).  Contours cut by the grid's
+        edge carry ``"clipped": true`` and a warning names their metric and levels.
     levels : sequence of float or str
         Contour levels, dB(A).
     metrics : sequence of str
@@ -108,7 +112,8 @@ def make_map(
     dict
         ``levels`` (Path of levels.tif), ``contours`` (Path of contours.geojson),
         ``map`` (Path of map.png, with ``plot``), ``result`` (:class:`MapResult`),
-        ``trajectory`` (:class:`Trajectory`).
+        ``trajectory`` (:class:`Trajectory`), ``warnings`` (list of str: extent cut by the cell
+        limit, clipped contours).
     """
     lv = parse_levels(levels)
     if plot:
@@ -120,7 +125,8 @@ def make_map(
     if ground_h is None and dem is None:
         ground_h = route.ground_h_m
     cardset = as_cardset(cards)
-    grid = grid_for_trajectory(traj, resolution_m, margin_m, crs)
+    grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
+                                  background=background)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
@@ -135,6 +141,8 @@ def make_map(
         background=background, substeps=substeps, uncertainty=uncertainty, engine=engine, progress=eval_progress,
         cancel=cancel)
     result.metadata["levels_db"] = lv
+    warnings = warnings + clip_warnings(result, lv)
+    result.metadata["warnings"] = warnings
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Any] = {}
     paths["levels"] = write_geotiff(result, out / "levels.tif")
@@ -149,4 +157,5 @@ def make_map(
         progress(1.0)
     paths["result"] = result
     paths["trajectory"] = traj
+    paths["warnings"] = warnings
     return paths

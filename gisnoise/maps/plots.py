@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gisnoise.errors import InputError
+from gisnoise.maps.palette import ISOLINE_COLOUR, PHASE_COLOURS, class_colours
 
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.flight import Trajectory
@@ -24,8 +25,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["require_matplotlib", "plot_map", "directivity_grid", "plot_directivity", "PHASE_COLOURS"]
 
-PHASE_COLOURS = {"horizontal": "#1f77b4", "transition": "#9467bd", "climb": "#2ca02c", "sink": "#17becf",
-                 "hover": "#d62728"}
 
 
 def require_matplotlib() -> Any:
@@ -118,8 +117,7 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
     fig, ax = plt.subplots(figsize=(10.0, float(np.clip(8.0 * aspect + 1.6, 4.5, 11.0))), constrained_layout=True)
     try:
         bounds = lv + [max(lv[-1] + 5.0, float(np.nanmax(z)) + 1e-6 if np.isfinite(z).any() else lv[-1] + 5.0)]
-        base = plt.get_cmap("YlOrRd")
-        colours = base(np.linspace(0.15, 0.95, len(bounds) - 1))
+        colours = class_colours(lv)  # the noise palette shared with the web page and QGIS
         cmap = ListedColormap(colours).with_extremes(under=(1, 1, 1, 0), over=colours[-1],
                                                      bad=(0.85, 0.85, 0.85, 1))
         norm = BoundaryNorm(bounds, cmap.N)
@@ -127,7 +125,7 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
                        norm=norm, interpolation="nearest", alpha=0.85, zorder=1)
         ax.set_facecolor("#f4f4f0")
         if np.isfinite(z).any() and min(z.shape) >= 2:
-            cs = ax.contour(grid.xs, grid.ys, np.ma.masked_invalid(z), levels=lv, colors="black",
+            cs = ax.contour(grid.xs, grid.ys, np.ma.masked_invalid(z), levels=lv, colors=ISOLINE_COLOUR,
                             linewidths=0.7, zorder=3)
             ax.clabel(cs, fmt=lambda v: f"{v:g}", fontsize=8)
         handles = []
@@ -146,7 +144,7 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
         handles.append(Line2D([], [], color="black", lw=0.7, label=f"{metric} contours, dB(A)"))
         ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.85)
         cb = fig.colorbar(im, ax=ax, shrink=0.9, extend="max", ticks=bounds[:-1], aspect=30)
-        cb.set_label(f"{metric}, dB(A)")
+        cb.set_label(f"{metric}, dB(A) (colours of DIN 18005-2, 5 dB classes)")
         _scale_bar(ax, left, bottom, right - left, top - bottom)
         _north_arrow(ax)
         ax.set_xlim(left, right)

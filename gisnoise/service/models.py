@@ -184,7 +184,10 @@ TrajectoryInput = Annotated[CsvTrajectory | ColumnsTrajectory | RowsTrajectory |
 class GridRequest(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
     resolution_m: float = Field(default=10.0, ge=0.1, le=100_000, description="Cell size, m (0.1 m or more).")
-    margin_m: float = Field(default=500.0, ge=0, le=1_000_000, description="Margin around the track, m.")
+    margin_m: float | None = Field(
+        default=None, ge=0, le=1_000_000,
+        description="Margin around the track, m; default from the cards, so the lowest level's LAmax and LAeq "
+                    "contours close.  Contours cut by the grid's edge carry \"clipped\": true.")
     crs: str | None = Field(default=None, description="Grid CRS (e.g. 'EPSG:25832'); default a local UTM zone.")
 
 

@@ -153,11 +153,24 @@ def resolve_cards(req: ContourRequest, store: CardStore) -> list[ModelCard]:
     return out
 
 
+def _auto_margin(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, max_cells: int) -> ContourRequest:
+    """The request with its grid's margin set: as given, or from the cards within ``max_cells``."""
+    if req.grid.margin_m is not None:
+        return req
+    from gisnoise.maps import CardSet, auto_margin
+
+    with _core_fields():
+        margin, _ = auto_margin(traj, CardSet(cards), min(req.levels), resolution_m=req.grid.resolution_m,
+                                crs=req.grid.crs, background=req.background, cell_limit=max_cells)
+    return req.model_copy(update={"grid": req.grid.model_copy(update={"margin_m": margin})})
+
+
 def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
     from gisnoise.maps import grid_for_trajectory
 
     with _prefixed("grid"):
         try:
+            assert req.grid.margin_m is not None, "_auto_margin sets the margin first"
             grid = grid_for_trajectory(traj, req.grid.resolution_m, req.grid.margin_m, crs=req.grid.crs)
         except GridTooLargeError as exc:
             raise GridTooLargeError(str(exc), field="grid.resolution_m") from None
@@ -219,12 +232,14 @@ _CONTOUR_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 
 
-def _prepare(req: ContourRequest, state: State) -> tuple[Trajectory, list[ModelCard], int]:
-    """Trajectory, cards and grid size of a request (in a worker thread: routes and grids take CPU)."""
+def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Trajectory, list[ModelCard], int]:
+    """The request with its margin set, trajectory, cards and grid size (in a worker thread: routes and grids
+    take CPU)."""
     s = state.settings
     traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
     cards = resolve_cards(req, state.cards)
-    return traj, cards, _grid_cells(traj, req, s.max_cells)
+    req = _auto_margin(traj, cards, req, s.max_cells)
+    return req, traj, cards, _grid_cells(traj, req, s.max_cells)
 
 
 def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory, cards: list[ModelCard],
@@ -239,7 +254,7 @@ def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory
              summary="Noise map of a trajectory (small at once, large as a job)")
 async def contours(req: ContourRequest, request: Request, state: StateDep,
                    job: bool = Query(False, description="Always answer with a job (202).")) -> Response:
-    traj, cards, cells = await run_in_threadpool(_prepare, req, state)
+    req, traj, cards, cells = await run_in_threadpool(_prepare, req, state)
     work = float(cells) * len(traj) * req.substeps
     if job or work > state.settings.sync_work_limit:
         require_key(request, request.headers.get("x-api-key"))  # a job is a write
@@ -262,7 +277,7 @@ def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tif
              responses={202: {"links": JOB_LINKS}},
              summary="Queue a noise map as a job")
 async def contour_job(req: ContourRequest, request: Request, state: StateDep) -> JSONResponse:
-    traj, cards, cells = await run_in_threadpool(_prepare, req, state)
+    req, traj, cards, cells = await run_in_threadpool(_prepare, req, state)
     return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
 
 

@@ -45,9 +45,12 @@ def health(state: StateDep) -> Health:
 @router.get("/config.json", tags=["service"], summary="Settings the web page needs",
             responses={200: {"content": {MediaType.json.value: {"schema": {"type": "object"}}}}})
 def config(state: StateDep) -> Response:
+    from gisnoise.maps import palette_doc
+
     s = state.settings
-    body = {"version": __version__, "tile_url": s.tile_url, "api_key_required": bool(s.api_keys),
-            "sample_route": _sample_route_path() is not None}
+    body = {"version": __version__, "tile_url": s.tile_url, "tile_attribution": s.tile_attribution,
+            "api_key_required": bool(s.api_keys),
+            "sample_route": _sample_route_path() is not None, "palette": palette_doc()}
     return Response(json.dumps(body), media_type=MediaType.json.value)
 
 

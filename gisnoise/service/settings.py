@@ -62,7 +62,10 @@ class Settings(BaseSettings):
     seed_cards_dir: Path | None = Field(default_factory=default_seed_cards_dir,
                                         description="Cards copied into an empty store at start-up.")
     tile_url: str = Field(default="https://tile.openstreetmap.org/{z}/{x}/{y}.png",
-                          description="Basemap tiles of the web page; empty for none.")
+                          description="Basemap tiles of the web page (an XYZ URL, also a local or self-hosted "
+                                      "source); empty for none.")
+    tile_attribution: str = Field(default="&copy; OpenStreetMap contributors",
+                                  description="Credit shown with the basemap tiles of tile_url once they load.")
 
     @field_validator("api_keys", mode="before")
     @classmethod

@@ -76,11 +76,53 @@ def bundled() -> list[dict]:
         return json.load(fh)
 
 
+def this_platform() -> str:
+    """``linux``, ``windows`` or ``macos`` (else ``sys.platform``)."""
+    if sys.platform.startswith("linux"):
+        return "linux"
+    if sys.platform == "win32":
+        return "windows"
+    if sys.platform == "darwin":
+        return "macos"
+    return sys.platform
+
+
+def install_hint(requirements: list[str]) -> str:
+    """How to install ``requirements`` (pip specifiers) into QGIS's own Python, on each platform."""
+    spec = " ".join(f"'{r}'" for r in requirements)
+    win = " ".join(f'"{r}"' for r in requirements)
+    return (f"install into QGIS's Python, then restart QGIS. Linux: python3 -m pip install --user {spec} "
+            f"(or your distribution's python3 packages of these versions); Windows: in the OSGeo4W Shell, "
+            f"python -m pip install {win}; macOS: /Applications/QGIS.app/Contents/MacOS/bin/python3 -m pip "
+            f"install --user {spec}")
+
+
+def wheel_mismatch(wheel: str) -> str | None:
+    """Why a bundled wheel (by file name) cannot load in this Python; None when its tags fit."""
+    parts = wheel[:-4].split("-") if wheel.endswith(".whl") else []
+    if len(parts) < 5:
+        return None
+    py_tag, plat_tag = parts[-3], parts[-1]
+    want = f"cp{sys.version_info.major}{sys.version_info.minor}"
+    plat = this_platform()
+    plat_ok = {"linux": "linux" in plat_tag, "windows": plat_tag.startswith("win"),
+               "macos": plat_tag.startswith("macosx")}.get(plat, False)
+    tags_ok = want in py_tag.split(".") or "abi3" in parts[-2]
+    if tags_ok and plat_ok:
+        return None
+    return (f"the bundled {wheel} is built for {py_tag} on {plat_tag}, but QGIS runs Python "
+            f"{sys.version_info.major}.{sys.version_info.minor} on {plat}")
+
+
 def _use_bundled(problems: list[str]) -> None:
     for item in bundled():
         module, minimum = item["module"], item["minimum"]
         have = installed_version(module)
         if have is not None and version_tuple(have) >= version_tuple(minimum):
+            continue
+        why = wheel_mismatch(item.get("wheel", "")) if item.get("compiled") else None
+        if why:
+            problems.append(f"{module} >= {minimum} (QGIS has {have or 'none'}; {why})")
             continue
         folder = os.path.join(VENDOR_DIR, module)
         if module in sys.modules:
@@ -123,6 +165,61 @@ def _load_isolated(folder: str, module: str) -> None:
             sys.setdlopenflags(flags)
 
 
+#: Compiled packages the core needs that QGIS often lacks and the zip may bundle: module -> minimum.
+BUNDLED_COMPILED = {"shapely": "2.0"}
+
+
+def _unbundled_compiled(problems: list[str]) -> None:
+    """A compiled package the core needs that neither QGIS (recent enough) nor the zip provides."""
+    have_bundled = {item["module"] for item in bundled()}
+    for module, minimum in BUNDLED_COMPILED.items():
+        if module in have_bundled:
+            continue
+        have = installed_version(module)
+        if have is None:
+            problems.append(f"{module} >= {minimum} is not installed")
+        elif version_tuple(have) < version_tuple(minimum):
+            problems.append(f"{module} {have} is older than {minimum}")
+
+
+def load_problems() -> str | None:
+    """The plain message shown when the plugin loads and the core cannot work here, else None.
+
+    Names each missing or too old package and how to install it on Linux, Windows and macOS.
+    Does not import the core.
+    """
+    problems = missing_requirements()
+    _unbundled_compiled(problems)
+    if not problems:
+        probe: list[str] = []
+        _check_bundled(probe)
+        problems = probe
+    if not problems:
+        return None
+    reqs = []
+    for line in problems:
+        name = line.split()[0]
+        minimum = dict((m, v) for m, v, _ in REQUIRED).get(name) or BUNDLED_COMPILED.get(name)
+        if minimum:
+            reqs.append(f"{name}>={minimum}")
+    text = "gisnoise cannot run in this QGIS: " + "; ".join(problems) + "."
+    if reqs:
+        text += " To fix it, " + install_hint(reqs) + "."
+    return text
+
+
+def _check_bundled(problems: list[str]) -> None:
+    """Like :func:`_use_bundled` without touching ``sys.path``: what the bundled packages cannot fix."""
+    for item in bundled():
+        module, minimum = item["module"], item["minimum"]
+        have = installed_version(module)
+        if have is not None and version_tuple(have) >= version_tuple(minimum):
+            continue
+        why = wheel_mismatch(item.get("wheel", "")) if item.get("compiled") else None
+        if why:
+            problems.append(f"{module} >= {minimum} (QGIS has {have or 'none'}; {why})")
+
+
 def missing_requirements() -> list[str]:
     """One line per compiled requirement that is absent or too old in this Python."""
     problems = []
@@ -156,10 +253,12 @@ def ensure_core():
         if os.path.isdir(EXT_DIR) and EXT_DIR not in sys.path:
             sys.path.insert(0, EXT_DIR)
         problems = missing_requirements()
+        _unbundled_compiled(problems)
         _use_bundled(problems)
         if problems:
-            raise QgsProcessingException("gisnoise needs these Python packages in QGIS's Python: "
-                                         + "; ".join(problems))
+            message = load_problems() or ("gisnoise needs these Python packages in QGIS's Python: "
+                                          + "; ".join(problems))
+            raise QgsProcessingException(message)
     try:
         gisnoise = importlib.import_module("gisnoise")
         importlib.import_module("gisnoise.maps.pipeline")

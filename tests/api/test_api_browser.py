@@ -8,6 +8,8 @@ import pytest
 from cdp_pipe import Browser, find_chromium
 from service_helpers import Server
 
+from gisnoise.maps import NOISE_CLASSES, colour_for
+
 pytestmark = [pytest.mark.browser, pytest.mark.server]
 
 CHROMIUM = find_chromium()
@@ -17,8 +19,8 @@ if CHROMIUM is None:
 
 Image = pytest.importorskip("PIL.Image")
 
-# the page's palette (api/static/app.js) drawn at fill-opacity 0.55 over the map background #e8eef2
-PALETTE = ["#1a9850", "#91cf60", "#d9ef8b", "#fee08b", "#fdae61", "#f46d43", "#d73027", "#a50026"]
+# the shared noise palette (gisnoise.maps.palette) drawn at fill-opacity 0.55 over the map background #e8eef2
+PALETTE = [hexcol for _, _, hexcol in NOISE_CLASSES]
 BACKGROUND = (0xE8, 0xEE, 0xF2)
 PANEL_WIDTH = 360
 
@@ -82,6 +84,46 @@ def test_draw_a_route_and_see_the_contours(page, tmp_path):
     assert before < 0.005
     assert after > 0.2, f"contour fills cover {after:.1%} of the map"
     assert b.evaluate("document.querySelectorAll('#legend .item').length") == 5
+    # the legend names metric and unit and uses the shared palette
+    assert b.evaluate("document.querySelector('#legend .legend-title').textContent") == "LAmax, dB(A)"
+    items = b.evaluate("[...document.querySelectorAll('#legend .item')].map((i) => i.textContent)")
+    assert items == ["45–50 dB(A)", "50–55 dB(A)", "55–60 dB(A)", "60–65 dB(A)", "≥ 65 dB(A)"]
+    swatches = b.evaluate("[...document.querySelectorAll('#legend .swatch')].map((s) => s.style.background)")
+    assert swatches == [_rgb(colour_for(lv)) for lv in (45, 50, 55, 60, 65)]
+    # the GeoTIFF download: the same request as a GeoTIFF, one band of the metric
+    size = b.evaluate("gisnoiseFetchGeoTIFF().then((blob) => blob.arrayBuffer())"
+                            ".then((buf) => { window._tif = Array.from(new Uint8Array(buf)); return buf.byteLength; })",
+                            60)
+    data = bytes(b.evaluate("window._tif"))
+    assert size == len(data) > 1000
+    pytest.importorskip("rasterio")
+    from rasterio.io import MemoryFile
+
+    with MemoryFile(data) as mf, mf.open() as ds:
+        assert ds.descriptions == ("LAmax",) and ds.crs.is_projected
+        assert ds.read(1).max() > 65.0
+
+
+def _rgb(hexcol: str) -> str:
+    r, g, b = (int(hexcol[i:i + 2], 16) for i in (1, 3, 5))
+    return f"rgb({r}, {g}, {b})"
+
+
+def test_unreachable_tiles_show_a_notice(tmp_path):
+    # tiles from a loopback port nobody listens on: every tile fails
+    srv = Server(tmp_path / "data", env={"GISNOISE_TILE_URL": "http://127.0.0.1:9/{z}/{x}/{y}.png"})
+    browser = Browser(CHROMIUM)
+    try:
+        browser.navigate(srv.url + "/")
+        browser.wait_for("window.gisnoise && window.gisnoise.ready === true", 30)
+        browser.wait_for("!document.getElementById('tile-notice').hidden", 30)
+        text = browser.evaluate("document.getElementById('tile-notice').textContent")
+        assert "127.0.0.1:9" in text and "cannot be loaded" in text
+        assert "OpenStreetMap" not in browser.evaluate("document.querySelector('.leaflet-control-attribution')"
+                                                        ".textContent")
+    finally:
+        browser.close()
+        srv.stop()
 
 
 def test_a_job_shows_its_progress_then_its_contours(page):

@@ -2,8 +2,8 @@
 // Plain JavaScript on Leaflet; every call goes to the service's own JSON API.
 "use strict";
 
-const PALETTE = ["#1a9850", "#91cf60", "#d9ef8b", "#fee08b", "#fdae61", "#f46d43", "#d73027", "#a50026",
-                 "#762a83", "#40004b"];
+// The noise palette comes from the service (/config.json: one definition for map.png, this page and QGIS).
+const BASEMAP_KEY = "gisnoise.basemap";
 
 const app = {
   config: null,
@@ -50,11 +50,15 @@ async function init() {
   $("key-label").hidden = !app.config.api_key_required;
   $("btn-sample").disabled = !app.config.sample_route;
   app.map = L.map("map", { doubleClickZoom: false, zoomSnap: 0.25 }).setView([51.0, 10.0], 6);
-  if (app.config.tile_url) {
-    L.tileLayer(app.config.tile_url, {
-      maxZoom: 19, attribution: "&copy; OpenStreetMap contributors",
-    }).addTo(app.map);
-  }
+  $("basemap").value = localStorage.getItem(BASEMAP_KEY) || "";
+  setBasemap($("basemap").value.trim() || app.config.tile_url);
+  $("btn-basemap").onclick = () => {
+    const url = $("basemap").value.trim();
+    if (url) localStorage.setItem(BASEMAP_KEY, url); else localStorage.removeItem(BASEMAP_KEY);
+    setBasemap(url || app.config.tile_url);
+  };
+  $("btn-geojson").onclick = downloadGeoJSON;
+  $("btn-geotiff").onclick = downloadGeoTIFF;
   L.control.scale({ imperial: false }).addTo(app.map);
   app.map.on("click", onMapClick);
   $("btn-sample").onclick = loadSample;
@@ -65,6 +69,35 @@ async function init() {
   await loadCards();
   pollJobs();
   app.ready = true;
+}
+
+// ------------------------------------------------------------------ basemap
+function tileNotice(text) {
+  const el = $("tile-notice");
+  el.textContent = text;
+  el.hidden = !text;
+}
+
+function setBasemap(url) {
+  if (app.tiles) { app.tiles.remove(); app.tiles = null; }
+  app.tilesLoaded = 0;
+  app.tilesFailed = 0;
+  tileNotice("");
+  if (!url) { tileNotice("No basemap is set: contours are drawn on a blank map."); return; }
+  const credit = url === app.config.tile_url ? (app.config.tile_attribution || "") : "";
+  const layer = L.tileLayer(url, { maxZoom: 19, attribution: credit });
+  layer.on("tileload", () => { app.tilesLoaded += 1; if (app.tilesLoaded === 1) tileNotice(""); });
+  layer.on("tileerror", () => {
+    app.tilesFailed += 1;
+    if (app.tilesLoaded === 0 && app.tilesFailed === 1) {
+      let host = url;
+      try { host = new URL(url.replace(/[{}]/g, "")).host || url; } catch (e) { /* keep the URL */ }
+      tileNotice(`Map tiles from ${host} cannot be loaded (offline, or the source is down): the basemap is `
+        + "blank. Contours and the track still show; set a local or self-hosted tile URL under Basemap.");
+      if (app.map.attributionControl) app.map.attributionControl.removeAttribution(credit);
+    }
+  });
+  app.tiles = layer.addTo(app.map);
 }
 
 async function loadCards() {
@@ -187,10 +220,12 @@ function clearAll() {
 function request() {
   const cards = [...document.querySelectorAll("#cards input:checked")].map((cb) => cb.value);
   const levels = $("levels").value.split(",").map((s) => s.trim()).filter((s) => s).map(Number);
+  const grid = { resolution_m: Number($("resolution").value) };
+  if ($("margin").value.trim() !== "") grid.margin_m = Number($("margin").value);
   return {
     trajectory: app.trajectory,
     cards,
-    grid: { resolution_m: Number($("resolution").value), margin_m: Number($("margin").value) },
+    grid,
     metrics: [$("metric").value],
     levels,
   };
@@ -207,6 +242,7 @@ async function compute() {
     headers: headers({ "Content-Type": "application/json", Accept: "application/geo+json" }),
     body: JSON.stringify(request()),
   });
+  app.lastRequest = null;
   if (resp.status === 202) {
     const job = await resp.json();
     app.shownJob = job.id;
@@ -217,13 +253,24 @@ async function compute() {
   }
   if (!resp.ok) { setStatus(await errorText(resp), true); return; }
   const geo = await resp.json();
+  app.lastRequest = request();
   drawContours(geo);
-  setStatus(`Contours in ${((performance.now() - t0) / 1000).toFixed(1)} s: ${geo.features.length} features.`);
+  const metric = $("metric").value;
+  const warns = ((geo.gisnoise && geo.gisnoise.warnings) || []).filter((w) => w.startsWith(metric + " "));
+  setStatus(`Contours in ${((performance.now() - t0) / 1000).toFixed(1)} s: ${geo.features.length} features.`
+    + (warns.length ? " Warning: " + warns.join(" ") : ""), warns.length > 0);
 }
 
-function colourFor(level, levels) {
-  const i = Math.max(0, levels.indexOf(level));
-  return PALETTE[Math.min(i, PALETTE.length - 1)];
+function colourFor(level) {
+  const classes = app.config.palette.classes;
+  let c = classes[0].colour;
+  for (const k of classes) if (k.from_db === null || level >= k.from_db) c = k.colour;
+  return c;
+}
+
+function unitOf(feats) {
+  const f = feats.find((x) => x.properties.unit);
+  return f ? f.properties.unit : "dB(A)";
 }
 
 function drawContours(geo) {
@@ -235,30 +282,77 @@ function drawContours(geo) {
   if (app.contourLayer) app.contourLayer.remove();
   app.contourLayer = L.geoJSON({ type: "FeatureCollection", features: feats }, {
     style: (f) => {
-      const c = colourFor(f.properties.level, levels);
+      const c = colourFor(f.properties.level);
       return f.properties.kind === "isoline"
-        ? { color: "#333", weight: 1, opacity: 0.8, fill: false }
+        ? { color: app.config.palette.isoline, weight: 1, opacity: 0.8, fill: false }
         : { color: c, weight: 0.5, fillColor: c, fillOpacity: 0.55 };
     },
     onEachFeature: (f, layer) => layer.bindTooltip(
-      `${f.properties.metric || ""} ${f.properties.level}${f.properties.level_max != null ? "–" + f.properties.level_max : ""} dB(A)`),
+      `${f.properties.metric || ""} ${f.properties.level}${f.properties.level_max != null ? "–" + f.properties.level_max : ""} dB(A)`
+      + (f.properties.clipped ? " (clipped by the grid's edge)" : "")),
   }).addTo(app.map);
   if (app.routeLayer) app.routeLayer.bringToFront();
   const b = app.contourLayer.getBounds();
   if (b.isValid()) app.map.fitBounds(b.pad(0.05));
   const legend = $("legend");
   legend.textContent = "";
-  for (const lv of levels) {
+  const unit = unitOf(feats);
+  const title = document.createElement("div");
+  title.className = "legend-title";
+  title.textContent = `${metric}, ${unit}`;
+  title.title = app.config.palette.name;
+  legend.append(title);
+  levels.forEach((lv, i) => {
     const item = document.createElement("span");
     item.className = "item";
     const sw = document.createElement("span");
     sw.className = "swatch";
-    sw.style.background = colourFor(lv, levels);
-    item.append(sw, `≥ ${lv}`);
+    sw.style.background = colourFor(lv);
+    const range = i + 1 < levels.length ? `${lv}–${levels[i + 1]}` : `≥ ${lv}`;
+    item.append(sw, `${range} ${unit}`);
     legend.append(item);
-  }
+  });
+  $("downloads").hidden = false;
   app.contourCount = feats.length;
 }
+
+// ------------------------------------------------------------------ downloads
+function saveBlob(blob, name) {
+  const a = document.createElement("a");
+  a.href = URL.createObjectURL(blob);
+  a.download = name;
+  document.body.append(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+}
+
+function downloadGeoJSON() {
+  if (!app.lastContours) return;
+  saveBlob(new Blob([JSON.stringify(app.lastContours)], { type: "application/geo+json" }), "contours.geojson");
+}
+
+async function fetchGeoTIFF() {
+  const req = app.lastRequest;
+  const resp = await fetch("/contours", {
+    method: "POST",
+    headers: headers({ "Content-Type": "application/json", Accept: "image/tiff" }),
+    body: JSON.stringify({ ...req, output: "geotiff" }),
+  });
+  if (!resp.ok) throw new Error(await errorText(resp));
+  return resp.blob();
+}
+
+async function downloadGeoTIFF() {
+  if (!app.lastRequest) { setStatus("Compute a map first: the job's files are under Jobs.", true); return; }
+  setStatus("Preparing the GeoTIFF…");
+  try {
+    const blob = await fetchGeoTIFF();
+    saveBlob(blob, "levels.tif");
+    setStatus(`GeoTIFF of ${blob.size} bytes saved as levels.tif.`);
+  } catch (e) { setStatus(String(e.message || e), true); }
+}
+window.gisnoiseFetchGeoTIFF = fetchGeoTIFF;  // for the browser test
 
 // ------------------------------------------------------------------ jobs
 async function pollJobs() {
@@ -327,6 +421,7 @@ async function showJob(id) {
   const resp = await fetch(`/jobs/${id}/result`, { headers: { Accept: "application/geo+json" } });
   if (!resp.ok) { setStatus(await errorText(resp), true); return; }
   const geo = await resp.json();
+  app.lastRequest = request();
   drawContours(geo);
   setStatus(`Job ${id.slice(0, 8)}: ${geo.features.length} features.`);
 }

@@ -8,8 +8,14 @@ import tempfile
 
 from qgis.core import (
     QgsCoordinateReferenceSystem,
+    QgsCoordinateTransform,
     QgsFeature,
     QgsFeatureSink,
+    QgsField,
+    QgsFields,
+    QgsGeometry,
+    QgsLineString,
+    QgsPoint,
     QgsProcessing,
     QgsProcessingException,
     QgsProcessingParameterBoolean,
@@ -26,9 +32,11 @@ from qgis.core import (
     QgsProcessingParameterRasterLayer,
     QgsProcessingParameterString,
     QgsProcessingUtils,
+    QgsRasterLayer,
     QgsVectorLayer,
     QgsWkbTypes,
 )
+from qgis.PyQt.QtCore import QVariant
 
 from . import styles
 from .base import FeedbackProgress, GisnoiseAlgorithm
@@ -69,6 +77,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
     OUTPUT_RASTER = "OUTPUT_RASTER"
     OUTPUT_BANDS = "OUTPUT_BANDS"
     OUTPUT_LINES = "OUTPUT_LINES"
+    OUTPUT_TRACK = "OUTPUT_TRACK"
 
     GROUP = "Noise maps"
     GROUP_ID = "maps"
@@ -89,7 +98,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             "feature's fields; yaw along the line unless a yaw field is given), or a flight CSV / GeoJSON "
             "trajectory file as the gisnoise command line reads it.\n\n"
             "Outputs: a GeoTIFF with one band per metric (LAmax, LAeq over the flight, SEL), "
-            "isobands and isolines of the chosen levels (properties metric and level), "
+            "isobands and isolines of the chosen levels (properties metric, level and clipped: true where the "
+            "grid's edge cuts the contour; the default margin closes the lowest level of LAmax and LAeq), "
             "styled with graduated colours by level."
         )
 
@@ -120,8 +130,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         self.addParameter(QgsProcessingParameterNumber(
             self.RESOLUTION, "Cell size (m)", QgsProcessingParameterNumber.Double, 10.0, minValue=0.01))
         self.addParameter(QgsProcessingParameterNumber(
-            self.MARGIN, "Margin around the trajectory (m)", QgsProcessingParameterNumber.Double, 500.0,
-            minValue=0.0))
+            self.MARGIN, "Margin around the trajectory (m; empty: from the cards, so the lowest level closes)",
+            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterString(
             self.LEVELS, "Contour levels (dB(A), comma separated)", "45,50,55,60,65"))
         self.addParameter(QgsProcessingParameterEnum(
@@ -163,6 +173,9 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             self.OUTPUT_BANDS, "Noise contours (isobands)", QgsProcessing.TypeVectorPolygon))
         self.addParameter(QgsProcessingParameterFeatureSink(
             self.OUTPUT_LINES, "Noise contours (isolines)", QgsProcessing.TypeVectorLine, optional=True,
+            createByDefault=True))
+        self.addParameter(QgsProcessingParameterFeatureSink(
+            self.OUTPUT_TRACK, "Flight track (by phase)", QgsProcessing.TypeVectorLine, optional=True,
             createByDefault=True))
 
     # ------------------------------------------------------------------ inputs
@@ -237,31 +250,41 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         paths = make_map(
             traj, cards, work,
             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
-            margin_m=self.parameterAsDouble(parameters, self.MARGIN, context),
+            margin_m=(None if parameters.get(self.MARGIN) in (None, "")
+                      else self.parameterAsDouble(parameters, self.MARGIN, context)),
             levels=levels, metrics=metrics, crs=crs_text, dem=dem,
             receiver_height=self.parameterAsDouble(parameters, self.RECEIVER_HEIGHT, context),
             uncertainty=self.parameterAsBoolean(parameters, self.UNCERTAINTY, context), plot=False,
             progress=steps.progress, cancel=steps.cancel, **kw)
         tif, geojson = os.fspath(paths["levels"]), os.fspath(paths["contours"])
+        for warning in paths.get("warnings", []):
+            feedback.reportError(f"warning: {warning}", fatalError=False)
 
         raster_out = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)
         _write_raster(tif, raster_out)
         feedback.setProgress(92.0)
         results = {self.OUTPUT_RASTER: raster_out}
+        grid_crs = QgsRasterLayer(tif, "grid", "gdal").crs()
         bands, lines = _contour_layers(geojson)
         for key, layer in ((self.OUTPUT_BANDS, bands), (self.OUTPUT_LINES, lines)):
-            dest = self._copy_to_sink(parameters, key, layer, context, feedback, contoured)
+            dest = self._copy_to_sink(parameters, key, layer, context, feedback, contoured, grid_crs)
             if dest:
                 results[key] = dest
+        track = self._track_to_sink(parameters, traj, grid_crs, context)
+        if track:
+            results[self.OUTPUT_TRACK] = track
         feedback.setProgress(98.0)
         shown = next(m for m in metrics if m in contoured)
         self._style_outputs(results, context, levels, shown, metrics.index(shown) + 1)
+        self._save_styles(results, levels, shown, metrics.index(shown) + 1, feedback)
         feedback.setProgress(100.0)
         return results
 
-    def _copy_to_sink(self, parameters, key, layer, context, feedback, contoured):
+    def _copy_to_sink(self, parameters, key, layer, context, feedback, contoured, crs):
+        """Copy the contours (WGS84) into the sink, in the grid's CRS ``crs``."""
         sink, dest = self.parameterAsSink(parameters, key, context, layer.fields(),
-                                          QgsWkbTypes.multiType(layer.wkbType()), layer.crs())
+                                          QgsWkbTypes.multiType(layer.wkbType()), crs)
+        xform = QgsCoordinateTransform(layer.crs(), crs, context.transformContext())
         if sink is None and key == self.OUTPUT_LINES and not dest:
             return None  # optional output not wanted
         if sink is None:
@@ -272,14 +295,67 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             if feat["metric"] not in contoured:
                 continue
             out = QgsFeature(feat)
+            geom = out.geometry()
+            geom.transform(xform)
+            out.setGeometry(geom)
             if not sink.addFeature(out, QgsFeatureSink.FastInsert):
                 raise QgsProcessingException(f"cannot write a contour feature to {dest}: {sink.lastError()}")
         return dest
 
+    def _track_to_sink(self, parameters, traj, crs, context):
+        """The flight track as one line per run of equal phase (fields phase, t_start_s, t_end_s)."""
+        fields = QgsFields()
+        fields.append(QgsField("phase", QVariant.String))
+        fields.append(QgsField("t_start_s", QVariant.Double))
+        fields.append(QgsField("t_end_s", QVariant.Double))
+        sink, dest = self.parameterAsSink(parameters, self.OUTPUT_TRACK, context, fields,
+                                          QgsWkbTypes.LineStringZ, crs)
+        if sink is None:
+            return None
+        xform = QgsCoordinateTransform(QgsCoordinateReferenceSystem("EPSG:4326"), crs, context.transformContext())
+        phase = [str(p) for p in traj.phase]
+        start = 0
+        for i in range(1, len(phase) + 1):
+            if i < len(phase) and phase[i] == phase[start]:
+                continue
+            stop = min(i + 1, len(phase))  # runs share their boundary sample: the track has no gaps
+            pts = [QgsPoint(float(traj.lon[k]), float(traj.lat[k]), float(traj.h[k])) for k in range(start, stop)]
+            if len(pts) >= 2:
+                geom = QgsGeometry(QgsLineString(pts))
+                geom.transform(xform)
+                feat = QgsFeature(fields)
+                feat.setGeometry(geom)
+                feat.setAttributes([phase[start], float(traj.t[start]), float(traj.t[stop - 1])])
+                if not sink.addFeature(feat, QgsFeatureSink.FastInsert):
+                    raise QgsProcessingException(f"cannot write the track to {dest}: {sink.lastError()}")
+            start = i
+        return dest
+
+    def _save_styles(self, results, levels, metric, band, feedback):
+        """A style beside each file output, so it opens styled from qgis_process, models and scripts."""
+        for key in (self.OUTPUT_RASTER, self.OUTPUT_BANDS, self.OUTPUT_LINES, self.OUTPUT_TRACK):
+            dest = results.get(key)
+            if not dest or not os.path.isfile(str(dest)):
+                continue
+            if key == self.OUTPUT_RASTER:
+                layer = QgsRasterLayer(dest, "noise grid", "gdal")
+                styles.style_raster(layer, levels, metric, band)
+            else:
+                layer = QgsVectorLayer(dest, os.path.splitext(os.path.basename(dest))[0], "ogr")
+                if key == self.OUTPUT_TRACK:
+                    styles.style_track(layer)
+                else:
+                    styles.style_contours(layer, levels, polygons=key == self.OUTPUT_BANDS, metric=metric)
+            if not layer.isValid():
+                feedback.reportError(f"cannot open {dest} to save its style", fatalError=False)
+                continue
+            styles.save_style(layer, dest)
+
     def _style_outputs(self, results, context, levels, metric, band):
         for key, post in ((self.OUTPUT_RASTER, styles.RasterStyle(levels, metric, band)),
-                          (self.OUTPUT_BANDS, styles.ContourStyle(levels, polygons=True)),
-                          (self.OUTPUT_LINES, styles.ContourStyle(levels, polygons=False))):
+                          (self.OUTPUT_BANDS, styles.ContourStyle(levels, polygons=True, metric=metric)),
+                          (self.OUTPUT_LINES, styles.ContourStyle(levels, polygons=False, metric=metric)),
+                          (self.OUTPUT_TRACK, styles.TrackStyle())):
             dest = results.get(key)
             if dest and context.willLoadLayerOnCompletion(dest):
                 details = context.layerToLoadOnCompletionDetails(dest)

@@ -1,13 +1,19 @@
 """Styles of the outputs: graduated colours by level, the same classes for grid and contours.
 
 The classes are the contour levels: ``[L_i, L_i+1)`` dB(A), the last one open
-upwards, coloured from green (quiet) through yellow and orange to red and
-purple (loud), the order of the usual noise-map palettes.
+upwards, coloured with the core's noise palette (:mod:`gisnoise.maps.palette`,
+DIN 18005-2 5 dB classes), the same as ``map.png`` and the web page.  Legends name
+the metric and the unit.  :func:`save_style` writes a style beside a file output
+(``.qml``, and inside a GeoPackage as its default style), so the layer opens styled
+however it is loaded: from ``qgis_process``, a model or a script.
 """
 
 from __future__ import annotations
 
+import os
+
 from qgis.core import (
+    QgsCategorizedSymbolRenderer,
     QgsClassificationRange,
     QgsColorRampShader,
     QgsFillSymbol,
@@ -15,10 +21,14 @@ from qgis.core import (
     QgsGradientStop,
     QgsGraduatedSymbolRenderer,
     QgsLineSymbol,
+    QgsPalLayerSettings,
     QgsProcessingLayerPostProcessorInterface,
     QgsRasterShader,
+    QgsRendererCategory,
     QgsRendererRange,
     QgsSingleBandPseudoColorRenderer,
+    QgsTextFormat,
+    QgsVectorLayerSimpleLabeling,
 )
 from qgis.PyQt.QtGui import QColor
 
@@ -43,19 +53,27 @@ def level_ramp():
     return ramp
 
 
+def _palette():
+    from .._core import ensure_core
+
+    ensure_core()
+    from gisnoise.maps import palette
+
+    return palette
+
+
 def level_colours(levels):
-    """One colour per class ``[L_i, L_i+1)``, dB(A) levels ascending."""
-    ramp = level_ramp()
-    n = len(levels)
-    return [ramp.color(0.5 if n == 1 else i / (n - 1)) for i in range(n)]
+    """One colour per class ``[L_i, L_i+1)``, dB(A) levels ascending: the core's noise palette."""
+    return [QColor(c) for c in _palette().class_colours(list(levels))]
 
 
-def class_label(levels, i):
-    lo = levels[i]
-    return f">= {lo:g} dB(A)" if i == len(levels) - 1 else f"{lo:g} - {levels[i + 1]:g} dB(A)"
+def class_label(levels, i, metric="", unit="dB(A)"):
+    """``LAmax 45-50 dB(A)``, the last class ``LAmax >= 65 dB(A)``."""
+    label = _palette().class_labels(list(levels), metric or "", unit)[i]
+    return label.strip()
 
 
-def graduated_renderer(levels, *, polygons, field="level"):
+def graduated_renderer(levels, *, polygons, field="level", metric=""):
     """A graduated renderer on ``field`` with one class per level."""
     ranges = []
     for i, (lo, colour) in enumerate(zip(levels, level_colours(levels), strict=True)):
@@ -66,18 +84,21 @@ def graduated_renderer(levels, *, polygons, field="level"):
             symbol.setOpacity(0.6)
         else:
             symbol = QgsLineSymbol.createSimple({"color": colour.darker(130).name(), "width": "0.5"})
-        ranges.append(QgsRendererRange(QgsClassificationRange(class_label(levels, i), lo, hi), symbol))
+        label = class_label(levels, i, metric) if polygons else f"{metric} {lo:g} dB(A)".strip()
+        ranges.append(QgsRendererRange(QgsClassificationRange(label, lo, hi), symbol))
     renderer = QgsGraduatedSymbolRenderer(field, ranges)
     return renderer
 
 
-def pseudocolor_renderer(provider, levels, band=1):
-    """Discrete pseudo-colour classes of a raster band at the levels; below the first level transparent."""
-    items = [QgsColorRampShader.ColorRampItem(levels[0], QColor(0, 0, 0, 0), f"< {levels[0]:g} dB(A)")]
+def pseudocolor_renderer(provider, levels, band=1, metric=""):
+    """Discrete pseudo-colour classes of a raster band at the levels; below the first level transparent
+    (drawn white in legends, so a print layout shows no black box)."""
+    items = [QgsColorRampShader.ColorRampItem(levels[0], QColor(255, 255, 255, 0),
+                                              f"{metric} < {levels[0]:g} dB(A)".strip())]
     colours = level_colours(levels)
     for i, colour in enumerate(colours):
         hi = levels[i + 1] if i + 1 < len(levels) else float("inf")
-        items.append(QgsColorRampShader.ColorRampItem(hi, colour, class_label(levels, i)))
+        items.append(QgsColorRampShader.ColorRampItem(hi, colour, class_label(levels, i, metric)))
     shader_fn = QgsColorRampShader(levels[0], levels[-1], level_ramp(), QgsColorRampShader.Discrete)
     shader_fn.setColorRampItemList(items)
     shader = QgsRasterShader()
@@ -97,24 +118,84 @@ class RasterStyle(QgsProcessingLayerPostProcessorInterface):
     def postProcessLayer(self, layer, context, feedback):  # noqa: N802 - QGIS API
         if not layer.isValid():
             return
-        layer.setRenderer(pseudocolor_renderer(layer.dataProvider(), self.levels, band=self.band))
-        layer.setName(f"noise grid ({self.metric})")
+        style_raster(layer, self.levels, self.metric, self.band)
         layer.triggerRepaint()
 
 
 class ContourStyle(QgsProcessingLayerPostProcessorInterface):
     """Graduated colours on the contours' ``level`` property."""
 
-    def __init__(self, levels, *, polygons):
+    def __init__(self, levels, *, polygons, metric=""):
         super().__init__()
         self.levels = list(levels)
         self.polygons = polygons
+        self.metric = metric
 
     def postProcessLayer(self, layer, context, feedback):  # noqa: N802 - QGIS API
         if not layer.isValid():
             return
-        layer.setRenderer(graduated_renderer(self.levels, polygons=self.polygons))
+        style_contours(layer, self.levels, polygons=self.polygons, metric=self.metric)
         layer.triggerRepaint()
+
+
+class TrackStyle(QgsProcessingLayerPostProcessorInterface):
+    """The flight track coloured by phase."""
+
+    def postProcessLayer(self, layer, context, feedback):  # noqa: N802 - QGIS API
+        if layer.isValid():
+            style_track(layer)
+            layer.triggerRepaint()
+
+
+def style_raster(layer, levels, metric, band):
+    """The noise grid's band ``band`` (``metric``) in the palette's classes."""
+    layer.setRenderer(pseudocolor_renderer(layer.dataProvider(), list(levels), band=int(band), metric=metric))
+    layer.setName(f"noise grid ({metric})")
+
+
+def style_contours(layer, levels, *, polygons, metric=""):
+    """Graduated palette colours on ``level``; isolines labelled with their level."""
+    layer.setRenderer(graduated_renderer(list(levels), polygons=polygons, metric=metric))
+    if not polygons:
+        settings = QgsPalLayerSettings()
+        settings.fieldName = "format_number(\"level\", 0) || ' dB(A)'"
+        settings.isExpression = True
+        settings.placement = QgsPalLayerSettings.Line
+        fmt = QgsTextFormat()
+        fmt.setSize(8)
+        buffer = fmt.buffer()
+        buffer.setEnabled(True)
+        buffer.setSize(0.8)
+        fmt.setBuffer(buffer)
+        settings.setFormat(fmt)
+        layer.setLabeling(QgsVectorLayerSimpleLabeling(settings))
+        layer.setLabelsEnabled(True)
+
+
+def style_track(layer, field="phase"):
+    """Categories by flight phase in the core's phase colours."""
+    _palette()
+    from gisnoise.maps import PHASE_COLOURS
+
+    cats = []
+    for phase, colour in PHASE_COLOURS.items():
+        symbol = QgsLineSymbol.createSimple({"color": colour, "width": "0.8"})
+        cats.append(QgsRendererCategory(phase, symbol, f"track: {phase}"))
+    layer.setRenderer(QgsCategorizedSymbolRenderer(field, cats))
+
+
+def save_style(layer, path):
+    """Save ``layer``'s style beside the file ``path`` (``<name>.qml``) and, for a GeoPackage, as the
+    default style inside it; QGIS then opens the file styled.  Returns the ``.qml`` path or None."""
+    if not path or not os.path.isfile(path):
+        return None
+    qml = os.path.splitext(path)[0] + ".qml"
+    msg, ok = layer.saveNamedStyle(qml)
+    if not ok:
+        raise RuntimeError(f"cannot save the style {qml}: {msg}")
+    if path.lower().endswith(".gpkg") and hasattr(layer, "saveStyleToDatabase"):
+        layer.saveStyleToDatabase(layer.name() or "gisnoise", "gisnoise noise palette", True, "")
+    return qml
 
 
 #: Classes of residual levels, dB: the measurement noise of a good campaign is about 1 dB.

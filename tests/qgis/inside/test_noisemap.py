@@ -81,7 +81,9 @@ def test_contours_carry_metric_and_level_and_follow_the_raster(csv_map):
     grid, names, gt, wkt, nodata = read_raster(csv_map["OUTPUT_RASTER"])
     bands_layer, bands = _features(csv_map["OUTPUT_BANDS"])
     lines_layer, lines = _features(csv_map["OUTPUT_LINES"])
-    assert bands_layer.crs().authid() == lines_layer.crs().authid() == "EPSG:4326"
+    # contours in the grid's CRS (the GeoJSON of the web stays in WGS84)
+    assert bands_layer.crs() == lines_layer.crs() == QgsCoordinateReferenceSystem.fromWkt(wkt)
+    assert bands_layer.crs().authid() == "EPSG:32632"
     assert {f["metric"] for f in bands} == set(names)
     for f in bands + lines:
         assert f["metric"] in names and f["level"] in LEVELS
@@ -111,13 +113,17 @@ def test_loaded_outputs_are_styled_by_level(plugin, flight_csv, tmp_path):
     res = processing.runAndLoadResults("gisnoise:noisemap", {
         "TRAJECTORY_FILE": str(flight_csv), "CARDS": [CARD], **MAP_OPTIONS,
         "OUTPUT_RASTER": str(tmp_path / "grid.tif"), "OUTPUT_BANDS": str(tmp_path / "bands.gpkg"),
-        "OUTPUT_LINES": str(tmp_path / "lines.gpkg")})
+        "OUTPUT_LINES": str(tmp_path / "lines.gpkg"), "OUTPUT_TRACK": str(tmp_path / "track.gpkg")})
     project = QgsProject.instance()
     raster = project.mapLayer(res["OUTPUT_RASTER"]) or project.mapLayersByName("noise grid (LAmax)")[0]
     assert raster.renderer().type() == "singlebandpseudocolor"
     shader = raster.renderer().shader().rasterShaderFunction()
     assert [round(i.value, 6) for i in shader.colorRampItemList()] == [50.0, 55.0, 60.0, 65.0, float("inf")]
     vectors = [lyr for lyr in project.mapLayers().values() if lyr.type() == lyr.VectorLayer]
+    tracks = [lyr for lyr in vectors if lyr.fields().indexOf("phase") >= 0]
+    assert len(tracks) == 1 and tracks[0].renderer().type() == "categorizedSymbol"
+    assert [f["phase"] for f in tracks[0].getFeatures()] == ["horizontal"]
+    vectors = [lyr for lyr in vectors if lyr.id() != tracks[0].id()]
     assert len(vectors) == 2
     for lyr in vectors:
         assert {f["metric"] for f in lyr.getFeatures()} == {"LAmax"}  # the default: LAmax contours only

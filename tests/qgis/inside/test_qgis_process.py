@@ -53,3 +53,42 @@ def test_qgis_process_runs_the_noise_map(fresh_settings, flight_csv, csv_map, tm
     # the same map as processing.run in this QGIS (and so as the command line)
     assert_same_raster(results["OUTPUT_RASTER"], csv_map["OUTPUT_RASTER"], atol=1e-9)
     assert (out / "bands.gpkg").is_file()
+
+
+def test_qgis_process_outputs_open_styled_in_a_fresh_project(plugin, fresh_settings, flight_csv, tmp_path):
+    """Loaded from files alone (no post-processor ran): the noise palette, labels, grid CRS, track."""
+    from qgis.core import QgsProject, QgsRasterLayer, QgsVectorLayer
+
+    out = tmp_path / "out"
+    args = [f"TRAJECTORY_FILE={flight_csv}", f"CARDS={CARD}"]
+    args += [f"{k}={v}" for k, v in MAP_OPTIONS.items()]
+    args += [f"OUTPUT_RASTER={out / 'grid.tif'}", f"OUTPUT_BANDS={out / 'bands.gpkg'}",
+             f"OUTPUT_LINES={out / 'lines.gpkg'}", f"OUTPUT_TRACK={out / 'track.gpkg'}"]
+    r = subprocess.run([qgis_process(), "--json", "run", "gisnoise:noisemap", "--", *args], env=fresh_settings,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    from gisnoise.maps import class_colours
+
+    levels = [float(v) for v in MAP_OPTIONS["LEVELS"].split(",")]
+    colours = class_colours(levels)
+    project = QgsProject.instance()
+    project.clear()
+    raster = QgsRasterLayer(str(out / "grid.tif"), "grid", "gdal")
+    project.addMapLayer(raster)
+    assert raster.renderer().type() == "singlebandpseudocolor"
+    items = raster.renderer().shader().rasterShaderFunction().colorRampItemList()
+    assert [i.color.name().upper() for i in items[1:]] == colours
+    assert items[1].label == f"LAmax {levels[0]:g}-{levels[1]:g} dB(A)"
+    bands = QgsVectorLayer(str(out / "bands.gpkg"), "bands", "ogr")
+    lines = QgsVectorLayer(str(out / "lines.gpkg"), "lines", "ogr")
+    track = QgsVectorLayer(str(out / "track.gpkg"), "track", "ogr")
+    for lyr in (bands, lines, track):
+        assert lyr.isValid()
+        project.addMapLayer(lyr)
+        assert lyr.crs() == raster.crs()  # everything in the grid's CRS
+    assert bands.renderer().type() == "graduatedSymbol"
+    assert [rg.symbol().color().name().upper() for rg in bands.renderer().ranges()] == colours
+    assert [rg.label() for rg in bands.renderer().ranges()][-1] == f"LAmax >= {levels[-1]:g} dB(A)"
+    assert lines.labelsEnabled() and "level" in lines.labeling().settings().fieldName
+    assert track.renderer().type() == "categorizedSymbol" and track.featureCount() == 1
+    project.clear()

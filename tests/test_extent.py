@@ -1,0 +1,134 @@
+"""The map's extent: the default grid closes the lowest level; a fixed margin flags what it cuts (issue 17)."""
+
+import json
+
+import numpy as np
+import pytest
+import rasterio
+from click.testing import CliRunner
+
+from gisnoise.cli.main import cli
+from gisnoise.data import card_path
+from gisnoise.data import sample_route_path as sample_route
+from gisnoise.flight import read_route
+from gisnoise.maps import CardSet, audible_distance, auto_margin, make_map
+from gisnoise.model import ModelCard
+
+DEMO = ["demo-horizontal", "demo-climb", "demo-sink"]
+DEMO_LEVELS = "45,50,55,60,65"
+
+
+def omni(p6=1.0, g0=70.0):
+    return ModelCard(id="omni", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=g0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=p6, p7=30.0),
+                     reference_power_w=3000.0)
+
+
+@pytest.mark.parametrize("p6", [1.0, 0.5, 1.3])
+def test_audible_distance_is_the_spherical_spreading_distance(p6):
+    # omnidirectional source at the reference power: L(d) = 70 - 20 p6 log10(d / 40 m)
+    for level in (45.0, 55.0, 65.0):
+        truth = 40.0 * 10.0 ** ((70.0 - level) / (20.0 * p6))
+        d = audible_distance([omni(p6)], [3000.0], level)
+        assert truth <= d <= truth * 1.05  # an upper bound, one table step (4.9 %) at most above
+
+
+def test_audible_distance_grows_with_power_by_the_cards_power_law():
+    # p1 = 20: doubling the power adds 20 log10(2) = 6.02 dB, i.e. doubles the distance (p6 = 1)
+    d1 = audible_distance([omni()], [3000.0], 50.0)
+    d2 = audible_distance([omni()], [6000.0], 50.0)
+    assert d2 / d1 == pytest.approx(2.0, rel=0.06)
+    assert audible_distance([omni()], [3000.0], 200.0) == 0.0
+
+
+def levels_edges(path):
+    with rasterio.open(path) as ds:
+        out = {}
+        for i, name in enumerate(ds.descriptions, start=1):
+            a = ds.read(i)
+            out[name] = np.concatenate([a[0], a[-1], a[:, 0], a[:, -1]])
+        return out
+
+
+def test_demo_default_extent_closes_the_lowest_level(tmp_path):
+    """The demo (scripts/demo) without --margin: no edge cell of LAmax or LAeq at or above 45 dB(A)."""
+    pytest.importorskip("numba")
+    r = CliRunner().invoke(cli, ["-q", "contour", str(sample_route()), *sum((["--card", c] for c in DEMO), []),
+                                 "--out", str(tmp_path), "--resolution", "10", "--levels", DEMO_LEVELS,
+                                 "--engine", "fast"],  # the reference engine's equal within 0.01 dB, faster
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    edges = levels_edges(tmp_path / "levels.tif")
+    assert edges["LAmax"].max() < 45.0
+    assert edges["LAeq"].max() < 45.0
+    doc = json.loads((tmp_path / "contours.geojson").read_text())
+    for f in doc["features"]:
+        p = f["properties"]
+        assert p["clipped"] == bool(edges[p["metric"]].max() >= p["level"])
+        if p["metric"] in ("LAmax", "LAeq"):
+            assert not p["clipped"]
+    # SEL grows with the event's duration: its low contours lie beyond the grid, and say so
+    assert any(f["properties"]["clipped"] for f in doc["features"] if f["properties"]["metric"] == "SEL")
+    assert "SEL 45" in r.output and "clipped" in r.output
+    assert "LAmax" not in " ".join(line for line in r.output.splitlines() if line.startswith("warning"))
+
+
+def test_a_forced_small_margin_flags_the_cut_contours_and_warns(tmp_path):
+    r = CliRunner().invoke(cli, ["-q", "contour", str(sample_route()), *sum((["--card", c] for c in DEMO), []),
+                                 "--out", str(tmp_path), "--resolution", "20", "--margin", "100", "--metrics", "LAmax",
+                                 "--levels", "45,50,55,60,65,85"], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    top = levels_edges(tmp_path / "levels.tif")["LAmax"].max()
+    assert 65.0 <= top < 85.0
+    warn = [line for line in r.output.splitlines() if line.startswith("warning:")]
+    assert len(warn) == 1 and warn[0].startswith("warning: LAmax 45, 50, 55, 60, 65 dB(A) contours are clipped")
+    doc = json.loads((tmp_path / "contours.geojson").read_text())
+    flags = {(f["properties"]["kind"], f["properties"]["level"]): f["properties"]["clipped"] for f in doc["features"]}
+    assert flags[("isoline", 45.0)] and flags[("isoband", 65.0)]
+    assert flags[("isoline", 85.0)] is False  # the loudest contour closes around the track
+    assert doc["gisnoise"]["warnings"] == [w.removeprefix("warning: ") for w in warn]
+
+
+def test_the_cell_limit_cuts_the_default_extent_with_a_warning(tmp_path, monkeypatch):
+    route = read_route(sample_route())
+    cards = CardSet([card_path(c) for c in DEMO])
+    full, w = auto_margin(route.trajectory, cards, 45.0, resolution_m=20.0)
+    assert w == []
+    monkeypatch.setenv("GISNOISE_MAX_CELLS", "40000")
+    cut, w = auto_margin(route.trajectory, cards, 45.0, resolution_m=20.0)
+    assert cut < full and len(w) == 1 and "40,000 cells" in w[0]
+    paths = make_map(route.trajectory, cards, tmp_path, resolution_m=20.0, levels=[45.0], metrics=["LAmax"])
+    assert paths["result"].grid.n_cells <= 40000
+    assert paths["warnings"][0] == w[0]
+    assert paths["warnings"][1].startswith("LAmax 45 dB(A) contours are clipped")
+
+
+def test_the_margin_bound_holds_over_the_demo_cards_sphere():
+    """The bound is an upper one: at the bound's distance no direction of any demo card reaches the level."""
+    cards = [CardSet([card_path(c) for c in DEMO]).cards[i] for i in range(3)]
+    for card in cards:
+        d = audible_distance([card], [card.reference_power_w * 1.5], 50.0)
+        phi, theta = np.meshgrid(np.radians(np.arange(0, 360, 1.0)), np.radians(np.arange(-90, 90.5, 1.0)))
+        lv = card.level_uav(card.inputs(np.full(phi.shape, d), phi, theta, card.reference_power_w * 1.5))
+        assert np.nanmax(lv) < 50.0 + 0.05
+        lv_in = card.level_uav(card.inputs(np.full(phi.shape, d / 1.1), phi, theta, card.reference_power_w * 1.5))
+        assert np.nanmax(lv_in) >= 50.0
+
+
+def test_a_card_with_a_model_extension_is_bounded_by_its_base_with_a_warning(tmp_path):
+    import dataclasses
+
+    from gisnoise.model import get_ansatz
+
+    base = omni()
+    ext = "paper-offset+bank_angle"
+    params = dict(base.parameters)
+    for k in get_ansatz(ext).params:
+        params.setdefault(k, 0.0)  # the effect switched off: the same levels as the base
+    card = dataclasses.replace(base, ansatz=ext, parameters=params)
+    route = read_route(sample_route())
+    traj = route.trajectory.with_(phase=np.full(len(route.trajectory), "horizontal"))
+    m_ext, w = auto_margin(traj, CardSet([card]), 45.0, resolution_m=20.0)
+    m_base, w0 = auto_margin(traj, CardSet([base]), 45.0, resolution_m=20.0)
+    assert m_ext == m_base and w0 == []
+    assert len(w) == 1 and "paper-offset+bank_angle" in w[0] and "clipped" in w[0]
