@@ -45,8 +45,8 @@ import numpy as np
 
 from gisnoise.errors import InputError
 
-__all__ = ["Limits", "DEFAULTS", "current", "override", "check_range", "check_array", "check_lonlat",
-           "check_attitude", "check_power", "check_heights", "check_times", "check_samples", "check_count",
+__all__ = ["Limits", "WorkLimitError", "DEFAULTS", "current", "override", "check_range", "check_array", "check_lonlat",
+           "check_attitude", "check_power", "check_track", "check_heights", "check_times", "check_samples", "check_count",
            "check_receiver_height", "check_ground_below", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id"]
 
 
@@ -186,13 +186,30 @@ def check_times(t: Any, *, field: str = "t", source: str = "", error: type[Input
                     f"{_fmt(lim.max_duration_s)} s", field=field)
 
 
-def check_samples(n: float, *, field: str, what: str = "trajectory", dense: bool = False,
-                  error: type[InputError] = InputError) -> int:
-    """Refuse a sample count above ``max_samples`` (``dense``: times ``dense_factor``) before allocating."""
+class WorkLimitError(InputError):
+    """A request or input would need more samples (time, memory) than the limits allow (413 in the service)."""
+
+
+def check_track(t: Any, lat: Any, lon: Any, h: Any, roll: Any, pitch: Any, power_w: Any, *, source: str = "",
+                error: type[InputError] = InputError) -> None:
+    """The rule set of a trajectory: coordinates, heights, attitude, power and time gaps (one call)."""
+    check_lonlat(lon, lat, source=source, error=error)
+    check_heights(h, source=source, error=error)
+    check_array("roll", roll, -180.0, 180.0, unit="deg", source=source, error=error)
+    check_array("pitch", pitch, -180.0, 180.0, unit="deg", source=source, error=error)
+    check_power(power_w, source=source, error=error)
+    check_times(t, source=source, error=error)
+
+
+def check_samples(n: float, *, field: str, what: str = "trajectory", dense: bool = False) -> int:
+    """Refuse a sample count above ``max_samples`` (``dense``: times ``dense_factor``) before allocating.
+
+    Raises :class:`WorkLimitError`.
+    """
     lim = current()
     top = lim.max_samples * (lim.dense_factor if dense else 1)
     if not math.isfinite(n) or n > top:
-        raise error(f"{field}: the {what} would have {_fmt(n)} samples, more than the limit of {top}",
+        raise WorkLimitError(f"{field}: the {what} would have {_fmt(n)} samples, more than the limit of {top}",
                     field=field)
     return int(n)
 

@@ -39,6 +39,7 @@ from gisnoise.acoustics.bands import (
     third_octave_centres,
 )
 from gisnoise.acoustics.wav import (
+    check_wav_header,
     calibrate,
     read_wav,
     write_wav,
@@ -50,4 +51,4 @@ from gisnoise.acoustics.weighting import (
     overall_a_level,
 )
 
-__all__ = ['MOUNT_CORRECTIONS_DB', 'P_REF', 'a_weighting', 'absorption_corrected_level', 'absorption_correction', 'atmospheric_absorption', 'background_levels', 'band_edges', 'band_frequency', 'band_levels', 'band_name', 'calibrate', 'exact_frequency', 'is_band_name', 'mount_correction', 'nominal_frequency', 'overall_a_level', 'read_wav', 'speed_of_sound', 'third_octave_centres', 'wav_band_levels', 'write_wav']
+__all__ = ['MOUNT_CORRECTIONS_DB', 'P_REF', 'a_weighting', 'absorption_corrected_level', 'absorption_correction', 'atmospheric_absorption', 'background_levels', 'band_edges', 'band_frequency', 'band_levels', 'band_name', 'calibrate', 'check_wav_header', 'exact_frequency', 'is_band_name', 'mount_correction', 'nominal_frequency', 'overall_a_level', 'read_wav', 'speed_of_sound', 'third_octave_centres', 'wav_band_levels', 'write_wav']

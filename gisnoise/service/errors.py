@@ -37,6 +37,7 @@ from gisnoise.errors import (
     SchemaVersionError,
     TrajectoryError,
 )
+from gisnoise.limits import WorkLimitError
 from gisnoise.service import models as _models
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 
@@ -47,6 +48,7 @@ log = logging.getLogger(__name__)
 
 STATUS: dict[type[BaseException], int] = {
     GridTooLargeError: 413,
+    WorkLimitError: 413,
     InvalidGridError: 422,
     CRSError: 422,
     SchemaVersionError: 422,
