@@ -47,7 +47,7 @@ from gisnoise.errors import InputError
 
 __all__ = ["Limits", "WorkLimitError", "DEFAULTS", "current", "override", "check_range", "check_array", "check_lonlat",
            "check_attitude", "check_power", "check_track", "check_heights", "check_times", "check_samples", "check_count",
-           "check_receiver_height", "check_ground_below", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id"]
+           "check_receiver_height", "check_ground_below", "check_receivers", "GROUND_TOLERANCE_M", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id"]
 
 
 @dataclass(frozen=True)
@@ -227,12 +227,23 @@ def check_receiver_height(value: float, *, field: str = "receiver_height",
                        why="receivers stand on or above the ground")
 
 
+GROUND_TOLERANCE_M = 1.0
+"""How far the ground may lie above the track's lowest sample (rounding of take-off and landing), m."""
+
+
+def check_receivers(receiver_height: float, ground_h: float | None, track_h: Any) -> None:
+    """Receivers on or above the ground, the ground (when given) below the track: one call for a map."""
+    check_receiver_height(receiver_height)
+    if ground_h is not None:
+        check_ground_below(ground_h, track_h)
+
+
 def check_ground_below(ground_h: float, track_h: Any, *, field: str = "ground_h",
                        error: type[InputError] = InputError) -> float:
     """The ground lies at or below the lowest point of the track."""
     g = check_range(field, ground_h, current().min_height_m, current().max_height_m, unit="m", error=error)
     lowest = float(np.min(np.asarray(track_h, dtype=float)))
-    if g > lowest + 1e-6:
+    if g > lowest + GROUND_TOLERANCE_M:
         raise error(f"{field}: ground at {_fmt(g)} m lies above the track's lowest point {_fmt(lowest)} m",
                     field=field)
     return g

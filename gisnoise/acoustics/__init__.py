@@ -39,8 +39,8 @@ from gisnoise.acoustics.bands import (
     third_octave_centres,
 )
 from gisnoise.acoustics.wav import (
-    check_wav_header,
     calibrate,
+    check_wav_header,
     read_wav,
     write_wav,
 )

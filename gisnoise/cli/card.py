@@ -20,7 +20,7 @@ def command() -> None:
 @command.command("show")
 @click.argument("card", type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the card as JSON (validated, normalised).")
-@click.option("--p-el", "p_el", type=float, default=1.1, show_default=True,
+@click.option("--p-el", "p_el", type=click.FloatRange(0, 100, min_open=True), default=1.1, show_default=True,
               help="Nondimensional power for the level summary (the paper's Fig. 7: 1.1).")
 def show(card: str, as_json: bool, p_el: float) -> None:
     """Print CARD: phases, ansatz, parameters with standard deviations, statistics, provenance, notes."""
@@ -72,7 +72,7 @@ def show(card: str, as_json: bool, p_el: float) -> None:
 
 @command.command("plot")
 @click.argument("card", type=click.Path(dir_okay=False))
-@click.option("--p-el", "p_el", type=float, default=1.1, show_default=True,
+@click.option("--p-el", "p_el", type=click.FloatRange(0, 100, min_open=True), default=1.1, show_default=True,
               help="Nondimensional electric power (the paper's Fig. 7: 1.1, Fig. 9: 6.5).")
 @click.option("--distance", "distance", type=float, default=30.0, show_default=True,
               help="Source-observer distance, m.")

@@ -49,11 +49,11 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import TrajectoryError
-from gisnoise.limits import check_samples
 from gisnoise.flight.phases import MULTICOPTER_PHASES, PHASES
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.flight.vehicle import GRAVITY, VehicleModel
 from gisnoise.geo import LocalFrame, wrap_angle
+from gisnoise.limits import check_samples
 
 __all__ = ["Route", "route_from_waypoints", "WAYPOINTS_SCHEMA"]
 

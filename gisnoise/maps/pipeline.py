@@ -23,6 +23,7 @@ from typing import Any
 
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory, read_route
+from gisnoise.limits import check_receivers
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.contours import parse_levels, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
@@ -119,6 +120,7 @@ def make_map(
     traj = route.trajectory
     if ground_h is None and dem is None:
         ground_h = route.ground_h_m
+    check_receivers(receiver_height, ground_h, traj.h)  # the shared rule set (gisnoise.limits)
     cardset = as_cardset(cards)
     grid = grid_for_trajectory(traj, resolution_m, margin_m, crs)
     out = Path(out_dir)

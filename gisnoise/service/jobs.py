@@ -365,6 +365,10 @@ class _Progress:
         self.store.set_progress(self.job_id, f, texts[0] if texts else kwargs.get("message"))
 
 
+_INPUT_FAILURES: tuple[type[BaseException], ...] = (GisnoiseError, MemoryError, *UNREADABLE)
+"""What a job's input can make a handler raise: the job fails with a 4xx status, not a crash."""
+
+
 class WorkerPool:
     """Worker threads running queued jobs with the handler registered for their kind.
 
@@ -445,7 +449,7 @@ class WorkerPool:
             else:
                 store.finish(job.id, "cancelled", message="cancelled")
             return
-        except (GisnoiseError, MemoryError, *UNREADABLE) as exc:
+        except _INPUT_FAILURES as exc:
             shutil.rmtree(partial, ignore_errors=True)
             fld = getattr(exc, "field", None) or ("grid.resolution_m" if isinstance(exc, MemoryError) else
                                                   "campaign" if isinstance(exc, UNREADABLE) else "job")

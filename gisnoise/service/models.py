@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+import re
 from enum import Enum
 from typing import Annotated, Any, Literal
-
-import re
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, WithJsonSchema
 
