@@ -53,7 +53,7 @@ from gisnoise.flight.phases import MULTICOPTER_PHASES, PHASES
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.flight.vehicle import GRAVITY, VehicleModel
 from gisnoise.geo import LocalFrame, wrap_angle
-from gisnoise.limits import check_samples
+from gisnoise.limits import check_range, check_samples, current
 
 __all__ = ["Route", "route_from_waypoints", "WAYPOINTS_SCHEMA"]
 
@@ -225,6 +225,8 @@ def route_from_waypoints(waypoints: Sequence[Mapping[str, Any]], settings: Mappi
         hold = _num(wp.get("hold_s", 0.0), "hold_s", source, i)
         if hold < 0:
             raise TrajectoryError(f"{source}: waypoint {i}: field 'hold_s' must be >= 0", field="hold_s")
+        check_range("hold_s", hold, 0.0, current().max_duration_s, unit="s", source=f"{source}: waypoint {i}",
+                    error=TrajectoryError)
         hd = wp.get("heading_deg")
         hd = None if hd is None else math.radians(_num(hd, "heading_deg", source, i))
         extra.append((speed, phase, hold, hd))

@@ -11,13 +11,13 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI, Request
 
 from gisnoise import __version__
 from gisnoise.service import routes_campaign, routes_cards, routes_contours, routes_jobs, routes_web
 from gisnoise.service.cardstore import CardStore
 from gisnoise.service.deps import State, key_problem
-from gisnoise.service.errors import install_handlers
+from gisnoise.service.errors import ApiError, install_handlers
 from gisnoise.service.jobs import Handler, JobStore, WorkerPool
 from gisnoise.service.limits import BodySizeLimit, KeyBeforeBody
 from gisnoise.service.models import ErrorBody
@@ -35,6 +35,15 @@ ERROR_RESPONSES: dict[int | str, dict] = {
     for s, d in [(400, "Bad request"), (401, "API key missing"), (403, "API key not valid"), (404, "Not found"),
                  (409, "Conflict"), (413, "Too large (body, upload or grid)"), (422, "Invalid input")]
 }
+
+
+def single_query_values(request: Request) -> None:
+    """Every query parameter of this API takes one value: a repeated one is refused (422), not half-read."""
+    seen: set[str] = set()
+    for k, _ in request.query_params.multi_items():
+        if k in seen:
+            raise ApiError(422, f"{k}: given more than once in the query string", field=k)
+        seen.add(k)
 
 
 def _handlers() -> dict[str, Handler]:
@@ -83,6 +92,7 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
                     "when the service has keys.",
         lifespan=lifespan,
         responses=ERROR_RESPONSES,
+        dependencies=[Depends(single_query_values)],
         default_response_class=AsciiJSONResponse,
         docs_url=None,  # served below from the vendored swagger-ui: no network needed
         redoc_url=None,

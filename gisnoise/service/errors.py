@@ -113,18 +113,30 @@ def scrub_paths(message: str, roots: Iterable[str | object] = (), *, any_path: b
 
 
 def allowed_methods(app: FastAPI, path: str) -> list[str]:
-    """Every method some route of ``app`` answers on ``path`` (the ``Allow`` header of a 405)."""
-    from starlette.routing import Match
+    """Every method the OpenAPI schema of ``app`` states for ``path`` (the ``Allow`` header of a 405).
 
-    scope = {"type": "http", "path": path, "method": "GET", "root_path": ""}
+    Several routes share a path (``GET`` and ``DELETE /cards/{card_id}``); the router's own
+    405 names only the first, so the schema, which lists them all, is the source.
+    """
+    table = getattr(app.state, "allow_table", None)
+    if table is None:
+        table = []
+        for template, ops in app.openapi().get("paths", {}).items():
+            rx = re.escape(template)
+            rx = re.sub(r"\\\{[^}]*:path\\\}", ".+", rx)
+            rx = re.sub(r"\\\{[^}]*\\\}", "[^/]+", rx)
+            table.append((re.compile(rx), {m.upper() for m in ops if m.lower() in _HTTP_METHODS}))
+        app.state.allow_table = table
     methods: set[str] = set()
-    for route in app.routes:
-        match, _ = route.matches(scope)
-        if match != Match.NONE:
-            methods |= set(getattr(route, "methods", None) or ())
+    for rx, ms in table:
+        if rx.fullmatch(path):
+            methods |= ms
     if "GET" in methods:
         methods.add("HEAD")
     return sorted(methods)
+
+
+_HTTP_METHODS = {"get", "put", "post", "delete", "patch", "head", "options", "trace"}
 
 
 def error_body(message: str, field: str | None, errors: Sequence[dict[str, Any]] = ()) -> dict[str, Any]:
@@ -234,8 +246,9 @@ def install_handlers(app: FastAPI) -> None:
             detail = f"path: no such resource {request.url.path!r}"
         elif exc.status_code == 405:
             detail = f"method: {request.method} is not allowed on {request.url.path!r}"
-            allow = allowed_methods(app, request.url.path)
-            return JSONResponse(error_body(detail, "method"), status_code=405, headers={"Allow": ", ".join(allow)})
+            allow = ", ".join(allowed_methods(app, request.url.path)) or (getattr(exc, "headers", None) or {}).get(
+                "Allow", "")
+            return JSONResponse(error_body(detail, "method"), status_code=405, headers={"Allow": allow})
         elif fld and not detail.startswith(fld):
             detail = f"{fld}: {detail}"
         return JSONResponse(error_body(detail, fld or "request"), status_code=exc.status_code,
