@@ -125,12 +125,16 @@ def allowed_methods(app: FastAPI, path: str) -> list[str]:
             rx = re.escape(template)
             rx = re.sub(r"\\\{[^}]*:path\\\}", ".+", rx)
             rx = re.sub(r"\\\{[^}]*\\\}", "[^/]+", rx)
-            table.append((re.compile(rx), {m.upper() for m in ops if m.lower() in _HTTP_METHODS}))
+            table.append((re.compile(rx), "{" not in template,
+                          {m.upper() for m in ops if m.lower() in _HTTP_METHODS}))
         app.state.allow_table = table
+    # a literal path ('/jobs/fit') is its own resource, not an instance of '/jobs/{job_id}'
+    matching = [(literal, ms) for rx, literal, ms in table if rx.fullmatch(path)]
+    if any(literal for literal, _ in matching):
+        matching = [(literal, ms) for literal, ms in matching if literal]
     methods: set[str] = set()
-    for rx, ms in table:
-        if rx.fullmatch(path):
-            methods |= ms
+    for _, ms in matching:
+        methods |= ms
     if "GET" in methods:
         methods.add("HEAD")
     return sorted(methods)
