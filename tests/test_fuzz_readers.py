@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from gisnoise import limits
@@ -39,6 +39,7 @@ def _budget(n: int):
 
 def _refused_with_field(exc: BaseException) -> None:
     assert isinstance(exc, GisnoiseError), f"{type(exc).__name__}: {exc}"
+    event(f"refused: {exc.field}")
     assert exc.field, f"no field: {exc}"
     assert "\n" not in str(exc).strip(), f"more than one line: {exc!r}"
 
@@ -130,6 +131,7 @@ def route_doc(draw) -> dict:
 
 # ------------------------------------------------------------------ properties
 def _check_trajectory(tr) -> None:
+    event("read")
     lim = limits.current()
     for name in ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w"):
         a = np.asarray(getattr(tr, name), dtype=float)
@@ -159,6 +161,7 @@ def _card_property(data: bytes) -> None:
     except Exception as exc:  # noqa: BLE001
         _refused_with_field(exc)
         return
+    event("read")
     assert all(math.isfinite(v) for v in card.parameters.values())
     assert card.reference_power_w > 0 and math.isfinite(card.reference_power_w)
 
@@ -174,6 +177,7 @@ def _wav_property(data: bytes) -> None:
         except Exception as exc:  # noqa: BLE001
             _refused_with_field(exc)
             return
+    event("read")
     assert v.ndim == 1 and v.size >= 1 and fs > 0 and np.all(np.isfinite(v))
 
 

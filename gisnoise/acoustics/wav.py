@@ -160,6 +160,9 @@ def read_wav(
     fs, data = _wav_open(name, mmap=False)
     _check_rate(fs, expected_fs_hz, name)
     v = data.astype(np.float64) * _wav_scale(data, name)
+    bad = ~np.isfinite(v)
+    if bad.any():  # float WAV holding NaN or infinity: not a recording
+        raise InputError(f"{name}: non-finite sample at index {int(np.argmax(bad))}", field="samples")
     if sensitivity_v_per_pa is not None:
         v = calibrate(v, sensitivity_v_per_pa)
     return v, fs
