@@ -8,6 +8,7 @@ import math
 import click
 import numpy as np
 
+from gisnoise.errors import InputError
 from gisnoise.jsonio import to_jsonable
 from gisnoise.model import cards as gcards
 
@@ -20,12 +21,14 @@ def command() -> None:
 @command.command("show")
 @click.argument("card", type=click.Path(dir_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="Print the card as JSON (validated, normalised).")
-@click.option("--p-el", "p_el", type=click.FloatRange(0, 100, min_open=True), default=1.1, show_default=True,
+@click.option("--p-el", "p_el", type=float, default=1.1, show_default=True,
               help="Nondimensional power for the level summary (the paper's Fig. 7: 1.1).")
 def show(card: str, as_json: bool, p_el: float) -> None:
     """Print CARD: phases, ansatz, parameters with standard deviations, statistics, provenance, notes."""
     from gisnoise.maps import directivity_grid
 
+    if not (0 < p_el <= 100):  # a level summary at no or negative power is no summary: refused, not dropped
+        raise InputError(f"p_el: must be in (0, 100] (nondimensional power), got {p_el:g}", field="p_el")
     c = gcards.load(card)
     if as_json:
         click.echo(gcards.dumps(c), nl=False)
@@ -72,7 +75,7 @@ def show(card: str, as_json: bool, p_el: float) -> None:
 
 @command.command("plot")
 @click.argument("card", type=click.Path(dir_okay=False))
-@click.option("--p-el", "p_el", type=click.FloatRange(0, 100, min_open=True), default=1.1, show_default=True,
+@click.option("--p-el", "p_el", type=float, default=1.1, show_default=True,
               help="Nondimensional electric power (the paper's Fig. 7: 1.1, Fig. 9: 6.5).")
 @click.option("--distance", "distance", type=float, default=30.0, show_default=True,
               help="Source-observer distance, m.")
