@@ -17,7 +17,7 @@ PKG = ROOT / "gisnoise"
 PLUGIN = ROOT / "qgis_plugin" / "gisnoise_qgis"
 
 #: Top-level modules every subpackage may use (they import no subpackage themselves).
-BASE = {"gisnoise", "gisnoise.errors", "gisnoise.jsonio", "gisnoise.data", "gisnoise.reporting"}
+BASE = {"gisnoise", "gisnoise.errors", "gisnoise.jsonio", "gisnoise.data", "gisnoise.reporting", "gisnoise.limits"}
 
 _LOW = {"acoustics", "geo", "flight"}
 #: What each subpackage may import, besides itself and BASE.  The faces (cli, service) may import any.

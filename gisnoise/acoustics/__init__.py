@@ -42,6 +42,7 @@ from gisnoise.acoustics.bands import (
 )
 from gisnoise.acoustics.wav import (
     calibrate,
+    check_wav_header,
     read_wav,
     write_wav,
 )
@@ -67,4 +68,4 @@ def __getattr__(name: str) -> Any:
     globals()[name] = value
     return value
 
-__all__ = ['MOUNT_CORRECTIONS_DB', 'P_REF', 'a_weighting', 'absorption_corrected_level', 'absorption_correction', 'atmospheric_absorption', 'background_levels', 'band_edges', 'band_frequency', 'band_levels', 'band_name', 'calibrate', 'exact_frequency', 'is_band_name', 'mount_correction', 'nominal_frequency', 'overall_a_level', 'read_wav', 'speed_of_sound', 'third_octave_centres', 'wav_band_levels', 'write_wav']
+__all__ = ['MOUNT_CORRECTIONS_DB', 'P_REF', 'a_weighting', 'absorption_corrected_level', 'absorption_correction', 'atmospheric_absorption', 'background_levels', 'band_edges', 'band_frequency', 'band_levels', 'band_name', 'calibrate', 'check_wav_header', 'exact_frequency', 'is_band_name', 'mount_correction', 'nominal_frequency', 'overall_a_level', 'read_wav', 'speed_of_sound', 'third_octave_centres', 'wav_band_levels', 'write_wav']

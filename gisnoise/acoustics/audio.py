@@ -183,6 +183,9 @@ def wav_band_levels(
     blk = _positive_scalar(block_s, "block_s")
     fs, data = _wav_open(name, mmap=True)
     _check_rate(fs, expected_fs_hz, name)
+    if len(data) < blk * fs:  # a file's levels: at least one block, never an empty result
+        raise InputError(f"block_s: {blk:g} s is longer than the recording {name} ({len(data)} samples, "
+                         f"{len(data) / fs:g} s): no block of levels", field="block_s")
     scale = _wav_scale(data, name) / s
 
     def check(chunk: np.ndarray, start: int) -> None:

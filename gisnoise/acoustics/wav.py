@@ -14,7 +14,7 @@ import numpy as np
 from gisnoise.acoustics._checks import _array, _finite, _positive_scalar, _scalar
 from gisnoise.errors import InputError
 
-__all__ = ["calibrate", "read_wav", "write_wav"]
+__all__ = ["calibrate", "read_wav", "write_wav", "check_wav_header"]
 
 
 def calibrate(volts: Any, sensitivity_v_per_pa: float) -> np.ndarray:
@@ -35,6 +35,7 @@ def _wav_open(path: str | os.PathLike[str], mmap: bool) -> tuple[float, np.ndarr
     name = os.fspath(path)
     if not os.path.isfile(name):
         raise InputError(f"{name}: WAV file not found", field="path")
+    check_wav_header(name)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", wavfile.WavFileWarning)  # unknown chunks (LIST, bext, ...)
@@ -49,6 +50,65 @@ def _wav_open(path: str | os.PathLike[str], mmap: bool) -> tuple[float, np.ndarr
     if data.ndim != 1:
         raise InputError(f"{name}: WAV must be mono, got {data.shape[1]} channels", field="channels")
     return float(fs), data
+
+
+def check_wav_header(path: str | os.PathLike[str]) -> tuple[int, int, int, int]:
+    """Check a WAV file's header against its length before its data is read.
+
+    Refuses, in one line naming the field: a file without a RIFF/WAVE header, a missing or
+    short ``fmt `` chunk, no ``data`` chunk, a ``data`` chunk holding no sample, and a file
+    shorter than its header states (truncated: the missing part is stated).
+
+    Returns
+    -------
+    channels, sample_rate_hz, bits_per_sample, frames
+    """
+    name = os.fspath(path)
+    size = os.path.getsize(name)
+    fmt: tuple[int, int, int] | None = None
+    with open(name, "rb") as fh:
+        head = fh.read(12)
+        if len(head) < 12 or head[:4] not in (b"RIFF", b"RF64") or head[8:12] != b"WAVE":
+            raise InputError(f"{name}: not a WAV file (no RIFF/WAVE header)", field="header")
+        if head[:4] == b"RF64":  # sizes in a ds64 chunk; scipy checks the rest
+            return 0, 0, 0, 0
+        pos = 12
+        while True:
+            ch = fh.read(8)
+            if len(ch) < 8:
+                raise InputError(f"{name}: WAV header without a 'data' chunk (file ends at byte {pos})",
+                                 field="header")
+            cid, n = ch[:4], int.from_bytes(ch[4:], "little")
+            pos += 8
+            if cid == b"fmt ":
+                body = fh.read(min(n, 16))
+                if n < 16 or len(body) < 16:
+                    raise InputError(f"{name}: truncated WAV 'fmt ' chunk ({len(body)} of 16 bytes)", field="header")
+                channels = int.from_bytes(body[2:4], "little")
+                rate = int.from_bytes(body[4:8], "little")
+                bits = int.from_bytes(body[14:16], "little")
+                if channels < 1 or rate < 1 or bits < 1:
+                    raise InputError(f"{name}: WAV 'fmt ' chunk states {channels} channels, {rate} Hz, {bits} bits",
+                                     field="header")
+                fmt = (channels, rate, bits)
+                fh.seek(pos + n + (n & 1))
+            elif cid == b"data":
+                if fmt is None:
+                    raise InputError(f"{name}: WAV 'data' chunk before its 'fmt ' chunk", field="header")
+                channels, rate, bits = fmt
+                frame = channels * ((bits + 7) // 8)
+                have = size - pos
+                if n > have:
+                    missing = (n - have) / (frame * rate)
+                    raise InputError(f"{name}: truncated WAV: the header states {n} bytes of samples, the file "
+                                     f"holds {have} ({missing:.6g} s of audio missing)", field="length")
+                frames = n // frame
+                if frames < 1:
+                    raise InputError(f"{name}: the WAV file holds no samples", field="length")
+                return channels, rate, bits, frames
+            else:
+                fh.seek(pos + n + (n & 1))
+            pos = fh.tell()
 
 
 def _wav_scale(data: np.ndarray, name: str) -> float:
@@ -100,6 +160,9 @@ def read_wav(
     fs, data = _wav_open(name, mmap=False)
     _check_rate(fs, expected_fs_hz, name)
     v = data.astype(np.float64) * _wav_scale(data, name)
+    bad = ~np.isfinite(v)
+    if bad.any():  # float WAV holding NaN or infinity: not a recording
+        raise InputError(f"{name}: non-finite sample at index {int(np.argmax(bad))}", field="samples")
     if sensitivity_v_per_pa is not None:
         v = calibrate(v, sensitivity_v_per_pa)
     return v, fs

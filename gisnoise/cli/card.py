@@ -8,6 +8,7 @@ import math
 import click
 import numpy as np
 
+from gisnoise.errors import InputError
 from gisnoise.jsonio import to_jsonable
 from gisnoise.model import cards as gcards
 
@@ -26,6 +27,8 @@ def show(card: str, as_json: bool, p_el: float) -> None:
     """Print CARD: phases, ansatz, parameters with standard deviations, statistics, provenance, notes."""
     from gisnoise.maps import directivity_grid
 
+    if not (0 < p_el <= 100):  # a level summary at no or negative power is no summary: refused, not dropped
+        raise InputError(f"p_el: must be in (0, 100] (nondimensional power), got {p_el:g}", field="p_el")
     c = gcards.load(card)
     if as_json:
         click.echo(gcards.dumps(c), nl=False)

@@ -16,7 +16,9 @@ import ast
 import importlib
 import logging
 import pkgutil
+import struct
 import sys
+import zlib
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -98,6 +100,14 @@ class GisnoiseGroup(click.Group):
             ctx.exit(2)
         except MemoryError:
             click.echo("Error: out of memory; use a coarser --resolution or a smaller grid", err=True)
+            ctx.exit(2)
+        except (click.exceptions.Exit, click.ClickException, click.Abort, KeyboardInterrupt, SystemExit):
+            raise
+        except (UnicodeError, ValueError, OSError, EOFError, ArithmeticError, struct.error, zlib.error) as exc:
+            # last resort: malformed input a reader did not name; one line, never a traceback
+            fld = getattr(exc, "field", None) or getattr(exc, "filename", None)
+            click.echo(f"Error: {fld + ': ' if isinstance(fld, str) else ''}cannot read the input "
+                       f"({type(exc).__name__}: {exc})", err=True)
             ctx.exit(2)
 
 

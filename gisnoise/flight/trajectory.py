@@ -22,6 +22,7 @@ import numpy as np
 from gisnoise.errors import MissingColumnError, TrajectoryError
 from gisnoise.flight.phases import PHASES
 from gisnoise.geo import LocalFrame, wrap_angle, wrap_deg
+from gisnoise.limits import check_track
 
 __all__ = ["Trajectory", "read_flight_csv", "from_columns", "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
 
@@ -106,6 +107,8 @@ class Trajectory:
             i = int(np.flatnonzero(self.power_w <= 0)[0])
             raise TrajectoryError(f"{src}: field 'power_w' must be positive, got {self.power_w[i]:g} at sample {i}",
                                   field="power_w")
+        check_track(self.t, self.lat, self.lon, self.h, self.roll, self.pitch, self.power_w, source=src,
+                    error=TrajectoryError)  # the shared rule set (gisnoise.limits)
         bad = [p for p in np.unique(self.phase) if p not in PHASES]
         if bad:
             raise TrajectoryError(f"{src}: field 'phase' has unknown value {bad[0]!r}; known: {', '.join(PHASES)}",
@@ -211,6 +214,8 @@ def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str
             text = Path(path).read_text(encoding="utf-8-sig")
         except FileNotFoundError:
             raise TrajectoryError(f"{src}: no such file", field="trajectory") from None
+        except UnicodeDecodeError as exc:
+            raise TrajectoryError(f"{src}: not a UTF-8 text CSV (byte {exc.start}: {exc.reason})", field="csv") from None
     else:
         src = source or "flight CSV"
         text = path.read()

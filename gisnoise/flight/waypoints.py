@@ -53,6 +53,7 @@ from gisnoise.flight.phases import MULTICOPTER_PHASES, PHASES
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.flight.vehicle import GRAVITY, VehicleModel
 from gisnoise.geo import LocalFrame, wrap_angle
+from gisnoise.limits import check_range, check_samples, current
 
 __all__ = ["Route", "route_from_waypoints", "WAYPOINTS_SCHEMA"]
 
@@ -224,6 +225,8 @@ def route_from_waypoints(waypoints: Sequence[Mapping[str, Any]], settings: Mappi
         hold = _num(wp.get("hold_s", 0.0), "hold_s", source, i)
         if hold < 0:
             raise TrajectoryError(f"{source}: waypoint {i}: field 'hold_s' must be >= 0", field="hold_s")
+        check_range("hold_s", hold, 0.0, current().max_duration_s, unit="s", source=f"{source}: waypoint {i}",
+                    error=TrajectoryError)
         hd = wp.get("heading_deg")
         hd = None if hd is None else math.radians(_num(hd, "heading_deg", source, i))
         extra.append((speed, phase, hold, hd))
@@ -236,6 +239,7 @@ def route_from_waypoints(waypoints: Sequence[Mapping[str, Any]], settings: Mappi
     dense = _fly(wps, veh)
     t = dense.cat("t")
     dt = st["sample_dt_s"]
+    check_samples(t[-1] / dt + 2, field="sample_dt_s", what="route")  # before allocating
     t_out = np.arange(0.0, t[-1], dt)
     if t[-1] - t_out[-1] > 1e-6:
         t_out = np.append(t_out, t[-1])
@@ -311,6 +315,7 @@ def _hold(dense: _Dense, wp: _Wp, hold_s: float, heading: float, veh: VehicleMod
     if hold_s <= 0:
         return
     t0 = dense.t_end
+    check_samples(hold_s / 0.1, field="hold_s", what="hold", dense=True)
     t = t0 + np.linspace(0.0, hold_s, max(2, int(math.ceil(hold_s / 0.1)) + 1))
     dense.add(t, e=wp.e, n=wp.n, u=wp.u, yaw=heading, pitch=0.0, roll=0.0, power=veh.hover_power_w(),
               speed=0.0, phase="hover")
@@ -325,6 +330,7 @@ def _trapezoid_profile(dist: float, vmax: float, acc: float, dt: float = 0.1) ->
     ta = v / acc
     tc = (dist - v * ta) / v
     total = 2 * ta + tc
+    check_samples(total / dt, field="speed", what="leg", dense=True)
     t = np.linspace(0.0, total, max(3, int(math.ceil(total / dt)) + 1))
     s = np.where(t < ta, 0.5 * acc * t ** 2,
                  np.where(t < ta + tc, 0.5 * acc * ta ** 2 + v * (t - ta),
@@ -409,7 +415,7 @@ def _forward_section(dense: _Dense, wps: Sequence[_Wp], veh: VehicleModel, start
     s_wp[-1] = total
     if total <= 0:
         return float(course[-1]) if m else 0.0
-    ns = max(3, int(math.ceil(total / 0.5)) + 1)
+    ns = max(3, check_samples(math.ceil(total / 0.5) + 1, field="waypoints", what="path", dense=True))
     sg = np.linspace(0.0, total, ns)
     ds = sg[1] - sg[0]
     vlim = np.full(ns, np.inf)

@@ -23,6 +23,7 @@ from typing import Any
 
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory, read_route
+from gisnoise.limits import check_receivers
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.contours import clip_warnings, parse_levels, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
@@ -124,6 +125,7 @@ def make_map(
     traj = route.trajectory
     if ground_h is None and dem is None:
         ground_h = route.ground_h_m
+    check_receivers(receiver_height, ground_h, traj.h)  # the shared rule set (gisnoise.limits)
     cardset = as_cardset(cards)
     grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
                                   background=background)

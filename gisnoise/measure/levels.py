@@ -48,6 +48,8 @@ def read_level_csv(path: str | os.PathLike[str], *, mic: str = "", flight: str =
         text = Path(path).read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise CampaignError(f"{src}: missing microphone file", field="path") from None
+    except UnicodeDecodeError as exc:
+        raise CampaignError(f"{src}: not a UTF-8 text CSV (byte {exc.start}: {exc.reason})", field="path") from None
     rows = [r for r in csv.reader(io.StringIO(text)) if r and any(x.strip() for x in r)]
     if not rows:
         raise CampaignError(f"{src}: the file is empty", field="t")
@@ -232,6 +234,12 @@ def write_levels(folder: str | os.PathLike[str], *, block_s: float | None = None
             wav = root / "mics" / m.id / f"{fid}.wav"
             if wav.is_file():
                 jobs.append((m, str(fid), wav))
+    missing = [root / "mics" / m.id / f"{fid}.wav" for m in mics for fid in flights
+               if not (root / "mics" / m.id / f"{fid}.wav").is_file()
+               and not (root / "mics" / m.id / f"{fid}.csv").is_file()]
+    if jobs and missing:  # named, never skipped
+        raise CampaignError(f"{missing[0]}: missing microphone file (neither WAV nor level CSV; "
+                            f"{len(missing)} missing in all)", field="path")
     if not jobs:
         raise CampaignError(f"{root / 'mics'}: no WAV file of a known microphone and flight", field="mics")
     info = {wav: _wav_rate(wav) for _, _, wav in jobs}

@@ -41,6 +41,7 @@ from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory, read_route
 from gisnoise.geo import GridSpec, check_cell_limit, grid_for_points, parse_crs
 from gisnoise.jsonio import read_json_file
+from gisnoise.limits import check_count, current
 from gisnoise.maps import CardSet, parse_levels
 from gisnoise.ops.periods import PERIODS, period_of
 
@@ -84,7 +85,7 @@ class Flight:
                                  field="counts") from None
             if not (math.isfinite(f) and f >= 0):
                 raise InputError(f"flight {self.id!r}: count of {k!r} must be >= 0, got {v!r}", field="counts")
-            counts[k] = f
+            counts[k] = check_count("counts", f, current().max_daily_count, source=f"flight {self.id!r}: {k}")
         object.__setattr__(self, "counts", counts)
 
     @property

@@ -6,19 +6,20 @@ Run it with ``gisnoise serve`` (uvicorn).  OpenAPI at ``/docs`` and ``/openapi.j
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI, Request
 
 from gisnoise import __version__
 from gisnoise.service import routes_campaign, routes_cards, routes_contours, routes_jobs, routes_web
 from gisnoise.service.cardstore import CardStore
-from gisnoise.service.deps import State
-from gisnoise.service.errors import install_handlers
+from gisnoise.service.deps import State, key_problem
+from gisnoise.service.errors import ApiError, install_handlers
 from gisnoise.service.jobs import Handler, JobStore, WorkerPool
-from gisnoise.service.limits import BodySizeLimit
+from gisnoise.service.limits import BodySizeLimit, KeyBeforeBody
 from gisnoise.service.models import ErrorBody
 from gisnoise.service.responses import AsciiJSONResponse
 from gisnoise.service.settings import Settings, get_settings
@@ -34,6 +35,15 @@ ERROR_RESPONSES: dict[int | str, dict] = {
     for s, d in [(400, "Bad request"), (401, "API key missing"), (403, "API key not valid"), (404, "Not found"),
                  (409, "Conflict"), (413, "Too large (body, upload or grid)"), (422, "Invalid input")]
 }
+
+
+def single_query_values(request: Request) -> None:
+    """Every query parameter of this API takes one value: a repeated one is refused (422), not half-read."""
+    seen: set[str] = set()
+    for k, _ in request.query_params.multi_items():
+        if k in seen:
+            raise ApiError(422, f"{k}: given more than once in the query string", field=k)
+        seen.add(k)
 
 
 def _handlers() -> dict[str, Handler]:
@@ -82,6 +92,7 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
                     "when the service has keys.",
         lifespan=lifespan,
         responses=ERROR_RESPONSES,
+        dependencies=[Depends(single_query_values)],
         default_response_class=AsciiJSONResponse,
         docs_url=None,  # served below from the vendored swagger-ui: no network needed
         redoc_url=None,
@@ -102,4 +113,18 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
         return settings.max_upload_bytes if path in upload_paths else settings.max_request_bytes
 
     app.add_middleware(BodySizeLimit, limit_for=limit_for)
+
+    def refusal(method: str, path: str, key: str | None) -> tuple[int, str, dict[str, str]] | None:
+        if not any(m == method and rx.fullmatch(path) for m, rx in _WRITES):
+            return None
+        problem = key_problem(settings.api_keys, key)
+        return None if problem is None else (problem.status, str(problem), problem.headers or {})
+
+    app.add_middleware(KeyBeforeBody, refusal=refusal)  # outermost: runs before the body is read
     return app
+
+
+_WRITES = [(m, re.compile(p)) for m, p in (
+    ("POST", r"/cards"), ("DELETE", r"/cards/[^/]+"), ("POST", r"/jobs/(contours|fit|diagnose)"),
+    ("POST", r"/jobs/[^/]+/cancel"), ("DELETE", r"/jobs/[^/]+"))]
+"""The writes (method, path) that need a key when the service has keys: refused from the headers."""

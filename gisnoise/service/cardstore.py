@@ -15,13 +15,14 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
+from gisnoise.limits import SAFE_ID_PATTERN
 from gisnoise.model import ModelCard
 from gisnoise.model import cards as gcards
 from gisnoise.service.errors import ApiError
 
 __all__ = ["CardStore", "StoredCard", "ID_PATTERN"]
 
-ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$"
+ID_PATTERN = SAFE_ID_PATTERN
 _ID_RE = re.compile(ID_PATTERN)
 _VERSION_RE = re.compile(r"^v(\d+)\.json$")
 
@@ -34,9 +35,9 @@ class StoredCard:
 
 
 def check_id(card_id: str, field: str = "id") -> str:
-    if not isinstance(card_id, str) or not _ID_RE.match(card_id):
-        raise ApiError(422, f"{field}: card id must match {ID_PATTERN} (letters, digits, '.', '_', '-'), "
-                            f"got {card_id!r}", field=field)
+    if not isinstance(card_id, str) or not _ID_RE.fullmatch(card_id):
+        raise ApiError(422, f"{field}: card id {card_id!r} is not valid (letters, digits, '.', '_', '-', no leading "
+                            "dot, no reserved device name, at most 128 characters)", field=field)
     return card_id
 
 

@@ -8,7 +8,12 @@ plus ``errors`` listing every invalid field of a rejected request body.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+import re
+import struct
+import tempfile
+import zipfile
+import zlib
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -32,15 +37,18 @@ from gisnoise.errors import (
     SchemaVersionError,
     TrajectoryError,
 )
+from gisnoise.limits import WorkLimitError
 from gisnoise.service import models as _models
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 
-__all__ = ["STATUS", "ApiError", "status_for", "error_body", "install_handlers"]
+__all__ = ["STATUS", "ApiError", "status_for", "error_body", "install_handlers", "scrub_paths", "UNREADABLE",
+           "allowed_methods"]
 
 log = logging.getLogger(__name__)
 
 STATUS: dict[type[BaseException], int] = {
     GridTooLargeError: 413,
+    WorkLimitError: 413,
     InvalidGridError: 422,
     CRSError: 422,
     SchemaVersionError: 422,
@@ -55,6 +63,11 @@ STATUS: dict[type[BaseException], int] = {
     Cancelled: 409,
     GisnoiseError: 400,
     MemoryError: 413,
+    UnicodeError: 422,
+    zlib.error: 422,
+    struct.error: 422,
+    zipfile.BadZipFile: 422,
+    EOFError: 422,
 }
 """HTTP status of each core exception; the most specific class in the MRO wins."""
 
@@ -76,6 +89,58 @@ def status_for(exc: BaseException) -> int:
         if cls in STATUS:
             return STATUS[cls]
     return 500
+
+
+UNREADABLE: tuple[type[BaseException], ...] = (UnicodeError, zlib.error, struct.error, zipfile.BadZipFile, EOFError)
+"""Errors of decoding malformed input (text encoding, deflate data, binary headers): 422, never 500."""
+
+
+def scrub_paths(message: str, roots: Iterable[str | object] = (), *, any_path: bool = True) -> str:
+    """``message`` without the server's folders (the data folder, the temporary folder, ``roots``).
+
+    ``any_path``: also cut any other absolute file path down to its file name (not for messages
+    naming URL paths of the service).
+    """
+    out = message
+    for root in [*roots, tempfile.gettempdir()]:
+        r = str(root).rstrip("/")
+        if len(r) > 1:
+            out = out.replace(r + "/", "").replace(r, "")
+    if not any_path:
+        return out
+    # any other absolute path of this machine: keep the file name only
+    return re.sub(r"(?<![\w.:/])/(?:[^\s'\"/:]+/)+([^\s'\"/:]+)", r"\1", out)
+
+
+def allowed_methods(app: FastAPI, path: str) -> list[str]:
+    """Every method the OpenAPI schema of ``app`` states for ``path`` (the ``Allow`` header of a 405).
+
+    Several routes share a path (``GET`` and ``DELETE /cards/{card_id}``); the router's own
+    405 names only the first, so the schema, which lists them all, is the source.
+    """
+    table = getattr(app.state, "allow_table", None)
+    if table is None:
+        table = []
+        for template, ops in app.openapi().get("paths", {}).items():
+            rx = re.escape(template)
+            rx = re.sub(r"\\\{[^}]*:path\\\}", ".+", rx)
+            rx = re.sub(r"\\\{[^}]*\\\}", "[^/]+", rx)
+            table.append((re.compile(rx), "{" not in template,
+                          {m.upper() for m in ops if m.lower() in _HTTP_METHODS}))
+        app.state.allow_table = table
+    # a literal path ('/jobs/fit') is its own resource, not an instance of '/jobs/{job_id}'
+    matching = [(literal, ms) for rx, literal, ms in table if rx.fullmatch(path)]
+    if any(literal for literal, _ in matching):
+        matching = [(literal, ms) for literal, ms in matching if literal]
+    methods: set[str] = set()
+    for _, ms in matching:
+        methods |= ms
+    if "GET" in methods:
+        methods.add("HEAD")
+    return sorted(methods)
+
+
+_HTTP_METHODS = {"get", "put", "post", "delete", "patch", "head", "options", "trace"}
 
 
 def error_body(message: str, field: str | None, errors: Sequence[dict[str, Any]] = ()) -> dict[str, Any]:
@@ -114,6 +179,10 @@ def _loc_field(loc: Sequence[Any]) -> str:
     return ".".join(parts)
 
 
+_PATH_FIELDS = {"card_id": "id"}
+"""Path parameters named as the other errors about them name them."""
+
+
 def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
     out = []
     for e in exc.errors():
@@ -121,7 +190,9 @@ def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
         fld = _loc_field(loc)
         if e.get("type") == "json_invalid":
             fld = "body"
-        msg = str(e.get("msg", "invalid"))
+        elif loc[:1] == ("path",):
+            fld = _PATH_FIELDS.get(fld, fld)
+        msg = str(e.get("msg", "invalid")).removeprefix("Value error, ")
         out.append({"field": fld, "message": msg, "type": str(e.get("type", ""))})
     return out
 
@@ -129,14 +200,33 @@ def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
 def install_handlers(app: FastAPI) -> None:
     """Register the handlers turning every known error into the common error body."""
 
+    def roots() -> list[str]:
+        st = getattr(app.state, "gisnoise", None)
+        if st is None:
+            return []
+        d = st.settings.data_dir
+        return [str(d.resolve()), str(d)]
+
     @app.exception_handler(ApiError)
     async def _api_error(request: Request, exc: ApiError) -> JSONResponse:
-        return JSONResponse(error_body(str(exc), exc.field), status_code=exc.status, headers=exc.headers)
+        return JSONResponse(error_body(scrub_paths(str(exc), roots(), any_path=False), exc.field), status_code=exc.status,
+                            headers=exc.headers)
 
     @app.exception_handler(GisnoiseError)
     async def _core_error(request: Request, exc: GisnoiseError) -> JSONResponse:
         status = status_for(exc)
-        return JSONResponse(error_body(str(exc), exc.field or "body"), status_code=status)
+        return JSONResponse(error_body(scrub_paths(str(exc), roots()), exc.field or "body"), status_code=status)
+
+    @app.exception_handler(Exception)
+    async def _last_resort(request: Request, exc: Exception) -> JSONResponse:
+        """Nothing escapes as a bare 500: unreadable input is 422, anything else a 500 without details."""
+        fld = getattr(exc, "field", None)
+        if isinstance(exc, UNREADABLE):
+            msg = scrub_paths(f"{fld or 'body'}: the input cannot be read ({type(exc).__name__}: {exc})", roots())
+            return JSONResponse(error_body(msg, fld or "body"), status_code=422)
+        log.error("%s %s crashed", request.method, request.url.path, exc_info=exc)
+        return JSONResponse(error_body(f"{fld or 'request'}: internal error ({type(exc).__name__})",
+                                       fld or "request"), status_code=500)
 
     @app.exception_handler(MemoryError)
     async def _memory(request: Request, exc: MemoryError) -> JSONResponse:
@@ -160,6 +250,9 @@ def install_handlers(app: FastAPI) -> None:
             detail = f"path: no such resource {request.url.path!r}"
         elif exc.status_code == 405:
             detail = f"method: {request.method} is not allowed on {request.url.path!r}"
+            allow = ", ".join(allowed_methods(app, request.url.path)) or (getattr(exc, "headers", None) or {}).get(
+                "Allow", "")
+            return JSONResponse(error_body(detail, "method"), status_code=405, headers={"Allow": allow})
         elif fld and not detail.startswith(fld):
             detail = f"{fld}: {detail}"
         return JSONResponse(error_body(detail, fld or "request"), status_code=exc.status_code,

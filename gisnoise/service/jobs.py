@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from gisnoise.errors import Cancelled, GisnoiseError
-from gisnoise.service.errors import status_for
+from gisnoise.service.errors import UNREADABLE, scrub_paths, status_for
 
 __all__ = ["Job", "JobContext", "JobStore", "WorkerPool", "STATES", "FINAL_STATES", "Handler"]
 
@@ -365,6 +365,10 @@ class _Progress:
         self.store.set_progress(self.job_id, f, texts[0] if texts else kwargs.get("message"))
 
 
+_INPUT_FAILURES: tuple[type[BaseException], ...] = (GisnoiseError, MemoryError, *UNREADABLE)
+"""What a job's input can make a handler raise: the job fails with a 4xx status, not a crash."""
+
+
 class WorkerPool:
     """Worker threads running queued jobs with the handler registered for their kind.
 
@@ -445,16 +449,24 @@ class WorkerPool:
             else:
                 store.finish(job.id, "cancelled", message="cancelled")
             return
-        except (GisnoiseError, MemoryError) as exc:
+        except _INPUT_FAILURES as exc:
             shutil.rmtree(partial, ignore_errors=True)
-            fld = getattr(exc, "field", None) or ("grid.resolution_m" if isinstance(exc, MemoryError) else "job")
-            store.finish(job.id, "failed", error=str(exc) or type(exc).__name__, error_field=fld,
+            fld = getattr(exc, "field", None) or ("grid.resolution_m" if isinstance(exc, MemoryError) else
+                                                  "campaign" if isinstance(exc, UNREADABLE) else "job")
+            msg = str(exc) or type(exc).__name__
+            if isinstance(exc, UNREADABLE):
+                msg = f"{fld}: a file cannot be read ({type(exc).__name__}: {msg})"
+            # the server's folders mean nothing to the client
+            for folder in (ctx.input_dir.resolve(), ctx.input_dir):
+                msg = msg.replace(str(folder), "upload")
+            msg = scrub_paths(msg, [store.jobs_dir.resolve(), store.jobs_dir])
+            store.finish(job.id, "failed", error=msg, error_field=fld,
                          error_status=status_for(exc), message="failed")
             return
         except Exception as exc:  # noqa: BLE001 - a job's bug must not kill the worker
             shutil.rmtree(partial, ignore_errors=True)
             log.error("job %s (%s) crashed:\n%s", job.id, job.kind, traceback.format_exc())
-            store.finish(job.id, "failed", error=f"internal error: {type(exc).__name__}: {exc}", error_field="job",
+            store.finish(job.id, "failed", error=f"job: internal error ({type(exc).__name__})", error_field="job",
                          error_status=500, message="failed")
             return
         partial.rename(store.result_dir(job.id))

@@ -8,7 +8,7 @@ from typing import Any
 
 from starlette.exceptions import HTTPException
 
-__all__ = ["BodySizeLimit"]
+__all__ = ["BodySizeLimit", "KeyBeforeBody"]
 
 Scope = dict[str, Any]
 
@@ -18,6 +18,32 @@ class _TooLarge(HTTPException):
 
     def __init__(self, limit: int) -> None:
         super().__init__(413, f"body: request body exceeds the limit of {limit} bytes")
+
+
+class KeyBeforeBody:
+    """Refuse a write without a valid ``X-API-Key`` from its headers, before a byte of its body is read.
+
+    ``refusal(method, path, key)`` returns ``(status, message, extra headers)`` or None.
+    """
+
+    def __init__(self, app: Any, refusal: Callable[[str, str, str | None], tuple[int, str, dict[str, str]] | None]
+                 ) -> None:
+        self.app = app
+        self.refusal = refusal
+
+    async def __call__(self, scope: Scope, receive: Any, send: Any) -> None:
+        if scope["type"] == "http":
+            key = next((v.decode("latin-1") for k, v in scope.get("headers", []) if k == b"x-api-key"), None)
+            no = self.refusal(scope.get("method", ""), scope.get("path", ""), key)
+            if no is not None:
+                status, message, headers = no
+                body = json.dumps({"detail": message, "field": "X-API-Key"}).encode()
+                hdrs = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()),
+                        (b"connection", b"close")] + [(k.lower().encode(), v.encode()) for k, v in headers.items()]
+                await send({"type": "http.response.start", "status": status, "headers": hdrs})
+                await send({"type": "http.response.body", "body": body})
+                return
+        await self.app(scope, receive, send)
 
 
 class BodySizeLimit:

@@ -2,18 +2,41 @@
 
 from __future__ import annotations
 
+import re
 from enum import Enum
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, WithJsonSchema
 
+from gisnoise.limits import CARD_REF_PATTERN, SAFE_ID_PATTERN
 from gisnoise.model import PHASES
 
 __all__ = [
     "MediaType", "ErrorBody", "FieldError", "CardDocument", "CardInfo", "CardList", "CardVersions",
     "JobInfo", "JobList", "JobError", "GridRequest", "ContourRequest", "Health", "PhaseName",
-    "TrajectoryInput", "Metric", "OutputFormat",
+    "TrajectoryInput", "Metric", "OutputFormat", "SafeId", "CardRef", "FileName",
 ]
+
+
+def _matching(pattern: str, what: str) -> Any:
+    rx = re.compile(pattern)
+
+    def check(value: str) -> str:
+        if rx.fullmatch(value) is None:
+            raise ValueError(f"{value!r} is not a valid {what}: letters, digits, '-', '_', '.', no leading dot, "
+                             "no reserved device name (con, nul, com1 ...), at most 128 characters")
+        return value
+
+    return AfterValidator(check)
+
+
+SafeId = Annotated[str, _matching(SAFE_ID_PATTERN, "identifier"),
+                   WithJsonSchema({"type": "string", "pattern": SAFE_ID_PATTERN, "minLength": 1, "maxLength": 128})]
+"""An identifier of a card, job or layer: one safe pattern, stated in the OpenAPI schema."""
+
+FileName = Annotated[str, Field(min_length=1, max_length=255, pattern=r"^[A-Za-z0-9._/-]+$")]
+"""A result file name of a job (looked up in the job's listing, never joined to a path)."""
+
 
 
 class MediaType(str, Enum):
@@ -68,7 +91,7 @@ class CardDocument(BaseModel):
         "phases": ["transition"]}})
 
     schema_: str = Field(alias="schema", description="'gisnoise/model-card/1'")
-    id: str
+    id: SafeId
     vehicle: str
     phase: str
     ansatz: str
@@ -191,7 +214,9 @@ class GridRequest(BaseModel):
     crs: str | None = Field(default=None, description="Grid CRS (e.g. 'EPSG:25832'); default a local UTM zone.")
 
 
-CardRef = Annotated[str, Field(min_length=1, max_length=160, description="Card id in the store, or 'id@version'.")]
+CardRef = Annotated[str, _matching(CARD_REF_PATTERN, "card reference"),
+                    WithJsonSchema({"type": "string", "pattern": CARD_REF_PATTERN, "minLength": 1, "maxLength": 138,
+                                    "description": "Card id in the store, or 'id@version'."})]
 
 
 _ROUTE_EXAMPLE: dict[str, Any] = {"type": "FeatureCollection", "route": {"altitude_reference": "agl"}, "features": [

@@ -6,6 +6,7 @@ import shutil
 import stat
 import tempfile
 import zipfile
+import zlib
 from pathlib import Path, PurePosixPath
 from typing import Annotated, Any
 
@@ -17,7 +18,7 @@ from gisnoise.model import cards as gcards
 from gisnoise.service.deps import WRITE, State, StateDep
 from gisnoise.service.errors import ApiError
 from gisnoise.service.jobs import JobContext
-from gisnoise.service.models import JobInfo, PhaseName
+from gisnoise.service.models import CardRef, JobInfo, PhaseName, SafeId
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 from gisnoise.service.routes_jobs import JOB_LINKS, job_info
 
@@ -53,8 +54,8 @@ def unpack_campaign(upload: Path, dest: Path, *, max_bytes: int, field: str = "c
                 raise ApiError(422, f"{field}: member {i.filename!r} is a link", field=field)
         try:
             zf.extractall(dest)
-        except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError) as exc:
-            raise ApiError(422, f"{field}: cannot unzip: {exc}", field=field) from None
+        except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError, zlib.error, EOFError) as exc:
+            raise ApiError(422, f"{field}: cannot unzip ({type(exc).__name__}: {exc})", field=field) from None
     found = sorted(dest.rglob("campaign.json"), key=lambda p: len(p.parts))
     found = [p for p in found if "__MACOSX" not in p.parts]
     if not found:
@@ -105,7 +106,7 @@ async def fit_job(request: Request, state: StateDep,
                                                                    "flights/, mics/).")],
                   phase: Annotated[PhaseName, Form(description="Flight phase to fit.")],
                   ansatz: Annotated[str, Form(max_length=100, description="Ansatz name.")] = "paper-offset",
-                  card_id: Annotated[str | None, Form(max_length=128, description="Id of the fitted card.")] = None,
+                  card_id: Annotated[SafeId | None, Form(description="Id of the fitted card.")] = None,
                   report: Annotated[bool, Form(description="Also write the fit report (report.html, "
                                                            "figures).")] = False,
                   ) -> JSONResponse:
@@ -129,8 +130,8 @@ async def fit_job(request: Request, state: StateDep,
              summary="Diagnose a card against an uploaded campaign (job)")
 async def diagnose_job(request: Request, state: StateDep,
                        campaign: Annotated[UploadFile, File(description="Zipped campaign folder.")],
-                       card_id: Annotated[str | None, Form(max_length=160, description="Card in the store "
-                                                                                       "('id' or 'id@version').")] = None,
+                       card_id: Annotated[CardRef | None, Form(description="Card in the store "
+                                                                          "('id' or 'id@version').")] = None,
                        card: Annotated[UploadFile | None, File(description="Or a card JSON file.")] = None,
                        report: Annotated[bool, Form(description="Also write report.html and its "
                                                                 "figures.")] = True,
@@ -142,7 +143,11 @@ async def diagnose_job(request: Request, state: StateDep,
         if len(text) > 10_000_000:
             raise ApiError(413, "card: card file exceeds 10 MB", field="card")
         try:
-            mc = gcards.loads(text, source="card")
+            raw = text.decode("utf-8-sig")
+        except UnicodeDecodeError:
+            raise ApiError(422, "card: the card file is not UTF-8 JSON text", field="card") from None
+        try:
+            mc = gcards.loads(raw, source="card")
         except gcards.CardError as exc:
             raise ApiError(422, str(exc), field=f"card.{exc.field}" if exc.field else "card") from None
     else:

@@ -4,16 +4,17 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Query, Request, Response
+from fastapi import APIRouter, Body, Path, Query, Request, Response
 
 from gisnoise.model import cards as gcards
 from gisnoise.service.cardstore import StoredCard
 from gisnoise.service.deps import WRITE, State, StateDep
-from gisnoise.service.models import CardDocument, CardInfo, CardList, CardVersions, MediaType
+from gisnoise.service.models import CardDocument, CardInfo, CardList, CardVersions, MediaType, SafeId
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 
 router = APIRouter(prefix="/cards", tags=["cards"])
 
+CardId = Annotated[SafeId, Path(description="Card id.")]
 
 
 def _info(request: Request, state: State, stored: StoredCard) -> CardInfo:
@@ -47,13 +48,13 @@ def list_cards(request: Request, state: StateDep,
 @router.get("/{card_id}", response_model=CardDocument, summary="Get a card (latest version unless one is named)",
             responses={200: {"content": {MediaType.json.value: {}},
                              "headers": {"X-Card-Version": {"schema": {"type": "integer"}}}}})
-def get_card(card_id: str, state: StateDep,
+def get_card(card_id: CardId, state: StateDep,
              version: int | None = Query(None, ge=1, description="Version; default the latest.")) -> Response:
     return _card_response(state.cards.get(card_id, version))
 
 
 @router.get("/{card_id}/versions", response_model=CardVersions, summary="The versions of a card")
-def card_versions(card_id: str, state: StateDep) -> CardVersions:
+def card_versions(card_id: CardId, state: StateDep) -> CardVersions:
     vs = state.cards.versions(card_id)
     if not vs:
         state.cards.get(card_id)  # raises the 404
@@ -76,7 +77,7 @@ def upload_card(request: Request, doc: Annotated[CardDocument, Body()], state: S
 
 @router.delete("/{card_id}", status_code=204, dependencies=WRITE, summary="Delete a card (all versions or one)",
                response_class=Response)
-def delete_card(card_id: str, state: StateDep,
+def delete_card(card_id: CardId, state: StateDep,
                 version: int | None = Query(None, ge=1, description="Only this version.")) -> Response:
     state.cards.delete(card_id, version)
     return Response(status_code=204)

@@ -23,6 +23,7 @@ from typing import Any
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 
+from gisnoise import limits
 from gisnoise.errors import GisnoiseError, GridTooLargeError, InputError, TrajectoryError
 from gisnoise.flight import Trajectory, from_columns, read_flight_csv
 from gisnoise.model import ModelCard
@@ -236,7 +237,8 @@ def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Traject
     """The request with its margin set, trajectory, cards and grid size (in a worker thread: routes and grids
     take CPU)."""
     s = state.settings
-    traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
+    with limits.override(max_samples=s.max_trajectory_samples):  # bounds routes before they are sampled
+        traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
     cards = resolve_cards(req, state.cards)
     req = _auto_margin(traj, cards, req, s.max_cells)
     return req, traj, cards, _grid_cells(traj, req, s.max_cells)

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import mimetypes
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Request, Response
+from fastapi import Path as PathParam
 from fastapi.responses import FileResponse
 
 from gisnoise.service.deps import WRITE, State, StateDep
 from gisnoise.service.errors import ApiError
 from gisnoise.service.jobs import Job
-from gisnoise.service.models import JobError, JobInfo, JobList, MediaType
+from gisnoise.service.models import FileName, JobError, JobInfo, JobList, MediaType, SafeId
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
@@ -42,6 +43,9 @@ def job_info(request: Request, job: Job) -> JobInfo:
     )
 
 
+JobId = Annotated[SafeId, PathParam(description="Job id.")]
+
+
 def _get(state: State, job_id: str) -> Job:
     job = state.jobs.get(job_id) if job_id.isalnum() else None
     if job is None:
@@ -59,7 +63,7 @@ def list_jobs(request: Request, state: StateDep,
 
 
 @router.get("/{job_id}", response_model=JobInfo, summary="A job's status and progress", operation_id="get_job")
-def get_job(job_id: str, request: Request, state: StateDep) -> JobInfo:
+def get_job(job_id: JobId, request: Request, state: StateDep) -> JobInfo:
     return job_info(request, _get(state, job_id))
 
 
@@ -73,11 +77,14 @@ def _result_path(state: State, job: Job, name: str) -> Path:
         if job.status == "failed":
             raise ApiError(409, f"job_id: job {job.id} failed: {job.error}", field="job_id")
         raise ApiError(409, f"job_id: job {job.id} is {job.status}; no result yet", field="job_id")
-    root = state.jobs.result_dir(job.id).resolve()
-    path = (root / name).resolve()
-    if root not in path.parents or not path.is_file():
+    # the name is looked up in the job's listing, never joined to a path as given
+    listed = {f: f for f in job.files}
+    if name not in listed:
         raise ApiError(404, f"name: job {job.id} has no result file {name!r} (files: {', '.join(job.files)})",
                        field="name")
+    path = state.jobs.result_dir(job.id) / listed[name]
+    if not path.is_file():
+        raise ApiError(404, f"name: job {job.id} has no result file {name!r}", field="name")
     return path
 
 
@@ -89,7 +96,7 @@ _RESULT_RESPONSES: dict[int | str, dict[str, Any]] = {200: {"content": {m.value:
 @router.get("/{job_id}/result", summary="Download a job's main result", responses=_RESULT_RESPONSES,
             operation_id="job_result",
             response_class=Response)
-def job_result(job_id: str, request: Request, state: StateDep,
+def job_result(job_id: JobId, request: Request, state: StateDep,
                format: str | None = Query(None, pattern="^(geojson|geotiff)$",
                                           description="Contour jobs: geojson (default) or geotiff.")) -> Response:
     job = _get(state, job_id)
@@ -102,13 +109,14 @@ def job_result(job_id: str, request: Request, state: StateDep,
 
 @router.get("/{job_id}/files/{name:path}", summary="Download one result file", responses=_RESULT_RESPONSES,
             response_class=Response)
-def job_file(job_id: str, name: str, state: StateDep) -> Response:
+def job_file(job_id: JobId, name: Annotated[FileName, PathParam(description="A file of the job's listing.")],
+             state: StateDep) -> Response:
     return _file_response(_result_path(state, _get(state, job_id), name))
 
 
 @router.post("/{job_id}/cancel", response_model=JobInfo, dependencies=WRITE, summary="Cancel a queued or running job",
              operation_id="cancel_job")
-def cancel_job(job_id: str, request: Request, state: StateDep) -> JobInfo:
+def cancel_job(job_id: JobId, request: Request, state: StateDep) -> JobInfo:
     job = _get(state, job_id)
     if job.done:
         raise ApiError(409, f"job_id: job {job.id} is already {job.status}", field="job_id")
@@ -118,7 +126,7 @@ def cancel_job(job_id: str, request: Request, state: StateDep) -> JobInfo:
 
 @router.delete("/{job_id}", status_code=204, dependencies=WRITE, response_class=Response, operation_id="delete_job",
                summary="Delete a finished job and its files")
-def delete_job(job_id: str, state: StateDep) -> Response:
+def delete_job(job_id: JobId, state: StateDep) -> Response:
     job = _get(state, job_id)
     if not job.done:
         raise ApiError(409, f"job_id: job {job.id} is {job.status}; cancel it first", field="job_id")
