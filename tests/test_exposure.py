@@ -47,8 +47,8 @@ def flight(e, n, t, phase):
 
 
 def flyover():
-    t = np.arange(0.0, 4000.0 / 20.0 + 1e-9, 0.1)  # 20 m/s, 2 m between samples, n = -2000 ... 2000 m
-    return flight(0 * t, -2000.0 + 20.0 * t, t, "horizontal")
+    t = np.arange(0.0, 3000.0 / 20.0 + 1e-9, 0.2)  # 20 m/s, 4 m between samples, n = -1500 ... 1500 m
+    return flight(0 * t, -1500.0 + 20.0 * t, t, "horizontal")
 
 
 def radius_at(level_db, dz):
@@ -81,7 +81,7 @@ def uniform_population(path, crs, res, half_x, half_y, per_cell):
 @pytest.fixture(scope="module")
 def flyover_map():
     traj = flyover()
-    res = evaluate_grid(traj, [omni_card()], grid(10.0, 1000.0, 500.0), ground_h=0.0, metrics=("LAmax",))
+    res = evaluate_grid(traj, [omni_card()], grid(10.0, 1000.0, 350.0), ground_h=0.0, metrics=("LAmax",))
     return traj, res
 
 
@@ -90,7 +90,7 @@ def test_uniform_density_under_flyover_equals_strip_areas(flyover_map, tmp_path,
     """People in each LAmax class = density x 2 (r_hi - r_lo) x along-track length, within 1 %.
 
     The population raster (10 m cells, 0.25 people each: 2500 per km^2) covers |x| <= 900 m,
-    |y| <= 300 m around the middle of a 4 km track, so every point's closest approach lies
+    |y| <= 300 m around the middle of a 3 km track, so every point's closest approach lies
     on the track; it is written in the map's CRS, in UTM 32N and in ETRS89-LAEA.
     """
     traj, res = flyover_map
@@ -114,9 +114,9 @@ def test_area_above_each_level_is_strip_width_times_map_length(flyover_map):
     traj, res = flyover_map
     doc = map_exposure(as_levels(res), population=Population(np.zeros((1, 1)), Affine.identity(),
                                                               CRS.from_user_input(TMERC)), edges=EDGES)
-    # the map is 1000 m along track; ends of the 4 km track are far outside it
+    # the map is 700 m along track; the ends of the 3 km track are far outside it
     for a in doc["area_above"]["LAmax"]:
-        expect = 2 * radius_at(a["level_db"], HEIGHT - HR) * 1000.0
+        expect = 2 * radius_at(a["level_db"], HEIGHT - HR) * 700.0
         assert a["area_m2"] == pytest.approx(expect, rel=0.01)
 
 
