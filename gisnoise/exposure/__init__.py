@@ -33,12 +33,13 @@ from gisnoise.exposure.stats import (
     class_edges,
     fraction_above,
     level_field,
+    person_db_above,
     population_exposure,
     population_points,
 )
 
 __all__ = ['ASSESSMENT_HEIGHT_M', 'Buildings', 'CLASS_WIDTH_DB', 'DWELLING_FIELDS', 'FacadePoints', 'HEIGHT_FIELDS',
            'LevelsRaster', 'Population', 'RESIDENT_FIELDS', 'SCHEMA', 'area_above', 'class_edges', 'exposure_table',
-           'facade_levels', 'facade_points', 'fraction_above', 'level_field', 'map_exposure', 'point_levels',
+           'facade_levels', 'facade_points', 'fraction_above', 'level_field', 'map_exposure', 'person_db_above', 'point_levels',
            'population_exposure', 'population_points', 'read_buildings', 'read_levels', 'read_population',
            'write_exposure']

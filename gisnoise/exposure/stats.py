@@ -32,7 +32,7 @@ from gisnoise.exposure.layers import LevelsRaster, Population
 from gisnoise.geo import GridSpec, apply_affine, transformer
 
 __all__ = ["CLASS_WIDTH_DB", "class_edges", "fraction_above", "level_field", "population_points",
-           "population_exposure", "area_above"]
+           "population_exposure", "area_above", "person_db_above"]
 
 CLASS_WIDTH_DB = 5.0
 """Width of the exposure classes, dB."""
@@ -188,3 +188,15 @@ def area_above(band: np.ndarray, grid: GridSpec, edges: Sequence[float], *, rows
         for j, e in enumerate(edges):
             total[j] += float(np.sum(fraction_above(L[ok], gx[ok], gy[ok], side, e)))
     return [float(v) * rx * ry / 4.0 for v in total]
+
+
+def person_db_above(band: np.ndarray, grid: GridSpec, points: tuple[np.ndarray, np.ndarray, np.ndarray, float],
+                    floor_db: float) -> float:
+    """Total exposure in person-dB above ``floor_db``: the sum over people of ``max(L - floor, 0)``.
+
+    ``points`` are :func:`population_points`; each sub-cell's level is taken at its centre.
+    """
+    x, y, people, _ = points
+    L, _, _ = level_field(band, grid, x, y)
+    ok = np.isfinite(L)
+    return float(np.sum(people[ok] * np.maximum(L[ok] - floor_db, 0.0)))
