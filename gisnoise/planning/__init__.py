@@ -10,5 +10,12 @@ from gisnoise.planning.compare import (
     comparison_table,
     write_comparison,
 )
+from gisnoise.planning.optimize import (
+    Optimized,
+    corridor_half_width,
+    optimize_route,
+    waypoints_geojson,
+)
 
-__all__ = ['COMPARISON_SCHEMA', 'Comparison', 'compare_routes', 'comparison_table', 'write_comparison']
+__all__ = ['COMPARISON_SCHEMA', 'Comparison', 'Optimized', 'compare_routes', 'comparison_table', 'corridor_half_width',
+           'optimize_route', 'waypoints_geojson', 'write_comparison']
