@@ -109,3 +109,28 @@ def test_no_fly_zone_and_bad_requests(tmp_path):
         optimize_route(pad(-100.0), pad(100.0), [omni()], population=pop)
     with pytest.raises(InputError, match="no-fly"):
         optimize_route(pad(-1500.0), pad(0.0), [omni()], population=pop, avoid=[nofly])
+
+
+def test_cli_route_optimize_writes_flyable_waypoints(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from gisnoise.cli.main import cli
+    from gisnoise.model import save
+
+    cp = str(save(omni(), tmp_path / "omni.json"))
+    town(tmp_path / "pop.tif")
+    (s_lon, s_lat), (g_lon, g_lat) = pad(-1500.0), pad(1500.0)
+    r = CliRunner().invoke(cli, ["-q", "route", "optimize", "--from", f"{s_lon},{s_lat}", "--to", f"{g_lon},{g_lat}",
+                                 "--card", cp, "--population", str(tmp_path / "pop.tif"), "--out",
+                                 str(tmp_path / "out"), "--max-detour", "25", "--resolution", "50"],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    summary = json.loads((tmp_path / "out" / "optimize.json").read_text())
+    assert summary["reduction_pct"] > 75.0
+    traj = read_route(tmp_path / "out" / "route.geojson").trajectory  # the waypoints fly
+    assert traj.phase[0] == "climb" and traj.phase[-1] == "sink"
+    r = CliRunner().invoke(cli, ["-q", "route", "optimize", "--from", "10.5", "--to", "10.6,52.3", "--card", cp,
+                                 "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "o2")])
+    assert r.exit_code == 2 and "--from" in r.output
