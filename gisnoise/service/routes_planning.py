@@ -11,6 +11,10 @@ GeoPackage or GeoJSON file (a Shapefile as a zip of its parts).
 the comparison document, or with ``output=difference`` the difference GeoTIFF.  The grid is
 held to ``GISNOISE_MAX_CELLS`` and the work (cells x samples of all routes) to
 ``GISNOISE_SYNC_WORK_LIMIT`` (413 beyond).
+
+``POST /routes/optimize`` finds a quieter flyable route between two pads
+(:func:`gisnoise.planning.optimize_route`, as ``gisnoise route optimize``) and answers its
+summary, both routes as waypoint GeoJSON and their comparison.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from gisnoise.service.models import CardDocument, CardRef, GridRequest, MediaTyp
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 from gisnoise.service.routes_contours import build_trajectory
 
-__all__ = ["router", "LayerStore", "CompareRequest"]
+__all__ = ["router", "LayerStore", "CompareRequest", "OptimizeRequest"]
 
 router = APIRouter(tags=["route planning"])
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
@@ -239,3 +243,83 @@ def _compare(req: CompareRequest, state: State) -> tuple[bytes, str]:
 async def compare(req: CompareRequest, state: StateDep) -> Response:
     data, media = await run_in_threadpool(_compare, req, state)
     return Response(data, media_type=media)
+
+
+class OptimizeRequest(BaseModel):
+    """A quieter route between two pads."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    start: list[float] = Field(min_length=2, max_length=2, description="Take-off pad [lon, lat], deg.")
+    goal: list[float] = Field(min_length=2, max_length=2, description="Landing pad [lon, lat], deg.")
+    cards: list[CardRef | CardDocument] = Field(min_length=1, max_length=32, description="Cards by id or inline.")
+    phase_cards: dict[PhaseName, CardRef] = Field(default_factory=dict)
+    population: str | None = Field(default=None, max_length=160, description="Population layer id ('id[@version]').")
+    buildings: str | None = Field(default=None, max_length=160, description="Buildings layer id ('id[@version]').")
+    avoid: dict[str, Any] | None = Field(default=None, description="No-fly polygons: a GeoJSON FeatureCollection "
+                                                                   "(WGS84) of Polygon or MultiPolygon features.")
+    altitude_m: float = Field(default=60.0, gt=0, le=1000)
+    max_detour_pct: float = Field(default=30.0, ge=0, le=300)
+    turn_radius_m: float | None = Field(default=None, gt=0, le=10_000)
+    rank_level_db: float = Field(default=55.0, ge=0, le=200)
+    resolution_m: float = Field(default=50.0, ge=5, le=1000, description="Cost grid cell, m.")
+    ground_h_m: float = Field(default=0.0, ge=-1000, le=9000)
+
+
+def _avoid_polygons(doc: dict[str, Any] | None) -> list[Any]:
+    if doc is None:
+        return []
+    import shapely.geometry
+
+    feats = doc.get("features") if doc.get("type") == "FeatureCollection" else None
+    if not isinstance(feats, list):
+        raise ApiError(422, "avoid: expected a GeoJSON FeatureCollection", field="avoid")
+    out = []
+    for i, f in enumerate(feats):
+        try:
+            g = shapely.geometry.shape(f["geometry"])
+        except (KeyError, TypeError, ValueError, AttributeError):
+            raise ApiError(422, f"avoid: feature {i} has no readable geometry", field=f"avoid.features[{i}]") from None
+        if g.geom_type not in ("Polygon", "MultiPolygon") or not g.is_valid:
+            raise ApiError(422, f"avoid: feature {i} is not a valid polygon", field=f"avoid.features[{i}]")
+        out.extend(list(g.geoms) if g.geom_type == "MultiPolygon" else [g])
+    return out
+
+
+def _optimize(req: OptimizeRequest, state: State) -> dict[str, Any]:
+    from gisnoise.exposure import read_buildings, read_population
+    from gisnoise.planning import optimize_route, waypoints_geojson
+    from gisnoise.service.routes_contours import resolve_cards
+
+    if req.population is None and req.buildings is None:
+        raise ApiError(422, "population: give a population or a buildings layer id", field="population")
+    for name, (lon, lat) in (("start", req.start), ("goal", req.goal)):
+        if not (-180 <= lon <= 180 and -90 <= lat <= 90):
+            raise ApiError(422, f"{name}: [lon, lat] out of range: {[lon, lat]}", field=name)
+    s = state.settings
+    # the search grid is a square of side (1 + detour) x distance: keep it within the cell limit
+    from pyproj import Geod
+
+    dist = Geod(ellps="WGS84").inv(req.start[0], req.start[1], req.goal[0], req.goal[1])[2]
+    cells = ((1 + req.max_detour_pct / 100) * dist / req.resolution_m + 4) ** 2
+    if cells > min(s.max_cells, 4_000_000):
+        raise ApiError(413, f"resolution_m: the search grid would have {cells:.3g} cells; use a coarser resolution_m",
+                       field="resolution_m")
+    cards = resolve_cards(req, state.cards)  # type: ignore[arg-type]  # same card fields as ContourRequest
+    st = _store(state)
+    pop = read_population(st.resolve(req.population, "population", field="population")) if req.population else None
+    b = read_buildings(st.resolve(req.buildings, "buildings", field="buildings")) if req.buildings else None
+    with _slots:
+        res = optimize_route((req.start[0], req.start[1]), (req.goal[0], req.goal[1]), cards, population=pop, buildings=b,
+                             avoid=_avoid_polygons(req.avoid), altitude_m=req.altitude_m,
+                             max_detour_pct=req.max_detour_pct, turn_radius_m=req.turn_radius_m,
+                             rank_level_db=req.rank_level_db, resolution_m=req.resolution_m, ground_h=req.ground_h_m)
+    return {"summary": res.summary, "route": waypoints_geojson(res.optimized_doc),
+            "direct": waypoints_geojson(res.direct_doc), "comparison": res.comparison.doc}
+
+
+@router.post("/routes/optimize", summary="A quieter flyable route between two pads, compared with the direct one")
+async def optimize(req: OptimizeRequest, state: StateDep) -> JSONResponse:
+    from gisnoise.jsonio import to_jsonable
+
+    doc = await run_in_threadpool(_optimize, req, state)
+    return JSONResponse(to_jsonable(doc))

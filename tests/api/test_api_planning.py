@@ -96,3 +96,35 @@ def test_compare_refusals_name_the_field(make_client, tmp_path):
     assert_names_field(upload(client, "population", "bad id", "pop.tif", b"x"), 422, "id")
     assert_names_field(upload(client, "population", "t2", "pop.tif", b"not a tiff"), 422, "file")
     assert client.get("/layers").json() == [{"id": "town", "version": 1, "kind": "population", "file": "pop.tif"}]
+
+
+def town_tif(path: Path) -> bytes:
+    """5 km x 4 km at 20 m: 0.2 people per cell, 8 in the 600 m block at the centre."""
+    x = -2500.0 + 20.0 * (np.arange(250) + 0.5)
+    y = 2000.0 - 20.0 * (np.arange(200) + 0.5)
+    xx, yy = np.meshgrid(x, y)
+    people = np.where((np.abs(xx) < 300) & (np.abs(yy) < 300), 8.0, 0.2).astype(np.float32)
+    with rasterio.open(path, "w", driver="GTiff", width=250, height=200, count=1, dtype="float32",
+                       crs=CRS.from_user_input(TMERC).to_wkt(), transform=Affine(20.0, 0, -2500, 0, -20.0, 2000)) as d:
+        d.write(people, 1)
+    return path.read_bytes()
+
+
+def test_optimize_goes_around_the_block(make_client, tmp_path):
+    client = make_client()
+    assert upload(client, "population", "town", "pop.tif", town_tif(tmp_path / "t.tif")).status_code == 201
+    card = {**OMNI, "phases": ["climb", "sink", "hover", "transition"],
+            "parameters": {**OMNI["parameters"], "p1": 0.0}}
+    lat_s, lon_s, _ = FRAME.to_wgs84(-1500.0, 0.0, 0.0)
+    lat_g, lon_g, _ = FRAME.to_wgs84(1500.0, 0.0, 0.0)
+    body = {"start": [float(lon_s), float(lat_s)], "goal": [float(lon_g), float(lat_g)], "cards": [card],
+            "population": "town", "max_detour_pct": 25.0}
+    r = client.post("/routes/optimize", json=body)
+    assert r.status_code == 200, r.text
+    doc = r.json()
+    assert doc["summary"]["reduction_pct"] > 75.0
+    assert doc["summary"]["optimized_length_m"] <= 1.25 * doc["summary"]["direct_length_m"] + 1e-6
+    assert doc["route"]["features"][0]["properties"]["alt"] == 0.0
+    assert_names_field(client.post("/routes/optimize", json={**body, "resolution_m": 5.0, "max_detour_pct": 300.0,
+                                                              "goal": [11.5, 53.0]}), 413, "resolution_m")
+    assert_names_field(client.post("/routes/optimize", json={**body, "avoid": {"type": "Point"}}), 422, "avoid")
