@@ -38,7 +38,7 @@ from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
 from gisnoise.maps import CardSet, MapResult, evaluate_grid, write_geotiff
 
-__all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "write_comparison", "comparison_table"]
+__all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
 
 COMPARISON_SCHEMA = "gisnoise/comparison/1"
 
@@ -74,6 +74,42 @@ def _names(routes: Sequence[Any], names: Sequence[str] | None) -> list[str]:
         else:
             seen[n] = 1
     return out
+
+
+def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population: Population | None = None,
+                buildings: Buildings | None = None, metric: str = "LAmax",
+                levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), receiver_height: float = 1.5,
+                ground_h: float = 0.0, engine: str = "numpy",
+                points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
+                ) -> tuple[dict[str, Any], np.ndarray]:
+    """The exposure scores of one route on a given grid, and its band of ``metric``.
+
+    ``points`` are the population's sub-cells on this grid
+    (:func:`gisnoise.exposure.population_points`), computed once when several routes share the grid.
+    """
+    lv = [float(v) for v in levels]
+    res = evaluate_grid(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
+                        ground_h=ground_h, engine=engine)
+    band = res.bands[metric]
+    lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
+                                                               "period_s": res.metadata.get("period_s")})
+    ex = map_exposure(lr, population=population, buildings=buildings, trajectory=traj, cards=cards,
+                      metrics=[metric], edges=lv, ground_h=ground_h)
+    row: dict[str, Any] = {"duration_s": traj.duration_s, "track_length_m": _track_length(traj)}
+    if population is not None:
+        pts = points if points is not None else population_points(population, grid)
+        above = ex["population"]["metrics"][metric]["above"]
+        row["people_above"] = {f"{a['level_db']:g}": a["people"] for a in above}
+        row["person_db"] = person_db_above(band, grid, pts, lv[0])
+        row["people_without_level"] = ex["population"]["metrics"][metric]["people_without_level"]
+    if buildings is not None:
+        bm = ex["buildings"]["metrics"][metric]
+        row["peak_facade_db"] = bm["peak_facade_db"]
+        row["peak_dwelling_db"] = bm.get("peak_db_at_dwellings", bm.get("peak_db_at_residents"))
+        row["residents_above"] = _cumulative(bm["classes"], "residents")
+        row["dwellings_above"] = _cumulative(bm["classes"], "dwellings")
+    row["area_above_m2"] = {f"{a['level_db']:g}": a["area_m2"] for a in ex["area_above"][metric]}
+    return row, band
 
 
 def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population | None = None,
@@ -133,28 +169,11 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     bands: dict[str, np.ndarray] = {}
     rows: list[dict[str, Any]] = []
     for n, traj in trajs.items():
-        res = evaluate_grid(traj, cardset, grid, metrics=(metric,), receiver_height=receiver_height,
-                            ground_h=ground_h, engine=engine)
-        band = res.bands[metric]
+        row, band = score_route(traj, cardset, grid, population=population, buildings=buildings, metric=metric,
+                                levels=lv, receiver_height=receiver_height, ground_h=ground_h, engine=engine,
+                                points=pts)
+        row["route"] = n
         bands[n] = band
-        lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
-                                                                   "period_s": res.metadata.get("period_s")})
-        ex = map_exposure(lr, population=population, buildings=buildings, trajectory=traj, cards=cardset,
-                          metrics=[metric], edges=lv, ground_h=ground_h)
-        row: dict[str, Any] = {"route": n, "duration_s": traj.duration_s,
-                               "track_length_m": _track_length(traj)}
-        if population is not None:
-            above = ex["population"]["metrics"][metric]["above"]
-            row["people_above"] = {f"{a['level_db']:g}": a["people"] for a in above}
-            row["person_db"] = person_db_above(band, grid, pts, lv[0]) if pts is not None else 0.0
-            row["people_without_level"] = ex["population"]["metrics"][metric]["people_without_level"]
-        if buildings is not None:
-            bm = ex["buildings"]["metrics"][metric]
-            row["peak_facade_db"] = bm["peak_facade_db"]
-            row["peak_dwelling_db"] = bm.get("peak_db_at_dwellings", bm.get("peak_db_at_residents"))
-            row["residents_above"] = _cumulative(bm["classes"], "residents")
-            row["dwellings_above"] = _cumulative(bm["classes"], "dwellings")
-        row["area_above_m2"] = {f"{a['level_db']:g}": a["area_m2"] for a in ex["area_above"][metric]}
         rows.append(row)
     key = f"{float(rank_level_db):g}"
 
