@@ -86,3 +86,17 @@ def test_bad_input_is_one_line_and_keeps_what_is_stored(tmp_path):
         assert r.exit_code == 2, (args, r.output)
         assert field in r.output
         assert (tmp_path / "map" / "exposure.json").read_text() == before
+
+
+def test_contour_writes_exposure_with_population_and_buildings(tmp_path):
+    cp, tp = setup(tmp_path)
+    r = run("contour", tp, "--card", cp, "--out", str(tmp_path / "m2"), "--resolution", "20", "--margin", "300",
+            "--ground-height", "0", "--metrics", "LAmax,SEL", "--population", str(tmp_path / "pop.tif"),
+            "--buildings", str(tmp_path / "b.shp"))
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "m2" / "exposure.json").read_text())
+    assert doc["population"]["total_people"] == 400.0
+    b = doc["buildings"]["metrics"]["LAmax"]
+    lon, lat = b["most_exposed"]["lon"], b["most_exposed"]["lat"]
+    e, _, _ = FRAME.to_enu(lat, lon, 0.0)
+    assert abs(b["peak_facade_db"] - (G0 - 20 * math.log10(math.hypot(float(e), HEIGHT - 4.0) / 40.0))) < 0.1
