@@ -13,8 +13,10 @@ no value) are counted as ``people_without_level``, never put in a class.
 
 Area above a level uses the same rule on 2 x 2 sub-cells of the map's own cells.
 
->>> float(fraction_above(60.0, 0.0, 0.0, 1.0, 60.0))  # the level runs through the middle
+>>> float(fraction_above(60.0, 0.1, 0.0, 10.0, 60.0))  # the level runs through the middle
 0.5
+>>> float(fraction_above(60.0, 0.1, 0.0, 10.0, 60.25))  # a quarter of the square lies above 60.25 dB
+0.25
 >>> float(fraction_above(62.0, 0.0, 0.0, 1.0, 60.0))  # 2 dB above everywhere on a flat cell
 1.0
 """
@@ -55,13 +57,20 @@ def fraction_above(level: Any, gx: Any, gy: Any, side: Any, threshold: float) ->
     """
     a0 = np.abs(np.asarray(gx, dtype=float)) * side
     b0 = np.abs(np.asarray(gy, dtype=float)) * side
-    a = np.maximum(np.maximum(a0, b0), 1e-9)
-    b = np.maximum(np.minimum(a0, b0), 1e-12)
+    level = np.asarray(level, dtype=float)
+    tiny = 1e-9  # dB across the square: flat
+    a = np.maximum(np.maximum(a0, b0), tiny)
+    b = np.maximum(np.minimum(a0, b0), tiny)
     # z: how far the threshold lies above the square's lowest level
-    z = threshold - (np.asarray(level, dtype=float) - 0.5 * (a + b))
-    below = np.where(z <= 0, 0.0, np.where(z <= b, z * z / (2 * a * b),
-                     np.where(z <= a, (2 * z - b) / (2 * a),
-                              np.where(z < a + b, 1.0 - (a + b - z) ** 2 / (2 * a * b), 1.0))))
+    z = threshold - (level - 0.5 * (a + b))
+    trapezoid = np.where(z <= 0, 0.0, np.where(z <= b, z * z / (2 * a * b),
+                         np.where(z <= a, (2 * z - b) / (2 * a),
+                                  np.where(z < a + b, 1.0 - (a + b - z) ** 2 / (2 * a * b), 1.0))))
+    uniform = np.clip((threshold - (level - 0.5 * a)) / a, 0.0, 1.0)
+    step = np.where(level > threshold, 0.0, np.where(level < threshold, 1.0, 0.5))
+    flat_a = np.maximum(a0, b0) <= tiny
+    flat_b = np.minimum(a0, b0) <= tiny
+    below = np.where(flat_a, step, np.where(flat_b, uniform, trapezoid))
     return np.clip(1.0 - below, 0.0, 1.0)
 
 
