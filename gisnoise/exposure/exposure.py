@@ -42,7 +42,8 @@ def _building_classes(level: np.ndarray, weights: np.ndarray | None, edges: Sequ
 def map_exposure(levels: LevelsRaster, *, population: Population | None = None, buildings: Buildings | None = None,
                  trajectory: Trajectory | None = None, cards: Any = None, metrics: Sequence[str] | None = None,
                  edges: Sequence[float] | None = None, facade_height_m: float = ASSESSMENT_HEIGHT_M,
-                 facade_spacing_m: float = 5.0, ground_h: float | None = None) -> dict[str, Any]:
+                 facade_spacing_m: float = 5.0, ground_h: float | None = None,
+                 points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None) -> dict[str, Any]:
     """The exposure document of a map (see the module docstring).
 
     Parameters
@@ -58,6 +59,9 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
         Lower class edges, dB; default 35, 40, ..., 85 (:func:`class_edges`).
     ground_h : float, optional
         Flat ground's ellipsoidal height for façade points, m; default the map's.
+    points : tuple, optional
+        The population's sub-cells on the map's grid (:func:`gisnoise.exposure.population_points`),
+        when already computed (several routes on one grid).
     """
     if population is None and buildings is None:
         raise InputError("exposure: give a population raster or buildings (or both)", field="population")
@@ -77,7 +81,7 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
         "area_rule": f"map cells of {res[0]:g} x {res[1]:g} m in 2 x 2 sub-cells, level linear within each",
     }
     if population is not None:
-        pe = population_exposure(levels, population, metrics=names, edges=edges)
+        pe = population_exposure(levels, population, metrics=names, edges=edges, points=points)
         doc["population"] = {"source": population.source, "total_people": pe["total_people"],
                              "subcell_m": pe["subcell_m"], "metrics": pe["metrics"],
                              "rule": "population cells split into sub-cells of at most half a map cell; level linear "

@@ -151,11 +151,15 @@ def population_points(pop: Population, grid: GridSpec, *, max_points: int = 50_0
 
 
 def population_exposure(levels: LevelsRaster, pop: Population, *, metrics: Sequence[str] | None = None,
-                        edges: Sequence[float] | None = None) -> dict[str, Any]:
-    """People by class and above each level, per level band (see the module docstring)."""
+                        edges: Sequence[float] | None = None,
+                        points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None) -> dict[str, Any]:
+    """People by class and above each level, per level band (see the module docstring).
+
+    ``points``: the population's sub-cells on this grid (:func:`population_points`), when already computed.
+    """
     names = list(metrics) if metrics is not None else levels.level_bands()
     edges = list(edges) if edges is not None else class_edges()
-    x, y, people, side = population_points(pop, levels.grid)
+    x, y, people, side = points if points is not None else population_points(pop, levels.grid)
     out: dict[str, Any] = {}
     for name in names:
         if name not in levels.bands:

@@ -93,11 +93,11 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
     band = res.bands[metric]
     lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
                                                                "period_s": res.metadata.get("period_s")})
+    pts = points if points is not None or population is None else population_points(population, grid)
     ex = map_exposure(lr, population=population, buildings=buildings, trajectory=traj, cards=cards,
-                      metrics=[metric], edges=lv, ground_h=ground_h)
+                      metrics=[metric], edges=lv, ground_h=ground_h, points=pts)
     row: dict[str, Any] = {"duration_s": traj.duration_s, "track_length_m": _track_length(traj)}
-    if population is not None:
-        pts = points if points is not None else population_points(population, grid)
+    if population is not None and pts is not None:
         above = ex["population"]["metrics"][metric]["above"]
         row["people_above"] = {f"{a['level_db']:g}": a["people"] for a in above}
         row["person_db"] = person_db_above(band, grid, pts, lv[0])
