@@ -141,11 +141,20 @@ def population_points(pop: Population, grid: GridSpec, *, max_points: int = 50_0
     if rows.size * k * k > max_points:
         raise InputError(f"population: {rows.size} populated cells x {k * k} sub-cells exceed {max_points} points; "
                          "use a coarser map or a smaller population raster", field="population")
-    off = (np.arange(k) + 0.5) / k
-    sc = (cols[:, None, None] + off[None, None, :]).repeat(k, axis=1)
-    sr = (rows[:, None, None] + off[None, :, None]).repeat(k, axis=2)
-    sx, sy = apply_affine(t, sc.ravel(), sr.ravel())
-    x, y = tr.transform(sx, sy)
+    off = (np.arange(k) + 0.5) / k - 0.5
+    # each cell is mapped affinely about its centre (centre and the unit steps along a column and a row
+    # transformed exactly; the cell is small against the curvature of any map projection)
+    cc, rc = cols + 0.5, rows + 0.5
+    x0, y0 = tr.transform(*apply_affine(t, cc, rc))
+    x1, y1 = tr.transform(*apply_affine(t, cc + 1.0, rc))
+    x2, y2 = tr.transform(*apply_affine(t, cc, rc + 1.0))
+    x0, y0 = np.asarray(x0), np.asarray(y0)
+    dcx, dcy = np.asarray(x1) - x0, np.asarray(y1) - y0  # one column to the right, map m
+    drx, dry = np.asarray(x2) - x0, np.asarray(y2) - y0  # one row down, map m
+    fc = np.tile(off, k)  # column offsets of the k x k sub-cells, cell units
+    fr = np.repeat(off, k)  # row offsets
+    x = (x0[:, None] + dcx[:, None] * fc[None, :] + drx[:, None] * fr[None, :]).ravel()
+    y = (y0[:, None] + dcy[:, None] * fc[None, :] + dry[:, None] * fr[None, :]).ravel()
     people = np.repeat(pop.counts[rows, cols] / (k * k), k * k)
     return np.asarray(x), np.asarray(y), people, cell_m / k
 
