@@ -33,6 +33,8 @@ ALLOWED: dict[str, set[str]] = {
     "design": _LOW | {"measure", "model", "identify", "simulate"},
     "maps": _LOW | {"model"},
     "ops": _LOW | {"model", "maps"},
+    "exposure": _LOW | {"model", "maps"},
+    "planning": _LOW | {"model", "maps", "exposure"},
 }
 FACES = {"cli", "service"}
 #: Modules allowed above about 600 lines, and why (none today).

@@ -82,12 +82,16 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
                    "extensions such as +bank_angle, +rpm), equal to 'numpy' within 0.01 dB and tens of times "
                    "faster.  'numpy': the reference (any ansatz, the --uncertainty bands).  'auto': 'fast' "
                    "unless --uncertainty or a card with a receiver-dependent term needs 'numpy'.")
+@click.option("--population", "population", type=click.Path(dir_okay=False), default=None,
+              help="Population raster (GeoTIFF, people per cell): also write DIR/exposure.json and exposure.md.")
+@click.option("--buildings", "buildings", type=click.Path(dir_okay=False), default=None,
+              help="Buildings with residents/dwellings: façade levels in DIR/exposure.json and exposure.md.")
 @click.pass_context
 def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float | None,
             levels: list[float], dem: str | None, dem_offset: float, receiver_height: float, ground_h: float | None,
             crs: str | None, metrics: list[str], period: float | None, threshold: list[float] | None,
             snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool,
-            engine: str) -> None:
+            engine: str, population: str | None = None, buildings: str | None = None) -> None:
     """Noise map of TRAJECTORY: DIR/levels.tif, DIR/contours.geojson (and DIR/map.png).
 
     TRAJECTORY is a flight CSV (t, lat, lon, h, roll, pitch, yaw, power_w, phase), a GeoJSON
@@ -109,6 +113,16 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
     click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m in "
                f"{':'.join(auth) if auth else g.crs.name}; {res.metadata['evaluation_instants']} instants; "
                f"engine {res.metadata.get('engine', engine)}")
-    _echo_bands_and_files(res, paths, ("levels", "contours", "map"))
+    if population or buildings:
+        from gisnoise.exposure import map_exposure, read_buildings, read_levels, read_population, write_exposure
+
+        if dem is not None and buildings:
+            raise InputError("buildings: façade levels need flat ground; without --dem", field="buildings")
+        doc = map_exposure(read_levels(paths["levels"]),
+                           population=read_population(population) if population else None,
+                           buildings=read_buildings(buildings) if buildings else None,
+                           trajectory=paths["trajectory"], cards=list(cards))
+        paths.update(write_exposure(doc, out))
+    _echo_bands_and_files(res, paths, ("levels", "contours", "map", "exposure", "table"))
     for w in paths.get("warnings", []):
         click.echo(f"warning: {w}", err=True)

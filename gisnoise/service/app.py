@@ -14,7 +14,7 @@ from pathlib import Path
 from fastapi import Depends, FastAPI, Request
 
 from gisnoise import __version__
-from gisnoise.service import routes_campaign, routes_cards, routes_contours, routes_jobs, routes_web
+from gisnoise.service import routes_campaign, routes_cards, routes_contours, routes_jobs, routes_planning, routes_web
 from gisnoise.service.cardstore import CardStore
 from gisnoise.service.deps import State, key_problem
 from gisnoise.service.errors import ApiError, install_handlers
@@ -103,11 +103,11 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
                                pool=WorkerPool(jobs, _handlers(), settings.workers))
     install_handlers(app)
     for r in (routes_cards.router, routes_contours.router, routes_jobs.router, routes_campaign.router,
-              routes_web.router):
+              routes_planning.router, routes_web.router):
         app.include_router(r)
     routes_web.mount_static(app, STATIC_DIR)
 
-    upload_paths = ("/jobs/fit", "/jobs/diagnose")
+    upload_paths = ("/jobs/fit", "/jobs/diagnose", "/layers")
 
     def limit_for(path: str) -> int:
         return settings.max_upload_bytes if path in upload_paths else settings.max_request_bytes

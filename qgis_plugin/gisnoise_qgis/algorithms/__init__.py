@@ -4,7 +4,10 @@ from .contour import NoiseMapAlgorithm
 from .design import DesignLayoutAlgorithm
 from .diagnose import DiagnoseAlgorithm
 from .fit import FitCardAlgorithm
+from .planning import CompareRoutesAlgorithm, QuieterRouteAlgorithm
 
-ALGORITHMS = (NoiseMapAlgorithm, FitCardAlgorithm, DiagnoseAlgorithm, DesignLayoutAlgorithm)
+ALGORITHMS = (NoiseMapAlgorithm, FitCardAlgorithm, DiagnoseAlgorithm, DesignLayoutAlgorithm, CompareRoutesAlgorithm,
+              QuieterRouteAlgorithm)
 
-__all__ = ["ALGORITHMS", "NoiseMapAlgorithm", "FitCardAlgorithm", "DiagnoseAlgorithm", "DesignLayoutAlgorithm"]
+__all__ = ["ALGORITHMS", "NoiseMapAlgorithm", "FitCardAlgorithm", "DiagnoseAlgorithm", "DesignLayoutAlgorithm",
+           "CompareRoutesAlgorithm", "QuieterRouteAlgorithm"]

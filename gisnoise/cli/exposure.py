@@ -1,0 +1,86 @@
+"""``gisnoise exposure``: people and dwellings by 5 dB class of a written map, area above each level."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from gisnoise.errors import InputError
+
+
+def _edges(value: str) -> list[float]:
+    try:
+        lo, hi = (float(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected LOW,HIGH in dB, got {value!r}", param_hint="--classes") from None
+    from gisnoise.exposure import class_edges
+
+    return class_edges(lo, hi)
+
+
+@click.command("exposure")
+@click.argument("map_dir", type=click.Path(exists=True))
+@click.option("--population", "population", type=click.Path(dir_okay=False), default=None,
+              help="Population raster (GeoTIFF, people per cell, any CRS).")
+@click.option("--buildings", "buildings", type=click.Path(dir_okay=False), default=None,
+              help="Building polygons (GeoPackage, GeoJSON, Shapefile) with residents/dwellings/height attributes; "
+                   "needs --trajectory and --card.")
+@click.option("--layer", "layer", default=None, help="Layer of the buildings file (GeoPackage).")
+@click.option("--residents-field", "residents_field", default=None,
+              help="Attribute with the residents of a building [default: residents, population, pop, ...].")
+@click.option("--dwellings-field", "dwellings_field", default=None,
+              help="Attribute with the dwellings of a building [default: dwellings, households, units, flats].")
+@click.option("--trajectory", "trajectory", type=click.Path(dir_okay=False), default=None,
+              help="The map's trajectory (for façade levels of --buildings).")
+@click.option("--card", "cards", multiple=True, type=click.Path(dir_okay=False),
+              help="The map's model cards, one per phase (for façade levels of --buildings).")
+@click.option("--facade-height", "facade_height", type=float, default=4.0, show_default=True,
+              help="Height of façade receivers above ground, m.")
+@click.option("--facade-spacing", "facade_spacing", type=float, default=5.0, show_default=True,
+              help="Longest wall segment per façade receiver, m.")
+@click.option("--ground-height", "ground_h", type=float, default=None,
+              help="Ellipsoidal height of flat ground for façade receivers, m [default: the map's].")
+@click.option("--metrics", "metrics", default=None,
+              help="Level bands to class, comma-separated [default: every dB(A) band of the map].")
+@click.option("--classes", "classes", default="35,85", show_default=True,
+              help="LOW,HIGH: 5 dB classes from LOW; the last class (>= HIGH) is open.")
+@click.option("--out", "out", type=click.Path(file_okay=False), default=None,
+              help="Folder for exposure.json and exposure.md [default: MAP_DIR].")
+def command(map_dir: str, population: str | None, buildings: str | None, layer: str | None,
+            residents_field: str | None, dwellings_field: str | None, trajectory: str | None,
+            cards: tuple[str, ...], facade_height: float, facade_spacing: float, ground_h: float | None,
+            metrics: str | None, classes: str, out: str | None) -> None:
+    """Exposure of the map in MAP_DIR (its levels.tif, or the GeoTIFF itself): people by 5 dB class
+    of each level band (from --population), buildings, residents and dwellings at the most
+    exposed façade (from --buildings), area above each level.  Writes exposure.json and exposure.md.
+    """
+    from gisnoise.exposure import map_exposure, read_buildings, read_levels, read_population, write_exposure
+
+    p = Path(map_dir)
+    tif = p / "levels.tif" if p.is_dir() else p
+    if not tif.is_file():
+        raise InputError(f"map: no levels.tif in {p}", field="map")
+    if population is None and buildings is None:
+        raise InputError("exposure: give --population and/or --buildings", field="population")
+    edges = _edges(classes)
+    levels = read_levels(tif)
+    pop = read_population(population) if population else None
+    b = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field) \
+        if buildings else None
+    traj = None
+    if b is not None:
+        if trajectory is None or not cards:
+            raise InputError("buildings: façade levels need --trajectory and --card (the map's flight)",
+                             field="trajectory")
+        from gisnoise.flight import read_route
+
+        traj = read_route(trajectory).trajectory
+    names = [m.strip() for m in metrics.split(",") if m.strip()] if metrics else None
+    doc = map_exposure(levels, population=pop, buildings=b, trajectory=traj, cards=list(cards) or None,
+                       metrics=names, edges=edges, facade_height_m=facade_height,
+                       facade_spacing_m=facade_spacing, ground_h=ground_h)
+    paths = write_exposure(doc, out if out is not None else (p if p.is_dir() else p.parent))
+    click.echo(paths["table"].read_text().rstrip())
+    for v in paths.values():
+        click.echo(f"wrote {v}")

@@ -1,0 +1,45 @@
+"""Exposure: population rasters and buildings, façade receivers, people and dwellings by level class.
+"""
+
+from __future__ import annotations
+
+from gisnoise.exposure.exposure import (
+    SCHEMA,
+    exposure_table,
+    map_exposure,
+    write_exposure,
+)
+from gisnoise.exposure.facades import (
+    ASSESSMENT_HEIGHT_M,
+    FacadePoints,
+    facade_levels,
+    facade_points,
+    point_levels,
+)
+from gisnoise.exposure.layers import (
+    DWELLING_FIELDS,
+    HEIGHT_FIELDS,
+    RESIDENT_FIELDS,
+    Buildings,
+    LevelsRaster,
+    Population,
+    read_buildings,
+    read_levels,
+    read_population,
+)
+from gisnoise.exposure.stats import (
+    CLASS_WIDTH_DB,
+    area_above,
+    class_edges,
+    fraction_above,
+    level_field,
+    person_db_above,
+    population_exposure,
+    population_points,
+)
+
+__all__ = ['ASSESSMENT_HEIGHT_M', 'Buildings', 'CLASS_WIDTH_DB', 'DWELLING_FIELDS', 'FacadePoints', 'HEIGHT_FIELDS',
+           'LevelsRaster', 'Population', 'RESIDENT_FIELDS', 'SCHEMA', 'area_above', 'class_edges', 'exposure_table',
+           'facade_levels', 'facade_points', 'fraction_above', 'level_field', 'map_exposure', 'person_db_above', 'point_levels',
+           'population_exposure', 'population_points', 'read_buildings', 'read_levels', 'read_population',
+           'write_exposure']

@@ -1,0 +1,182 @@
+"""Exposure of a map: people and dwellings by 5 dB class, area above each level; ``exposure.json``.
+
+:func:`map_exposure` joins the pieces: people from a population raster
+(:func:`gisnoise.exposure.stats.population_exposure`), buildings at their most exposed
+façade (:func:`gisnoise.exposure.facades.facade_levels`: needs the flight and its cards),
+and the area above each level (:func:`gisnoise.exposure.stats.area_above`).
+:func:`write_exposure` writes ``exposure.json`` (schema ``gisnoise/exposure/1``) and a
+Markdown table ``exposure.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import InputError
+from gisnoise.exposure.facades import ASSESSMENT_HEIGHT_M, facade_levels
+from gisnoise.exposure.layers import Buildings, LevelsRaster, Population
+from gisnoise.exposure.stats import area_above, class_edges, population_exposure
+from gisnoise.flight import Trajectory
+from gisnoise.jsonio import to_jsonable
+
+__all__ = ["SCHEMA", "map_exposure", "write_exposure", "exposure_table"]
+
+SCHEMA = "gisnoise/exposure/1"
+
+
+def _building_classes(level: np.ndarray, weights: np.ndarray | None, edges: Sequence[float]) -> list[float]:
+    w = np.ones_like(level) if weights is None else weights
+    out = []
+    for j, e in enumerate(edges):
+        hi = edges[j + 1] if j + 1 < len(edges) else np.inf
+        out.append(float(w[(level >= e) & (level < hi)].sum()))
+    return out
+
+
+def map_exposure(levels: LevelsRaster, *, population: Population | None = None, buildings: Buildings | None = None,
+                 trajectory: Trajectory | None = None, cards: Any = None, metrics: Sequence[str] | None = None,
+                 edges: Sequence[float] | None = None, facade_height_m: float = ASSESSMENT_HEIGHT_M,
+                 facade_spacing_m: float = 5.0, ground_h: float | None = None,
+                 points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None) -> dict[str, Any]:
+    """The exposure document of a map (see the module docstring).
+
+    Parameters
+    ----------
+    levels : LevelsRaster
+        The map (:func:`gisnoise.exposure.read_levels`).
+    population : Population, optional
+    buildings : Buildings, optional
+        Need ``trajectory`` and ``cards`` (façade levels are computed at the façades' height).
+    metrics : sequence of str, optional
+        Level bands to class, default every dB(A) band of the map.
+    edges : sequence of float, optional
+        Lower class edges, dB; default 35, 40, ..., 85 (:func:`class_edges`).
+    ground_h : float, optional
+        Flat ground's ellipsoidal height for façade points, m; default the map's.
+    points : tuple, optional
+        The population's sub-cells on the map's grid (:func:`gisnoise.exposure.population_points`),
+        when already computed (several routes on one grid).
+    """
+    if population is None and buildings is None:
+        raise InputError("exposure: give a population raster or buildings (or both)", field="population")
+    names = list(metrics) if metrics is not None else levels.level_bands()
+    if not names:
+        raise InputError("exposure: the map has no level bands", field="metric")
+    for n in names:
+        if n not in levels.bands:
+            raise InputError(f"no band {n!r}; bands: {', '.join(levels.bands)}", field="metric")
+    edges = list(edges) if edges is not None else class_edges()
+    res = levels.grid.resolution
+    doc: dict[str, Any] = {
+        "schema": SCHEMA, "class_edges_db": edges, "class_width_db": edges[1] - edges[0] if len(edges) > 1 else None,
+        "grid": levels.grid.to_dict(),
+        "area_above": {n: [{"level_db": e, "area_m2": a} for e, a in
+                           zip(edges, area_above(levels.bands[n], levels.grid, edges), strict=True)] for n in names},
+        "area_rule": f"map cells of {res[0]:g} x {res[1]:g} m in 2 x 2 sub-cells, level linear within each",
+    }
+    if population is not None:
+        pe = population_exposure(levels, population, metrics=names, edges=edges, points=points)
+        doc["population"] = {"source": population.source, "total_people": pe["total_people"],
+                             "subcell_m": pe["subcell_m"], "metrics": pe["metrics"],
+                             "rule": "population cells split into sub-cells of at most half a map cell; level linear "
+                                     "within each sub-cell (second-order Taylor about the nearest map cell); people outside the map "
+                                     "or without a level are counted in people_without_level"}
+    if buildings is not None:
+        doc["buildings"] = _buildings_doc(levels, buildings, trajectory, cards, names, edges, facade_height_m,
+                                          facade_spacing_m, ground_h)
+    return doc
+
+
+def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, cards: Any, names: Sequence[str],
+                   edges: Sequence[float], height: float, spacing: float, ground_h: float | None) -> dict[str, Any]:
+    if traj is None or cards is None:
+        raise InputError("buildings: façade levels need the trajectory and its cards (--trajectory, --card)",
+                         field="trajectory")
+    if ground_h is None:
+        ground_h = levels.metadata.get("ground_h_m")
+        if ground_h is None:
+            raise InputError("buildings: the map does not state a flat ground height; give --ground-height",
+                             field="ground_h")
+    metrics = [n for n in names if n in ("LAmax", "LAeq", "SEL")]
+    if not metrics:
+        raise InputError("buildings: façade levels are computed for LAmax, LAeq and SEL; the map has none of them",
+                         field="metric")
+    period = levels.metadata.get("period_s")
+    fl = facade_levels(b, traj, cards, ground_h=float(ground_h), metrics=metrics, spacing_m=spacing,
+                       height_m=height, period_s=period)
+    pts = fl["points"]
+    out: dict[str, Any] = {
+        "source": b.source, "n_buildings": b.n, "fields": b.fields, "facade_points": int(pts.x.size),
+        "facade": {"height_m": height, "spacing_m": spacing, "offset_m": pts.offset_m,
+                   "rule": "receivers at the middle of wall segments of at most spacing_m, offset_m in front of "
+                           "each outer wall, height_m above ground; a building's level is its most exposed "
+                           "façade point (the source-side wall); incident free-field level, no screening"},
+        "metrics": {},
+    }
+    for m in metrics:
+        lv = fl["buildings"][m]["level"]
+        entry: dict[str, Any] = {
+            "classes": [{"from_db": e, "to_db": edges[j + 1] if j + 1 < len(edges) else None,
+                         "buildings": nb} for j, (e, nb) in
+                        enumerate(zip(edges, _building_classes(lv, None, edges), strict=True))],
+            "peak_facade_db": float(np.max(lv)),
+        }
+        for what, w in (("residents", b.residents), ("dwellings", b.dwellings)):
+            if w is None:
+                continue
+            for c, v in zip(entry["classes"], _building_classes(lv, w, edges), strict=True):
+                c[what] = v
+            occupied = w > 0
+            entry[f"peak_db_at_{what}"] = float(np.max(lv[occupied])) if occupied.any() else None
+        top = int(np.argmax(lv))
+        p = int(fl["buildings"][m]["point"][top])
+        entry["most_exposed"] = {"building": top, "wall": int(pts.wall[p]), "lon": float(pts.lon[p]),
+                                 "lat": float(pts.lat[p]), "level_db": float(lv[top])}
+        entry["per_building_db"] = [float(v) for v in lv]
+        out["metrics"][m] = entry
+    return out
+
+
+def exposure_table(doc: dict[str, Any]) -> str:
+    """A Markdown table per metric: people, buildings, residents, dwellings by class; area above."""
+    lines = ["# Exposure", ""]
+    names = list(doc["area_above"])
+    for n in names:
+        lines += [f"## {n}", "", "| class dB(A) | people | buildings | residents | dwellings | area above lower edge km² |",
+                  "|---|---|---|---|---|---|"]
+        pop = doc.get("population", {}).get("metrics", {}).get(n)
+        bld = doc.get("buildings", {}).get("metrics", {}).get(n)
+        for j, a in enumerate(doc["area_above"][n]):
+            lo = a["level_db"]
+            hi = doc["class_edges_db"][j + 1] if j + 1 < len(doc["class_edges_db"]) else None
+            label = f"{lo:g}-{hi:g}" if hi is not None else f">= {lo:g}"
+            cells = [label, f"{pop['classes'][j]['people']:.0f}" if pop else "-"]
+            for key in ("buildings", "residents", "dwellings"):
+                cells.append(f"{bld['classes'][j][key]:.0f}" if bld and key in bld["classes"][j] else "-")
+            cells.append(f"{a['area_m2'] / 1e6:.4f}")
+            lines.append("| " + " | ".join(cells) + " |")
+        if pop:
+            lines += ["", f"people without a level (outside the map): {pop['people_without_level']:.0f}"]
+        if bld:
+            lines += [f"peak façade level: {bld['peak_facade_db']:.1f} dB(A)"]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def write_exposure(doc: dict[str, Any], out_dir: str | os.PathLike[str]) -> dict[str, Path]:
+    """Write ``exposure.json`` and ``exposure.md`` into ``out_dir`` (created)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    j = out / "exposure.json"
+    tmp = j.with_name(j.name + ".tmp")
+    tmp.write_text(json.dumps(to_jsonable(doc), indent=1, allow_nan=False))
+    os.replace(tmp, j)
+    md = out / "exposure.md"
+    md.write_text(exposure_table(doc))
+    return {"exposure": j, "table": md}

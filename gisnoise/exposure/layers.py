@@ -1,0 +1,227 @@
+"""Exposure layers: a population raster, buildings with residents, and a written levels raster.
+
+* :func:`read_population`: a GeoTIFF (any CRS, any driver rasterio reads) whose band 1
+  holds people per cell; nodata and negative values count as no people.
+* :func:`read_buildings`: polygons (GeoPackage, GeoJSON, Shapefile, anything pyogrio reads)
+  with optional attributes for residents, dwellings and height.
+* :func:`read_levels`: the ``levels.tif`` a map wrote, back as bands on its grid.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from affine import Affine
+from pyproj import CRS
+
+from gisnoise.errors import InputError
+from gisnoise.geo import GridSpec
+
+__all__ = ["Population", "Buildings", "LevelsRaster", "read_population", "read_buildings", "read_levels",
+           "RESIDENT_FIELDS", "DWELLING_FIELDS", "HEIGHT_FIELDS"]
+
+RESIDENT_FIELDS = ("residents", "population", "pop", "inhabitants", "persons", "people")
+"""Attribute names tried, in order, for the residents of a building (case-insensitive)."""
+DWELLING_FIELDS = ("dwellings", "households", "units", "flats")
+"""Attribute names tried, in order, for the dwellings of a building (case-insensitive)."""
+HEIGHT_FIELDS = ("height", "height_m", "building_height")
+"""Attribute names tried, in order, for the height of a building, m (case-insensitive)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Population:
+    """People per cell of a north-up raster.
+
+    Attributes
+    ----------
+    counts : ndarray, shape (height, width)
+        People per cell (0 where the raster has nodata).
+    transform : affine.Affine
+        Pixel-corner transform in the raster's CRS.
+    crs : pyproj.CRS
+    source : str
+    """
+
+    counts: np.ndarray
+    transform: Affine
+    crs: Any
+    source: str = "population"
+
+    @property
+    def total(self) -> float:
+        return float(self.counts.sum())
+
+
+@dataclass(frozen=True, eq=False)
+class Buildings:
+    """Building footprints with residents, dwellings and heights.
+
+    Attributes
+    ----------
+    polygons : list of shapely Polygon
+        Footprints (multi-polygons split into parts, each part keeping its building's index
+        in ``part_of``), in ``crs``.
+    part_of : ndarray of int
+        Building index of each polygon.
+    residents, dwellings, height_m : ndarray of float, one per building, or None
+        From the attributes; None when the layer has no such attribute.
+    crs : pyproj.CRS
+    fields : dict
+        Which attribute gave residents, dwellings and height.
+    """
+
+    polygons: list
+    part_of: np.ndarray
+    n: int
+    residents: np.ndarray | None
+    dwellings: np.ndarray | None
+    height_m: np.ndarray | None
+    crs: Any
+    source: str = "buildings"
+    fields: dict[str, str | None] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, eq=False)
+class LevelsRaster:
+    """The bands of a written map (``levels.tif``) on its grid."""
+
+    bands: dict[str, np.ndarray]
+    grid: GridSpec
+    units: dict[str, str]
+    metadata: dict[str, Any]
+
+    def level_bands(self) -> list[str]:
+        """Bands holding levels in dB(A) (the ones exposure is classed by)."""
+        return [b for b in self.bands if self.units.get(b) == "dB(A)"]
+
+
+def _north_up(t: Affine, fld: str) -> None:
+    if t.b != 0 or t.d != 0 or not (t.a > 0 and t.e < 0):
+        raise InputError(f"{fld}: the raster must be north-up without rotation", field=fld)
+
+
+def read_population(path: str | os.PathLike[str], *, band: int = 1) -> Population:
+    """Read a population raster: people per cell of band ``band``.
+
+    Raises
+    ------
+    InputError
+        No such file, no CRS, a rotated raster, or negative counts other than nodata.
+    """
+    import rasterio
+    from rasterio.errors import RasterioIOError
+
+    p = Path(path)
+    try:
+        with rasterio.open(p) as src:
+            if src.crs is None:
+                raise InputError(f"population: {p.name} has no CRS", field="population")
+            if not 1 <= band <= src.count:
+                raise InputError(f"population: band {band} not in 1..{src.count}", field="population")
+            a = src.read(band, masked=True).astype(np.float64)
+            t, crs = src.transform, CRS.from_wkt(src.crs.to_wkt())
+    except RasterioIOError as exc:
+        raise InputError(f"population: cannot read {p}: {exc}", field="population") from None
+    _north_up(t, "population")
+    counts = np.ma.filled(a, 0.0)
+    counts = np.where(np.isfinite(counts), counts, 0.0)
+    if (counts < 0).any():
+        raise InputError(f"population: {p.name} has negative people per cell (min {counts.min():g})",
+                         field="population")
+    return Population(counts, t, crs, source=str(p))
+
+
+def _pick(columns: list[str], wanted: str | None, names: tuple[str, ...], what: str) -> str | None:
+    lower = {c.lower(): c for c in columns}
+    if wanted is not None:
+        if wanted.lower() not in lower:
+            raise InputError(f"buildings: no attribute {wanted!r} for {what}; attributes: {', '.join(columns)}",
+                             field=what)
+        return lower[wanted.lower()]
+    for n in names:
+        if n in lower:
+            return lower[n]
+    return None
+
+
+def _numbers(df: Any, col: str | None, what: str) -> np.ndarray | None:
+    if col is None:
+        return None
+    v = np.asarray(df[col].to_numpy(dtype=float, na_value=np.nan), dtype=float)
+    bad = ~np.isfinite(v) | (v < 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(f"buildings: attribute {col!r} ({what}) of feature {i} is {df[col].iloc[i]!r}, "
+                         "not a number >= 0", field=what)
+    return v
+
+
+def read_buildings(path: str | os.PathLike[str], *, layer: str | None = None, residents: str | None = None,
+                   dwellings: str | None = None, height: str | None = None) -> Buildings:
+    """Read building footprints (polygons) with residents, dwellings and height attributes.
+
+    Attribute names default to the first of :data:`RESIDENT_FIELDS`, :data:`DWELLING_FIELDS`,
+    :data:`HEIGHT_FIELDS` that the layer has.
+    """
+    import geopandas as gpd
+    import shapely
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"buildings: no such file {p}", field="buildings")
+    try:
+        df = gpd.read_file(p, layer=layer, engine="pyogrio")
+    except Exception as exc:  # pyogrio's errors are many; the message names the file
+        raise InputError(f"buildings: cannot read {p.name}: {str(exc).splitlines()[0]}", field="buildings") from None
+    if df.crs is None:
+        raise InputError(f"buildings: {p.name} has no CRS", field="buildings")
+    if len(df) == 0:
+        raise InputError(f"buildings: {p.name} has no features", field="buildings")
+    cols = [c for c in df.columns if c != df.geometry.name]
+    rc = _pick(cols, residents, RESIDENT_FIELDS, "residents")
+    dc = _pick(cols, dwellings, DWELLING_FIELDS, "dwellings")
+    hc = _pick(cols, height, HEIGHT_FIELDS, "height")
+    polys: list = []
+    part_of: list[int] = []
+    for i, g in enumerate(df.geometry):
+        if g is None or g.is_empty:
+            raise InputError(f"buildings: feature {i} has no geometry", field="buildings")
+        if g.geom_type == "Polygon":
+            parts = [g]
+        elif g.geom_type == "MultiPolygon":
+            parts = list(g.geoms)
+        else:
+            raise InputError(f"buildings: feature {i} is a {g.geom_type}, not a polygon", field="buildings")
+        for part in parts:
+            polys.append(shapely.Polygon(part.exterior))  # façades are the outer walls
+            part_of.append(i)
+    return Buildings(polys, np.asarray(part_of, dtype=int), len(df), _numbers(df, rc, "residents"),
+                     _numbers(df, dc, "dwellings"), _numbers(df, hc, "height"),
+                     CRS.from_wkt(df.crs.to_wkt()), source=str(p),
+                     fields={"residents": rc, "dwellings": dc, "height": hc})
+
+
+def read_levels(path: str | os.PathLike[str]) -> LevelsRaster:
+    """Read a map's ``levels.tif`` (:func:`gisnoise.maps.write_geotiff`): bands by description, units, metadata."""
+    import rasterio
+    from rasterio.errors import RasterioIOError
+
+    p = Path(path)
+    try:
+        with rasterio.open(p) as src:
+            names = [d or f"band{i + 1}" for i, d in enumerate(src.descriptions)]
+            units = {n: src.tags(i + 1).get("unit", "") for i, n in enumerate(names)}
+            bands = {n: np.asarray(src.read(i + 1, masked=True).astype(np.float64).filled(np.nan))
+                     for i, n in enumerate(names)}
+            meta = json.loads(src.tags().get("gisnoise", "{}"))
+            if src.crs is None:
+                raise InputError(f"map: {p.name} has no CRS", field="map")
+            grid = GridSpec(src.crs.to_wkt(), src.transform, src.width, src.height)
+    except RasterioIOError as exc:
+        raise InputError(f"map: cannot read {p}: {exc}", field="map") from None
+    return LevelsRaster(bands, grid, units, meta)

@@ -1,0 +1,252 @@
+"""Comparison of candidate routes: one common grid, a ranked table, difference maps.
+
+:func:`compare_routes` reads every candidate (flight CSV, GeoJSON LineString with times,
+waypoints), puts one receiver grid around all of them (so every cell is judged the same
+for every route), evaluates each with the map evaluator and measures its exposure
+(:mod:`gisnoise.exposure`): people above each level, the peak level at any dwelling
+(most exposed façade), and the total exposure in person-dB above the lowest level
+(``sum over people of max(L - L_low, 0)``).  Routes are ranked by people above the
+ranking level, then by person-dB, then by the peak dwelling level.
+
+:func:`write_comparison` writes ``comparison.json`` (schema ``gisnoise/comparison/1``),
+``comparison.md`` (the table), ``levels.tif`` (the metric of every route, one band per
+route) and ``difference.tif`` (each other route minus the best, one band per route, dB).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import InputError
+from gisnoise.exposure import (
+    Buildings,
+    LevelsRaster,
+    Population,
+    map_exposure,
+    person_db_above,
+    population_points,
+)
+from gisnoise.flight import Trajectory, read_route
+from gisnoise.geo import GridSpec, grid_for_points
+from gisnoise.jsonio import to_jsonable
+from gisnoise.maps import CardSet, MapResult, evaluate_grid, write_geotiff
+
+__all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
+
+COMPARISON_SCHEMA = "gisnoise/comparison/1"
+
+
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    """Candidates on one grid: their bands, their scores (ranked) and the document."""
+
+    names: list[str]
+    grid: GridSpec
+    bands: dict[str, np.ndarray]
+    metric: str
+    doc: dict[str, Any]
+    trajectories: dict[str, Trajectory] = field(default_factory=dict)
+
+    @property
+    def best(self) -> str:
+        return str(self.doc["ranking"][0]["route"])
+
+
+def _names(routes: Sequence[Any], names: Sequence[str] | None) -> list[str]:
+    if names is not None:
+        if len(names) != len(routes):
+            raise InputError(f"names: {len(names)} names for {len(routes)} routes", field="names")
+        out = [str(n) for n in names]
+    else:
+        out = [Path(r).stem if isinstance(r, (str, os.PathLike)) else f"route{i + 1}" for i, r in enumerate(routes)]
+    seen: dict[str, int] = {}
+    for i, n in enumerate(out):
+        if n in seen:
+            seen[n] += 1
+            out[i] = f"{n}-{seen[n]}"
+        else:
+            seen[n] = 1
+    return out
+
+
+def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population: Population | None = None,
+                buildings: Buildings | None = None, metric: str = "LAmax",
+                levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), receiver_height: float = 1.5,
+                ground_h: float = 0.0, engine: str = "numpy",
+                points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
+                ) -> tuple[dict[str, Any], np.ndarray]:
+    """The exposure scores of one route on a given grid, and its band of ``metric``.
+
+    ``points`` are the population's sub-cells on this grid
+    (:func:`gisnoise.exposure.population_points`), computed once when several routes share the grid.
+    """
+    lv = [float(v) for v in levels]
+    res = evaluate_grid(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
+                        ground_h=ground_h, engine=engine)
+    band = res.bands[metric]
+    lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
+                                                               "period_s": res.metadata.get("period_s")})
+    pts = points if points is not None or population is None else population_points(population, grid)
+    ex = map_exposure(lr, population=population, buildings=buildings, trajectory=traj, cards=cards,
+                      metrics=[metric], edges=lv, ground_h=ground_h, points=pts)
+    row: dict[str, Any] = {"duration_s": traj.duration_s, "track_length_m": _track_length(traj)}
+    if population is not None and pts is not None:
+        above = ex["population"]["metrics"][metric]["above"]
+        row["people_above"] = {f"{a['level_db']:g}": a["people"] for a in above}
+        row["person_db"] = person_db_above(band, grid, pts, lv[0])
+        row["people_without_level"] = ex["population"]["metrics"][metric]["people_without_level"]
+    if buildings is not None:
+        bm = ex["buildings"]["metrics"][metric]
+        row["peak_facade_db"] = bm["peak_facade_db"]
+        row["peak_dwelling_db"] = bm.get("peak_db_at_dwellings", bm.get("peak_db_at_residents"))
+        row["residents_above"] = _cumulative(bm["classes"], "residents")
+        row["dwellings_above"] = _cumulative(bm["classes"], "dwellings")
+    row["area_above_m2"] = {f"{a['level_db']:g}": a["area_m2"] for a in ex["area_above"][metric]}
+    return row, band
+
+
+def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population | None = None,
+                   buildings: Buildings | None = None, names: Sequence[str] | None = None, metric: str = "LAmax",
+                   levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), rank_level_db: float = 55.0,
+                   resolution_m: float = 20.0, margin_m: float = 500.0, crs: Any = None,
+                   receiver_height: float = 1.5, ground_h: float | None = None, engine: str = "numpy",
+                   grid: GridSpec | None = None) -> Comparison:
+    """Evaluate candidate routes on one grid and rank them by exposure (see the module docstring).
+
+    Parameters
+    ----------
+    routes : sequence of path, dict or Trajectory
+        At least two candidates.
+    cards : card paths or ids, ModelCard or CardSet
+        Serving every phase of every route.
+    population, buildings : optional
+        Exposure layers (:func:`gisnoise.exposure.read_population`, :func:`~gisnoise.exposure.read_buildings`);
+        at least one.
+    metric : str
+        ``LAmax``, ``LAeq`` or ``SEL``: the metric judged.
+    levels : sequence of float
+        Levels for "people above", dB(A), ascending; person-dB counts above the first.
+    rank_level_db : float
+        Routes are ranked by the people above this level first; must be one of ``levels``.
+    resolution_m, margin_m, crs, receiver_height, engine
+        The common grid and the evaluator, as ``gisnoise contour``.
+    ground_h : float, optional
+        Flat ground's ellipsoidal height, m; default the height the routes state (waypoints),
+        else the lowest point of all routes.
+    grid : GridSpec, optional
+        A given common grid instead of one around the routes.
+    """
+    if len(routes) < 2:
+        raise InputError(f"routes: give at least two candidate routes, got {len(routes)}", field="routes")
+    if population is None and buildings is None:
+        raise InputError("compare: give a population raster or buildings (or both)", field="population")
+    if metric not in ("LAmax", "LAeq", "SEL"):
+        raise InputError(f"metric must be LAmax, LAeq or SEL, got {metric!r}", field="metric")
+    lv = [float(v) for v in levels]
+    if not lv or any(b <= a for a, b in zip(lv, lv[1:], strict=False)):
+        raise InputError(f"levels must be ascending, got {levels!r}", field="levels")
+    if float(rank_level_db) not in lv:
+        raise InputError(f"rank_level must be one of the levels {lv}, got {rank_level_db!r}", field="rank_level")
+    nm = _names(routes, names)
+    rs = [read_route(r) for r in routes]
+    cardset = cards if isinstance(cards, CardSet) else CardSet(cards if isinstance(cards, (list, tuple)) else [cards])
+    trajs = {n: r.trajectory for n, r in zip(nm, rs, strict=True)}
+    if ground_h is None:
+        stated = [r.ground_h_m for r in rs if r.ground_h_m is not None]
+        ground_h = min(stated) if stated else min(float(np.min(t.h)) for t in trajs.values())
+    if grid is None:
+        lon = np.concatenate([t.lon for t in trajs.values()])
+        lat = np.concatenate([t.lat for t in trajs.values()])
+        grid = grid_for_points(lon, lat, resolution_m, margin_m, crs)
+    pts = population_points(population, grid) if population is not None else None
+    bands: dict[str, np.ndarray] = {}
+    rows: list[dict[str, Any]] = []
+    for n, traj in trajs.items():
+        row, band = score_route(traj, cardset, grid, population=population, buildings=buildings, metric=metric,
+                                levels=lv, receiver_height=receiver_height, ground_h=ground_h, engine=engine,
+                                points=pts)
+        row["route"] = n
+        bands[n] = band
+        rows.append(row)
+    key = f"{float(rank_level_db):g}"
+
+    def score(r: dict[str, Any]) -> tuple[float, float, float]:
+        people = r["people_above"][key] if "people_above" in r else (r.get("residents_above") or {}).get(key, 0.0)
+        peak = r.get("peak_dwelling_db")
+        return (round(people, 6), round(r.get("person_db", 0.0), 6), peak if peak is not None else -np.inf)
+
+    ranked = sorted(rows, key=score)
+    for i, r in enumerate(ranked, start=1):
+        r["rank"] = i
+    doc = {"schema": COMPARISON_SCHEMA, "metric": metric, "levels_db": lv, "rank_level_db": float(rank_level_db),
+           "ranking_rule": f"people above {rank_level_db:g} dB(A) {metric}, then person-dB above {lv[0]:g} dB(A), "
+                           "then peak level at a dwelling; lower is better",
+           "dose_metric": f"person-dB: sum over people of max({metric} - {lv[0]:g} dB, 0)",
+           "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked}
+    return Comparison(nm, grid, bands, metric, doc, trajs)
+
+
+def _track_length(traj: Trajectory) -> float:
+    from gisnoise.geo import LocalFrame
+
+    fr = LocalFrame(float(traj.lat[0]), float(traj.lon[0]), 0.0)
+    e, n, _ = fr.to_enu(traj.lat, traj.lon, np.zeros_like(traj.lat))
+    return float(np.sum(np.hypot(np.diff(e), np.diff(n))))
+
+
+def _cumulative(classes: list[dict[str, Any]], what: str) -> dict[str, float] | None:
+    if not classes or what not in classes[0]:
+        return None
+    vals = [c[what] for c in classes]
+    cum = np.cumsum(vals[::-1])[::-1]
+    return {f"{c['from_db']:g}": float(v) for c, v in zip(classes, cum, strict=True)}
+
+
+def comparison_table(doc: dict[str, Any]) -> str:
+    """The ranking as a Markdown table."""
+    lv = [f"{v:g}" for v in doc["levels_db"]]
+    m = doc["metric"]
+    head = ["rank", "route"] + [f"people > {v}" for v in lv] + ["person-dB", "peak dwelling dB(A)", "length km"]
+    lines = [f"# Candidate routes by exposure ({m})", "", doc["ranking_rule"], "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in doc["ranking"]:
+        pa = r.get("people_above") or r.get("residents_above") or {}
+        peak = r.get("peak_dwelling_db")
+        cells = [str(r["rank"]), r["route"]] + [f"{pa.get(v, float('nan')):.0f}" for v in lv]
+        cells += [f"{r.get('person_db', float('nan')):.0f}", "-" if peak is None else f"{peak:.1f}",
+                  f"{r['track_length_m'] / 1000:.2f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_comparison(cmp: Comparison, out_dir: str | os.PathLike[str]) -> dict[str, Path]:
+    """Write comparison.json, comparison.md, levels.tif (one band per route) and difference.tif."""
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: output exists and is not a folder", field="out")
+    out.mkdir(parents=True, exist_ok=True)
+    best = cmp.best
+    paths: dict[str, Path] = {}
+    meta = {"metric": cmp.metric, "best": best}
+    lv = MapResult(dict(cmp.bands), cmp.grid, {"units": {n: "dB(A)" for n in cmp.bands}, **meta})
+    paths["levels"] = write_geotiff(lv, out / "levels.tif")
+    diff = {f"{n} - {best}": cmp.bands[n] - cmp.bands[best] for n in cmp.names if n != best}
+    dr = MapResult(diff, cmp.grid, {"units": {n: "dB" for n in diff}, **meta,
+                                    "meaning": f"{cmp.metric} of each route minus the best route's, dB"})
+    paths["difference"] = write_geotiff(dr, out / "difference.tif")
+    j = out / "comparison.json"
+    tmp = j.with_name(j.name + ".tmp")
+    tmp.write_text(json.dumps(to_jsonable(cmp.doc), indent=1, allow_nan=False))
+    os.replace(tmp, j)
+    paths["comparison"] = j
+    md = out / "comparison.md"
+    md.write_text(comparison_table(cmp.doc))
+    paths["table"] = md
+    return paths

@@ -1,0 +1,203 @@
+"""Route planners in QGIS: candidate routes compared by exposure, and a quieter route between two pads."""
+
+from __future__ import annotations
+
+import json
+import os
+
+from qgis.core import (
+    QgsCoordinateReferenceSystem,
+    QgsCoordinateTransform,
+    QgsProcessing,
+    QgsProcessingException,
+    QgsProcessingOutputNumber,
+    QgsProcessingOutputString,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFile,
+    QgsProcessingParameterFolderDestination,
+    QgsProcessingParameterMultipleLayers,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterPoint,
+    QgsProcessingParameterRasterLayer,
+    QgsProcessingParameterVectorLayer,
+    QgsProject,
+)
+
+from .base import GisnoiseAlgorithm
+
+METRICS = ("LAmax", "LAeq", "SEL")
+
+
+def _cards(alg, parameters, context):
+    text = alg.parameterAsString(parameters, alg.CARDS, context)
+    refs = [c.strip() for c in text.replace(";", ",").split(",") if c.strip()]
+    if not refs:
+        raise QgsProcessingException("no model card given (parameter CARDS)")
+    return refs
+
+
+def _population(alg, parameters, context):
+    from gisnoise.exposure import read_population
+
+    layer = alg.parameterAsRasterLayer(parameters, alg.POPULATION, context)
+    return None if layer is None else read_population(layer.source())
+
+
+def _buildings(alg, parameters, context):
+    path = alg.parameterAsFile(parameters, alg.BUILDINGS, context)
+    if not path:
+        return None
+    from gisnoise.exposure import read_buildings
+
+    return read_buildings(path)
+
+
+class _PlanningBase(GisnoiseAlgorithm):
+    CARDS = "CARDS"
+    POPULATION = "POPULATION"
+    BUILDINGS = "BUILDINGS"
+    OUTPUT_FOLDER = "OUTPUT_FOLDER"
+    GROUP = "Route planning"
+    GROUP_ID = "planning"
+
+    def _layers(self):
+        from qgis.core import QgsProcessingParameterString
+
+        self.addParameter(QgsProcessingParameterString(
+            self.CARDS, "Model cards (files or bundled ids, comma-separated)",
+            defaultValue="demo-horizontal,demo-climb,demo-sink"))
+        self.addParameter(QgsProcessingParameterRasterLayer(
+            self.POPULATION, "Population raster (people per cell)", optional=True))
+        self.addParameter(QgsProcessingParameterFile(
+            self.BUILDINGS, "Buildings with residents/dwellings (GeoPackage, GeoJSON, Shapefile)", optional=True,
+            fileFilter="Vector files (*.gpkg *.geojson *.json *.shp)"))
+
+
+class CompareRoutesAlgorithm(_PlanningBase):
+    """``gisnoise compare``: candidate routes on one grid, ranked by the people they expose."""
+
+    ROUTES = "ROUTES"
+    METRIC = "METRIC"
+    RESOLUTION = "RESOLUTION"
+    RANK_LEVEL = "RANK_LEVEL"
+    BEST = "BEST"
+
+    def name(self):
+        return "compareroutes"
+
+    def displayName(self):  # noqa: N802 - QGIS API
+        return "Compare candidate routes by exposure"
+
+    def shortHelpString(self):  # noqa: N802 - QGIS API
+        return ("Evaluates every candidate route (flight CSV, GeoJSON LineString with times, waypoints) on one "
+                "common grid and ranks them by the people above the ranking level, then person-dB, then the peak "
+                "level at a dwelling. Writes comparison.json, comparison.md, levels.tif (one band per route) and "
+                "difference.tif (each route minus the best, dB) into the output folder.")
+
+    def initAlgorithm(self, config=None):  # noqa: N802 - QGIS API
+        self.addParameter(QgsProcessingParameterMultipleLayers(
+            self.ROUTES, "Candidate routes (files)", layerType=QgsProcessing.TypeFile))
+        self._layers()
+        self.addParameter(QgsProcessingParameterEnum(self.METRIC, "Metric", options=list(METRICS), defaultValue=0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.RANK_LEVEL, "Rank by people above (dB(A))", QgsProcessingParameterNumber.Double, 55.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.RESOLUTION, "Grid cell (m)", QgsProcessingParameterNumber.Double, 20.0, minValue=0.5))
+        self.addParameter(QgsProcessingParameterFolderDestination(self.OUTPUT_FOLDER, "Output folder"))
+        self.addOutput(QgsProcessingOutputString(self.BEST, "best route"))
+
+    def compute(self, parameters, context, feedback):
+        from gisnoise.planning import compare_routes, write_comparison
+
+        routes = self.parameterAsFileList(parameters, self.ROUTES, context)
+        out = self.parameterAsString(parameters, self.OUTPUT_FOLDER, context)
+        cmp = compare_routes(list(routes), _cards(self, parameters, context),
+                             population=_population(self, parameters, context),
+                             buildings=_buildings(self, parameters, context),
+                             metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
+                             rank_level_db=self.parameterAsDouble(parameters, self.RANK_LEVEL, context),
+                             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context))
+        write_comparison(cmp, out)
+        for r in cmp.doc["ranking"]:
+            feedback.pushInfo(f"{r['rank']}. {r['route']}")
+        return {self.OUTPUT_FOLDER: out, self.BEST: cmp.best}
+
+
+class QuieterRouteAlgorithm(_PlanningBase):
+    """``gisnoise route optimize``: a least-exposure flyable route between two pads."""
+
+    START = "START"
+    GOAL = "GOAL"
+    AVOID = "AVOID"
+    ALTITUDE = "ALTITUDE"
+    MAX_DETOUR = "MAX_DETOUR"
+    RESOLUTION = "RESOLUTION"
+    REDUCTION_PCT = "REDUCTION_PCT"
+    ROUTE = "ROUTE"
+
+    def name(self):
+        return "quieterroute"
+
+    def displayName(self):  # noqa: N802 - QGIS API
+        return "Find a quieter route"
+
+    def shortHelpString(self):  # noqa: N802 - QGIS API
+        return ("Least-exposure route from the take-off to the landing pad: graph search on a cost grid (people "
+                "within the 55 dB(A) LAmax corridor per metre), no-fly polygons, a maximum detour, smoothed into "
+                "fly-by waypoints that keep the vehicle's turn radius; re-evaluated with the full evaluator against "
+                "the direct route. Writes route.geojson (waypoints), direct.geojson, optimize.json and the "
+                "comparison into the output folder.")
+
+    def initAlgorithm(self, config=None):  # noqa: N802 - QGIS API
+        self.addParameter(QgsProcessingParameterPoint(self.START, "Take-off pad"))
+        self.addParameter(QgsProcessingParameterPoint(self.GOAL, "Landing pad"))
+        self._layers()
+        self.addParameter(QgsProcessingParameterVectorLayer(
+            self.AVOID, "No-fly polygons", types=[QgsProcessing.TypeVectorPolygon], optional=True))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.ALTITUDE, "Cruise altitude above ground (m)", QgsProcessingParameterNumber.Double, 60.0,
+            minValue=1.0, maxValue=1000.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MAX_DETOUR, "Maximum detour (%)", QgsProcessingParameterNumber.Double, 30.0, minValue=0.0,
+            maxValue=300.0))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.RESOLUTION, "Cost grid cell (m)", QgsProcessingParameterNumber.Double, 50.0, minValue=5.0))
+        self.addParameter(QgsProcessingParameterFolderDestination(self.OUTPUT_FOLDER, "Output folder"))
+        self.addOutput(QgsProcessingOutputNumber(self.REDUCTION_PCT, "fewer people above 55 dB(A) (%)"))
+        self.addOutput(QgsProcessingOutputString(self.ROUTE, "waypoints file of the quieter route"))
+
+    def _lonlat(self, parameters, name, context):
+        wgs = QgsCoordinateReferenceSystem("EPSG:4326")
+        p = self.parameterAsPoint(parameters, name, context, wgs)
+        return (p.x(), p.y())
+
+    def compute(self, parameters, context, feedback):
+        import shapely
+
+        from gisnoise.planning import optimize_route, waypoints_geojson, write_comparison
+
+        polys = []
+        layer = self.parameterAsVectorLayer(parameters, self.AVOID, context)
+        if layer is not None:
+            tr = QgsCoordinateTransform(layer.crs(), QgsCoordinateReferenceSystem("EPSG:4326"), QgsProject.instance())
+            for f in layer.getFeatures():
+                g = f.geometry()
+                g.transform(tr)
+                shp = shapely.from_wkb(bytes(g.asWkb()))
+                polys.extend(list(shp.geoms) if shp.geom_type == "MultiPolygon" else [shp])
+        res = optimize_route(self._lonlat(parameters, self.START, context), self._lonlat(parameters, self.GOAL, context),
+                             _cards(self, parameters, context), population=_population(self, parameters, context),
+                             buildings=_buildings(self, parameters, context), avoid=polys,
+                             altitude_m=self.parameterAsDouble(parameters, self.ALTITUDE, context),
+                             max_detour_pct=self.parameterAsDouble(parameters, self.MAX_DETOUR, context),
+                             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context))
+        out = self.parameterAsString(parameters, self.OUTPUT_FOLDER, context)
+        write_comparison(res.comparison, out)
+        route = os.path.join(out, "route.geojson")
+        for name, doc in ((route, res.optimized_doc), (os.path.join(out, "direct.geojson"), res.direct_doc)):
+            with open(name, "w", encoding="utf-8") as fh:
+                json.dump(waypoints_geojson(doc), fh, indent=1)
+        with open(os.path.join(out, "optimize.json"), "w", encoding="utf-8") as fh:
+            json.dump(res.summary, fh, indent=1)
+        feedback.pushInfo(json.dumps(res.summary, indent=1))
+        return {self.OUTPUT_FOLDER: out, self.REDUCTION_PCT: float(res.summary["reduction_pct"]), self.ROUTE: route}

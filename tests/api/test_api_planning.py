@@ -1,0 +1,130 @@
+"""Exposure layers stored by id (versioned) and ``POST /routes/compare`` against closed-form counts."""
+
+from __future__ import annotations
+
+import io
+import math
+import zipfile
+from pathlib import Path
+
+import geopandas as gpd
+import numpy as np
+import pytest
+import rasterio
+import shapely
+from affine import Affine
+from pyproj import CRS
+from service_helpers import KEY, assert_names_field
+
+from gisnoise.flight import Trajectory
+from gisnoise.geo import LocalFrame
+
+LAT0, LON0 = 52.27, 10.52
+TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+FRAME = LocalFrame(LAT0, LON0, 0.0)
+G0, HEIGHT, HR = 70.0, 60.0, 1.5
+OMNI = {"schema": "gisnoise/model-card/1", "id": "omni", "vehicle": "test", "phase": "horizontal",
+        "ansatz": "paper-offset", "reference_power_w": 3000.0, "reference_distance_m": 40.0,
+        "parameters": dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0)}
+
+
+def route_csv(e: float) -> dict:
+    t = np.arange(0.0, 1200.0 / 20.0 + 1e-9, 0.5)
+    lat, lon, h = FRAME.to_wgs84(np.full_like(t, e), -600.0 + 20.0 * t, np.full_like(t, HEIGHT))
+    tr = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t,
+                    power_w=np.full_like(t, 3000.0), phase=np.full(t.size, "horizontal"))
+    return {"format": "csv", "text": tr.to_csv()}
+
+
+def population_tif(path: Path) -> bytes:
+    """A 200 m x 200 m block of 1 person per 10 m x 10 m cell at the origin."""
+    with rasterio.open(path, "w", driver="GTiff", width=20, height=20, count=1, dtype="float32",
+                       crs=CRS.from_user_input(TMERC).to_wkt(), transform=Affine(10.0, 0, -100, 0, -10.0, 100)) as d:
+        d.write(np.ones((20, 20), dtype=np.float32), 1)
+    return path.read_bytes()
+
+
+def upload(client, kind, lid, name, data, key=True):
+    return client.post("/layers", data={"kind": kind, "id": lid}, files={"file": (name, data)},
+                       headers={"X-API-Key": KEY} if key else {})
+
+
+def test_layers_are_versioned_and_compare_ranks_by_closed_form_counts(make_client, tmp_path):
+    client = make_client(api_keys=[KEY])
+    data = population_tif(tmp_path / "pop.tif")
+    assert upload(client, "population", "town", "pop.tif", data, key=False).status_code == 401
+    r1 = upload(client, "population", "town", "pop.tif", data)
+    assert r1.status_code == 201 and r1.json()["ref"] == "town@1" and r1.json()["total_people"] == 400.0
+    r2 = upload(client, "population", "town", "pop.tif", data)
+    assert r2.json()["ref"] == "town@2"
+    assert [(x["id"], x["version"]) for x in client.get("/layers").json()] == [("town", 1), ("town", 2)]
+    # buildings as a zipped Shapefile
+    utm = CRS.from_epsg(32632)
+    gdf = gpd.GeoDataFrame({"residents": [5]}, geometry=[shapely.box(0, 0, 10, 10)], crs=utm)
+    gdf.to_file(tmp_path / "b.shp", engine="pyogrio")
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        for p in tmp_path.glob("b.*"):
+            zf.write(p, p.name)
+    rb = upload(client, "buildings", "houses", "b.zip", buf.getvalue())
+    assert rb.status_code == 201 and rb.json()["buildings"] == 1
+
+    body = {"routes": [route_csv(0.0), route_csv(400.0)], "names": ["over", "beside"], "cards": [OMNI],
+            "population": "town@1", "ground_h_m": 0.0, "grid": {"resolution_m": 10.0, "margin_m": 150.0}}
+    r = client.post("/routes/compare", json=body)
+    assert r.status_code == 200, r.text
+    doc = r.json()
+    assert [x["route"] for x in doc["ranking"]] == ["beside", "over"]
+    over = doc["ranking"][1]
+    for level in (55.0, 65.0):
+        rr = math.sqrt((40.0 * 10 ** ((G0 - level) / 20)) ** 2 - (HEIGHT - HR) ** 2)
+        assert over["people_above"][f"{level:g}"] == pytest.approx(0.01 * 200 * 2 * min(rr, 100.0), rel=0.01)
+    tif = client.post("/routes/compare", json={**body, "output": "difference"})
+    assert tif.status_code == 200 and tif.headers["content-type"].startswith("image/tiff")
+
+
+def test_compare_refusals_name_the_field(make_client, tmp_path):
+    client = make_client()
+    upload(client, "population", "town", "pop.tif", population_tif(tmp_path / "pop.tif"))
+    base = {"routes": [route_csv(0.0), route_csv(400.0)], "cards": [OMNI], "population": "town",
+            "ground_h_m": 0.0, "grid": {"resolution_m": 10.0, "margin_m": 150.0}}
+    assert_names_field(client.post("/routes/compare", json={**base, "population": "nope"}), 404, "population")
+    assert_names_field(client.post("/routes/compare", json={**base, "population": None}), 422, "population")
+    assert_names_field(client.post("/routes/compare", json={**base, "buildings": "town"}), 422, "buildings")
+    assert_names_field(client.post("/routes/compare", json={**base, "grid": {"resolution_m": 0.5}}), 413,
+                       "grid.resolution_m")
+    assert_names_field(upload(client, "population", "bad id", "pop.tif", b"x"), 422, "id")
+    assert_names_field(upload(client, "population", "t2", "pop.tif", b"not a tiff"), 422, "file")
+    assert client.get("/layers").json() == [{"id": "town", "version": 1, "kind": "population", "file": "pop.tif"}]
+
+
+def town_tif(path: Path) -> bytes:
+    """5 km x 4 km at 20 m: 0.2 people per cell, 8 in the 600 m block at the centre."""
+    x = -2500.0 + 20.0 * (np.arange(250) + 0.5)
+    y = 2000.0 - 20.0 * (np.arange(200) + 0.5)
+    xx, yy = np.meshgrid(x, y)
+    people = np.where((np.abs(xx) < 300) & (np.abs(yy) < 300), 8.0, 0.2).astype(np.float32)
+    with rasterio.open(path, "w", driver="GTiff", width=250, height=200, count=1, dtype="float32",
+                       crs=CRS.from_user_input(TMERC).to_wkt(), transform=Affine(20.0, 0, -2500, 0, -20.0, 2000)) as d:
+        d.write(people, 1)
+    return path.read_bytes()
+
+
+def test_optimize_goes_around_the_block(make_client, tmp_path):
+    client = make_client()
+    assert upload(client, "population", "town", "pop.tif", town_tif(tmp_path / "t.tif")).status_code == 201
+    card = {**OMNI, "phases": ["climb", "sink", "hover", "transition"],
+            "parameters": {**OMNI["parameters"], "p1": 0.0}}
+    lat_s, lon_s, _ = FRAME.to_wgs84(-1500.0, 0.0, 0.0)
+    lat_g, lon_g, _ = FRAME.to_wgs84(1500.0, 0.0, 0.0)
+    body = {"start": [float(lon_s), float(lat_s)], "goal": [float(lon_g), float(lat_g)], "cards": [card],
+            "population": "town", "max_detour_pct": 25.0}
+    r = client.post("/routes/optimize", json=body)
+    assert r.status_code == 200, r.text
+    doc = r.json()
+    assert doc["summary"]["reduction_pct"] > 75.0
+    assert doc["summary"]["optimized_length_m"] <= 1.25 * doc["summary"]["direct_length_m"] + 1e-6
+    assert doc["route"]["features"][0]["properties"]["alt"] == 0.0
+    assert_names_field(client.post("/routes/optimize", json={**body, "resolution_m": 5.0, "max_detour_pct": 300.0,
+                                                              "goal": [11.5, 53.0]}), 413, "resolution_m")
+    assert_names_field(client.post("/routes/optimize", json={**body, "avoid": {"type": "Point"}}), 422, "avoid")

@@ -1,0 +1,102 @@
+"""``gisnoise exposure``: a written map, a population raster and buildings in other CRSs -> exposure.json."""
+
+import json
+import math
+
+import geopandas as gpd
+import numpy as np
+import rasterio
+import shapely
+from affine import Affine
+from click.testing import CliRunner
+from pyproj import CRS
+
+from gisnoise.cli.main import cli
+from gisnoise.flight import Trajectory
+from gisnoise.geo import LocalFrame, transformer
+from gisnoise.model import ModelCard, save
+
+LAT0, LON0 = 52.27, 10.52
+FRAME = LocalFrame(LAT0, LON0, 0.0)
+G0, HEIGHT = 70.0, 60.0
+UTM = CRS.from_epsg(32632)
+
+
+def run(*args):
+    return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
+
+
+def setup(tmp_path):
+    card = ModelCard(id="omni", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0)
+    cp = str(save(card, tmp_path / "omni.json"))
+    t = np.arange(0.0, 100.0 + 1e-9, 0.25)  # northwards at 20 m/s, n = -1000 ... 1000 m
+    lat, lon, h = FRAME.to_wgs84(0 * t, -1000.0 + 20.0 * t, np.full_like(t, HEIGHT))
+    traj = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t,
+                      power_w=np.full_like(t, 3000.0), phase=np.full(t.size, "horizontal"))
+    tp = tmp_path / "flight.csv"
+    traj.to_csv(tp)
+    x0, y0 = transformer(CRS.from_epsg(4326), UTM).transform(LON0, LAT0)
+    with rasterio.open(tmp_path / "pop.tif", "w", driver="GTiff", width=20, height=10, count=1, dtype="float32",
+                       crs=UTM.to_wkt(), transform=Affine(20.0, 0, x0 - 200.0, 0, -20.0, y0 + 100.0)) as dst:
+        dst.write(np.full((10, 20), 2.0, dtype=np.float32), 1)
+    gpd.GeoDataFrame({"residents": [20], "dwellings": [8], "height": [12.0]},
+                     geometry=[shapely.box(x0 + 50.0, y0 - 10.0, x0 + 70.0, y0 + 10.0)], crs=UTM
+                     ).to_file(tmp_path / "b.shp", engine="pyogrio")
+    r = run("contour", str(tp), "--card", cp, "--out", str(tmp_path / "map"), "--resolution", "20",
+            "--margin", "300", "--ground-height", "0", "--metrics", "LAmax,SEL")
+    assert r.exit_code == 0, r.output
+    return cp, str(tp)
+
+
+def test_exposure_of_a_written_map(tmp_path):
+    cp, tp = setup(tmp_path)
+    r = run("exposure", str(tmp_path / "map"), "--population", str(tmp_path / "pop.tif"),
+            "--buildings", str(tmp_path / "b.shp"), "--trajectory", tp, "--card", cp)
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "map" / "exposure.json").read_text())
+    assert doc["schema"] == "gisnoise/exposure/1"
+    assert set(doc["population"]["metrics"]) == {"LAmax", "SEL"}
+    assert doc["population"]["total_people"] == 400.0
+    assert doc["population"]["metrics"]["LAmax"]["people_without_level"] == 0.0
+    # the wall facing the track: 0.1 m in front of it, 4 m up; the track is 1 km long each way
+    b = doc["buildings"]["metrics"]["LAmax"]
+    lon, lat = b["most_exposed"]["lon"], b["most_exposed"]["lat"]
+    e, _, _ = FRAME.to_enu(lat, lon, 0.0)
+    assert 49.0 < float(e) < 51.0
+    assert b["peak_db_at_residents"] == b["peak_facade_db"]
+    assert abs(b["peak_facade_db"] - (G0 - 20 * math.log10(math.hypot(float(e), HEIGHT - 4.0) / 40.0))) < 0.1
+    assert (tmp_path / "map" / "exposure.md").read_text().startswith("# Exposure")
+
+
+def test_bad_input_is_one_line_and_keeps_what_is_stored(tmp_path):
+    cp, tp = setup(tmp_path)
+    r = run("exposure", str(tmp_path / "map"), "--population", str(tmp_path / "pop.tif"))
+    assert r.exit_code == 0
+    before = (tmp_path / "map" / "exposure.json").read_text()
+    for args, field in (
+        (["--buildings", str(tmp_path / "b.shp")], "trajectory"),
+        (["--population", str(tmp_path / "missing.tif")], "population"),
+        (["--population", str(tmp_path / "pop.tif"), "--classes", "50"], "--classes"),
+        (["--population", str(tmp_path / "pop.tif"), "--metrics", "Lden"], "Lden"),
+        ([], "population"),
+    ):
+        r = CliRunner().invoke(cli, ["-q", "exposure", str(tmp_path / "map"), *args])
+        assert r.exit_code == 2, (args, r.output)
+        assert field in r.output
+        assert (tmp_path / "map" / "exposure.json").read_text() == before
+
+
+def test_contour_writes_exposure_with_population_and_buildings(tmp_path):
+    cp, tp = setup(tmp_path)
+    r = run("contour", tp, "--card", cp, "--out", str(tmp_path / "m2"), "--resolution", "20", "--margin", "300",
+            "--ground-height", "0", "--metrics", "LAmax,SEL", "--population", str(tmp_path / "pop.tif"),
+            "--buildings", str(tmp_path / "b.shp"))
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "m2" / "exposure.json").read_text())
+    assert doc["population"]["total_people"] == 400.0
+    b = doc["buildings"]["metrics"]["LAmax"]
+    lon, lat = b["most_exposed"]["lon"], b["most_exposed"]["lat"]
+    e, _, _ = FRAME.to_enu(lat, lon, 0.0)
+    assert abs(b["peak_facade_db"] - (G0 - 20 * math.log10(math.hypot(float(e), HEIGHT - 4.0) / 40.0))) < 0.1

@@ -1,0 +1,127 @@
+"""Candidate routes on one grid: people above each level, person-dB and the ranking against closed form."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+from click.testing import CliRunner
+from pyproj import CRS
+from scipy.integrate import quad
+
+from gisnoise.cli.main import cli
+from gisnoise.errors import InputError
+from gisnoise.exposure import read_population
+from gisnoise.flight import Trajectory
+from gisnoise.geo import GridSpec, LocalFrame
+from gisnoise.model import ModelCard, save
+from gisnoise.planning import compare_routes, write_comparison
+
+LAT0, LON0 = 52.27, 10.52
+TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+FRAME = LocalFrame(LAT0, LON0, 0.0)
+G0, HEIGHT, HR = 70.0, 60.0, 1.5
+DENSITY = 0.01  # people per m^2 in the block (1 per 10 m x 10 m cell)
+BLOCK = 100.0  # half width of the square block at the origin, m
+
+
+def omni():
+    return ModelCard(id="omni", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0)
+
+
+def northwards(e):
+    t = np.arange(0.0, 2000.0 / 20.0 + 1e-9, 0.2)
+    lat, lon, h = FRAME.to_wgs84(np.full_like(t, e), -1000.0 + 20.0 * t, np.full_like(t, HEIGHT))
+    return Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t,
+                      power_w=np.full_like(t, 3000.0), phase=np.full(t.size, "horizontal"), source=f"e{e:g}")
+
+
+def lamax(x):
+    return G0 - 20 * math.log10(math.hypot(x, HEIGHT - HR) / 40.0)
+
+
+def block_population(path):
+    n = int(2 * BLOCK / 10.0)
+    with rasterio.open(path, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32",
+                       crs=CRS.from_user_input(TMERC).to_wkt(),
+                       transform=Affine(10.0, 0, -BLOCK, 0, -10.0, BLOCK)) as dst:
+        dst.write(np.full((n, n), DENSITY * 100.0, dtype=np.float32), 1)
+    return path
+
+
+@pytest.fixture(scope="module")
+def comparison(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cmp")
+    pop = read_population(block_population(d / "pop.tif"))
+    grid = GridSpec(TMERC, Affine(10.0, 0, -300.0, 0, -10.0, 150.0), 100, 30)  # x -300..700, y -150..150
+    cmp = compare_routes([northwards(0.0), northwards(400.0)], [omni()], population=pop, names=["over", "beside"],
+                         levels=(45.0, 50.0, 55.0, 60.0, 65.0), ground_h=0.0, grid=grid)
+    return cmp, d
+
+
+def test_people_above_each_level_and_person_db_equal_closed_form(comparison):
+    cmp, _ = comparison
+    rows = {r["route"]: r for r in cmp.doc["ranking"]}
+    side = 2 * BLOCK
+    for level in (45.0, 50.0, 55.0, 60.0, 65.0):
+        # over the block: the strip |x| < r(level), clipped to the block
+        r = math.sqrt(max((40.0 * 10 ** ((G0 - level) / 20)) ** 2 - (HEIGHT - HR) ** 2, 0.0))
+        over = DENSITY * side * 2 * min(r, BLOCK)
+        # 400 m east: the block spans x = 300 ... 500 m from the track
+        beside = DENSITY * side * max(0.0, min(r, 500.0) - 300.0)
+        assert rows["over"]["people_above"][f"{level:g}"] == pytest.approx(over, rel=0.01, abs=2.0)
+        assert rows["beside"]["people_above"][f"{level:g}"] == pytest.approx(beside, rel=0.01, abs=2.0)
+    dose_over = DENSITY * side * quad(lambda x: max(lamax(x) - 45.0, 0.0), -BLOCK, BLOCK)[0]
+    dose_beside = DENSITY * side * quad(lambda x: max(lamax(x) - 45.0, 0.0), 300.0, 500.0, points=[394.0])[0]
+    assert rows["over"]["person_db"] == pytest.approx(dose_over, rel=0.01)
+    assert rows["beside"]["person_db"] == pytest.approx(dose_beside, rel=0.02, abs=5.0)
+    assert cmp.best == "beside" and rows["beside"]["rank"] == 1 and rows["over"]["rank"] == 2
+
+
+def test_difference_map_is_the_other_route_minus_the_best(comparison):
+    cmp, d = comparison
+    paths = write_comparison(cmp, d / "out")
+    with rasterio.open(paths["difference"]) as src:
+        assert src.descriptions == ("over - beside",)
+        a = src.read(1)
+        row, col = src.index(0.0 + 1e-6, 0.0 - 1e-6)  # the cell at the block centre, x = 5, y = -5
+        x, y = src.xy(row, col)
+    expect = (G0 - 20 * math.log10(math.hypot(x, HEIGHT - HR) / 40)) - lamax(x - 400.0)
+    assert a[row, col] == pytest.approx(expect, abs=0.05)
+    doc = json.loads(paths["comparison"].read_text())
+    assert doc["ranking"][0]["route"] == "beside"
+    assert "| 1 | beside |" in paths["table"].read_text()
+
+
+def test_compare_refuses_bad_requests(comparison):
+    cmp, d = comparison
+    pop = read_population(d / "pop.tif")
+    with pytest.raises(InputError, match="at least two"):
+        compare_routes([northwards(0.0)], [omni()], population=pop)
+    with pytest.raises(InputError, match="rank_level"):
+        compare_routes([northwards(0.0), northwards(50.0)], [omni()], population=pop, rank_level_db=52.0)
+    with pytest.raises(InputError, match="population"):
+        compare_routes([northwards(0.0), northwards(50.0)], [omni()])
+
+
+def test_cli_compare(tmp_path):
+    cp = str(save(omni(), tmp_path / "omni.json"))
+    files = []
+    for e in (0.0, 400.0):
+        p = tmp_path / f"route{e:g}.csv"
+        northwards(e).to_csv(p)
+        files.append(str(p))
+    block_population(tmp_path / "pop.tif")
+    r = CliRunner().invoke(cli, ["-q", "compare", *files, "--card", cp, "--population", str(tmp_path / "pop.tif"),
+                                 "--out", str(tmp_path / "out"), "--resolution", "20", "--margin", "200",
+                                 "--ground-height", "0"], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    assert [x["route"] for x in doc["ranking"]] == ["route400", "route0"]
+    assert doc["ranking"][1]["people_above"]["55"] == pytest.approx(DENSITY * 200 * 200, rel=0.01)
+    r = CliRunner().invoke(cli, ["-q", "compare", files[0], "--card", cp, "--out", str(tmp_path / "o2")])
+    assert r.exit_code == 2 and "population" in r.output

@@ -1,0 +1,231 @@
+"""Exposure of a map against closed-form strip, annulus and façade values; real layer formats."""
+
+import math
+
+import numpy as np
+import pytest
+import rasterio
+from affine import Affine
+from pyproj import CRS
+
+from gisnoise.errors import InputError
+from gisnoise.exposure import (
+    LevelsRaster,
+    Population,
+    facade_levels,
+    fraction_above,
+    map_exposure,
+    read_buildings,
+    read_levels,
+    read_population,
+    write_exposure,
+)
+from gisnoise.flight import Trajectory
+from gisnoise.geo import GridSpec, LocalFrame, transformer
+from gisnoise.maps import evaluate_grid, write_geotiff
+from gisnoise.model import ModelCard
+
+LAT0, LON0 = 52.27, 10.52
+TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+FRAME = LocalFrame(LAT0, LON0, 0.0)
+G0 = 70.0  # level at 40 m, P_el = 1
+HEIGHT = 60.0  # flight height above flat ground at 0 m
+HR = 1.5  # map receiver height
+EDGES = [45.0, 50.0, 55.0, 60.0, 65.0]
+
+
+def omni_card(phase="horizontal"):
+    p = dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0)
+    return ModelCard(id=f"omni-{phase}", vehicle="test", phase=phase, ansatz="paper-offset", parameters=p,
+                     reference_power_w=3000.0)
+
+
+def flight(e, n, t, phase):
+    lat, lon, h = FRAME.to_wgs84(e, n, np.full_like(t, HEIGHT))
+    return Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t,
+                      power_w=np.full_like(t, 3000.0), phase=np.full(t.size, phase), source=phase)
+
+
+def flyover():
+    t = np.arange(0.0, 3000.0 / 20.0 + 1e-9, 0.2)  # 20 m/s, 4 m between samples, n = -1500 ... 1500 m
+    return flight(0 * t, -1500.0 + 20.0 * t, t, "horizontal")
+
+
+def radius_at(level_db, dz):
+    """Horizontal distance at which LAmax = level: G0 - 20 log10(sqrt(r^2 + dz^2) / 40)."""
+    d = 40.0 * 10 ** ((G0 - level_db) / 20.0)
+    return math.sqrt(max(d * d - dz * dz, 0.0))
+
+
+def grid(res, half_x, half_y):
+    nx, ny = int(2 * half_x / res), int(2 * half_y / res)
+    return GridSpec(TMERC, Affine(res, 0.0, -half_x, 0.0, -res, half_y), nx, ny)
+
+
+def as_levels(res):
+    return LevelsRaster(dict(res.bands), res.grid, res.units, dict(res.metadata))
+
+
+def uniform_population(path, crs, res, half_x, half_y, per_cell):
+    """A GeoTIFF of ``per_cell`` people in every cell, centred on the origin, in ``crs``."""
+    c = CRS.from_user_input(crs)
+    x0, y0 = transformer(CRS.from_user_input("EPSG:4326"), c).transform(LON0, LAT0)
+    nx, ny = int(2 * half_x / res), int(2 * half_y / res)
+    t = Affine(res, 0.0, x0 - half_x, 0.0, -res, y0 + half_y)
+    with rasterio.open(path, "w", driver="GTiff", width=nx, height=ny, count=1, dtype="float32", crs=c.to_wkt(),
+                       transform=t, nodata=-1.0) as dst:
+        dst.write(np.full((ny, nx), per_cell, dtype=np.float32), 1)
+    return path
+
+
+@pytest.fixture(scope="module")
+def flyover_map():
+    traj = flyover()
+    res = evaluate_grid(traj, [omni_card()], grid(10.0, 1000.0, 350.0), ground_h=0.0, metrics=("LAmax",))
+    return traj, res
+
+
+@pytest.mark.parametrize("crs", [TMERC, "EPSG:32632", "EPSG:3035"])
+def test_uniform_density_under_flyover_equals_strip_areas(flyover_map, tmp_path, crs):
+    """People in each LAmax class = density x 2 (r_hi - r_lo) x along-track length, within 1 %.
+
+    The population raster (10 m cells, 0.25 people each: 2500 per km^2) covers |x| <= 900 m,
+    |y| <= 300 m around the middle of a 3 km track, so every point's closest approach lies
+    on the track; it is written in the map's CRS, in UTM 32N and in ETRS89-LAEA.
+    """
+    traj, res = flyover_map
+    density = 0.25 / 100.0  # people per m^2
+    pop = read_population(uniform_population(tmp_path / "pop.tif", crs, 10.0, 900.0, 300.0, 0.25))
+    doc = map_exposure(as_levels(res), population=pop, edges=EDGES)
+    m = doc["population"]["metrics"]["LAmax"]
+    assert m["people_without_level"] == 0.0
+    for j, c in enumerate(m["classes"]):
+        r_lo = radius_at(c["from_db"], HEIGHT - HR)
+        r_hi = radius_at(c["to_db"], HEIGHT - HR) if c["to_db"] is not None else 0.0
+        expect = density * 2 * (r_lo - r_hi) * 600.0
+        assert c["people"] == pytest.approx(expect, rel=0.01), (j, c)
+    # people above each level: the cumulative sum; total preserved
+    assert doc["population"]["total_people"] == pytest.approx(density * 1800 * 600, rel=1e-6)
+    above = m["above"]
+    assert above[0]["people"] == pytest.approx(density * 2 * radius_at(45.0, HEIGHT - HR) * 600.0, rel=0.01)
+
+
+def test_area_above_each_level_is_strip_width_times_map_length(flyover_map):
+    traj, res = flyover_map
+    doc = map_exposure(as_levels(res), population=Population(np.zeros((1, 1)), Affine.identity(),
+                                                              CRS.from_user_input(TMERC)), edges=EDGES)
+    # the map is 700 m along track; the ends of the 3 km track are far outside it
+    for a in doc["area_above"]["LAmax"]:
+        expect = 2 * radius_at(a["level_db"], HEIGHT - HR) * 700.0
+        assert a["area_m2"] == pytest.approx(expect, rel=0.01)
+
+
+def test_hover_over_uniform_density_gives_annulus_areas(tmp_path):
+    t = np.arange(0.0, 60.0 + 1e-9, 1.0)
+    traj = flight(0 * t, 0 * t, t, "hover")
+    res = evaluate_grid(traj, [omni_card("hover")], grid(10.0, 800.0, 800.0), ground_h=0.0, metrics=("LAmax",))
+    pop = read_population(uniform_population(tmp_path / "pop.tif", "EPSG:32632", 10.0, 760.0, 760.0, 0.25))
+    doc = map_exposure(as_levels(res), population=pop, edges=EDGES)
+    density = 0.25 / 100.0
+    for c in doc["population"]["metrics"]["LAmax"]["classes"]:
+        r_lo = radius_at(c["from_db"], HEIGHT - HR)
+        r_hi = radius_at(c["to_db"], HEIGHT - HR) if c["to_db"] is not None else 0.0
+        assert r_lo < 760.0
+        assert c["people"] == pytest.approx(density * math.pi * (r_lo ** 2 - r_hi ** 2), rel=0.01), c
+
+
+def test_fraction_above_is_exact_for_a_linear_level():
+    # gradient along x only: the fraction is linear in the offset
+    assert fraction_above(60.0, 0.1, 0.0, 10.0, 60.25) == pytest.approx(0.25)
+    # along the diagonal (equal gradients): the corner triangle z^2 / (2ab)
+    assert fraction_above(60.0, 0.1, 0.1, 10.0, 61.0) == pytest.approx(0.0)
+    assert fraction_above(60.0, 0.1, 0.1, 10.0, 60.5) == pytest.approx(0.5 ** 2 / 2)
+    # Monte Carlo check of an oblique gradient
+    rng = np.random.default_rng(1)
+    u = rng.uniform(-5, 5, (200_000, 2))
+    lv = 60.0 + 0.3 * u[:, 0] - 0.1 * u[:, 1]
+    assert fraction_above(60.0, 0.3, -0.1, 10.0, 61.0) == pytest.approx(np.mean(lv > 61.0), abs=0.005)
+
+
+def box(cx, cy, w, d):
+    import shapely
+
+    return shapely.box(cx - w / 2, cy - d / 2, cx + w / 2, cy + d / 2)
+
+
+def buildings_layer(path, crs, polys, residents, dwellings, heights, driver=None):
+    import geopandas as gpd
+
+    df = gpd.GeoDataFrame({"residents": residents, "Dwellings": dwellings, "height": heights},
+                          geometry=list(polys), crs=crs)
+    df.to_file(path, driver=driver, engine="pyogrio")
+    return path
+
+
+@pytest.mark.parametrize("suffix,driver", [(".gpkg", "GPKG"), (".shp", "ESRI Shapefile")])
+def test_box_building_facade_level_equals_closed_form(tmp_path, suffix, driver):
+    """A 20 m x 20 m building with its near wall 50 m east of a straight flyover: LAmax at the
+    most exposed façade = G0 - 20 log10(d / 40), d from the nearest façade point (0.1 m in
+    front of the wall, 4 m above ground) to the track, within 0.1 dB."""
+    traj = flyover()
+    # the building in UTM 32N (another CRS than the local frame of the flight)
+    utm = CRS.from_user_input("EPSG:32632")
+    x0, y0 = transformer(CRS.from_user_input("EPSG:4326"), utm).transform(LON0, LAT0)
+    far = box(x0 - 300.0, y0 + 100.0, 12.0, 12.0)
+    path = buildings_layer(tmp_path / f"b{suffix}", utm, [box(x0 + 60.0, y0, 20.0, 20.0), far],
+                           [12, 3], [5, 1], [10.0, 7.0], driver=driver)
+    b = read_buildings(path)
+    assert b.n == 2 and b.fields == {"residents": "residents", "dwellings": "Dwellings", "height": "height"}
+    fl = facade_levels(b, traj, [omni_card()], ground_h=0.0)
+    pts = fl["points"]
+    # closed form: the track is the local meridian e = 0; each façade point's east offset
+    e, _, _ = FRAME.to_enu(pts.lat, pts.lon, np.zeros_like(pts.lat))
+    for k in range(2):
+        sel = pts.building == k
+        emin = np.min(np.abs(e[sel]))
+        closed = G0 - 20 * math.log10(math.hypot(emin, HEIGHT - 4.0) / 40.0)
+        assert fl["buildings"]["LAmax"]["level"][k] == pytest.approx(closed, abs=0.1)
+    # the near building's most exposed wall faces the track (west), 49.9 m from it in UTM metres
+    p = fl["buildings"]["LAmax"]["point"][0]
+    assert abs(e[p]) == pytest.approx(np.min(np.abs(e[pts.building == 0])), abs=1e-9)
+    assert 49.0 < abs(e[p]) < 51.0
+    # 4 walls of 20 m cut into 5 m segments
+    assert int(np.sum(pts.building == 0)) == 16
+
+
+def test_exposure_document_with_buildings_and_population(flyover_map, tmp_path):
+    traj, res = flyover_map
+    utm = CRS.from_user_input("EPSG:32632")
+    x0, y0 = transformer(CRS.from_user_input("EPSG:4326"), utm).transform(LON0, LAT0)
+    path = buildings_layer(tmp_path / "b.geojson", "EPSG:4326",
+                           [box(*transformer(utm, CRS.from_user_input("EPSG:4326")).transform(x0 + 60, y0), 2e-4, 2e-4)],
+                           [10], [4], [9.0], driver="GeoJSON")
+    pop = read_population(uniform_population(tmp_path / "pop.tif", "EPSG:32632", 10.0, 900.0, 300.0, 0.25))
+    write_geotiff(res, tmp_path / "map" / "levels.tif")
+    levels = read_levels(tmp_path / "map" / "levels.tif")
+    doc = map_exposure(levels, population=pop, buildings=read_buildings(path), trajectory=traj,
+                       cards=[omni_card()], edges=EDGES)
+    paths = write_exposure(doc, tmp_path / "map")
+    text = paths["table"].read_text()
+    assert "| 60-65 |" in text and "peak façade level" in text
+    b = doc["buildings"]["metrics"]["LAmax"]
+    assert sum(c["residents"] for c in b["classes"]) == 10
+    assert b["peak_db_at_dwellings"] == b["peak_facade_db"]
+
+
+def test_bad_layers_are_refused_in_one_line(tmp_path):
+    import geopandas as gpd
+    import shapely
+
+    with pytest.raises(InputError, match="population"):
+        read_population(tmp_path / "none.tif")
+    p = tmp_path / "pts.gpkg"
+    gpd.GeoDataFrame({"residents": [1]}, geometry=[shapely.Point(LON0, LAT0)], crs="EPSG:4326").to_file(p)
+    with pytest.raises(InputError, match="not a polygon"):
+        read_buildings(p)
+    q = tmp_path / "neg.gpkg"
+    gpd.GeoDataFrame({"residents": [-3]}, geometry=[box(LON0, LAT0, 1e-4, 1e-4)], crs="EPSG:4326").to_file(q)
+    with pytest.raises(InputError, match="residents"):
+        read_buildings(q)
+    with pytest.raises(InputError, match="dwellings"):
+        read_buildings(q.with_name("neg.gpkg"), dwellings="flats")

@@ -1,0 +1,136 @@
+"""A quieter route: a synthetic town with a dense block between two pads."""
+
+import math
+
+import numpy as np
+import pytest
+import rasterio
+import shapely
+from affine import Affine
+from pyproj import CRS
+
+from gisnoise.errors import InputError
+from gisnoise.exposure import read_population
+from gisnoise.flight import GRAVITY, VehicleModel, read_route
+from gisnoise.geo import LocalFrame, transformer
+from gisnoise.model import ModelCard
+from gisnoise.planning import optimize_route
+
+LAT0, LON0 = 52.27, 10.52
+FRAME = LocalFrame(LAT0, LON0, 0.0)
+G0 = 70.0
+BLOCK = 300.0  # half side of the dense block at the origin, m
+DENSE, SPARSE = 0.02, 0.0005  # people per m^2
+
+
+def omni():
+    return ModelCard(id="omni", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=G0, p1=0.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0, phases=("climb", "sink", "hover", "transition"))
+
+
+def town(path):
+    """20 m cells in a local transverse Mercator: sparse everywhere, dense in the block."""
+    crs = CRS.from_proj4(f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m")
+    n_x, n_y = 250, 200  # 5 km x 4 km
+    x = -2500.0 + 20.0 * (np.arange(n_x) + 0.5)
+    y = 2000.0 - 20.0 * (np.arange(n_y) + 0.5)
+    xx, yy = np.meshgrid(x, y)
+    dens = np.where((np.abs(xx) < BLOCK) & (np.abs(yy) < BLOCK), DENSE, SPARSE)
+    with rasterio.open(path, "w", driver="GTiff", width=n_x, height=n_y, count=1, dtype="float32", crs=crs.to_wkt(),
+                       transform=Affine(20.0, 0, -2500.0, 0, -20.0, 2000.0)) as d:
+        d.write((dens * 400.0).astype(np.float32), 1)
+    return path
+
+
+def pad(e):
+    lat, lon, _ = FRAME.to_wgs84(e, 0.0, 0.0)
+    return (float(lon), float(lat))
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory):
+    pop = read_population(town(tmp_path_factory.mktemp("town") / "pop.tif"))
+    return optimize_route(pad(-1500.0), pad(1500.0), [omni()], population=pop, altitude_m=60.0, max_detour_pct=25.0,
+                          resolution_m=40.0, eval_resolution_m=20.0)
+
+
+def test_optimized_route_goes_around_the_block_and_halves_the_people_above_55(result):
+    s = result.summary
+    # corridor: LAmax = 55 dB(A) at sqrt(r^2 + 58.5^2) = 40 m x 10^(15/20)
+    assert s["corridor_half_width_m"] == pytest.approx(math.sqrt((40 * 10 ** 0.75) ** 2 - 58.5 ** 2), abs=6.0)
+    # the direct route's people above 55 dB: the dense block's strip of half-width r, re-evaluated
+    r = s["corridor_half_width_m"]
+    strip = 2 * BLOCK * 2 * r * DENSE
+    assert s["people_above_55_direct"] > 0.9 * strip
+    # the optimized route keeps the whole corridor off the block: only sparse people remain
+    assert s["people_above_55_optimized"] < 0.25 * s["people_above_55_direct"]
+    assert s["reduction_pct"] > 75.0
+    traj = read_route(result.optimized_doc).trajectory
+    e, n, _ = FRAME.to_enu(traj.lat, traj.lon, np.zeros_like(traj.lat))
+    inside = (np.abs(e) < BLOCK) & (np.abs(n) < BLOCK)
+    assert not inside.any()
+
+
+def test_optimized_route_keeps_turn_radius_and_detour_limit(result):
+    s = result.summary
+    assert s["optimized_length_m"] <= 1.25 * s["direct_length_m"] + 1e-6
+    veh = VehicleModel()
+    radius = veh.cruise_speed_m_s ** 2 / (GRAVITY * math.tan(math.radians(veh.max_bank_deg)))
+    assert s["turn_radius_m"] == pytest.approx(radius)
+    traj = read_route(result.optimized_doc).trajectory
+    wing = (traj.phase == "horizontal") & (np.abs(traj.roll) > 1.0)
+    speed = np.hypot(*np.gradient(np.stack(FRAME.to_enu(traj.lat, traj.lon, traj.h)[:2]), traj.t, axis=1))
+    r_flown = speed[wing] ** 2 / (GRAVITY * np.tan(np.radians(np.abs(traj.roll[wing]))))
+    assert wing.any() and r_flown.min() >= 0.97 * radius
+    # every leg holds its fly-by turns at that radius
+    x, y = transformer(CRS.from_epsg(4326), CRS.from_epsg(32632)).transform(*result.lonlat.T)
+    p = np.column_stack([x, y])
+    legs = np.diff(p, axis=0)
+    lengths = np.hypot(*legs.T)
+    ang = np.arccos(np.clip(np.sum(legs[1:] * legs[:-1], axis=1) / (lengths[1:] * lengths[:-1]), -1, 1))
+    tan_len = np.concatenate([[0.0], radius * np.tan(ang / 2), [0.0]])
+    assert np.all(tan_len[:-1] + tan_len[1:] <= lengths * 1.001)
+
+
+def test_no_fly_zone_and_bad_requests(tmp_path):
+    pop = read_population(town(tmp_path / "pop.tif"))
+    # a no-fly zone over the whole block's south side forces the north
+    lat, lon, _ = FRAME.to_wgs84(np.array([-800.0, 800.0, 800.0, -800.0]), np.array([-1500.0, -1500.0, 450.0, 450.0]),
+                                 np.zeros(4))
+    nofly = shapely.Polygon(np.column_stack([lon, lat]))
+    out = optimize_route(pad(-1500.0), pad(1500.0), [omni()], population=pop, avoid=[nofly], max_detour_pct=25.0,
+                         resolution_m=50.0, eval_resolution_m=25.0)
+    traj = read_route(out.optimized_doc).trajectory
+    e, n, _ = FRAME.to_enu(traj.lat, traj.lon, np.zeros_like(traj.lat))
+    assert not shapely.intersects(shapely.LineString(np.column_stack([traj.lon, traj.lat])), nofly)
+    assert n[np.abs(e) < 100].min() > 450.0
+    with pytest.raises(InputError, match="apart"):
+        optimize_route(pad(-100.0), pad(100.0), [omni()], population=pop)
+    with pytest.raises(InputError, match="no-fly"):
+        optimize_route(pad(-1500.0), pad(0.0), [omni()], population=pop, avoid=[nofly])
+
+
+def test_cli_route_optimize_writes_flyable_waypoints(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from gisnoise.cli.main import cli
+    from gisnoise.model import save
+
+    cp = str(save(omni(), tmp_path / "omni.json"))
+    town(tmp_path / "pop.tif")
+    (s_lon, s_lat), (g_lon, g_lat) = pad(-1500.0), pad(1500.0)
+    r = CliRunner().invoke(cli, ["-q", "route", "optimize", "--from", f"{s_lon},{s_lat}", "--to", f"{g_lon},{g_lat}",
+                                 "--card", cp, "--population", str(tmp_path / "pop.tif"), "--out",
+                                 str(tmp_path / "out"), "--max-detour", "25", "--resolution", "50"],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    summary = json.loads((tmp_path / "out" / "optimize.json").read_text())
+    assert summary["reduction_pct"] > 75.0
+    traj = read_route(tmp_path / "out" / "route.geojson").trajectory  # the waypoints fly
+    assert traj.phase[0] == "climb" and traj.phase[-1] == "sink"
+    r = CliRunner().invoke(cli, ["-q", "route", "optimize", "--from", "10.5", "--to", "10.6,52.3", "--card", cp,
+                                 "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "o2")])
+    assert r.exit_code == 2 and "--from" in r.output
