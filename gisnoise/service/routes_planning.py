@@ -208,7 +208,8 @@ def _compare(req: CompareRequest, state: State) -> tuple[bytes, str]:
 
     try:
         grid = grid_for_points(np.concatenate([t.lon for t in trajs]), np.concatenate([t.lat for t in trajs]),
-                               req.grid.resolution_m, req.grid.margin_m, req.grid.crs)
+                               req.grid.resolution_m, 500.0 if req.grid.margin_m is None else req.grid.margin_m,
+                               req.grid.crs)  # the CLI compare's default margin
     except GridTooLargeError as exc:
         raise GridTooLargeError(str(exc), field="grid.resolution_m") from None
     except InputError as exc:
