@@ -141,8 +141,9 @@ def read_hemisphere_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
     for n, r in enumerate(rows, start=2):
         if str(r["band"]).strip().lower() == "overall":
             continue
+        band = _band(path, r["band"])
         try:
-            key = (_band(path, r["band"]), float(r["phi_deg"]), float(r["theta_deg"]))
+            key = (band, float(r["phi_deg"]), float(r["theta_deg"]))
             v = float(r[lvl])
         except (TypeError, ValueError):
             raise _err(path, f"line {n}: non-numeric angle or level", lvl) from None
