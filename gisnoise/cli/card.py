@@ -9,6 +9,7 @@ import click
 import numpy as np
 
 from gisnoise.jsonio import to_jsonable
+from gisnoise.model import HemisphereCard, import_hemisphere
 from gisnoise.model import cards as gcards
 
 
@@ -31,6 +32,9 @@ def show(card: str, as_json: bool, p_el: float) -> None:
         click.echo(gcards.dumps(c), nl=False)
         return
     model = c.model
+    if isinstance(c, HemisphereCard):
+        _show_hemisphere(c)
+        return
     click.echo(f"card      {c.id}")
     click.echo(f"vehicle   {c.vehicle}")
     click.echo(f"phases    {', '.join(c.served_phases)}")
@@ -68,6 +72,69 @@ def show(card: str, as_json: bool, p_el: float) -> None:
         click.echo("provenance " + json.dumps(to_jsonable(c.provenance)))
     if c.notes:
         click.echo(f"notes     {c.notes}")
+
+
+def _show_hemisphere(c: HemisphereCard) -> None:
+    """Summary of a measured hemisphere card."""
+    click.echo(f"card      {c.id} (measured hemisphere)")
+    click.echo(f"vehicle   {c.vehicle}")
+    click.echo(f"phases    {', '.join(c.served_phases)}")
+    cond = ", ".join(f"{k} {v:g}" if isinstance(v, (int, float)) else f"{k} {v}" for k, v in c.condition.items())
+    click.echo(f"condition {cond or 'not stated'}")
+    click.echo(f"table     {c.phi_deg.size} phi x {c.theta_deg.size} theta nodes (phi {c.phi_deg[0]:g}..{c.phi_deg[-1]:g}, "
+               f"theta {c.theta_deg[0]:g}..{c.theta_deg[-1]:g} deg), {c.bands_hz.size} bands "
+               f"{c.bands_hz[0]:g}-{c.bands_hz[-1]:g} Hz at radius {c.reference_distance_m:g} m")
+    click.echo(f"measured  {int(c.measured.sum())} of {c.measured.size} nodes (the others filled)")
+    a = c.atmosphere
+    click.echo(f"atmosphere {a['temperature_c']:g} C, {a['humidity_pct']:g} % RH, {a['pressure_kpa']:g} kPa "
+               "(back-propagation; ISO 9613-1 absorption on the map)")
+    w = c.sound_power_db()
+    click.echo(f"sound power {w['overall_z']:.1f} dB, {w['overall_a']:.1f} dB(A) (re 1 pW, table integrated)")
+    top = c.loudest_direction()
+    click.echo(f"max level {top['level_db_a']:.1f} dB(A) at {c.reference_distance_m:g} m, phi {top['phi_t_deg']:g} deg "
+               f"({'ahead' if top['phi_t_deg'] < 0 else 'behind' if top['phi_t_deg'] > 0 else 'below'}), "
+               f"theta {top['theta_t_deg']:g} deg ({'measured' if top['measured'] else 'filled'} node)")
+    if c.notes:
+        click.echo(f"notes     {c.notes}")
+
+
+@command.command("import-hemisphere")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Card file to write (JSON).")
+@click.option("--id", "card_id", default=None, help="Card id (default: the file's stem).")
+@click.option("--vehicle", default=None, help="Vehicle name (default: from a Salford file name).")
+@click.option("--phase", default="horizontal", show_default=True, help="Flight phase the hemisphere stands for.")
+@click.option("--also-phase", "also", multiple=True, help="Further phases the card serves (repeatable).")
+@click.option("--radius", "radius", type=float, default=None,
+              help="Radius of the table, m (default: the file's, else 1 m).")
+@click.option("--temperature", type=float, default=None,
+              help="Temperature of the back-propagation, C (Salford files: 25).")
+@click.option("--humidity", type=float, default=None, help="Relative humidity of the back-propagation, %.")
+@click.option("--pressure", type=float, default=101.325, show_default=True, help="Static pressure, kPa.")
+@click.option("--measured-theta-max", type=float, default=60.0, show_default=True,
+              help="Without a 'measured' column: nodes with |theta| above this were filled (deg).")
+@click.option("--power", type=float, default=None, help="Electric power of the flight condition, W (recorded).")
+@click.option("--force", is_flag=True, help="Overwrite --out.")
+def import_hemisphere_cmd(file: str, out: str, card_id: str | None, vehicle: str | None, phase: str,
+                          also: tuple[str, ...], radius: float | None, temperature: float | None,
+                          humidity: float | None, pressure: float, measured_theta_max: float, power: float | None,
+                          force: bool) -> None:
+    """Make a hemisphere card from a measured hemisphere FILE: a Salford xlsx or a long-form CSV.
+
+    CSV columns: band (nominal one-third-octave Hz), phi_deg (along the track, negative ahead),
+    theta_deg (across it, positive starboard), level_db (SPL at the radius), optional radius_m
+    and measured (1/0).  Angles as in the Salford hemispheres: 0 straight below, +-90 at the horizon.
+    """
+    atm = None
+    if (temperature is None) != (humidity is None):
+        raise click.UsageError("give both --temperature and --humidity")
+    if temperature is not None and humidity is not None:
+        atm = {"temperature_c": temperature, "humidity_pct": humidity, "pressure_kpa": pressure}
+    c = import_hemisphere(file, card_id=card_id, vehicle=vehicle, phase=phase, phases=also, radius_m=radius,
+                          atmosphere=atm, measured_theta_max=measured_theta_max, reference_power_w=power)
+    path = gcards.save(c, out, overwrite=force)
+    click.echo(f"wrote {path}: {c.phi_deg.size} x {c.theta_deg.size} nodes, {c.bands_hz.size} bands, "
+               f"{int(c.measured.sum())} nodes measured")
 
 
 @command.command("plot")

@@ -314,7 +314,7 @@ class HemisphereCard(ModelCard):
     def to_dict(self) -> dict[str, Any]:
         return {
             "schema": HEMISPHERE_SCHEMA, "id": self.id, "vehicle": self.vehicle, "phase": self.phase,
-            "phases": list(self.phases), "ansatz": HEMISPHERE_ANSATZ,
+            "phases": list(self.phases), "ansatz": HEMISPHERE_ANSATZ, "parameters": {},
             "reference_power_w": float(self.reference_power_w),
             "reference_distance_m": float(self.reference_distance_m),
             "angle_convention": "phi_t = atan2(-x_b, z_b) along the track (negative ahead), "
