@@ -27,19 +27,6 @@ from gisnoise.model.cards import (
     save,
     with_parameters,
 )
-from gisnoise.model.hemisphere import (
-    HEMISPHERE_ANSATZ,
-    HEMISPHERE_SCHEMA,
-    HemisphereCard,
-    hemisphere_from_dict,
-    table_angles,
-)
-from gisnoise.model.hemisphere_io import (
-    SALFORD_ATMOSPHERE,
-    import_hemisphere,
-    read_hemisphere_csv,
-    read_salford_xlsx,
-)
 from gisnoise.model.effects import (
     ATMOSPHERIC_ABSORPTION,
     BACKGROUND_EVENT,
@@ -69,6 +56,19 @@ from gisnoise.model.effects import (
     series_ids,
     shifted_inputs,
     speed_of_sound,
+)
+from gisnoise.model.hemisphere import (
+    HEMISPHERE_ANSATZ,
+    HEMISPHERE_SCHEMA,
+    HemisphereCard,
+    hemisphere_from_dict,
+    table_angles,
+)
+from gisnoise.model.hemisphere_io import (
+    SALFORD_ATMOSPHERE,
+    import_hemisphere,
+    read_hemisphere_csv,
+    read_salford_xlsx,
 )
 
 __all__ = [

@@ -186,7 +186,7 @@ def from_dict(doc: Mapping[str, Any], *, source: str = "model card") -> ModelCar
         raise CardError(f"{source}: expected a JSON object", field="schema")
     schema = doc.get("schema")
     if isinstance(schema, str) and schema in _CARD_KINDS:
-        return _CARD_KINDS[schema](doc, source=source)  # type: ignore[no-any-return]
+        return _CARD_KINDS[schema](doc, source=source)
     if not isinstance(schema, str) or not schema.startswith(SCHEMA_PREFIX):
         raise SchemaVersionError(
             f"{source}: field 'schema' must be '{SCHEMA}', got {schema!r} (not a model card?)", field="schema"

@@ -207,12 +207,12 @@ class HemisphereCard(ModelCard):
     @property
     def absorption_db_m(self) -> np.ndarray:
         """ISO 9613-1 absorption of each band in the card's atmosphere, dB/m."""
-        return self._weighted[1]  # type: ignore[attr-defined,no-any-return]
+        return self._weighted[1]  # type: ignore[attr-defined]
 
     @property
     def a_weighted_db(self) -> np.ndarray:
         """A-weighted band levels at the radius, ``(bands, phi, theta)``."""
-        return self._weighted[0]  # type: ignore[attr-defined,no-any-return]
+        return self._weighted[0]  # type: ignore[attr-defined]
 
     @property
     def overall_a_db(self) -> np.ndarray:
@@ -275,7 +275,7 @@ class HemisphereCard(ModelCard):
     @property
     def model(self) -> Ansatz:
         """The card's table as an ansatz without parameters (not in the registry)."""
-        return self._ansatz  # type: ignore[attr-defined,no-any-return]
+        return self._ansatz  # type: ignore[attr-defined]
 
     # ------------------------------------------------------------------ summary
     def sound_power_db(self) -> dict[str, float]:

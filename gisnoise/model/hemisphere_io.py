@@ -69,7 +69,7 @@ def read_salford_xlsx(path: str | os.PathLike[str]) -> dict[str, Any]:
     """The tables of a Salford hemisphere workbook: ``phi_deg``, ``theta_deg``, ``bands_hz``, ``levels_db``
     ``(bands, phi, theta)``, ``overall_db`` (``band_Overall`` or None), ``swl_db`` (band -> dB)."""
     try:
-        import openpyxl  # type: ignore[import-untyped]
+        import openpyxl
     except ImportError:
         raise CardError("reading xlsx hemispheres needs openpyxl (pip install 'gisnoise[hemisphere]'); "
                         "or give the CSV long form", field="file") from None
@@ -100,7 +100,7 @@ def read_salford_xlsx(path: str | os.PathLike[str]) -> dict[str, Any]:
             raise _err(path, f"sheet {name!r}: non-numeric angle or level", f"sheet {name}") from None
         if phi is None:
             phi, theta = ph, th
-        elif not (np.array_equal(ph, phi) and np.array_equal(th, theta)):
+        elif not (np.array_equal(ph, phi) and theta is not None and np.array_equal(th, theta)):
             raise _err(path, f"sheet {name!r}: angles differ from the first band's", f"sheet {name}")
         tag = name.removeprefix("band_")
         if tag.lower() == "overall":
