@@ -202,3 +202,30 @@ def test_summary_sound_power_near_the_file(card):
     assert card.sound_power_db()["overall_z"] == pytest.approx(91.0, abs=1.0)
     top = card.loudest_direction()
     assert top["level_db_a"] == pytest.approx(float(card.overall_a_db.max()))
+
+
+# --------------------------------------------------------------------------- conversions
+
+
+def test_fit_of_the_paper_ansatz_and_sampling_it_back(card):
+    from gisnoise.model import fit_hemisphere, node_directions, sample_card
+
+    fit = fit_hemisphere(card)
+    st = fit.statistics
+    assert fit.ansatz == "paper-offset" and st["n_nodes"] == int(card.measured.sum()) == 135
+    # the stated residual is the RMS over the measured nodes of fitted minus table levels at 40 m
+    phi, theta = node_directions(card.phi_deg, card.theta_deg)
+    m = card.measured
+    x = fit.inputs(np.full(m.sum(), 40.0), phi[m], theta[m], fit.reference_power_w)
+    model = fit.level(x, background=False)
+    table = card.node_levels(40.0)[m]
+    assert st["residual_rms_db"] == pytest.approx(float(np.sqrt(np.mean((model - table) ** 2))), rel=1e-9)
+    assert st["residual_rms_db"] < 2.0  # a smooth directivity: the ansatz holds it to about a dB
+    assert abs(float(np.mean(model - table))) < 0.05  # least squares with a free level: unbiased
+    # sampling the fitted card on the hemisphere's grid at 40 m gives the fitted values at the nodes
+    back = sample_card(fit, phi_deg=card.phi_deg, theta_deg=card.theta_deg, radius_m=40.0)
+    np.testing.assert_allclose(back.levels_db[0][m], model, atol=1e-9)
+    np.testing.assert_allclose(back.node_levels(40.0)[m], model, atol=0.01)  # A(1 kHz) = 0, no absorption at r0
+    a_phi, a_theta = np.radians(30.0), np.radians(-50.0)  # and between nodes it stays near the fitted card
+    assert level(back, 40.0, a_phi, a_theta) == pytest.approx(
+        float(fit.level(fit.inputs(40.0, a_phi, a_theta, fit.reference_power_w), background=False)), abs=0.3)

@@ -9,7 +9,7 @@ import click
 import numpy as np
 
 from gisnoise.jsonio import to_jsonable
-from gisnoise.model import HemisphereCard, import_hemisphere
+from gisnoise.model import HemisphereCard, fit_hemisphere, import_hemisphere, sample_card
 from gisnoise.model import cards as gcards
 
 
@@ -135,6 +135,37 @@ def import_hemisphere_cmd(file: str, out: str, card_id: str | None, vehicle: str
     path = gcards.save(c, out, overwrite=force)
     click.echo(f"wrote {path}: {c.phi_deg.size} x {c.theta_deg.size} nodes, {c.bands_hz.size} bands, "
                f"{int(c.measured.sum())} nodes measured")
+
+
+@command.command("fit-hemisphere")
+@click.argument("hemisphere", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Card file to write (JSON).")
+@click.option("--distance", type=float, default=40.0, show_default=True,
+              help="Distance at which the table's levels are fitted, m.")
+@click.option("--force", is_flag=True, help="Overwrite --out.")
+def fit_hemisphere_cmd(hemisphere: str, out: str, distance: float, force: bool) -> None:
+    """Fit the paper ansatz (paper-offset) to the measured nodes of a HEMISPHERE card; prints the residual."""
+    h = gcards.load(hemisphere)
+    if not isinstance(h, HemisphereCard):
+        raise click.BadParameter("not a hemisphere card", param_hint="HEMISPHERE")
+    c = fit_hemisphere(h, distance_m=distance)
+    path = gcards.save(c, out, overwrite=force)
+    st = c.statistics
+    click.echo(f"wrote {path}: residual RMS {st['residual_rms_db']:.2f} dB, max {st['residual_max_db']:.2f} dB "
+               f"over {st['n_nodes']} measured nodes at {distance:g} m")
+
+
+@command.command("sample-hemisphere")
+@click.argument("card", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Hemisphere card to write.")
+@click.option("--p-el", "p_el", type=float, default=1.0, show_default=True, help="Nondimensional power.")
+@click.option("--radius", type=float, default=None, help="Radius, m (default: the card's reference distance).")
+@click.option("--force", is_flag=True, help="Overwrite --out.")
+def sample_hemisphere_cmd(card: str, out: str, p_el: float, radius: float | None, force: bool) -> None:
+    """Sample a parametric CARD into a hemisphere card (15 deg table angles) to compare it with a measured one."""
+    h = sample_card(gcards.load(card), p_el=p_el, radius_m=radius)
+    path = gcards.save(h, out, overwrite=force)
+    click.echo(f"wrote {path}: {h.phi_deg.size} x {h.theta_deg.size} nodes at {h.reference_distance_m:g} m")
 
 
 @command.command("plot")
