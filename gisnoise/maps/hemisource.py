@@ -49,6 +49,17 @@ N_DISTANCES = 2048
 
 numba = _kernels.numba
 
+_LUT_PER_DEG = 10
+_NLUT = 180 * _LUT_PER_DEG + 1
+_LN10_10 = math.log(10.0) / 10.0
+"""Bins per degree of the table-angle lookup (the lower node of each bin's start)."""
+
+
+def _lut(grid: np.ndarray) -> np.ndarray:
+    """Index of the last node at or below the start of every bin over -90..90 deg."""
+    edges = -90.0 + np.arange(180 * _LUT_PER_DEG + 1) / _LUT_PER_DEG
+    return np.clip(np.searchsorted(grid, edges, side="right") - 1, 0, max(grid.size - 2, 0)).astype(np.int64)
+
 
 def has_hemisphere(cards: Any) -> bool:
     """True when any card of the set is a hemisphere card."""
@@ -71,16 +82,14 @@ def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, n: int = N_DI
 
 if numba is not None:
     @numba.njit(cache=True, inline="always")
-    def _locate(grid: np.ndarray, off: int, n: int, a: float) -> tuple[int, float]:
+    def _locate(grid: np.ndarray, off: int, n: int, lut: np.ndarray, loff: int, a: float) -> tuple[int, float]:
         if n == 1:
             return 0, 0.0
-        lo = grid[off]
-        hi = grid[off + n - 1]
-        if a <= lo:
+        if a <= grid[off]:
             return 0, 0.0
-        if a >= hi:
+        if a >= grid[off + n - 1]:
             return n - 2, 1.0
-        i = 0
+        i = lut[loff + int((a + 90.0) * _LUT_PER_DEG)]
         while i < n - 2 and grid[off + i + 1] <= a:
             i += 1
         g0 = grid[off + i]
@@ -88,7 +97,7 @@ if numba is not None:
 
     @numba.njit(cache=True, nogil=True, error_model="numpy")
     def _hemi_kernel(rcv, src, R, kind, gain, coef, w, dmin2,
-                     phig, phio, phin, thg, tho, thn, tab, tabo, meas, measo, u0, du, nd,
+                     phig, phio, phin, thg, tho, thn, tab, tabo, meas, measo, u0, du, nd, plut, tlut,
                      emax, energy, efill):  # pragma: no cover - compiled
         nc = rcv.shape[0]
         ns = src.shape[0]
@@ -116,7 +125,7 @@ if numba is not None:
                     st = math.sin(theta) * coef[s, 4] - math.cos(theta) * coef[s, 5]
                     lv = (gain[s] * (1.0 + coef[s, 0] * sp * (theta + half_pi)) * (1.0 + coef[s, 3] * st)
                           - coef[s, 6] * math.log2(d2c) + coef[s, 7])
-                    e = 10.0 ** (lv / 10.0) + coef[s, 8]
+                    e = math.exp(lv * _LN10_10) + coef[s, 8]
                     fw = 0.0
                 else:
                     d = math.sqrt(max(d2, dmin2))
@@ -125,8 +134,8 @@ if numba is not None:
                     b = math.atan2(yb, zc) * rad
                     ni = phin[k]
                     nj = thn[k]
-                    i, wi = _locate(phig, phio[k], ni, a)
-                    j, wj = _locate(thg, tho[k], nj, b)
+                    i, wi = _locate(phig, phio[k], ni, plut, k * _NLUT, a)
+                    j, wj = _locate(thg, tho[k], nj, tlut, k * _NLUT, b)
                     i1 = min(i + 1, ni - 1)
                     j1 = min(j + 1, nj - 1)
                     x = (math.log(d) - u0) / du
@@ -147,7 +156,7 @@ if numba is not None:
                     if zb < 0.0 or a < phig[phio[k]] or a > phig[phio[k] + ni - 1] \
                             or b < thg[tho[k]] or b > thg[tho[k] + nj - 1]:
                         fw = 1.0
-                    e = 10.0 ** (lv / 10.0)
+                    e = math.exp(lv * _LN10_10)
                 if e > em:
                     em = e
                 en += w[s] * e
@@ -253,7 +262,8 @@ def evaluate_hemisphere_fast(req: MapRequest, opts: MapOptions) -> MapResult:
             cat(phig, float), np.array(phio or [0], np.int64), np.array(phin or [1], np.int64),
             cat(thg, float), np.array(tho or [0], np.int64), np.array(thn or [1], np.int64),
             cat(tabs, float), np.array(tabo or [0], np.int64), cat(meas, np.uint8),
-            np.array(measo or [0], np.int64), float(u0), float(du) or 1.0, N_DISTANCES)
+            np.array(measo or [0], np.int64), float(u0), float(du) or 1.0, N_DISTANCES,
+            cat([_lut(g) for g in phig], np.int64), cat([_lut(g) for g in thg], np.int64))
 
     n = grid.n_cells
     emax, energy, efill = np.zeros(n), np.zeros(n), np.zeros(n)
