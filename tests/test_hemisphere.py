@@ -229,3 +229,20 @@ def test_fit_of_the_paper_ansatz_and_sampling_it_back(card):
     a_phi, a_theta = np.radians(30.0), np.radians(-50.0)  # and between nodes it stays near the fitted card
     assert level(back, 40.0, a_phi, a_theta) == pytest.approx(
         float(fit.level(fit.inputs(40.0, a_phi, a_theta, fit.reference_power_w), background=False)), abs=0.3)
+
+
+def test_map_atmosphere_changes_the_absorption(card, sheets):
+    other = card.in_atmosphere(10.0, 30.0)
+    assert loads(dumps(other)) == other and other.atmosphere == card.atmosphere
+    phi, theta, _ = sheets["1000"]
+    i, j = phi.index(0.0), theta.index(0.0)
+    names, nominal = bands_of(sheets)
+    f = exact_frequency(nominal)
+    lb = np.array([sheets[k][2][i, j] for k in names]) + a_weighting(f)
+    d = 200.0
+    expect = 10 * np.log10(np.sum(10 ** ((lb - (d - 1.0) * atmospheric_absorption(f, 10.0, 30.0)) / 10))) \
+        - 20 * np.log10(d)
+    assert level(other, d, 0.0, -math.pi / 2) == pytest.approx(expect, abs=0.05)
+    assert abs(level(card, d, 0.0, -math.pi / 2) - expect) > 0.5  # the atmospheres differ measurably at 200 m
+    with pytest.raises(CardError, match="map_atmosphere.humidity_pct"):
+        card.in_atmosphere(10.0, 130.0)

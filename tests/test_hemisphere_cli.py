@@ -74,3 +74,13 @@ def test_bad_input_exits_2_naming_the_field(tmp_path):
     (tmp_path / "h.json").write_text(json.dumps(doc))
     r = CliRunner().invoke(cli, ["-q", "card", "show", str(tmp_path / "h.json")])
     assert r.exit_code == 2 and "phi_deg" in r.output
+
+
+def test_set_atmosphere_for_maps(m300_json, tmp_path):
+    out = tmp_path / "cold.json"
+    r = run("card", "set-atmosphere", str(m300_json), "--temperature", "5", "--humidity", "40", "--out", str(out))
+    assert r.exit_code == 0, r.output
+    c = cards.load(out)
+    assert c.propagation_atmosphere["temperature_c"] == 5.0 and c.atmosphere["temperature_c"] == 25.0
+    r = run("card", "show", str(out))
+    assert "on maps   5 C, 40 % RH" in r.output

@@ -87,7 +87,10 @@ def _show_hemisphere(c: HemisphereCard) -> None:
     click.echo(f"measured  {int(c.measured.sum())} of {c.measured.size} nodes (the others filled)")
     a = c.atmosphere
     click.echo(f"atmosphere {a['temperature_c']:g} C, {a['humidity_pct']:g} % RH, {a['pressure_kpa']:g} kPa "
-               "(back-propagation; ISO 9613-1 absorption on the map)")
+               "(back-propagation)")
+    m = c.propagation_atmosphere
+    click.echo(f"on maps   {m['temperature_c']:g} C, {m['humidity_pct']:g} % RH, {m['pressure_kpa']:g} kPa "
+               "(ISO 9613-1 absorption)")
     w = c.sound_power_db()
     click.echo(f"sound power {w['overall_z']:.1f} dB, {w['overall_a']:.1f} dB(A) (re 1 pW, table integrated)")
     top = c.loudest_direction()
@@ -135,6 +138,23 @@ def import_hemisphere_cmd(file: str, out: str, card_id: str | None, vehicle: str
     path = gcards.save(c, out, overwrite=force)
     click.echo(f"wrote {path}: {c.phi_deg.size} x {c.theta_deg.size} nodes, {c.bands_hz.size} bands, "
                f"{int(c.measured.sum())} nodes measured")
+
+
+@command.command("set-atmosphere")
+@click.argument("hemisphere", type=click.Path(dir_okay=False))
+@click.option("--temperature", type=float, required=True, help="Air temperature on the map, C.")
+@click.option("--humidity", type=float, required=True, help="Relative humidity on the map, %.")
+@click.option("--pressure", type=float, default=101.325, show_default=True, help="Static pressure, kPa.")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Card file to write.")
+@click.option("--force", is_flag=True, help="Overwrite --out.")
+def set_atmosphere_cmd(hemisphere: str, temperature: float, humidity: float, pressure: float, out: str,
+                       force: bool) -> None:
+    """Copy a HEMISPHERE card to propagate through another atmosphere on maps (ISO 9613-1 absorption)."""
+    h = gcards.load(hemisphere)
+    if not isinstance(h, HemisphereCard):
+        raise click.BadParameter("not a hemisphere card", param_hint="HEMISPHERE")
+    path = gcards.save(h.in_atmosphere(temperature, humidity, pressure), out, overwrite=force)
+    click.echo(f"wrote {path}: map atmosphere {temperature:g} C, {humidity:g} % RH, {pressure:g} kPa")
 
 
 @command.command("fit-hemisphere")

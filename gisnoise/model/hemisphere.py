@@ -28,7 +28,8 @@ level *at the receiver's distance* of the four surrounding nodes,
     L_node(d) = 10 lg sum_b 10^((L_b,node + A(f_b) - alpha_b (d - r0)) / 10) - 20 lg(d / r0)
 
 with ``A`` the A-weighting (IEC 61672-1) and ``alpha_b`` the ISO 9613-1 absorption (dB/m) at
-the band's exact mid-band frequency in the card's atmosphere.  It is exact at the nodes,
+the band's exact mid-band frequency in the map's atmosphere (``map_atmosphere``, by default the
+card's ``atmosphere``, the one the table was back-propagated with).  It is exact at the nodes,
 continuous, and between nodes lies between the values of the neighbouring nodes.  Outside the
 table's angle range the edge values hold (counted as filled).  The level does not depend on
 the electric power: the table stands for its stated flight condition.
@@ -38,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -119,6 +120,8 @@ class HemisphereCard(ModelCard):
     measured: Any = field(default_factory=lambda: np.zeros((0, 0), bool))
     atmosphere: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_ATMOSPHERE))
     condition: Mapping[str, Any] = field(default_factory=dict)
+    map_atmosphere: Mapping[str, float] | None = None
+    """Atmosphere of the propagation on the map (ISO 9613-1 absorption); None: the card's ``atmosphere``."""
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -137,6 +140,10 @@ class HemisphereCard(ModelCard):
         s(self, "measured", m)
         s(self, "atmosphere", dict(self.atmosphere))
         s(self, "condition", dict(self.condition))
+        if self.map_atmosphere is not None:
+            if not isinstance(self.map_atmosphere, Mapping):
+                _fail("field 'map_atmosphere' must be an object or null", "map_atmosphere")
+            s(self, "map_atmosphere", {**DEFAULT_ATMOSPHERE, **self.map_atmosphere})
         self._validate()
         s(self, "_weighted", self._a_weighted())
         s(self, "_ansatz", Ansatz(name=HEMISPHERE_ANSATZ, params=(), inputs=("d", "phi", "theta"),
@@ -184,20 +191,34 @@ class HemisphereCard(ModelCard):
         if self.measured.shape != shape[1:]:
             _fail(f"field 'measured' must have shape (phi, theta) = {shape[1:]}, got {self.measured.shape}",
                   "measured")
-        atm = self.atmosphere
-        for k, lo, hi in (("temperature_c", -60.0, 60.0), ("humidity_pct", 0.0, 100.0),
-                          ("pressure_kpa", 50.0, 120.0)):
-            v = atm.get(k)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= float(v) <= hi:
-                _fail(f"field 'atmosphere.{k}' must be a number in {lo:g}..{hi:g}, got {v!r}", f"atmosphere.{k}")
+        for name in ("atmosphere", "map_atmosphere"):
+            atm = getattr(self, name)
+            if atm is None:
+                continue
+            for k, lo, hi in (("temperature_c", -60.0, 60.0), ("humidity_pct", 0.0, 100.0),
+                              ("pressure_kpa", 50.0, 120.0)):
+                v = atm.get(k)
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= float(v) <= hi:
+                    _fail(f"field '{name}.{k}' must be a number in {lo:g}..{hi:g}, got {v!r}", f"{name}.{k}")
 
     # ------------------------------------------------------------------ physics
     def _a_weighted(self) -> tuple[np.ndarray, np.ndarray]:
         f = exact_frequency(self.bands_hz)
         la = self.levels_db + a_weighting(f)[:, None, None]
-        atm = self.atmosphere
+        atm = self.propagation_atmosphere
         alpha = atmospheric_absorption(f, atm["temperature_c"], atm["humidity_pct"], atm["pressure_kpa"])
         return la, np.asarray(alpha, dtype=float)
+
+    @property
+    def propagation_atmosphere(self) -> dict[str, float]:
+        """The atmosphere of the absorption on the map: ``map_atmosphere``, else the card's ``atmosphere``."""
+        return dict(self.map_atmosphere if self.map_atmosphere is not None else self.atmosphere)
+
+    def in_atmosphere(self, temperature_c: float, humidity_pct: float, pressure_kpa: float = 101.325
+                      ) -> HemisphereCard:
+        """A copy propagating through another atmosphere on the map (the table stays as back-propagated)."""
+        return replace(self, map_atmosphere={"temperature_c": float(temperature_c),
+                                             "humidity_pct": float(humidity_pct), "pressure_kpa": float(pressure_kpa)})
 
     @property
     def band_frequencies_hz(self) -> np.ndarray:
@@ -323,7 +344,9 @@ class HemisphereCard(ModelCard):
             "phi_deg": self.phi_deg.tolist(), "theta_deg": self.theta_deg.tolist(),
             "bands_hz": self.bands_hz.tolist(), "levels_db": self.levels_db.tolist(),
             "measured": self.measured.tolist(), "atmosphere": dict(self.atmosphere),
-            "condition": dict(self.condition), "statistics": dict(self.statistics),
+            "condition": dict(self.condition),
+            "map_atmosphere": None if self.map_atmosphere is None else dict(self.map_atmosphere),
+            "statistics": dict(self.statistics),
             "provenance": dict(self.provenance), "notes": self.notes,
         }
 

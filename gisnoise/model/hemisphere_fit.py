@@ -72,7 +72,7 @@ def fit_hemisphere(hemi: HemisphereCard, *, distance_m: float = REFERENCE_DISTAN
         return p
 
     def resid(q: np.ndarray) -> np.ndarray:
-        return PAPER_OFFSET.level(full(q), x, background=False) - target  # type: ignore[no-any-return]
+        return PAPER_OFFSET.level(full(q), x, background=False) - target
 
     def jac(q: np.ndarray) -> np.ndarray:
         return PAPER_OFFSET.jacobian(full(q), x, background=False)[:, free]
