@@ -67,6 +67,7 @@ def test_flyover_both_engines_agree_and_match_the_table(flyover, sheets):
     assert fast.bands["SEL"][r, c] == pytest.approx(sel, abs=0.01)
     share = fast.metadata["hemisphere_filled_energy_share"]
     assert 0.0 < share < 1.0
+    assert ref.metadata["hemisphere_filled_energy_share"] == pytest.approx(share, abs=1e-6)
 
 
 def test_hemisphere_and_parametric_cards_mix_by_phase(m300):

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import Cancelled, InputError
-from gisnoise.geo import WGS84, body_vector, transformer
+from gisnoise.geo import WGS84, body_vector, emission_angles, transformer
 from gisnoise.maps import _numba as _kernels
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.instants import card_coefficients
@@ -42,7 +42,7 @@ from gisnoise.maps.result import MapResult
 from gisnoise.maps.threads import default_threads, map_threads
 from gisnoise.model import HemisphereCard
 
-__all__ = ["N_DISTANCES", "distance_table", "evaluate_hemisphere_fast", "has_hemisphere"]
+__all__ = ["N_DISTANCES", "distance_table", "evaluate_hemisphere_fast", "filled_weights", "has_hemisphere"]
 
 N_DISTANCES = 2048
 """Distances of the kernel's table, log-spaced from the nearest to the farthest receiver."""
@@ -64,6 +64,23 @@ def _lut(grid: np.ndarray) -> np.ndarray:
 def has_hemisphere(cards: Any) -> bool:
     """True when any card of the set is a hemisphere card."""
     return any(isinstance(c, HemisphereCard) for c in cards)
+
+
+def filled_weights(rcv: np.ndarray, src: np.ndarray, att: np.ndarray, card_idx: np.ndarray, cards: Any
+                   ) -> np.ndarray:
+    """Interpolation weight on filled table nodes, ``(cells, instants)``; 0 for parametric cards' instants.
+
+    Arguments as the NumPy engine's block function (ENU receivers and sources, yaw/pitch/roll in rad).
+    """
+    d, phi, theta = emission_angles(rcv[:, 0, None] - src[None, :, 0], rcv[:, 1, None] - src[None, :, 1],
+                                    rcv[:, 2, None] - src[None, :, 2], att[:, 0], att[:, 1], att[:, 2])
+    fw = np.zeros(d.shape)
+    for k in np.unique(card_idx):
+        c = cards[int(k)]
+        if isinstance(c, HemisphereCard):
+            sel = np.flatnonzero(card_idx == k)
+            fw[:, sel] = c.interpolation(phi[:, sel], theta[:, sel])[1]
+    return fw
 
 
 def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, n: int = N_DISTANCES
