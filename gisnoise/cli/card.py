@@ -10,6 +10,7 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.jsonio import to_jsonable
+from gisnoise.model import HemisphereCard, fit_hemisphere, import_hemisphere, sample_card
 from gisnoise.model import cards as gcards
 
 
@@ -34,6 +35,9 @@ def show(card: str, as_json: bool, p_el: float) -> None:
         click.echo(gcards.dumps(c), nl=False)
         return
     model = c.model
+    if isinstance(c, HemisphereCard):
+        _show_hemisphere(c)
+        return
     click.echo(f"card      {c.id}")
     click.echo(f"vehicle   {c.vehicle}")
     click.echo(f"phases    {', '.join(c.served_phases)}")
@@ -71,6 +75,120 @@ def show(card: str, as_json: bool, p_el: float) -> None:
         click.echo("provenance " + json.dumps(to_jsonable(c.provenance)))
     if c.notes:
         click.echo(f"notes     {c.notes}")
+
+
+def _show_hemisphere(c: HemisphereCard) -> None:
+    """Summary of a measured hemisphere card."""
+    click.echo(f"card      {c.id} (measured hemisphere)")
+    click.echo(f"vehicle   {c.vehicle}")
+    click.echo(f"phases    {', '.join(c.served_phases)}")
+    cond = ", ".join(f"{k} {v:g}" if isinstance(v, (int, float)) else f"{k} {v}" for k, v in c.condition.items())
+    click.echo(f"condition {cond or 'not stated'}")
+    click.echo(f"table     {c.phi_deg.size} phi x {c.theta_deg.size} theta nodes (phi {c.phi_deg[0]:g}..{c.phi_deg[-1]:g}, "
+               f"theta {c.theta_deg[0]:g}..{c.theta_deg[-1]:g} deg), {c.bands_hz.size} bands "
+               f"{c.bands_hz[0]:g}-{c.bands_hz[-1]:g} Hz at radius {c.reference_distance_m:g} m")
+    click.echo(f"measured  {int(c.measured.sum())} of {c.measured.size} nodes (the others filled)")
+    a = c.atmosphere
+    click.echo(f"atmosphere {a['temperature_c']:g} C, {a['humidity_pct']:g} % RH, {a['pressure_kpa']:g} kPa "
+               "(back-propagation)")
+    m = c.propagation_atmosphere
+    click.echo(f"on maps   {m['temperature_c']:g} C, {m['humidity_pct']:g} % RH, {m['pressure_kpa']:g} kPa "
+               "(ISO 9613-1 absorption)")
+    w = c.sound_power_db()
+    click.echo(f"sound power {w['overall_z']:.1f} dB, {w['overall_a']:.1f} dB(A) (re 1 pW, table integrated)")
+    top = c.loudest_direction()
+    click.echo(f"max level {top['level_db_a']:.1f} dB(A) at {c.reference_distance_m:g} m, phi {top['phi_t_deg']:g} deg "
+               f"({'ahead' if top['phi_t_deg'] < 0 else 'behind' if top['phi_t_deg'] > 0 else 'below'}), "
+               f"theta {top['theta_t_deg']:g} deg ({'measured' if top['measured'] else 'filled'} node)")
+    if c.notes:
+        click.echo(f"notes     {c.notes}")
+
+
+@command.command("import-hemisphere")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Card file to write (JSON).")
+@click.option("--id", "card_id", default=None, help="Card id (default: the file's stem).")
+@click.option("--vehicle", default=None, help="Vehicle name (default: from a Salford file name).")
+@click.option("--phase", default="horizontal", show_default=True, help="Flight phase the hemisphere stands for.")
+@click.option("--also-phase", "also", multiple=True, help="Further phases the card serves (repeatable).")
+@click.option("--radius", "radius", type=float, default=None,
+              help="Radius of the table, m (default: the file's, else 1 m).")
+@click.option("--temperature", type=float, default=None,
+              help="Temperature of the back-propagation, C (Salford files: 25).")
+@click.option("--humidity", type=float, default=None, help="Relative humidity of the back-propagation, %.")
+@click.option("--pressure", type=float, default=101.325, show_default=True, help="Static pressure, kPa.")
+@click.option("--measured-theta-max", type=float, default=60.0, show_default=True,
+              help="Without a 'measured' column: nodes with |theta| above this were filled (deg).")
+@click.option("--power", type=float, default=None, help="Electric power of the flight condition, W (recorded).")
+@click.option("--force", is_flag=True, help="Overwrite --out.")
+def import_hemisphere_cmd(file: str, out: str, card_id: str | None, vehicle: str | None, phase: str,
+                          also: tuple[str, ...], radius: float | None, temperature: float | None,
+                          humidity: float | None, pressure: float, measured_theta_max: float, power: float | None,
+                          force: bool) -> None:
+    """Make a hemisphere card from a measured hemisphere FILE: a Salford xlsx or a long-form CSV.
+
+    CSV columns: band (nominal one-third-octave Hz), phi_deg (along the track, negative ahead),
+    theta_deg (across it, positive starboard), level_db (SPL at the radius), optional radius_m
+    and measured (1/0).  Angles as in the Salford hemispheres: 0 straight below, +-90 at the horizon.
+    """
+    atm = None
+    if (temperature is None) != (humidity is None):
+        raise click.UsageError("give both --temperature and --humidity")
+    if temperature is not None and humidity is not None:
+        atm = {"temperature_c": temperature, "humidity_pct": humidity, "pressure_kpa": pressure}
+    c = import_hemisphere(file, card_id=card_id, vehicle=vehicle, phase=phase, phases=also, radius_m=radius,
+                          atmosphere=atm, measured_theta_max=measured_theta_max, reference_power_w=power)
+    path = gcards.save(c, out, overwrite=force)
+    click.echo(f"wrote {path}: {c.phi_deg.size} x {c.theta_deg.size} nodes, {c.bands_hz.size} bands, "
+               f"{int(c.measured.sum())} nodes measured")
+
+
+@command.command("set-atmosphere")
+@click.argument("hemisphere", type=click.Path(dir_okay=False))
+@click.option("--temperature", type=float, required=True, help="Air temperature on the map, C.")
+@click.option("--humidity", type=float, required=True, help="Relative humidity on the map, %.")
+@click.option("--pressure", type=float, default=101.325, show_default=True, help="Static pressure, kPa.")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Card file to write.")
+@click.option("--force", is_flag=True, help="Overwrite --out.")
+def set_atmosphere_cmd(hemisphere: str, temperature: float, humidity: float, pressure: float, out: str,
+                       force: bool) -> None:
+    """Copy a HEMISPHERE card to propagate through another atmosphere on maps (ISO 9613-1 absorption)."""
+    h = gcards.load(hemisphere)
+    if not isinstance(h, HemisphereCard):
+        raise click.BadParameter("not a hemisphere card", param_hint="HEMISPHERE")
+    path = gcards.save(h.in_atmosphere(temperature, humidity, pressure), out, overwrite=force)
+    click.echo(f"wrote {path}: map atmosphere {temperature:g} C, {humidity:g} % RH, {pressure:g} kPa")
+
+
+@command.command("fit-hemisphere")
+@click.argument("hemisphere", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Card file to write (JSON).")
+@click.option("--distance", type=float, default=40.0, show_default=True,
+              help="Distance at which the table's levels are fitted, m.")
+@click.option("--force", is_flag=True, help="Overwrite --out.")
+def fit_hemisphere_cmd(hemisphere: str, out: str, distance: float, force: bool) -> None:
+    """Fit the paper ansatz (paper-offset) to the measured nodes of a HEMISPHERE card; prints the residual."""
+    h = gcards.load(hemisphere)
+    if not isinstance(h, HemisphereCard):
+        raise click.BadParameter("not a hemisphere card", param_hint="HEMISPHERE")
+    c = fit_hemisphere(h, distance_m=distance)
+    path = gcards.save(c, out, overwrite=force)
+    st = c.statistics
+    click.echo(f"wrote {path}: residual RMS {st['residual_rms_db']:.2f} dB, max {st['residual_max_db']:.2f} dB "
+               f"over {st['n_nodes']} measured nodes at {distance:g} m")
+
+
+@command.command("sample-hemisphere")
+@click.argument("card", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Hemisphere card to write.")
+@click.option("--p-el", "p_el", type=float, default=1.0, show_default=True, help="Nondimensional power.")
+@click.option("--radius", type=float, default=None, help="Radius, m (default: the card's reference distance).")
+@click.option("--force", is_flag=True, help="Overwrite --out.")
+def sample_hemisphere_cmd(card: str, out: str, p_el: float, radius: float | None, force: bool) -> None:
+    """Sample a parametric CARD into a hemisphere card (15 deg table angles) to compare it with a measured one."""
+    h = sample_card(gcards.load(card), p_el=p_el, radius_m=radius)
+    path = gcards.save(h, out, overwrite=force)
+    click.echo(f"wrote {path}: {h.phi_deg.size} x {h.theta_deg.size} nodes at {h.reference_distance_m:g} m")
 
 
 @command.command("plot")

@@ -42,6 +42,7 @@ from gisnoise.errors import Cancelled, InputError
 from gisnoise.maps import _numba as _kernels
 from gisnoise.maps._checks import as_float
 from gisnoise.maps._poly import _ATAN_C, _EXP2_C, _LOG2_C, _poly_eval  # noqa: F401  (the kernel's polynomials)
+from gisnoise.maps.hemisource import evaluate_hemisphere_fast, has_hemisphere
 from gisnoise.maps.instants import (
     FAST_ANSATZES,
     FlightInstants,
@@ -268,6 +269,8 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
         raise InputError("uncertainty: engine 'fast' computes levels only; use engine='numpy' for the "
                          "uncertainty bands", field="engine")
     req = check_request(traj, cards, grid, opts)
+    if has_hemisphere(req.cardset.cards):  # measured hemispheres: their own kernel (maps/hemisource.py)
+        return evaluate_hemisphere_fast(req, opts)
     traj, grid, metrics, thresholds = req.traj, req.grid, req.metrics, req.thresholds
     period, snap = req.period, req.snap
     progress, cancel, threads, background = opts.progress, opts.cancel, opts.threads, opts.background

@@ -34,6 +34,7 @@ from gisnoise.acoustics import speed_of_sound
 from gisnoise.errors import Cancelled, CardError, GisnoiseError, InputError
 from gisnoise.geo import WGS84, emission_angles, transformer
 from gisnoise.maps._checks import as_float
+from gisnoise.maps.hemisource import filled_weights, has_hemisphere
 from gisnoise.maps.prepare import (
     MapOptions,
     band_order,
@@ -327,6 +328,8 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
     to_wgs = transformer(grid.crs, WGS84)
     ground_flat = None if ground.heights is None else ground.heights.ravel()
     done = 0.0
+    hemi = has_hemisphere(cardset.cards) and integral  # energy share of filled hemisphere nodes
+    e_fill = e_all = 0.0
     kw: dict[str, Any] = dict(background=opts.background, receiver_extras=receiver_extras,
                               min_distance_m=req.min_distance_m, receiver_agl_m=hr,
                               meta={"speed_of_sound_m_s": c_sound, "temperature_c": temp})
@@ -370,6 +373,10 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
                 energy += ew.sum(axis=1)
                 if gsum is not None and J is not None:
                     gsum += np.einsum("cs,csp->cp", ew, J[:, :m, :])
+                if hemi:
+                    fw = filled_weights(rcv, src_enu[s0:s1], att[s0:s1], card_idx[s0:s1], cardset.cards)
+                    e_fill += float(np.sum(ew[valid] * fw[valid]))
+                    e_all += float(np.sum(ew[valid]))
                 if thresholds and L.shape[1] > 1:
                     dt = np.diff(t_eval[s0:e1])
                     for i, thr in enumerate(thresholds):
@@ -414,6 +421,8 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
 
     bands = {k: v.reshape(grid.shape) for k, v in out.items()}
     meta = map_metadata(req, bands, ns, hr, ground.description, opts.background, used, speed_of_sound_m_s=c_sound)
+    if hemi:
+        meta["hemisphere_filled_energy_share"] = e_fill / e_all if e_all > 0 else 0.0
     if uncertainty:
         meta["uncertainty"] = ("delta method through the ansatz Jacobian with the cards' covariance; "
                                "*_std standard deviation (dB); *_p95 = level - 1.645 std, the level exceeded "

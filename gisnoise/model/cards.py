@@ -35,11 +35,19 @@ from gisnoise.model.ansatz import REFERENCE_DISTANCE_M, Ansatz
 from gisnoise.model.effects import get_ansatz
 
 __all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "save", "load_card", "from_dict",
-           "with_parameters"]
+           "with_parameters", "register_card_schema"]
 
 SCHEMA = "gisnoise/model-card/1"
 SCHEMA_PREFIX = "gisnoise/model-card/"
 SUPPORTED_VERSIONS = (1,)
+
+_CARD_KINDS: dict[str, Any] = {}
+"""Further card kinds by their exact ``schema``: ``reader(doc, source=...) -> ModelCard`` (a subclass)."""
+
+
+def register_card_schema(schema: str, reader: Any) -> None:
+    """Let :func:`from_dict` (and so :func:`load`, :func:`loads`) read documents of ``schema`` with ``reader``."""
+    _CARD_KINDS[schema] = reader
 
 
 @dataclass(frozen=True)
@@ -177,6 +185,8 @@ def from_dict(doc: Mapping[str, Any], *, source: str = "model card") -> ModelCar
     if not isinstance(doc, Mapping):
         raise CardError(f"{source}: expected a JSON object", field="schema")
     schema = doc.get("schema")
+    if isinstance(schema, str) and schema in _CARD_KINDS:
+        return _CARD_KINDS[schema](doc, source=source)
     if not isinstance(schema, str) or not schema.startswith(SCHEMA_PREFIX):
         raise SchemaVersionError(
             f"{source}: field 'schema' must be '{SCHEMA}', got {schema!r} (not a model card?)", field="schema"

@@ -1,0 +1,391 @@
+"""Measured hemispheres as sources: the hemisphere card (``gisnoise/hemisphere-card/1``).
+
+A hemisphere card holds one-third-octave band levels (dB re 20 uPa, unweighted) at a
+reference radius ``radius_m`` on a rectilinear grid of two table angles, for one flight
+condition of one vehicle, with the atmosphere the table was back-propagated with and which
+cells were measured (the others are filled by the importer or the source of the table).
+
+**Table angles** (the Salford / NORAH hemisphere convention, fixed here).  With the body axes
+of the product (x forward, y starboard, z down) and the unit vector ``(x_b, y_b, z_b)`` from
+the UAV to the observer below it (``z_b > 0``):
+
+* ``phi_t = atan2(-x_b, z_b)``: the angle in the vertical plane along the track, 0 straight
+  below, negative ahead (fore), positive behind (aft), +-90 deg at the horizon;
+* ``theta_t = atan2(y_b, z_b)``: the angle in the vertical plane across the track, 0 straight
+  below, positive to starboard, +-90 deg at the horizon.
+
+The sign of ``phi_t`` follows the measurement: the table's rows before the overhead time
+(drone approaching the microphone line, the microphone ahead of it) carry negative angles.
+In the product's azimuth ``phi`` and polar angle ``theta`` (SPEC section 1):
+``x_b = cos(theta) cos(phi)``, ``y_b = cos(theta) sin(phi)``, ``z_b = -sin(theta)``.  Above the
+horizon (``z_b < 0``) nothing was measured: the table is mirrored in the horizontal plane
+(``|z_b|`` in place of ``z_b``), which is continuous at the horizon; those directions count as
+filled.
+
+**Interpolation** (stated scheme): bilinear in ``(phi_t, theta_t)`` of the A-weighted overall
+level *at the receiver's distance* of the four surrounding nodes,
+
+    L_node(d) = 10 lg sum_b 10^((L_b,node + A(f_b) - alpha_b (d - r0)) / 10) - 20 lg(d / r0)
+
+with ``A`` the A-weighting (IEC 61672-1) and ``alpha_b`` the ISO 9613-1 absorption (dB/m) at
+the band's exact mid-band frequency in the map's atmosphere (``map_atmosphere``, by default the
+card's ``atmosphere``, the one the table was back-propagated with).  It is exact at the nodes,
+continuous, and between nodes lies between the values of the neighbouring nodes.  Outside the
+table's angle range the edge values hold (counted as filled).  The level does not depend on
+the electric power: the table stands for its stated flight condition.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from gisnoise.acoustics import a_weighting, atmospheric_absorption, exact_frequency
+from gisnoise.errors import CardError
+from gisnoise.flight import PHASES
+from gisnoise.model.ansatz import Ansatz
+from gisnoise.model.cards import ModelCard, register_card_schema
+
+__all__ = ["HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "HemisphereCard", "hemisphere_from_dict", "table_angles"]
+
+HEMISPHERE_SCHEMA = "gisnoise/hemisphere-card/1"
+HEMISPHERE_ANSATZ = "hemisphere"
+DEFAULT_ATMOSPHERE = {"temperature_c": 20.0, "humidity_pct": 70.0, "pressure_kpa": 101.325}
+
+
+def table_angles(phi: Any, theta: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Table angles ``(phi_t, theta_t)`` in degrees of product angles ``phi``, ``theta`` (rad).
+
+    Also returns ``above``: True where the direction lies above the horizon (mirrored).
+
+    Examples
+    --------
+    >>> a, b, up = table_angles(0.0, -np.pi / 2)          # straight below
+    >>> round(float(a), 6), round(float(b), 6), bool(up)
+    (0.0, 0.0, False)
+    >>> a, b, _ = table_angles(0.0, -np.pi / 4)           # 45 deg ahead and down
+    >>> round(float(a), 6), round(float(b), 6)
+    (-45.0, 0.0)
+    >>> a, b, _ = table_angles(np.pi / 2, -np.pi / 4)     # 45 deg to starboard and down
+    >>> round(float(a), 6), round(float(b), 6)
+    (0.0, 45.0)
+    """
+    phi = np.asarray(phi, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    ct = np.cos(theta)
+    xb = ct * np.cos(phi)
+    yb = ct * np.sin(phi)
+    zb = -np.sin(theta)
+    zc = np.abs(zb)
+    return np.degrees(np.arctan2(-xb, zc)), np.degrees(np.arctan2(yb, zc)), zb < 0
+
+
+def _axis_weights(grid: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lower node index, weight of the upper node, and whether ``a`` lay outside the grid."""
+    n = grid.size
+    outside = (a < grid[0]) | (a > grid[-1])
+    ac = np.clip(a, grid[0], grid[-1])
+    if n == 1:
+        return np.zeros(a.shape, dtype=np.intp), np.zeros(a.shape), outside
+    i = np.clip(np.searchsorted(grid, ac, side="right") - 1, 0, n - 2)
+    w = (ac - grid[i]) / (grid[i + 1] - grid[i])
+    return i, w, outside
+
+
+def _fail(msg: str, fld: str) -> None:
+    raise CardError(f"hemisphere card: {msg}", field=fld)
+
+
+@dataclass(frozen=True, eq=False)
+class HemisphereCard(ModelCard):
+    """A measured hemisphere as a source (see module docstring).
+
+    Besides the fields of a model card (``ansatz`` is ``"hemisphere"``, ``parameters`` empty,
+    ``reference_distance_m`` the table's radius): ``phi_deg`` (rows, ascending), ``theta_deg``
+    (columns, ascending), ``bands_hz`` (nominal one-third-octave mid-band frequencies),
+    ``levels_db`` (array ``(bands, rows, columns)``, unweighted band levels at the radius),
+    ``measured`` (bool ``(rows, columns)``), ``atmosphere`` (``temperature_c``,
+    ``humidity_pct``, ``pressure_kpa`` of the back-propagation) and ``condition`` (the flight
+    condition: e.g. ``speed_m_s``, ``height_m``, ``power_w``).
+    """
+
+    phi_deg: Any = field(default_factory=lambda: np.zeros(0))
+    theta_deg: Any = field(default_factory=lambda: np.zeros(0))
+    bands_hz: Any = field(default_factory=lambda: np.zeros(0))
+    levels_db: Any = field(default_factory=lambda: np.zeros((0, 0, 0)))
+    measured: Any = field(default_factory=lambda: np.zeros((0, 0), bool))
+    atmosphere: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_ATMOSPHERE))
+    condition: Mapping[str, Any] = field(default_factory=dict)
+    map_atmosphere: Mapping[str, float] | None = None
+    """Atmosphere of the propagation on the map (ISO 9613-1 absorption); None: the card's ``atmosphere``."""
+
+    def __post_init__(self) -> None:
+        s = object.__setattr__
+        for name in ("phi_deg", "theta_deg", "bands_hz", "levels_db"):
+            try:
+                a = np.array(getattr(self, name), dtype=float)
+            except (TypeError, ValueError):
+                _fail(f"field '{name}' must be numbers", name)
+            a.setflags(write=False)
+            s(self, name, a)
+        try:
+            m = np.array(self.measured, dtype=bool)
+        except (TypeError, ValueError):
+            _fail("field 'measured' must be a matrix of booleans", "measured")
+        m.setflags(write=False)
+        s(self, "measured", m)
+        s(self, "atmosphere", dict(self.atmosphere))
+        s(self, "condition", dict(self.condition))
+        if self.map_atmosphere is not None:
+            if not isinstance(self.map_atmosphere, Mapping):
+                _fail("field 'map_atmosphere' must be an object or null", "map_atmosphere")
+            s(self, "map_atmosphere", {**DEFAULT_ATMOSPHERE, **self.map_atmosphere})
+        self._validate()
+        s(self, "_weighted", self._a_weighted())
+        s(self, "_ansatz", Ansatz(name=HEMISPHERE_ANSATZ, params=(), inputs=("d", "phi", "theta"),
+                                  kernel=self._kernel, background=None,
+                                  description=f"measured hemisphere {self.id}"))
+
+    # ------------------------------------------------------------------ checks
+    def _validate(self) -> None:
+        for name in ("id", "vehicle", "phase"):
+            v = getattr(self, name)
+            if not isinstance(v, str) or not v:
+                _fail(f"field '{name}' must be a non-empty string, got {v!r}", name)
+        if self.phase not in PHASES:
+            _fail(f"field 'phase' must be one of {', '.join(PHASES)}, got {self.phase!r}", "phase")
+        for ph in self.phases:
+            if ph not in PHASES:
+                _fail(f"field 'phases' has unknown phase {ph!r}", "phases")
+        if self.ansatz != HEMISPHERE_ANSATZ:
+            _fail(f"field 'ansatz' must be {HEMISPHERE_ANSATZ!r}, got {self.ansatz!r}", "ansatz")
+        if dict(self.parameters):
+            _fail("field 'parameters' must be empty (the table is the model)", "parameters")
+        for name in ("reference_power_w", "reference_distance_m"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                _fail(f"field '{name}' must be a positive number, got {v!r}", name)
+        for name in ("phi_deg", "theta_deg"):
+            a = getattr(self, name)
+            if a.ndim != 1 or a.size < 1 or not np.all(np.isfinite(a)):
+                _fail(f"field '{name}' must be a non-empty list of finite angles", name)
+            if np.any(np.abs(a) > 90.0):
+                _fail(f"field '{name}' angles must lie in -90..90 deg", name)
+            if np.any(np.diff(a) <= 0):
+                _fail(f"field '{name}' must be strictly ascending", name)
+        b = self.bands_hz
+        if b.ndim != 1 or b.size < 1 or np.any(~np.isfinite(b)) or np.any(b <= 0):
+            _fail("field 'bands_hz' must be a non-empty list of positive frequencies", "bands_hz")
+        if np.any(np.diff(b) <= 0):
+            _fail("field 'bands_hz' must be strictly ascending", "bands_hz")
+        shape = (b.size, self.phi_deg.size, self.theta_deg.size)
+        if self.levels_db.shape != shape:
+            _fail(f"field 'levels_db' must have shape (bands, phi, theta) = {shape}, got {self.levels_db.shape}",
+                  "levels_db")
+        if not np.all(np.isfinite(self.levels_db)):
+            _fail("field 'levels_db' has non-finite levels", "levels_db")
+        if self.measured.shape != shape[1:]:
+            _fail(f"field 'measured' must have shape (phi, theta) = {shape[1:]}, got {self.measured.shape}",
+                  "measured")
+        for name in ("atmosphere", "map_atmosphere"):
+            atm = getattr(self, name)
+            if atm is None:
+                continue
+            for k, lo, hi in (("temperature_c", -60.0, 60.0), ("humidity_pct", 0.0, 100.0),
+                              ("pressure_kpa", 50.0, 120.0)):
+                v = atm.get(k)
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= float(v) <= hi:
+                    _fail(f"field '{name}.{k}' must be a number in {lo:g}..{hi:g}, got {v!r}", f"{name}.{k}")
+
+    # ------------------------------------------------------------------ physics
+    def _a_weighted(self) -> tuple[np.ndarray, np.ndarray]:
+        f = exact_frequency(self.bands_hz)
+        la = self.levels_db + a_weighting(f)[:, None, None]
+        atm = self.propagation_atmosphere
+        alpha = atmospheric_absorption(f, atm["temperature_c"], atm["humidity_pct"], atm["pressure_kpa"])
+        return la, np.asarray(alpha, dtype=float)
+
+    @property
+    def propagation_atmosphere(self) -> dict[str, float]:
+        """The atmosphere of the absorption on the map: ``map_atmosphere``, else the card's ``atmosphere``."""
+        return dict(self.map_atmosphere if self.map_atmosphere is not None else self.atmosphere)
+
+    def in_atmosphere(self, temperature_c: float, humidity_pct: float, pressure_kpa: float = 101.325
+                      ) -> HemisphereCard:
+        """A copy propagating through another atmosphere on the map (the table stays as back-propagated)."""
+        return replace(self, map_atmosphere={"temperature_c": float(temperature_c),
+                                             "humidity_pct": float(humidity_pct), "pressure_kpa": float(pressure_kpa)})
+
+    @property
+    def band_frequencies_hz(self) -> np.ndarray:
+        """Exact mid-band frequencies of ``bands_hz``, Hz."""
+        return np.asarray(exact_frequency(self.bands_hz), dtype=float)
+
+    @property
+    def absorption_db_m(self) -> np.ndarray:
+        """ISO 9613-1 absorption of each band in the card's atmosphere, dB/m."""
+        return self._weighted[1]  # type: ignore[attr-defined]
+
+    @property
+    def a_weighted_db(self) -> np.ndarray:
+        """A-weighted band levels at the radius, ``(bands, phi, theta)``."""
+        return self._weighted[0]  # type: ignore[attr-defined]
+
+    @property
+    def overall_a_db(self) -> np.ndarray:
+        """A-weighted overall level at the radius, ``(phi, theta)``."""
+        return np.asarray(10.0 * np.log10(np.sum(10.0 ** (self.a_weighted_db / 10.0), axis=0)))
+
+    def node_levels(self, d: Any) -> np.ndarray:
+        """A-weighted level of every node at distance ``d`` (m): ``(…d, phi, theta)``."""
+        d = np.asarray(d, dtype=float)
+        r0 = float(self.reference_distance_m)
+        la, alpha = self._weighted  # type: ignore[attr-defined]
+        ex = (la[None] - alpha[None, :, None, None] * (d.reshape(-1)[:, None, None, None] - r0)) / 10.0
+        top = ex.max(axis=1, keepdims=True)
+        lv = 10.0 * (top[:, 0] + np.log10(np.sum(10.0 ** (ex - top), axis=1)))
+        lv = lv - 20.0 * np.log10(d.reshape(-1) / r0)[:, None, None]
+        return lv.reshape(d.shape + lv.shape[1:])
+
+    def interpolation(self, phi: Any, theta: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray,
+                                                           np.ndarray]:
+        """Bilinear stencil of directions: ``[(flat node index, weight)] x 4``, ``filled_weight``, ``above``.
+
+        ``filled_weight`` is the summed weight on filled nodes (1 outside the table or above
+        the horizon).
+        """
+        a, b, above = table_angles(phi, theta)
+        i, wi, out_i = _axis_weights(self.phi_deg, a)
+        j, wj, out_j = _axis_weights(self.theta_deg, b)
+        nt = self.theta_deg.size
+        i1 = np.minimum(i + 1, self.phi_deg.size - 1)
+        j1 = np.minimum(j + 1, nt - 1)
+        st = [(i * nt + j, (1 - wi) * (1 - wj)), (i * nt + j1, (1 - wi) * wj),
+              (i1 * nt + j, wi * (1 - wj)), (i1 * nt + j1, wi * wj)]
+        filled = (~self.measured).ravel().astype(float)
+        fw = sum(w * filled[k] for k, w in st)
+        fw = np.where(out_i | out_j | above, 1.0, fw)
+        return st, np.asarray(fw), above
+
+    def level_direction(self, d: Any, phi: Any, theta: Any) -> np.ndarray:
+        """A-weighted level (dB(A)) at distance ``d`` (m) in direction ``phi``, ``theta`` (rad); broadcasts."""
+        d, phi, theta = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (d, phi, theta)))
+        st, _, _ = self.interpolation(phi, theta)
+        la, alpha = self._weighted  # type: ignore[attr-defined]
+        nb = la.shape[0]
+        flat = la.reshape(nb, -1)
+        r0 = float(self.reference_distance_m)
+        att = d - r0
+        out = np.zeros(d.shape)
+        for k, w in st:
+            e = np.zeros(d.shape)
+            for bnd in range(nb):
+                e += np.power(10.0, (flat[bnd][k] - alpha[bnd] * att) / 10.0)
+            out += w * 10.0 * np.log10(e)
+        return out - 20.0 * np.log10(d / r0)
+
+    def _kernel(self, p: np.ndarray, x: Mapping[str, Any], d_ref: float, want_jac: bool
+                ) -> tuple[np.ndarray, np.ndarray | None]:
+        lv = self.level_direction(x["d"], x["phi"], x["theta"])
+        return lv, (np.zeros(lv.shape + (0,)) if want_jac else None)
+
+    @property
+    def model(self) -> Ansatz:
+        """The card's table as an ansatz without parameters (not in the registry)."""
+        return self._ansatz  # type: ignore[attr-defined]
+
+    # ------------------------------------------------------------------ summary
+    def sound_power_db(self) -> dict[str, float]:
+        """Sound power level (dB re 1 pW) from the table, lower hemisphere integrated, upper mirrored.
+
+        Integrates the intensity ``p^2 / (rho c)`` with ``rho c = 400`` rayl (so that
+        ``Lw = Lp + 10 lg(area)``) over the sphere of radius ``radius_m`` on the table's
+        nodes (solid angle of each cell by the Jacobian of the table angles).  Keys:
+        ``overall_z`` (unweighted), ``overall_a``.
+        """
+        a = np.radians(self.phi_deg)
+        b = np.radians(self.theta_deg)
+        # direction u ~ (-tan a, tan b, 1); solid angle element dOmega = |J| da db
+        ta, tb = np.tan(np.clip(a, -1.5607, 1.5607))[:, None], np.tan(np.clip(b, -1.5607, 1.5607))[None, :]
+        sa, sb = 1.0 / np.cos(np.clip(a, -1.5607, 1.5607)) ** 2, 1.0 / np.cos(np.clip(b, -1.5607, 1.5607)) ** 2
+        jac = sa[:, None] * sb / (1.0 + ta * ta + tb * tb) ** 1.5
+        wa = np.gradient(a) if a.size > 1 else np.array([math.pi])
+        wb = np.gradient(b) if b.size > 1 else np.array([math.pi])
+        dom = jac * wa[:, None] * wb[None, :]
+        dom *= 2.0 * math.pi / dom.sum()  # the lower hemisphere is 2 pi sr
+        r2 = float(self.reference_distance_m) ** 2
+        z = 10.0 ** (self.levels_db / 10.0)
+        a_ = 10.0 ** (self.a_weighted_db / 10.0)
+        wz = 10.0 * math.log10(2.0 * float(np.sum(z.sum(axis=0) * dom)) * r2)
+        wa_ = 10.0 * math.log10(2.0 * float(np.sum(a_.sum(axis=0) * dom)) * r2)
+        return {"overall_z": wz, "overall_a": wa_}
+
+    def loudest_direction(self) -> dict[str, float]:
+        """Node of the largest A-weighted overall level: table angles (deg) and level at the radius."""
+        la = self.overall_a_db
+        i, j = np.unravel_index(int(np.argmax(la)), la.shape)
+        return {"phi_t_deg": float(self.phi_deg[i]), "theta_t_deg": float(self.theta_deg[j]),
+                "level_db_a": float(la[i, j]), "measured": bool(self.measured[i, j])}
+
+    # ------------------------------------------------------------------ io
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "schema": HEMISPHERE_SCHEMA, "id": self.id, "vehicle": self.vehicle, "phase": self.phase,
+            "phases": list(self.phases), "ansatz": HEMISPHERE_ANSATZ, "parameters": {},
+            "reference_power_w": float(self.reference_power_w),
+            "reference_distance_m": float(self.reference_distance_m),
+            "angle_convention": "phi_t = atan2(-x_b, z_b) along the track (negative ahead), "
+                                "theta_t = atan2(y_b, z_b) across it (positive starboard); body axes x forward, "
+                                "y starboard, z down",
+            "phi_deg": self.phi_deg.tolist(), "theta_deg": self.theta_deg.tolist(),
+            "bands_hz": self.bands_hz.tolist(), "levels_db": self.levels_db.tolist(),
+            "measured": self.measured.tolist(), "atmosphere": dict(self.atmosphere),
+            "condition": dict(self.condition),
+            "map_atmosphere": None if self.map_atmosphere is None else dict(self.map_atmosphere),
+            "statistics": dict(self.statistics),
+            "provenance": dict(self.provenance), "notes": self.notes,
+        }
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, HemisphereCard) and self.to_dict() == other.to_dict()
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def hemisphere_from_dict(doc: Mapping[str, Any], *, source: str = "hemisphere card") -> HemisphereCard:
+    """Build a hemisphere card from a parsed JSON object (schema ``gisnoise/hemisphere-card/1``)."""
+    if doc.get("schema") != HEMISPHERE_SCHEMA:
+        raise CardError(f"{source}: field 'schema' must be '{HEMISPHERE_SCHEMA}', got {doc.get('schema')!r}",
+                        field="schema")
+    required = ("id", "vehicle", "phase", "phi_deg", "theta_deg", "bands_hz", "levels_db", "measured")
+    for k in required:
+        if k not in doc:
+            raise CardError(f"{source}: missing field '{k}'", field=k)
+    known = set(HemisphereCard.__dataclass_fields__)
+    kw = {k: v for k, v in doc.items() if k in known}
+    kw.setdefault("ansatz", HEMISPHERE_ANSATZ)
+    kw.setdefault("parameters", {})
+    kw.setdefault("reference_power_w", 1.0)
+    kw.setdefault("reference_distance_m", 1.0)
+    for k in ("statistics", "provenance", "atmosphere", "condition"):
+        if k in kw and not isinstance(kw[k], Mapping):
+            raise CardError(f"{source}: field '{k}' must be an object", field=k)
+    if "phases" in kw:
+        if not isinstance(kw["phases"], (list, tuple)):
+            raise CardError(f"{source}: field 'phases' must be a list", field="phases")
+        kw["phases"] = tuple(kw["phases"])
+    if "atmosphere" in kw:
+        kw["atmosphere"] = {**DEFAULT_ATMOSPHERE, **kw["atmosphere"]}
+    try:
+        return HemisphereCard(**kw)
+    except CardError as exc:
+        raise CardError(str(exc).replace("hemisphere card", source, 1), field=exc.field) from None
+    except ValueError as exc:  # ragged nested lists
+        raise CardError(f"{source}: table fields must be rectangular ({exc})", field="levels_db") from None
+
+
+register_card_schema(HEMISPHERE_SCHEMA, hemisphere_from_dict)

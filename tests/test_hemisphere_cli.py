@@ -1,0 +1,86 @@
+"""``gisnoise card import-hemisphere / show / plot / fit-hemisphere / sample-hemisphere`` and a contour map."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gisnoise.cli.main import cli
+from gisnoise.model import HemisphereCard, cards, import_hemisphere
+
+pytest.importorskip("openpyxl")
+
+M300 = Path(__file__).parent / "data" / "hemispheres" / "Hem_Ed_M3_10_F05_Y_W_dw_2.xlsx"
+
+
+def run(*args):
+    return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
+
+
+@pytest.fixture(scope="module")
+def m300_json(tmp_path_factory):
+    out = tmp_path_factory.mktemp("h") / "m300.json"
+    r = run("card", "import-hemisphere", str(M300), "--out", str(out), "--id", "m300")
+    assert r.exit_code == 0, r.output
+    assert "135 nodes measured" in r.output
+    return out
+
+
+def test_import_writes_the_card_the_core_reads(m300_json):
+    c = cards.load(m300_json)
+    assert isinstance(c, HemisphereCard) and c.id == "m300"
+    ref = import_hemisphere(M300, card_id="m300")
+    np.testing.assert_array_equal(c.levels_db, ref.levels_db)
+
+
+def test_show_summarises_power_and_loudest_direction(m300_json):
+    r = run("card", "show", str(m300_json))
+    assert r.exit_code == 0, r.output
+    c = cards.load(m300_json)
+    top = c.loudest_direction()
+    assert f"max level {top['level_db_a']:.1f} dB(A)" in r.output
+    assert f"phi {top['phi_t_deg']:g} deg (ahead)" in r.output  # -18.4 deg: ahead of the drone
+    assert "135 of 273 nodes" in r.output
+    assert f"sound power {c.sound_power_db()['overall_z']:.1f} dB" in r.output
+
+
+def test_plot_draws_the_hemisphere(m300_json, tmp_path):
+    pytest.importorskip("matplotlib")
+    r = run("card", "plot", str(m300_json), "--distance", "10", "--out", str(tmp_path / "h.png"))
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "h.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_fit_and_sample_commands(m300_json, tmp_path):
+    r = run("card", "fit-hemisphere", str(m300_json), "--out", str(tmp_path / "fit.json"))
+    assert r.exit_code == 0, r.output
+    fit = cards.load(tmp_path / "fit.json")
+    assert f"residual RMS {fit.statistics['residual_rms_db']:.2f} dB" in r.output
+    r = run("card", "sample-hemisphere", str(tmp_path / "fit.json"), "--out", str(tmp_path / "back.json"))
+    assert r.exit_code == 0, r.output
+    assert isinstance(cards.load(tmp_path / "back.json"), HemisphereCard)
+
+
+def test_bad_input_exits_2_naming_the_field(tmp_path):
+    bad = tmp_path / "h.csv"
+    bad.write_text("band,phi_deg,theta_deg,level_db\n1000,0,0,60\n")
+    r = CliRunner().invoke(cli, ["-q", "card", "import-hemisphere", str(bad), "--out", str(tmp_path / "x.json")])
+    assert r.exit_code == 2
+    assert "atmosphere" in r.output and not (tmp_path / "x.json").exists()
+    doc = json.loads((Path(__file__).parents[1] / "gisnoise" / "data" / "cards" / "demo_horizontal.json").read_text())
+    doc["schema"] = "gisnoise/hemisphere-card/1"
+    (tmp_path / "h.json").write_text(json.dumps(doc))
+    r = CliRunner().invoke(cli, ["-q", "card", "show", str(tmp_path / "h.json")])
+    assert r.exit_code == 2 and "phi_deg" in r.output
+
+
+def test_set_atmosphere_for_maps(m300_json, tmp_path):
+    out = tmp_path / "cold.json"
+    r = run("card", "set-atmosphere", str(m300_json), "--temperature", "5", "--humidity", "40", "--out", str(out))
+    assert r.exit_code == 0, r.output
+    c = cards.load(out)
+    assert c.propagation_atmosphere["temperature_c"] == 5.0 and c.atmosphere["temperature_c"] == 25.0
+    r = run("card", "show", str(out))
+    assert "on maps   5 C, 40 % RH" in r.output

@@ -1,0 +1,97 @@
+"""Maps of measured hemispheres: the M300 flyover by both engines against the table, mixed with parametric cards."""
+
+import numpy as np
+import pytest
+from test_evaluate import centred_grid, omni_card, straight_flight
+from test_hemisphere import M300, node_level
+
+from gisnoise.errors import InputError
+from gisnoise.maps import evaluate_grid
+from gisnoise.model import import_hemisphere
+
+openpyxl = pytest.importorskip("openpyxl")
+numba = pytest.importorskip("numba")
+
+H, V, N0, N1, DT = 10.0, 5.0, -300.0, 300.0, 0.05
+
+
+@pytest.fixture(scope="module")
+def sheets():
+    from test_hemisphere import sheets as fx
+    return fx.__wrapped__()
+
+
+@pytest.fixture(scope="module")
+def m300():
+    return import_hemisphere(M300)
+
+
+@pytest.fixture(scope="module")
+def flyover(m300):
+    traj = straight_flight(v=V, height=H, n0=N0, n1=N1, dt=DT)
+    grid = centred_grid(5.0, 9, 3)  # receivers on the ground under the track and beside it
+    kw = dict(ground_h=0.0, receiver_height=0.0, metrics=("LAmax", "LAeq", "SEL"))
+    ref = evaluate_grid(traj, [m300], grid, engine="numpy", **kw)
+    fast = evaluate_grid(traj, [m300], grid, engine="fast", **kw)
+    return traj, grid, ref, fast
+
+
+def under_track_truth(sheets):
+    """LAmax and SEL at the receiver under the track from the file's table (column theta = 0)."""
+    phi, theta, _ = sheets["1000"]
+    j = theta.index(0.0)
+    t = np.arange(0.0, (N1 - N0) / V + 1e-9, DT)
+    n = N0 + V * t
+    d = np.hypot(n, H)
+    a = np.degrees(np.arctan2(n, H))  # drone before the receiver: the receiver is ahead, negative phi
+    lv = np.empty(n.size)
+    for k, (ak, dk) in enumerate(zip(a, d, strict=True)):
+        i = min(max(int(np.searchsorted(phi, ak, side="right")) - 1, 0), len(phi) - 2)
+        w = (ak - phi[i]) / (phi[i + 1] - phi[i])
+        lv[k] = (1 - w) * node_level(sheets, i, j, dk) + w * node_level(sheets, i + 1, j, dk)
+    wts = np.zeros(t.size)
+    wts[:-1] += 0.5 * DT
+    wts[1:] += 0.5 * DT
+    return float(lv.max()), float(10 * np.log10(np.sum(wts * 10 ** (lv / 10))))
+
+
+def test_flyover_both_engines_agree_and_match_the_table(flyover, sheets):
+    traj, grid, ref, fast = flyover
+    for name in ("LAmax", "LAeq", "SEL"):
+        np.testing.assert_allclose(fast.bands[name], ref.bands[name], atol=0.01)
+    r, c = 1, 4  # the cell centred on the track at n = 0
+    lamax, sel = under_track_truth(sheets)
+    assert ref.bands["LAmax"][r, c] == pytest.approx(lamax, abs=0.01)
+    assert ref.bands["SEL"][r, c] == pytest.approx(sel, abs=0.01)
+    assert fast.bands["LAmax"][r, c] == pytest.approx(lamax, abs=0.01)
+    assert fast.bands["SEL"][r, c] == pytest.approx(sel, abs=0.01)
+    share = fast.metadata["hemisphere_filled_energy_share"]
+    assert 0.0 < share < 1.0
+    assert ref.metadata["hemisphere_filled_energy_share"] == pytest.approx(share, abs=1e-6)
+
+
+def test_hemisphere_and_parametric_cards_mix_by_phase(m300):
+    import dataclasses
+    hemi = dataclasses.replace(m300, phase="horizontal")
+    climb = omni_card("climb")
+    traj = straight_flight(v=V, height=H, n0=-100.0, n1=100.0, dt=0.1)
+    ph = np.where(np.arange(len(traj)) < len(traj) // 2, "climb", "horizontal")
+    traj = dataclasses.replace(traj, phase=ph)
+    grid = centred_grid(10.0, 5, 5)
+    kw = dict(ground_h=0.0, receiver_height=1.5, metrics=("LAmax", "SEL"))
+    ref = evaluate_grid(traj, [hemi, climb], grid, engine="numpy", **kw)
+    fast = evaluate_grid(traj, [hemi, climb], grid, engine="fast", **kw)
+    for name in ("LAmax", "SEL"):
+        np.testing.assert_allclose(fast.bands[name], ref.bands[name], atol=0.01)
+    only_h = evaluate_grid(traj, [hemi, dataclasses.replace(hemi, id="h2", phase="climb")], grid, **kw)
+    assert not np.allclose(only_h.bands["SEL"], ref.bands["SEL"], atol=0.1)  # the climb half uses the omni card
+    assert set(ref.metadata["phases"]) == {"climb", "horizontal"}
+
+
+def test_fast_engine_refuses_what_it_does_not_compute_for_hemispheres(m300):
+    traj = straight_flight(v=V, height=H, n0=-20.0, n1=20.0, dt=0.5)
+    grid = centred_grid(10.0, 3, 3)
+    with pytest.raises(InputError, match="numpy") as e:
+        evaluate_grid(traj, [m300], grid, engine="fast", ground_h=0.0, threshold_db=60.0)
+    assert e.value.field == "engine"
+
