@@ -42,7 +42,8 @@ from gisnoise.errors import Cancelled, InputError
 from gisnoise.maps import _numba as _kernels
 from gisnoise.maps._checks import as_float
 from gisnoise.maps._poly import _ATAN_C, _EXP2_C, _LOG2_C, _poly_eval  # noqa: F401  (the kernel's polynomials)
-from gisnoise.maps.hemisource import evaluate_hemisphere_fast, has_hemisphere
+from gisnoise.maps.hemifill import has_hemisphere
+from gisnoise.maps.hemisource import evaluate_hemisphere_fast
 from gisnoise.maps.instants import (
     FAST_ANSATZES,
     FlightInstants,

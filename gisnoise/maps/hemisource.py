@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import Cancelled, InputError
-from gisnoise.geo import WGS84, body_vector, emission_angles, transformer
+from gisnoise.geo import WGS84, body_vector, transformer
 from gisnoise.maps import _numba as _kernels
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.instants import card_coefficients
@@ -42,7 +42,7 @@ from gisnoise.maps.result import MapResult
 from gisnoise.maps.threads import default_threads, map_threads
 from gisnoise.model import HemisphereCard
 
-__all__ = ["N_DISTANCES", "distance_table", "evaluate_hemisphere_fast", "filled_weights", "has_hemisphere"]
+__all__ = ["N_DISTANCES", "distance_table", "evaluate_hemisphere_fast"]
 
 N_DISTANCES = 2048
 """Distances of the kernel's table, log-spaced from the nearest to the farthest receiver."""
@@ -59,28 +59,6 @@ def _lut(grid: np.ndarray) -> np.ndarray:
     """Index of the last node at or below the start of every bin over -90..90 deg."""
     edges = -90.0 + np.arange(180 * _LUT_PER_DEG + 1) / _LUT_PER_DEG
     return np.clip(np.searchsorted(grid, edges, side="right") - 1, 0, max(grid.size - 2, 0)).astype(np.int64)
-
-
-def has_hemisphere(cards: Any) -> bool:
-    """True when any card of the set is a hemisphere card."""
-    return any(isinstance(c, HemisphereCard) for c in cards)
-
-
-def filled_weights(rcv: np.ndarray, src: np.ndarray, att: np.ndarray, card_idx: np.ndarray, cards: Any
-                   ) -> np.ndarray:
-    """Interpolation weight on filled table nodes, ``(cells, instants)``; 0 for parametric cards' instants.
-
-    Arguments as the NumPy engine's block function (ENU receivers and sources, yaw/pitch/roll in rad).
-    """
-    d, phi, theta = emission_angles(rcv[:, 0, None] - src[None, :, 0], rcv[:, 1, None] - src[None, :, 1],
-                                    rcv[:, 2, None] - src[None, :, 2], att[:, 0], att[:, 1], att[:, 2])
-    fw = np.zeros(d.shape)
-    for k in np.unique(card_idx):
-        c = cards[int(k)]
-        if isinstance(c, HemisphereCard):
-            sel = np.flatnonzero(card_idx == k)
-            fw[:, sel] = c.interpolation(phi[:, sel], theta[:, sel])[1]
-    return fw
 
 
 def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, n: int = N_DISTANCES

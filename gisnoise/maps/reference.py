@@ -34,7 +34,7 @@ from gisnoise.acoustics import speed_of_sound
 from gisnoise.errors import Cancelled, CardError, GisnoiseError, InputError
 from gisnoise.geo import WGS84, emission_angles, transformer
 from gisnoise.maps._checks import as_float
-from gisnoise.maps.hemisource import filled_weights, has_hemisphere
+from gisnoise.maps.hemifill import filled_weights, has_hemisphere
 from gisnoise.maps.prepare import (
     MapOptions,
     band_order,

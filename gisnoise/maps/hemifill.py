@@ -1,0 +1,38 @@
+"""Hemisphere cards in a card set: which sets hold one, and the weight of filled table nodes per cell.
+
+Shared by both engines (the NumPy reference and the numba hemisphere kernel) for the map's
+metadata on the energy that came from filled (not measured) cells of a hemisphere.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gisnoise.geo import emission_angles
+from gisnoise.model import HemisphereCard
+
+__all__ = ["has_hemisphere", "filled_weights"]
+
+
+def has_hemisphere(cards: Any) -> bool:
+    """True when any card of the set is a hemisphere card."""
+    return any(isinstance(c, HemisphereCard) for c in cards)
+
+
+def filled_weights(rcv: np.ndarray, src: np.ndarray, att: np.ndarray, card_idx: np.ndarray, cards: Any
+                   ) -> np.ndarray:
+    """Interpolation weight on filled table nodes, ``(cells, instants)``; 0 for parametric cards' instants.
+
+    Arguments as the NumPy engine's block function (ENU receivers and sources, yaw/pitch/roll in rad).
+    """
+    d, phi, theta = emission_angles(rcv[:, 0, None] - src[None, :, 0], rcv[:, 1, None] - src[None, :, 1],
+                                    rcv[:, 2, None] - src[None, :, 2], att[:, 0], att[:, 1], att[:, 2])
+    fw = np.zeros(d.shape)
+    for k in np.unique(card_idx):
+        c = cards[int(k)]
+        if isinstance(c, HemisphereCard):
+            sel = np.flatnonzero(card_idx == k)
+            fw[:, sel] = c.interpolation(phi[:, sel], theta[:, sel])[1]
+    return fw
