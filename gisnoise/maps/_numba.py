@@ -86,6 +86,10 @@ def _jit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
     return decorate
 
 
+jit = _jit
+"""The cache-aware ``numba.njit`` of this module, for the kernels of other modules of the engine."""
+
+
 _LOG2_10 = math.log2(10.0)
 _FM = True  # fastmath: contraction, reassociation; the kernel never sees NaN or inf
 

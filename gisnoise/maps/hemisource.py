@@ -76,7 +76,7 @@ def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, n: int = N_DI
 
 
 if numba is not None:
-    @numba.njit(cache=True, inline="always")
+    @_kernels.jit(inline="always")
     def _locate(grid: np.ndarray, off: int, n: int, lut: np.ndarray, loff: int, a: float) -> tuple[int, float]:
         if n == 1:
             return 0, 0.0
@@ -90,7 +90,7 @@ if numba is not None:
         g0 = grid[off + i]
         return i, (a - g0) / (grid[off + i + 1] - g0)
 
-    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    @_kernels.jit(nogil=True, error_model="numpy")
     def _hemi_kernel(rcv, src, R, kind, gain, coef, w, dmin2,
                      phig, phio, phin, thg, tho, thn, tab, tabo, meas, measo, u0, du, nd, plut, tlut,
                      emax, energy, efill):  # pragma: no cover - compiled

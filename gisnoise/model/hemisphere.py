@@ -65,13 +65,13 @@ def table_angles(phi: Any, theta: Any) -> tuple[np.ndarray, np.ndarray, np.ndarr
     Examples
     --------
     >>> a, b, up = table_angles(0.0, -np.pi / 2)          # straight below
-    >>> round(float(a), 6), round(float(b), 6), bool(up)
+    >>> abs(round(float(a), 6)), round(float(b), 6), bool(up)
     (0.0, 0.0, False)
     >>> a, b, _ = table_angles(0.0, -np.pi / 4)           # 45 deg ahead and down
     >>> round(float(a), 6), round(float(b), 6)
     (-45.0, 0.0)
     >>> a, b, _ = table_angles(np.pi / 2, -np.pi / 4)     # 45 deg to starboard and down
-    >>> round(float(a), 6), round(float(b), 6)
+    >>> round(float(a), 6) + 0.0, round(float(b), 6) + 0.0   # + 0.0: no negative zero
     (0.0, 45.0)
     """
     phi = np.asarray(phi, dtype=float)
