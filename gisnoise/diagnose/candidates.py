@@ -94,6 +94,7 @@ class _Candidate:
     oof: np.ndarray | None = None
     error: str = ""
     summary: dict[str, Any] = field(default_factory=dict)
+    x: dict[str, Any] | None = None
 
 
 def _fit(level: np.ndarray, x: Mapping[str, Any], model: Ansatz, s: Samples, rows: np.ndarray, *,
@@ -137,19 +138,33 @@ def _wald(res: FitResult, names: Sequence[str]) -> tuple[float, int]:
 
 def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: dict[str, Any],
                     x_ev: dict[str, Any], base_fit: FitResult, oof_base: np.ndarray, fold: np.ndarray, *,
-                    cancel: CancelFn | None, bias_z: float, tick: Callable[[str], None]) -> list[_Candidate]:
+                    cancel: CancelFn | None, bias_z: float, tick: Callable[[str], None],
+                    overrides: Mapping[str, tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]]
+                    | None = None,
+                    ) -> list[_Candidate]:
     """Each named candidate: untestable with its reason, or fitted on all data and in the folds.
 
     ``x_ev`` are the inputs with the event windows (``event_window``) for ``background_event``;
+    ``overrides[name] = (effect, extra_inputs, notes, summary)`` tests a candidate in another form or with
+    inputs estimated from the data instead of the campaign's metadata (the notes say why; ``summary``
+    adds evidence computed with the estimate, e.g. the band-level held-out test);
     a candidate whose fit fails keeps the error; ``tick(name)`` follows each candidate.
     """
     ev_list = ctx.event_windows
     cands: list[_Candidate] = []
     for nme in names:
         eff = _effects.get_effect(nme)
-        cand = _Candidate(nme, eff)
-        cands.append(cand)
         xe = x_ev if nme == "background_event" else x
+        notes: list[str] = []
+        more: dict[str, Any] = {}
+        if overrides and nme in overrides:
+            eff, extra, notes, more = overrides[nme]
+            xe = {**xe, **extra}
+        cand = _Candidate(nme, eff, x=xe)
+        if notes:
+            cand.summary["metadata_contradicted"] = list(notes)
+        cand.summary.update(more)
+        cands.append(cand)
         ok, why = _effects.check_testable(eff, xe)
         if nme == "background_event" and ok and not ev_list:
             ok, why = True, ""
