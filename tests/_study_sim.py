@@ -101,3 +101,35 @@ def clock(s, mic: str, offset_s: float):
             for j in range(bands.shape[1]):
                 bands[rows, j] = 10.0 * np.log10(np.interp(tt, t, 10.0 ** (s.bands[rows, j] / 10.0)))
     return replace(s, level=level, bands=bands).select(keep)
+
+
+def wrong_temperature(s, temperature_c: float):
+    """The samples with the campaign's temperature (and speed of sound) from a station that logged ``temperature_c``."""
+    from gisnoise.acoustics import speed_of_sound
+
+    meta = dict(s.meta)
+    weather = dict(meta.get("weather", {}))
+    weather["temperature_c"] = temperature_c
+    meta["weather"] = weather
+    meta["speed_of_sound_m_s"] = float(speed_of_sound(temperature_c))
+    return replace(s, meta=meta)
+
+
+def move_mic(s, mic: str, distance_m: float, bearing_deg: float):
+    """The samples as if microphone ``mic`` were listed ``distance_m`` away (towards ``bearing_deg``) from where it stood.
+
+    The geometry the diagnosis reads (microphone position, distance, emission angles) is recomputed for the
+    listed position; the levels stay what the true position heard.
+    """
+    from gisnoise.geo import emission_angles
+
+    rows = s.mic.astype(str) == mic
+    b = np.radians(bearing_deg)
+    mic_enu = np.array(s.mic_enu, dtype=float)
+    mic_enu[rows, 0] += distance_m * np.sin(b)
+    mic_enu[rows, 1] += distance_m * np.cos(b)
+    d, phi, theta = (np.array(v, dtype=float) for v in (s.d, s.phi, s.theta))
+    r = mic_enu[rows] - s.uav_enu[rows]
+    d[rows], phi[rows], theta[rows] = emission_angles(r[:, 0], r[:, 1], r[:, 2], np.radians(s.yaw[rows]),
+                                                      np.radians(s.pitch[rows]), np.radians(s.roll[rows]))
+    return replace(s, mic_enu=mic_enu, d=d, phi=phi, theta=theta)

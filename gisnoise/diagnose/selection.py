@@ -129,7 +129,8 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
         ctx2 = replace(ctx, x=xcur, base_model=cur.model, p_base=cur.fit.p, resid_base=cur.fit.residuals)
         x_ev = dict(xcur, event_window=ev_win)
         step = _fit_candidates(names, ctx2, level, xcur, x_ev, cur.fit, cur.oof, fold, cancel=cancel,
-                               bias_z=bias_z, tick=noop, overrides=overrides)
+                               bias_z=bias_z, tick=noop, overrides=overrides, screen_alpha=level_alpha)
+        step = [c for c in step if c.oof is not None]
         _score(step, ctx2, cur.oof, block, noise, level_alpha)
         ranked = sorted([c for c in step if c.oof is not None and c.fit is not None],
                         key=lambda c: -c.summary.get("holdout_improvement_db2", -np.inf))
