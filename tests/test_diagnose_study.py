@@ -68,6 +68,7 @@ def one_run(job: tuple[str | None, float | None, int]) -> dict:
     return {"effect": effect, "value": value, "seed": seed, "verdict": v["effect"],
             "shrinkage_pct": v.get("holdout_shrinkage_pct", 0.0),
             "significant": [e["name"] for e in r["effects"] if e.get("significant")],
+            "named": [e["effect"] for e in v.get("effects", [])],
             "seconds": time.perf_counter() - t0}
 
 
@@ -120,6 +121,7 @@ def summarize(rows: list[dict]) -> dict:
             "n_controls": len(controls), "rates": rates, "limits": limits,
             "all_correct": sum(1 for r in rows if r["verdict"] == r["effect"]), "n_all": len(rows),
             "wrong_effect": sum(1 for r in rows if r["verdict"] not in (None, r["effect"])),
+            "foreign_named": sum(1 for r in rows if set(r.get("named", [])) - {r["effect"]}),
             "seconds_median": float(np.median([r["seconds"] for r in rows]))}
 
 
@@ -149,6 +151,8 @@ def render(s: dict) -> str:
         f"* Over the whole sweep, weak magnitudes included: {s['all_correct']} of {s['n_all']} "
         f"({100 * s['all_correct'] / s['n_all']:.1f} %); {s['wrong_effect']} verdict(s) named another effect than "
         "the injected one, the rest of the misses are null verdicts below the detection limit.",
+        f"* Runs where forward selection (`verdict.effects`) named any effect that was not injected: "
+        f"{s['foreign_named']} of {s['n_all']}.",
         "",
         "Confusion matrix at realistic magnitudes (rows: injected effect, columns: verdict):",
         "",
