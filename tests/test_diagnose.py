@@ -13,6 +13,7 @@ import json
 import math
 from pathlib import Path
 
+import _study_sim as study  # the independent study simulator (tests/_study_sim.py)
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -312,3 +313,103 @@ def test_one_writer_of_diagnosis_json(tmp_path):
     assert other == tmp_path / "other.json" and json.loads(other.read_text())["campaign"] == "c"
     assert "campaign" not in diag.result
     assert sorted(p.name for p in tmp_path.iterdir()) == [DIAGNOSIS_FILE, "other.json"]
+
+
+# --------------------------------------------------------------------------- the campaign's metadata as a prior
+
+TRIPOD_HEIGHTS = {"m1": 1.0, "m2": 1.2, "m3": 1.5, "m4": 1.3}
+
+
+@functools.cache
+def plates_control(seed: int = 5):
+    """Samples of the base scenario with every microphone listed (and simulated) on a ground plate."""
+    return study.control(seed, all_plates=True)
+
+
+def test_two_ray_physics_of_the_study_simulator():
+    """Hard ground at low frequency doubles the pressure (+6.02 dB); grass reflects less than a hard ground."""
+    mic = np.zeros((1, 3))
+    uav = np.array([[0.0, 0.0, 1000.0]])  # overhead and far: r1/r2 -> 1, normal incidence
+    hard = study.two_ray_db([25.0], mic, uav, 0.01, 340.0, sigma_pa_s_m2=1e15)
+    assert hard[0, 0] == pytest.approx(20 * math.log10(2.0), abs=0.01)
+    # normal incidence, Delany-Bazley grass at 1 kHz: |Q| = |Z - 1| / |Z + 1| from the impedance itself
+    z = study.delany_bazley(1000.0, 200e3)
+    q = abs((z - 1) / (z + 1))
+    assert 0.4 < q < 0.9
+    # a quarter-wave geometry over the hard ground: the band around the first dip loses energy
+    f_dip = 340.0 / (4 * 1.0)  # path difference 2 h = lambda / 2 for h = 1 m
+    dip = study.two_ray_db([f_dip], mic, uav, 1.0, 340.0, sigma_pa_s_m2=1e15)
+    assert dip[0, 0] < -3.0
+
+
+def test_ground_plates_that_stood_above_grass_are_found_from_the_band_levels():
+    """Listed on ground plates, heard 1.0-1.5 m above grass: ground_reflection, heights within 0.3 m, and said so."""
+    s = study.elevate(plates_control(), TRIPOD_HEIGHTS)
+    r = run_diagnosis(s, cards.load(CARD)).result
+    v = r["verdict"]
+    assert v["effect"] == "ground_reflection", (v["reason"], r["metadata"]["contradictions"])
+    assert v["effects"][0]["effect"] == "ground_reflection"
+    est = r["metadata"]["microphone_heights"]
+    for m, h in TRIPOD_HEIGHTS.items():
+        assert est[m]["listed_m"] == 0.0
+        assert est[m]["height_m"] == pytest.approx(h, abs=0.3)
+        assert est[m]["contradicts"]
+    sentence = next(t for t in v["metadata_contradicted"] if "m2" in t)
+    assert "comb pattern" in sentence and "not a ground plate" in sentence
+    assert f"about {est['m2']['height_m']:.1f} m" in sentence
+    assert v["band_holdout"]["shrinkage_pct"] > 10.0
+
+
+def test_ground_plates_on_the_ground_contradict_nothing():
+    r = run_diagnosis(plates_control(), cards.load(CARD)).result
+    assert r["verdict"]["effect"] is None and r["verdict"]["effects"] == []
+    assert r["metadata"]["contradictions"] == []
+    assert not any(h["contradicts"] for h in r["metadata"]["microphone_heights"].values())
+
+
+def test_an_unstated_clock_offset_on_one_microphone_is_estimated():
+    """m2's clock 0.8 s behind, the campaign silent: emission_time with 0.8 s on m2 (within 0.15 s), 0 elsewhere."""
+    s = study.clock(plates_control(), "m2", 0.8)
+    r = run_diagnosis(s, cards.load(CARD)).result
+    v = r["verdict"]
+    assert v["effect"] == "emission_time", v["reason"]
+    p = v["parameters"]
+    assert p["dt_m2"]["value"] == pytest.approx(0.8, abs=0.15)
+    for m in ("m1", "m3", "m4"):
+        assert p[f"dt_{m}"]["value"] == pytest.approx(0.0, abs=0.15)
+    assert any("m2" in t and "clock" in t for t in v["metadata_contradicted"])
+    assert r["metadata"]["clock_offsets"]["m2"]["offset_s"] == pytest.approx(0.8, abs=0.15)
+
+
+def test_two_effects_at_once_are_both_named_in_order():
+    """A clock offset on m2 and the simulator's wind together: forward selection names both, each shrinking."""
+    doc = json.loads(SCENARIO.read_text())
+    doc["seed"] = 11
+    doc["effects"] = {"wind": {}}
+    s = study.clock(simulate.simulate_samples(simulate.run(doc, base_dir=SCENARIO.parent)), "m2", 0.8)
+    v = run_diagnosis(s, cards.load(CARD)).result["verdict"]
+    named = [e["effect"] for e in v["effects"]]
+    assert set(named) == {"wind", "emission_time"}, named
+    assert named[0] == v["effect"]
+    assert all(e["holdout_shrinkage_pct"] > 0 for e in v["effects"])
+    assert v["effects"][-1]["cumulative_shrinkage_pct"] > v["effects"][0]["cumulative_shrinkage_pct"]
+
+
+def test_evidence_that_contradicts_the_leader_gives_no_verdict():
+    """A fit that wins on numbers but whose physical evidence says otherwise is not named: null with the reason."""
+    from gisnoise.diagnose.candidates import _Candidate
+    from gisnoise.diagnose.verdict import _choose, _gate
+
+    def cand(name, imp, supports):
+        c = _Candidate(name)
+        c.summary.update(significant=True, holdout_improvement_db2=imp, p_holdout=1e-4,
+                         evidence={"supports": supports, "summary": f"{name} evidence"})
+        return c
+
+    lead = _choose([cand("bank_angle", 0.05, False), cand("wind", 0.01, None)], 0.005)
+    assert lead is not None and lead.name == "bank_angle"
+    why = _gate(lead)
+    assert why is not None and "bank_angle" in why and "contradicts" in why
+    # a close runner-up whose evidence supports it takes the place (the tie-break)
+    lead = _choose([cand("bank_angle", 0.05, False), cand("wind", 0.045, True)], 0.005)
+    assert lead is not None and lead.name == "wind" and _gate(lead) is None

@@ -25,6 +25,15 @@ from gisnoise.diagnose.localization import (
     measurement_noise,
     sample_regimes,
 )
+from gisnoise.diagnose.metadata import (
+    CLOCK_RANGE_S,
+    HEIGHT_RANGE_M,
+    clocks_disagree,
+    estimate_clock_offsets,
+    estimate_mic_heights,
+    mic_clock_effect,
+    shift_inputs,
+)
 from gisnoise.diagnose.report import (
     EFFECT_INPUT,
     before_after_data,
@@ -37,11 +46,18 @@ from gisnoise.diagnose.samples import (
     load_samples,
     with_mic_heights,
 )
+from gisnoise.diagnose.selection import (
+    MAX_EFFECTS,
+    forward_selection,
+    metadata_overrides,
+)
 from gisnoise.diagnose.verdict import (
     MIN_IMPROVEMENT_DB2,
 )
 
-__all__ = ['DIAGNOSIS_FILE', 'Diagnosis', 'EFFECT_INPUT', 'MIN_IMPROVEMENT_DB2', 'SCHEMA', 'before_after_data',
-           'candidate_inputs', 'diagnose', 'fold_labels', 'inputs_data', 'load_samples', 'localize',
-           'measurement_noise', 'register_evidence', 'residual_events', 'run_diagnosis', 'sample_regimes',
+__all__ = ['CLOCK_RANGE_S', 'DIAGNOSIS_FILE', 'Diagnosis', 'EFFECT_INPUT', 'HEIGHT_RANGE_M', 'MAX_EFFECTS',
+           'MIN_IMPROVEMENT_DB2', 'SCHEMA', 'before_after_data', 'candidate_inputs', 'clocks_disagree', 'diagnose',
+           'estimate_clock_offsets', 'estimate_mic_heights', 'fold_labels', 'forward_selection', 'inputs_data',
+           'load_samples', 'localize', 'measurement_noise', 'metadata_overrides', 'mic_clock_effect',
+           'register_evidence', 'residual_events', 'run_diagnosis', 'sample_regimes', 'shift_inputs',
            'timeline_data', 'with_mic_heights', 'write_diagnosis', 'write_report']

@@ -94,6 +94,7 @@ class _Candidate:
     oof: np.ndarray | None = None
     error: str = ""
     summary: dict[str, Any] = field(default_factory=dict)
+    x: dict[str, Any] | None = None
 
 
 def _fit(level: np.ndarray, x: Mapping[str, Any], model: Ansatz, s: Samples, rows: np.ndarray, *,
@@ -137,19 +138,34 @@ def _wald(res: FitResult, names: Sequence[str]) -> tuple[float, int]:
 
 def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: dict[str, Any],
                     x_ev: dict[str, Any], base_fit: FitResult, oof_base: np.ndarray, fold: np.ndarray, *,
-                    cancel: CancelFn | None, bias_z: float, tick: Callable[[str], None]) -> list[_Candidate]:
+                    cancel: CancelFn | None, bias_z: float, tick: Callable[[str], None],
+                    overrides: Mapping[str, tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]]
+                    | None = None, screen_alpha: float | None = None) -> list[_Candidate]:
     """Each named candidate: untestable with its reason, or fitted on all data and in the folds.
 
     ``x_ev`` are the inputs with the event windows (``event_window``) for ``background_event``;
-    a candidate whose fit fails keeps the error; ``tick(name)`` follows each candidate.
+    ``overrides[name] = (effect, extra_inputs, notes, summary)`` tests a candidate in another form or with
+    inputs estimated from the data instead of the campaign's metadata (the notes say why; ``summary``
+    adds evidence computed with the estimate, e.g. the band-level held-out test);
+    a candidate whose fit fails keeps the error; ``tick(name)`` follows each candidate.  With
+    ``screen_alpha``, a candidate whose Wald test on all data does not reach it is not refitted in the
+    folds (it cannot qualify; forward selection uses this to save time).
     """
     ev_list = ctx.event_windows
     cands: list[_Candidate] = []
     for nme in names:
         eff = _effects.get_effect(nme)
-        cand = _Candidate(nme, eff)
-        cands.append(cand)
         xe = x_ev if nme == "background_event" else x
+        notes: list[str] = []
+        more: dict[str, Any] = {}
+        if overrides and nme in overrides:
+            eff, extra, notes, more = overrides[nme]
+            xe = {**xe, **extra}
+        cand = _Candidate(nme, eff, x=xe)
+        if notes:
+            cand.summary["metadata_contradicted"] = list(notes)
+        cand.summary.update(more)
+        cands.append(cand)
         ok, why = _effects.check_testable(eff, xe)
         if nme == "background_event" and ok and not ev_list:
             ok, why = True, ""
@@ -164,7 +180,7 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
             tick(nme)
             continue
         try:
-            _attribute(cand, ctx, level, xe, base_fit, fold, cancel, bias_z)
+            _attribute(cand, ctx, level, xe, base_fit, fold, cancel, bias_z, screen_alpha)
         except GisnoiseError as exc:
             if isinstance(exc, Cancelled):
                 raise
@@ -174,7 +190,7 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
 
 
 def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, Any], base_fit: FitResult,
-               fold: np.ndarray, cancel: CancelFn | None, bias_z: float) -> None:
+               fold: np.ndarray, cancel: CancelFn | None, bias_z: float, screen_alpha: float | None = None) -> None:
     """Fit one candidate on all data and in the two folds; fill its summary."""
     s = ctx.s
     n = len(s)
@@ -213,6 +229,11 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
 
     full = fit_ext(rows_all, start, fixed)
     cand.fit = full
+    if screen_alpha is not None and cand.name != "background_event" and "band_holdout" not in cand.summary:
+        w, dof = _wald(full, tested)
+        if min(1.0, trials * float(stats.chi2.sf(w, dof))) >= screen_alpha:
+            cand.reason = "not significant on all data: not refitted in the folds"
+            return
     oof = np.empty(n)
     for f in (0, 1):
         tr, te = np.flatnonzero(fold != f), np.flatnonzero(fold == f)

@@ -59,6 +59,7 @@ from gisnoise.diagnose.candidates import CancelFn, _Context, _fit, _fit_candidat
 from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.localization import _statistics, localize, measurement_noise, sample_regimes
 from gisnoise.diagnose.samples import load_samples
+from gisnoise.diagnose.selection import forward_selection, metadata_overrides
 from gisnoise.diagnose.verdict import MIN_IMPROVEMENT_DB2, _judge, _rms
 from gisnoise.errors import Cancelled, FitError, InputError
 from gisnoise.jsonio import to_jsonable, write_json
@@ -246,13 +247,18 @@ def run_diagnosis(
     ctx = _Context(s=s, x=x, regimes=reg, resid_base=resid_base, base_model=base, p_base=base_fit.p,
                    background_db=bg, event_windows=ev_list)
 
-    # ---------------------------------------------------------------- candidates
+    # ---------------------------------------------------------------- the metadata as a prior, candidates
+    overrides, metadata = metadata_overrides(s, x, base, base_fit.p, names, fold, block)
     cands = _fit_candidates(names, ctx, level, x, x_ev, base_fit, oof_base, fold, cancel=cancel, bias_z=bias_z,
-                            tick=tick)
+                            tick=tick, overrides=overrides)
 
     # ---------------------------------------------------------------- ranking, verdict, shrinkage per segment
     verdict, effects_out, level_alpha = _judge(cands, ctx, segments, oof_base, block, noise, base_fit, alpha=alpha,
                                                min_improvement_db2=min_improvement_db2)
+    first = next((c for c in cands if c.name == verdict["effect"]), None)
+    verdict["effects"] = [] if first is None else forward_selection(
+        first, cands, ctx, level, ev_win, oof_base, fold, block, noise, level_alpha=level_alpha,
+        min_improvement_db2=min_improvement_db2, overrides=overrides, cancel=cancel, bias_z=bias_z)
 
     result = {
         "schema": SCHEMA,
@@ -272,6 +278,7 @@ def run_diagnosis(
         "effects": effects_out,
         "alpha": alpha,
         "alpha_per_test": level_alpha,
+        "metadata": metadata,
         "verdict": verdict,
     }
     arrays = {"resid_card": resid_card, "resid_baseline": resid_base, "oof_baseline": oof_base,

@@ -108,10 +108,15 @@ def _ev_absorption(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
 
 
 def _ev_ground(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
+    band = cand.summary.get("band_holdout")
+    if band is not None and cand.summary.get("significant_bands"):
+        return {"supports": True, "band_comb_shrinkage_pct": band["shrinkage_pct"],
+                "summary": "; ".join(cand.summary.get("metadata_contradicted", [])) +
+                f"; the comb predicts held-out band levels {band['shrinkage_pct']:.0f} % better (RMS)"}
     if cand.fit is None:
         return {"supports": None, "summary": "not fitted"}
     p = cand.fit.params
-    tau = _effects.reflection_delay(ctx.x)
+    tau = _effects.reflection_delay(cand.x if cand.x is not None else ctx.x)
     up = np.isfinite(tau)
     r = ctx.resid_base
     cb, _ = _effects.band_cos(2.0 * np.pi * p["f_ground"] * tau[up], False)
@@ -150,10 +155,18 @@ def _ev_emission(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
     lm = base.level(ctx.p_base, _effects.shifted_inputs(x, -0.05))
     rate = (lp - lm) / 0.1
     c = _corr(rate, ctx.resid_base)
-    out = {"supports": None if c is None else bool(abs(c) > 0.1), "corr_residual_model_rate": c,
+    per_mic = cand.fit is not None and "dt_clock" not in cand.fit.params
+    if per_mic:  # one clock offset per microphone: the microphone whose residual follows the rate best
+        mics = ctx.s.mic.astype(str)
+        cs = [_corr(rate[mics == m], ctx.resid_base[mics == m]) for m in sorted(set(mics.tolist()))]
+        c = max((v for v in cs if v is not None), key=abs, default=None)
+    out: dict[str, Any] = {"supports": None if c is None else bool(abs(c) > 0.1), "corr_residual_model_rate": c,
            "summary": f"residual correlates {c:+.2f} with the model's level rate dL/dt" if c is not None else
            "no level rate"}
-    if cand.fit is not None:
+    if cand.fit is not None and per_mic:
+        out["dt_clock_s"] = {k[3:]: v for k, v in cand.fit.params.items() if k.startswith("dt_")}
+        out["k_delay"] = cand.fit.params["k_delay"]
+    elif cand.fit is not None:
         out["dt_clock_s"] = cand.fit.params["dt_clock"]
         out["k_delay"] = cand.fit.params["k_delay"]
     return out

@@ -304,6 +304,11 @@ def _html(r: dict[str, Any], pngs: list[tuple[str, str]], title: str | None) -> 
                 for b in biased) + ".</p>"
     else:
         head = f"<p class=verdict>Verdict: <b>no effect</b> ({e(v.get('reason', ''))}).</p>"
+    if len(v.get("effects") or []) > 1:
+        head += "<p>Effects found together (forward selection): " + "; ".join(
+            f"{e(x['effect'])} ({x['holdout_shrinkage_pct']:.1f} % held-out shrinkage)" for x in v["effects"]) + ".</p>"
+    for sentence in (r.get("metadata") or {}).get("contradictions", []):
+        head += f"<p>The data contradict the campaign's metadata: {e(sentence)}.</p>"
     eff_rows = []
     for x in r["effects"]:
         ev = x.get("evidence") or {}

@@ -82,9 +82,24 @@ def _judge(
     for i, c in enumerate(ranked):
         c.summary["rank"] = i + 1
     verdict_c = _choose(ranked, min_improvement_db2)
+    gated = _gate(verdict_c) if verdict_c is not None else None
     _segment_shrinkage(segments, ctx, oof_base, verdict_c or (ranked[0] if ranked else None))
+    if gated is not None:
+        verdict_c = None
     tested = any(c.testable and c.fit is not None for c in cands)
-    return _verdict(verdict_c, tested, level_alpha, oof_base, base_fit), _effects_table(cands), level_alpha
+    doc = _verdict(verdict_c, tested, level_alpha, oof_base, base_fit)
+    if gated is not None:
+        doc["reason"] = gated
+    return doc, _effects_table(cands), level_alpha
+
+
+def _gate(c: _Candidate) -> str | None:
+    """Why the evidence stops ``c`` from being named (its physical evidence contradicts it), or None."""
+    ev = c.summary.get("evidence") or {}
+    if ev.get("supports") is False:
+        return (f"the leading candidate {c.name} fits but its physical evidence contradicts it "
+                f"({ev.get('summary', 'no summary')}): no effect is named")
+    return None
 
 
 def _score(cands: Sequence[_Candidate], ctx: _Context, oof_base: np.ndarray, block: np.ndarray,
@@ -106,6 +121,9 @@ def _score(cands: Sequence[_Candidate], ctx: _Context, oof_base: np.ndarray, blo
             trials = c.summary.get("look_elsewhere_trials", 1)
             c.summary["p_value"] = float(min(1.0, trials * stats.chi2.sf(w, dof))) if dof else 1.0
         c.summary["significant"] = bool(c.summary.get("p_value", 1.0) < level_alpha)
+        band = c.summary.get("band_holdout")
+        if band is not None:  # evidence in the band levels (estimated inputs): its own held-out test
+            c.summary["significant_bands"] = bool(band["p_value"] < level_alpha)
         check = _EVIDENCE.get(c.name)
         if check is not None:
             try:
@@ -121,8 +139,8 @@ def _choose(ranked: Sequence[_Candidate], min_improvement_db2: float) -> _Candid
     significant in the paired block test; a runner-up within 20 % of its improvement
     takes its place when the evidence contradicts the leader and supports the runner-up.
     """
-    eligible = [c for c in ranked if c.summary["significant"] and c.summary["holdout_improvement_db2"] >= min_improvement_db2
-                and c.summary["p_holdout"] < 0.05]
+    eligible = [c for c in ranked if (c.summary["significant"] and c.summary["holdout_improvement_db2"] >= min_improvement_db2
+                and c.summary["p_holdout"] < 0.05) or _band_qualifies(c, min_improvement_db2)]
     if not eligible:
         return None
     verdict_c = eligible[0]
@@ -132,6 +150,13 @@ def _choose(ranked: Sequence[_Candidate], min_improvement_db2: float) -> _Candid
         if close and sup is False and (other.summary.get("evidence") or {}).get("supports") is True:
             return other
     return verdict_c
+
+
+def _band_qualifies(c: _Candidate, min_improvement_db2: float) -> bool:
+    """Whether ``c`` qualifies on its band-level held-out test (significant, large enough, not worse in LA)."""
+    band = c.summary.get("band_holdout")
+    return bool(band is not None and c.summary.get("significant_bands") and band["improvement_db2"] >= min_improvement_db2
+                and c.summary.get("holdout_improvement_db2", 0.0) > -min_improvement_db2)
 
 
 def _segment_shrinkage(segments: list[dict[str, Any]], ctx: _Context, oof_base: np.ndarray,
@@ -176,7 +201,9 @@ def _verdict(verdict_c: _Candidate | None, tested: bool, level_alpha: float, oof
         return {"effect": None, "holdout_shrinkage_pct": 0.0, "reason": why,
                 "rms_db_holdout_baseline": _rms(oof_base)}
     evidence = verdict_c.summary.get("evidence") or {}
-    return {"effect": verdict_c.name, "holdout_shrinkage_pct": verdict_c.summary["shrinkage_pct"],
+    extra: dict[str, Any] = {k: verdict_c.summary[k] for k in ("metadata_contradicted", "band_holdout")
+                             if verdict_c.summary.get(k)}
+    return {**extra, "effect": verdict_c.name, "parameters": verdict_c.summary.get("parameters", {}), "holdout_shrinkage_pct": verdict_c.summary["shrinkage_pct"],
             "rms_db_holdout_baseline": _rms(oof_base),
             "rms_db_holdout_extended": verdict_c.summary["rms_db_holdout"],
             "rms_db_fit_baseline": base_fit.rms_db,
@@ -184,6 +211,17 @@ def _verdict(verdict_c: _Candidate | None, tested: bool, level_alpha: float, oof
             "p_value": verdict_c.summary.get("p_value"),
             "biased_parameters": verdict_c.summary.get("biased_parameters", []),
             "evidence": evidence.get("summary"),
-            "reason": f"significant at {level_alpha:.1e} and the largest held-out improvement "
-                      f"({verdict_c.summary['holdout_improvement_db2']:.3f} dB^2, paired-block p "
-                      f"{verdict_c.summary['p_holdout']:.1e})"}
+            "reason": _reason(verdict_c, level_alpha)}
+
+
+def _reason(c: _Candidate, level_alpha: float) -> str:
+    """Why ``c`` is the verdict, in one sentence."""
+    band = c.summary.get("band_holdout")
+    la = (f"held-out improvement of the overall level {c.summary['holdout_improvement_db2']:.3f} dB^2, paired-block p "
+          f"{c.summary['p_holdout']:.1e}")
+    if band is not None and c.summary.get("significant_bands"):
+        return (f"its pattern in the band levels predicts held-out data better at p {band['p_value']:.1e} < "
+                f"{level_alpha:.1e} ({band['improvement_db2']:.3f} dB^2, {band['shrinkage_pct']:.0f} % lower RMS); "
+                f"{la}")
+    return f"significant at {level_alpha:.1e} and the largest {la}"
+

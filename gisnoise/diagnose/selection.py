@@ -1,0 +1,143 @@
+"""Metadata as a prior and several effects at once: the candidates' estimated inputs and forward selection.
+
+:func:`metadata_overrides` runs the estimates of :mod:`gisnoise.diagnose.metadata`
+and, where the data contradict the campaign's metadata, gives the candidate the
+estimated inputs (microphone heights for ``ground_reflection``) or form (one clock
+offset per microphone for ``emission_time``) with the sentence the report shows.
+
+:func:`forward_selection` adds effects one at a time: after the verdict's first
+effect, the model extended by it becomes the baseline, the remaining candidates
+that were significant alone are fitted again on top of it, scored on held-out
+data against it, and the best qualifying one is added; until none qualifies.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from gisnoise.diagnose.candidates import CancelFn, _Candidate, _Context, _fit_candidates
+from gisnoise.diagnose.metadata import (
+    clocks_disagree,
+    estimate_clock_offsets,
+    estimate_mic_heights,
+    mic_clock_effect,
+)
+from gisnoise.diagnose.verdict import _block_test, _choose, _gate, _rms, _score
+from gisnoise.measure import Samples
+from gisnoise.model import Ansatz, mic_height_agl
+from gisnoise.model import effects as _effects
+
+__all__ = ["MAX_EFFECTS", "forward_selection", "metadata_overrides"]
+
+MAX_EFFECTS = 4
+"""Most effects forward selection adds."""
+
+Override = tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]
+
+
+def metadata_overrides(s: Samples, x: Mapping[str, Any], base: Ansatz, p_base: np.ndarray,
+                       names: Sequence[str], fold: np.ndarray,
+                       block: np.ndarray) -> tuple[dict[str, Override], dict[str, Any]]:
+    """Candidates to test with inputs estimated from the data, and the ``metadata`` section of the report.
+
+    Returns
+    -------
+    overrides : dict
+        ``name -> (effect, extra_inputs, sentences)`` for :func:`~gisnoise.diagnose.candidates._fit_candidates`.
+    doc : dict
+        ``{"microphone_heights": {...}, "clock_offsets": {...}, "contradictions": [sentence, ...]}``.
+    """
+    overrides: dict[str, Override] = {}
+    doc: dict[str, Any] = {"contradictions": []}
+    if "ground_reflection" in names:
+        heights = estimate_mic_heights(s, x, fold)
+        doc["microphone_heights"] = {m: {k: v for k, v in h.items() if k not in ("rows", "err0", "err1")}
+                                     for m, h in heights.items()}
+        contra = {m: h for m, h in heights.items() if h["contradicts"]}
+        if contra:
+            listed = mic_height_agl(x)
+            agl = np.zeros(len(s)) if listed is None else np.nan_to_num(np.asarray(listed, dtype=float))
+            mics = s.mic.astype(str)
+            for m, h in contra.items():
+                agl[mics == m] = h["height_m"]
+            notes = [h["sentence"] for h in contra.values()]
+            rows = np.concatenate([h["rows"] for h in contra.values()])
+            err0 = np.concatenate([h["err0"] for h in contra.values()])
+            err1 = np.concatenate([h["err1"] for h in contra.values()])
+            imp, p_band = _block_test(err0, err1, block[rows])
+            band = {"improvement_db2": imp, "p_value": p_band, "rms_db_baseline": _rms(err0),
+                    "rms_db_extended": _rms(err1), "shrinkage_pct": 100.0 * (1.0 - _rms(err1) / _rms(err0)),
+                    "what": "centred band levels of the microphones whose metadata the comb contradicts, "
+                            "comb fitted on the other fold"}
+            overrides["ground_reflection"] = (_effects.get_effect("ground_reflection"), {"mic_agl": agl}, notes,
+                                              {"band_holdout": band})
+            doc["contradictions"] += notes
+    if "emission_time" in names and "t_e" in x:
+        clocks = estimate_clock_offsets(s, x, base, p_base)
+        doc["clock_offsets"] = clocks
+        odd = clocks_disagree(clocks)
+        if odd:
+            notes = [f"the level of {m} follows the model {clocks[m]['offset_s']:+.2f} s (+/- "
+                     f"{clocks[m]['std_s']:.2f} s) later than the other microphones': its clock is off by that much, "
+                     "which the campaign does not state" for m in odd]
+            start = {m: float(v["offset_s"]) for m, v in clocks.items()}
+            eff = mic_clock_effect(s, x, sorted(clocks), start, base)
+            overrides["emission_time"] = (eff, {}, notes, {})
+            doc["contradictions"] += notes
+    return overrides, doc
+
+
+def _entry(c: _Candidate, oof_ref: np.ndarray, oof_base: np.ndarray) -> dict[str, Any]:
+    """One ``verdict.effects`` entry: the effect with its held-out shrinkage against the model before it."""
+    assert c.oof is not None
+    e: dict[str, Any] = {
+        "effect": c.name,
+        "holdout_shrinkage_pct": 100.0 * (1.0 - _rms(c.oof) / _rms(oof_ref)) if _rms(oof_ref) > 0 else 0.0,
+        "cumulative_shrinkage_pct": 100.0 * (1.0 - _rms(c.oof) / _rms(oof_base)) if _rms(oof_base) > 0 else 0.0,
+        "holdout_improvement_db2": c.summary.get("holdout_improvement_db2"),
+        "p_value": c.summary.get("p_value"),
+        "evidence": (c.summary.get("evidence") or {}).get("summary"),
+        "parameters": c.summary.get("parameters", {}),
+    }
+    if c.summary.get("metadata_contradicted"):
+        e["metadata_contradicted"] = c.summary["metadata_contradicted"]
+    return e
+
+
+def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Context, level: np.ndarray,
+                      ev_win: np.ndarray, oof_base: np.ndarray, fold: np.ndarray, block: np.ndarray,
+                      noise: Mapping[str, float], *, level_alpha: float, min_improvement_db2: float,
+                      overrides: Mapping[str, Override], cancel: CancelFn | None, bias_z: float,
+                      max_effects: int = MAX_EFFECTS) -> list[dict[str, Any]]:
+    """The effects in the order forward selection adds them, each with its held-out shrinkage.
+
+    Candidates not significant alone are not tried again (an effect too weak to
+    show alone is not looked for under another).
+    """
+    chosen = [_entry(first, oof_base, oof_base)]
+    names = [c.name for c in cands if c.name != first.name and c.fit is not None and c.summary.get("significant")]
+    cur = first
+    noop: Callable[[str], None] = lambda _name: None  # noqa: E731
+    while names and len(chosen) < max_effects:
+        assert cur.model is not None and cur.fit is not None and cur.oof is not None and cur.x is not None
+        xcur = dict(cur.x)
+        xcur.pop("event_window", None)
+        ctx2 = replace(ctx, x=xcur, base_model=cur.model, p_base=cur.fit.p, resid_base=cur.fit.residuals)
+        x_ev = dict(xcur, event_window=ev_win)
+        step = _fit_candidates(names, ctx2, level, xcur, x_ev, cur.fit, cur.oof, fold, cancel=cancel,
+                               bias_z=bias_z, tick=noop, overrides=overrides, screen_alpha=level_alpha)
+        step = [c for c in step if c.oof is not None]
+        _score(step, ctx2, cur.oof, block, noise, level_alpha)
+        ranked = sorted([c for c in step if c.oof is not None and c.fit is not None],
+                        key=lambda c: -c.summary.get("holdout_improvement_db2", -np.inf))
+        nxt = _choose(ranked, min_improvement_db2)
+        if nxt is None or _gate(nxt) is not None:
+            break
+        chosen.append(_entry(nxt, cur.oof, oof_base))
+        names = [c.name for c in ranked if c.name != nxt.name and c.summary.get("significant")]
+        cur = nxt
+    return chosen
