@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
-from gisnoise.flight._logkernels import _covering, _finish, _phase, _time_base
+from gisnoise.flight._logkernels import POWER_WAY_OUT, _at_rest_low, _covering, _finish, _phase, _power, _time_base
 from gisnoise.flight.clock import gps_to_unix
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
@@ -32,11 +32,13 @@ _INTEGER_FORMATS = set("bBhHiIqQ")
 
 
 def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undulation_m: float | None = None,
-                   rate_hz: float | None = None) -> Trajectory:
+                   rate_hz: float | None = None, power_w: float | None = None) -> Trajectory:
     """Read an ArduPilot DataFlash ``.bin`` log as a trajectory (see the module docstring).
 
     ArduPilot logs heights above mean sea level only, so ``geoid_undulation_m``
-    (ellipsoidal minus orthometric height at the site, m) is required.
+    (ellipsoidal minus orthometric height at the site, m) is required.  ``power_w``
+    (W) replaces the logged battery power by a constant (for logs without current);
+    then samples at rest at the track's lowest point are marked ``on_ground``.
     """
     try:
         from pymavlink import DFReader
@@ -103,7 +105,8 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
     tb, lat, lon, h_msl = tb[keep], lat[keep], lon[keep], h_msl[keep]
     if geoid_undulation_m is None:
         raise MissingColumnError(f"{src}: message '{pos_name}' gives heights above mean sea level only; "
-                                 "give geoid_undulation_m", field="geoid_undulation_m")
+                                 "give the geoid undulation (--geoid-undulation, or geoid_undulation_m)",
+                                 field="geoid_undulation_m")
     h = h_msl + float(geoid_undulation_m)
 
     att = table("ATT")
@@ -111,14 +114,12 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
         raise MissingColumnError(f"{src}: message 'ATT' missing (no attitude)", field="ATT")
     t_att = _ardupilot_boot_time("ATT", att)
 
-    batteries = _ardupilot_batteries(src, table, fmts)
+    batteries = _ardupilot_batteries(src, table, fmts) if power_w is None else []
     spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
     t = _time_base(src, tb, spans, rate_hz)
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
     roll, pitch, yaw = (_interp_deg(t, t_att, att[k]) for k in ("Roll", "Pitch", "Yaw"))
-    power = np.zeros_like(t)
-    for tt, pw in batteries:
-        power += np.interp(t, tt, pw)
+    power = _power(t, batteries, power_w)
     cols: dict[str, Any] = {"lat": lat_i, "lon": lon_i, "h": h_i, "roll": roll, "pitch": pitch, "yaw": yaw,
                             "power_w": power}
     arsp = table("ARSP")
@@ -129,7 +130,12 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
         cols["rpm"] = _covering(t, _ardupilot_boot_time("RPM", rpm), rpm["rpm1"], "RPM")
     cols = {k: v for k, v in cols.items() if v is not None}
     cols["phase"] = _phase(t, lat_i, lon_i, h_i, None)
-    return _finish(src, t, cols, start_utc, utc_offset, "GPS.Week")
+    if power_w is not None:
+        cols["on_ground"] = _at_rest_low(t, lat_i, lon_i, h_i)
+    meta = {"height_datum": f"mean sea level ({pos_name}.Alt) + geoid undulation",
+            "geoid_undulation_m": float(geoid_undulation_m),
+            "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}
+    return _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)
 
 
 def _ardupilot_boot_time(name: str, tab: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -174,7 +180,8 @@ def _ardupilot_batteries(src: str, table: Callable[[str], dict[str, np.ndarray] 
         t = _ardupilot_boot_time(name, cur)
         out.append((t, _scaled(fmts[name], "Volt", cur) * _scaled(fmts[name], "Curr", cur)))
     if not out:
-        raise MissingColumnError(f"{src}: message 'BAT' or 'CURR' missing (no electric power)", field="BAT")
+        raise MissingColumnError(f"{src}: message 'BAT' or 'CURR' missing (no electric power); {POWER_WAY_OUT}",
+                                 field="BAT")
     return out
 
 

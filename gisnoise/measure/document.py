@@ -210,7 +210,9 @@ def _parse_flights(cjs: str, root: Path, doc: Mapping[str, Any], col: _Collector
                     f"number, got {und!r}")
             continue
         logs = [root / "flights" / f"{fid}{s}" for s in FLIGHT_SUFFIXES]
-        found = [p for p in logs if p.is_file()]
+        fdir = root / "flights"
+        found = sorted(p for p in fdir.iterdir() if p.stem == fid and p.suffix.lower() in FLIGHT_SUFFIXES
+                       and p.is_file()) if fdir.is_dir() else []
         if not found:
             col.add(str(logs[0]), "flights", f"{logs[0]}: missing flight log for flight '{fid}' "
                     f"(.csv, .ulg or .bin)")
