@@ -37,8 +37,9 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
 
     ArduPilot logs heights above mean sea level only, so ``geoid_undulation_m``
     (ellipsoidal minus orthometric height at the site, m) is required.  ``power_w``
-    (W) replaces the logged battery power by a constant (for logs without current);
-    then samples at rest at the track's lowest point are marked ``on_ground``.
+    (W) replaces the logged battery power by a constant (for logs without current).
+    ArduPilot logs hold no landed flag here: samples at rest (below 0.3 m/s) within
+    1 m of the track's lowest point are marked ``on_ground``.
     """
     try:
         from pymavlink import DFReader
@@ -130,8 +131,7 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
         cols["rpm"] = _covering(t, _ardupilot_boot_time("RPM", rpm), rpm["rpm1"], "RPM")
     cols = {k: v for k, v in cols.items() if v is not None}
     cols["phase"] = _phase(t, lat_i, lon_i, h_i, None)
-    if power_w is not None:
-        cols["on_ground"] = _at_rest_low(t, lat_i, lon_i, h_i)
+    cols["on_ground"] = _at_rest_low(t, lat_i, lon_i, h_i)
     meta = {"height_datum": f"mean sea level ({pos_name}.Alt) + geoid undulation",
             "geoid_undulation_m": float(geoid_undulation_m),
             "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}

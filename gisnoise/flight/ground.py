@@ -23,8 +23,9 @@ from gisnoise.flight.trajectory import Trajectory
 
 __all__ = ["ground_from_track", "flying_segments", "GROUND_TOLERANCE_M", "REST_SPEED_M_S", "GROUND_RULE"]
 
-GROUND_TOLERANCE_M = 0.5
-"""How close to the track's lowest point an end sample must lie to stand on the ground, m."""
+GROUND_TOLERANCE_M = 1.0
+"""How close to the track's lowest point a sample must lie to stand on the ground, m (GPS heights
+of a vehicle standing still wander by some decimetres)."""
 REST_SPEED_M_S = 0.3
 """Speed below which an end sample at the lowest point is at rest, m/s."""
 GROUND_RULE = ("without --dem or --ground-height, the ground is taken from the track only when it starts or "

@@ -25,10 +25,10 @@ Time base
 
 On the ground
     Samples while landed (PX4 ``vehicle_land_detected.landed``) are marked
-    ``on_ground``; samples with zero battery current are not flying either
-    (:attr:`~gisnoise.flight.trajectory.Trajectory.flying`).  With a constant
-    ``power_w`` and no landed flag, samples at rest (below 0.3 m/s) within 0.5 m of the
-    track's lowest point are on the ground.  A log is never refused for its
+    ``on_ground``; without a landed flag (ArduPilot), samples at rest (below 0.3 m/s,
+    smoothed over 1 s) within 1 m of the track's lowest point are.  Samples with zero
+    battery current are not flying either
+    (:attr:`~gisnoise.flight.trajectory.Trajectory.flying`).  A log is never refused for its
     on-ground samples.
 
 Heights

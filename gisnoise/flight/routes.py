@@ -38,7 +38,10 @@ from gisnoise.flight.trajectory import Trajectory, read_flight_csv
 from gisnoise.flight.vehicle import VehicleModel
 from gisnoise.flight.waypoints import _WP_PREFIX, WAYPOINTS_SCHEMA, Route, _heights, _settings, route_from_waypoints
 
-__all__ = ["read_trajectory", "read_route", "trajectory_to_geojson"]
+__all__ = ["read_trajectory", "read_route", "trajectory_to_geojson", "LOG_MAP_RATE_HZ"]
+
+LOG_MAP_RATE_HZ = 10.0
+"""Rate at which :func:`read_route` samples a flight log (``.ulg``, ``.bin``) for a map, Hz."""
 
 
 def read_trajectory(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
@@ -91,7 +94,9 @@ def read_route(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
         if suffix == ".csv":
             return Route(read_flight_csv(p))
         if suffix in (".ulg", ".bin"):
-            return Route(read_flight(p, geoid_undulation_m=geoid_undulation_m, power_w=power_w))
+            # maps sample a log at LOG_MAP_RATE_HZ: GPS at 1-5 Hz would miss short hops
+            return Route(read_flight(p, geoid_undulation_m=geoid_undulation_m, power_w=power_w,
+                                     rate_hz=LOG_MAP_RATE_HZ))
         try:
             text = p.read_text(encoding="utf-8-sig")
         except (OSError, UnicodeDecodeError) as exc:

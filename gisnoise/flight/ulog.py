@@ -50,7 +50,8 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         A constant electric power, W, in place of the logged battery power (for logs
         without battery current).
 
-    Samples where ``vehicle_land_detected.landed`` is set are marked ``on_ground``.
+    Samples where ``vehicle_land_detected.landed`` is set are marked ``on_ground``; without
+    that topic, samples at rest near the track's lowest point.
     """
     try:
         from pyulog import ULog
@@ -150,7 +151,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     if "vehicle_land_detected" in topics and "landed" in topics["vehicle_land_detected"][0]:
         ld = topics["vehicle_land_detected"][0]
         cols["on_ground"] = _step(t, ld["timestamp"] / 1e6, ld["landed"].astype(bool)).astype(bool)
-    elif power_w is not None:
+    else:
         cols["on_ground"] = _at_rest_low(t, lat_i, lon_i, h_i)
 
     utc_offset = None

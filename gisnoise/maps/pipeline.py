@@ -141,6 +141,13 @@ def make_map(
     cardset = as_cardset(cards)
     grid = grid_for_trajectory(traj, resolution_m, margin_m, crs)
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
+    if traj.on_ground is not None:
+        silent = ~traj.on_ground & (traj.power_w <= 0)
+        if silent.any():
+            i = int(np.flatnonzero(silent)[0])
+            raise InputError(f"{traj.source}: electric power is zero on {int(silent.sum())} airborne samples (first "
+                             f"at t = {traj.t[i]:.2f} s: the battery current is not logged while flying); give a "
+                             f"constant power (--power-w W, field power_w)", field="power_w")
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
