@@ -43,7 +43,7 @@ from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_trajectory
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
-from gisnoise.model import ModelCard
+from gisnoise.model import ModelCard, check_card
 
 __all__ = ["make_map", "DEFAULT_LEVELS", "map_ground"]
 
@@ -139,6 +139,8 @@ def make_map(
                        power_w=power_w)
     traj = route.trajectory
     cardset = as_cardset(cards)
+    for card in cardset.cards:
+        check_card(card)   # the plausibility guard: an implausible card never makes a map
     grid = grid_for_trajectory(traj, resolution_m, margin_m, crs)
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
     if traj.on_ground is not None:
@@ -164,6 +166,7 @@ def make_map(
                                           progress=eval_progress, **kw)
     else:
         result = _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, eval_progress, kw)
+    _check_cells(result, traj.source)
     result.metadata["levels_db"] = lv
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Any] = {}
@@ -202,6 +205,20 @@ def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: flo
                          f"point {lo:.1f} m); give --ground-height M (field ground_h_m) or --dem DEM.tif",
                          field="ground_h")
     return g
+
+
+def _check_cells(result: MapResult, source: str) -> None:
+    """Refuse a map with a non-finite or implausible level cell (NaN: no value, e.g. outside a DEM)."""
+    from gisnoise.model import LEVEL_RANGE_DB
+
+    for name, a in result.bands.items():
+        if result.units.get(name) != "dB(A)":
+            continue
+        v = a[~np.isnan(a)]
+        bad = np.isinf(v) & (v > 0) | (v > LEVEL_RANGE_DB[1] + 40.0)
+        if bad.any():
+            raise InputError(f"{source}: band {name} has {int(bad.sum())} implausible cells (up to "
+                             f"{float(np.max(v)):.4g} dB(A)); no map written", field="cards")
 
 
 def _part_progress(progress: Callable[[float], Any], k: int, n: int) -> Callable[[float], Any]:

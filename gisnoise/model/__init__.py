@@ -56,8 +56,19 @@ from gisnoise.model.effects import (
     shifted_inputs,
     speed_of_sound,
 )
+from gisnoise.model.plausibility import (
+    LEVEL_RANGE_DB,
+    MAX_LEVEL_STD_DB,
+    ImplausibleCardError,
+    card_level_range,
+    card_problems,
+    check_card,
+    power_range_w,
+)
 
 __all__ = [
+    "LEVEL_RANGE_DB", "MAX_LEVEL_STD_DB", "ImplausibleCardError", "card_level_range", "card_problems", "check_card",
+    "power_range_w",
     "ATMOSPHERIC_ABSORPTION", "Ansatz", "BACKGROUND_EVENT", "BANK_ANGLE", "DOPPLER", "EFFECT_NAMES", "EMISSION_TIME",
     "Effect", "GROUND_REFLECTION", "MIN_REFLECTION_HEIGHT_M", "ModelCard", "PAPER", "PAPER_OFFSET", "PHASES",
     "REFERENCE_DISTANCE_M", "RPM", "SCHEMA", "THIRD_OCTAVE", "WIND", "add_background", "additive", "ansatz_names",
