@@ -19,9 +19,9 @@ from gisnoise.errors import Cancelled, InputError
 from gisnoise.identify.estimate import fit_arrays
 from gisnoise.identify.result import FitResult
 from gisnoise.measure import Samples, read_campaign, series_key
-from gisnoise.model import PHASES, Ansatz
+from gisnoise.model import PHASES, Ansatz, get_ansatz
 
-__all__ = ["fit", "fit_campaign", "usable_rows"]
+__all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "MIN_BACKGROUND_SAMPLES"]
 
 
 def fit(
@@ -145,8 +145,9 @@ def fit_campaign(
         have = sorted(set(np.unique(usable_rows(all_samples, None, include_low_snr=include_low_snr).phase).tolist()))
         raise InputError(f"no usable samples of phase {phase!r} in the campaign (phases with usable samples: "
                          f"{', '.join(have) or 'none'})", field="phase")
-    res = fit(s, ansatz, reference_power_w=float(ref), **kw)
-    info = {
+    fixed, held = identifiable_form(s, ansatz, kw.pop("fixed", None))
+    res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed or None, **kw)
+    info: dict[str, Any] = {
         "data": {
             "campaign": source if source is not None else str(getattr(camp, "folder", getattr(camp, "path", ""))),
             "phase": phase,
@@ -158,8 +159,54 @@ def fit_campaign(
     }
     if vehicle.get("name"):
         info["vehicle"] = vehicle["name"]
+    if held:
+        info["held_parameters"] = held
     res.info.update(info)
     return res
+
+
+STEADY_POWER_DEX = 0.02
+"""Spread of log10(P_el) over the fitted rows below which the power term p1 cannot be identified
+(a power varying by less than about 5 %)."""
+MIN_BACKGROUND_SAMPLES = 30
+"""Background-dominated rows (measured level within 3 dB of the background) needed to fit p7."""
+
+
+def identifiable_form(samples: Samples, ansatz: str | Ansatz,
+                      fixed: Mapping[str, float] | None) -> tuple[dict[str, float], dict[str, str]]:
+    """The parameters the data cannot support, held at values the data state, and why.
+
+    * Steady power (log10 P_el spreads less than :data:`STEADY_POWER_DEX`): with a level offset
+      ``p0`` in the ansatz, ``p1 log10(P_el)`` is a constant the offset absorbs, so ``p1`` is held
+      at 0: the card is a level offset without power term, valid at the power flown (the card's
+      ``statistics.power_range_w``).
+    * Background ``p7``: held at the campaign's background (stated, or measured from the
+      recordings) when fewer than :data:`MIN_BACKGROUND_SAMPLES` rows are background-dominated.
+
+    Parameters the user fixed are left alone.  Returns the fixed values and, per held
+    parameter, the reason (the card's provenance states it).
+    """
+    model = get_ansatz(ansatz) if isinstance(ansatz, str) else ansatz
+    out = dict(fixed or {})
+    held: dict[str, str] = {}
+    pw = np.asarray(samples.power_w, dtype=float)
+    pw = pw[np.isfinite(pw) & (pw > 0)]
+    if {"p0", "p1"} <= set(model.params) and "p1" not in out and pw.size \
+            and np.log10(pw.max() / pw.min()) < STEADY_POWER_DEX:
+        out["p1"] = 0.0
+        held["p1"] = (f"steady power ({pw.min():.4g}-{pw.max():.4g} W): no power information; held at 0, the card "
+                      f"is a level offset p0 valid at the power flown")
+    bg = model.background
+    if bg is not None and bg not in out and samples.background_db is not None:
+        b = np.asarray(samples.background_db, dtype=float)
+        lv = np.asarray(samples.level, dtype=float)
+        ok = np.isfinite(b)
+        n_bg = int(np.sum(ok & (lv <= b + 3.0)))
+        if ok.any() and n_bg < MIN_BACKGROUND_SAMPLES:
+            out[bg] = float(np.median(b[ok]))
+            held[bg] = (f"{n_bg} background-dominated rows (< {MIN_BACKGROUND_SAMPLES}): held at the campaign's "
+                        f"background {out[bg]:.1f} dB(A)")
+    return out, held
 
 
 def usable_rows(samples: Samples, phase: str | None, *, include_low_snr: bool = True) -> Samples:
