@@ -141,3 +141,29 @@ def test_card_with_infinite_std_is_refused_naming_the_parameter():
 
     problems = card_problems(c)
     assert problems and "p1" in problems[0]
+
+
+def test_no_traceback_from_any_effect_missing_its_inputs(tmp_path, campaign):
+    """Every BASE+EFFECT on a campaign without the effect's inputs: a card or one line, exit 2."""
+    from gisnoise.model import effect_names
+
+    doc = json.loads((campaign / "campaign.json").read_text())
+    plate = tmp_path / "plate"
+    import shutil
+
+    shutil.copytree(campaign, plate)
+    for m in doc["microphones"]:
+        m["height_agl_m"] = 0.0                      # ground plates
+    (plate / "campaign.json").write_text(json.dumps(doc))
+    for eff in effect_names():
+        for base in ("paper-offset", "paper"):
+            r = CliRunner().invoke(cli, ["-q", "fit", str(plate), "--phase", "horizontal", "--ansatz",
+                                         f"{base}+{eff}", "--out", str(tmp_path / "c.json")])
+            assert not (r.exception and not isinstance(r.exception, SystemExit)), (eff, r.exception)
+            assert r.exit_code in (0, 2), (eff, r.output)
+            if r.exit_code == 2:
+                assert len(r.output.strip().splitlines()) == 1, r.output
+            if eff == "rpm":
+                assert r.exit_code == 2 and "rpm" in r.output
+            if eff == "ground_reflection":   # a ground plate rules the reflection out, and the message says why
+                assert r.exit_code == 2 and "on the ground" in r.output

@@ -15,11 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import Cancelled, InputError
+from gisnoise.errors import Cancelled, GisnoiseError, InputError
 from gisnoise.identify.estimate import fit_arrays
 from gisnoise.identify.result import FitResult
 from gisnoise.measure import Samples, read_campaign, series_key
-from gisnoise.model import PHASES, Ansatz, get_ansatz
+from gisnoise.model import PHASES, Ansatz, check_testable, get_ansatz, get_effect
 
 __all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "MIN_BACKGROUND_SAMPLES"]
 
@@ -78,8 +78,25 @@ def fit(
     s = samples if bool(np.all(samples.valid)) else samples.select(samples.valid)
     if len(s) == 0:
         raise InputError("no valid samples to fit", field="samples")
-    return fit_arrays(s.level, s.inputs(ref), ansatz, mic=s.mic, series=series_key(s.mic, s.flight), time=s.t_r,
+    x = s.inputs(ref)
+    x.setdefault("mic", s.mic)   # microphone ids: effects match per-microphone facts (height above ground)
+    _check_effects(ansatz, x)
+    return fit_arrays(s.level, x, ansatz, mic=s.mic, series=series_key(s.mic, s.flight), time=s.t_r,
                       reference_power_w=ref, samples=s, phase=None, **options)
+
+
+def _check_effects(ansatz: str | Ansatz, x: Mapping[str, Any]) -> None:
+    """Refuse, in one line, an extended ansatz whose effect the data cannot support (missing inputs)."""
+    name = ansatz if isinstance(ansatz, str) else ansatz.name
+    for eff_name in name.split("+")[1:]:
+        try:
+            eff = get_effect(eff_name)
+        except GisnoiseError:
+            continue   # the registry's own message follows from fit_arrays
+        ok, why = check_testable(eff, x)
+        if not ok:
+            raise InputError(f"ansatz {name!r}: effect {eff_name!r} cannot be fitted to these data: {why}",
+                             field="ansatz")
 
 
 def fit_campaign(
