@@ -15,13 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import Cancelled, GisnoiseError, InputError
+from gisnoise.errors import Cancelled, GisnoiseError, InputError, NotIdentifiableError
 from gisnoise.identify.estimate import fit_arrays
 from gisnoise.identify.result import FitResult
 from gisnoise.measure import Samples, read_campaign, series_key
 from gisnoise.model import PHASES, Ansatz, check_testable, get_ansatz, get_effect
 
-__all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "MIN_BACKGROUND_SAMPLES"]
+__all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "P7_MAX_STD_DB"]
 
 
 def fit(
@@ -163,7 +163,25 @@ def fit_campaign(
         raise InputError(f"no usable samples of phase {phase!r} in the campaign (phases with usable samples: "
                          f"{', '.join(have) or 'none'})", field="phase")
     fixed, held = identifiable_form(s, ansatz, kw.pop("fixed", None))
-    res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed or None, **kw)
+    model = get_ansatz(ansatz) if isinstance(ansatz, str) else ansatz
+    bg = model.background
+    try:
+        res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed or None, **kw)
+        weak_bg = bg is not None and bg not in fixed and (bg in res.at_bounds or res.std.get(bg, 0.0) > P7_MAX_STD_DB)
+    except NotIdentifiableError as exc:
+        if bg is None or bg in fixed or bg not in getattr(exc, "parameters", ()):
+            raise
+        weak_bg = True
+    if weak_bg:   # too few background-dominated rows to fit p7: hold it at the campaign's background
+        level_bg = _campaign_background(s)
+        if level_bg is None:
+            raise InputError(f"the data cannot fit the background {bg} (too few background-dominated rows) and the "
+                             "campaign states none; give microphones[].background_db or --fix "
+                             f"{bg}=LEVEL", field=str(bg))
+        fixed[str(bg)] = level_bg
+        held[str(bg)] = (f"too few background-dominated rows to fit it; held at the campaign's background "
+                         f"{level_bg:.1f} dB(A)")
+        res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed, **kw)
     info: dict[str, Any] = {
         "data": {
             "campaign": source if source is not None else str(getattr(camp, "folder", getattr(camp, "path", ""))),
@@ -185,8 +203,17 @@ def fit_campaign(
 STEADY_POWER_DEX = 0.02
 """Spread of log10(P_el) over the fitted rows below which the power term p1 cannot be identified
 (a power varying by less than about 5 %)."""
-MIN_BACKGROUND_SAMPLES = 30
-"""Background-dominated rows (measured level within 3 dB of the background) needed to fit p7."""
+P7_MAX_STD_DB = 3.0
+"""Standard deviation of a fitted background p7 above which the data do not support it, dB."""
+
+
+def _campaign_background(samples: Samples) -> float | None:
+    """The campaign's background level (stated per microphone, else measured from the recordings), dB(A)."""
+    if samples.background_db is None:
+        return None
+    b = np.asarray(samples.background_db, dtype=float)
+    b = b[np.isfinite(b)]
+    return float(np.median(b)) if b.size else None
 
 
 def identifiable_form(samples: Samples, ansatz: str | Ansatz,
@@ -197,8 +224,10 @@ def identifiable_form(samples: Samples, ansatz: str | Ansatz,
       ``p0`` in the ansatz, ``p1 log10(P_el)`` is a constant the offset absorbs, so ``p1`` is held
       at 0: the card is a level offset without power term, valid at the power flown (the card's
       ``statistics.power_range_w``).
-    * Background ``p7``: held at the campaign's background (stated, or measured from the
-      recordings) when fewer than :data:`MIN_BACKGROUND_SAMPLES` rows are background-dominated.
+    The background ``p7`` is judged by :func:`fit_campaign` after a first fit: when it ends on
+    a bound, is not identifiable or has a standard deviation above :data:`P7_MAX_STD_DB`, the
+    data hold too few background-dominated rows, and it is held at the campaign's background
+    (stated, or measured from the recordings).
 
     Parameters the user fixed are left alone.  Returns the fixed values and, per held
     parameter, the reason (the card's provenance states it).
@@ -213,16 +242,6 @@ def identifiable_form(samples: Samples, ansatz: str | Ansatz,
         out["p1"] = 0.0
         held["p1"] = (f"steady power ({pw.min():.4g}-{pw.max():.4g} W): no power information; held at 0, the card "
                       f"is a level offset p0 valid at the power flown")
-    bg = model.background
-    if bg is not None and bg not in out and samples.background_db is not None:
-        b = np.asarray(samples.background_db, dtype=float)
-        lv = np.asarray(samples.level, dtype=float)
-        ok = np.isfinite(b)
-        n_bg = int(np.sum(ok & (lv <= b + 3.0)))
-        if ok.any() and n_bg < MIN_BACKGROUND_SAMPLES:
-            out[bg] = float(np.median(b[ok]))
-            held[bg] = (f"{n_bg} background-dominated rows (< {MIN_BACKGROUND_SAMPLES}): held at the campaign's "
-                        f"background {out[bg]:.1f} dB(A)")
     return out, held
 
 
