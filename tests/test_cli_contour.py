@@ -190,7 +190,7 @@ def test_uncertainty_bands_and_contours(tmp_path):
     # cards without a covariance: a clear one-line error
     one_line_error(run("contour", csv, "--card", str(save(ModelCard(**{**card.__dict__, "covariance": None}),
                                                               tmp_path / "nocov.json")),
-                       "--out", str(tmp_path / "o2"), "--uncertainty"), "covariance")
+                       "--out", str(tmp_path / "o2"), "--ground-height", "80", "--uncertainty"), "covariance")
 
 
 def test_receivers_on_a_dem(tmp_path, card_path):

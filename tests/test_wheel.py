@@ -103,13 +103,13 @@ def test_contour_with_a_bundled_card_by_id_equals_the_checkout(installed, tmp_pa
                       power_w=np.full_like(t, 1500.0), phase=np.full(t.size, "horizontal"))
     traj.to_csv(work / "flight.csv")
     _run([str(bin_dir / "gisnoise"), "-q", "contour", "flight.csv", "--card", "demo-horizontal", "--out", "map",
-          "--resolution", "20", "--margin", "200", "--levels", "45,50,55"], cwd=work, env=env)
+          "--resolution", "20", "--margin", "200", "--levels", "45,50,55", "--ground-height", "80"], cwd=work, env=env)
     assert (work / "map" / "levels.tif").is_file() and (work / "map" / "contours.geojson").is_file()
     with rasterio.open(work / "map" / "levels.tif") as ds:
         lamax = ds.read(list(ds.descriptions).index("LAmax") + 1)
 
     ref = make_map(str(work / "flight.csv"), [load("demo-horizontal")], tmp_path / "ref", resolution_m=20.0, margin_m=200.0,
-                   levels=[45.0, 50.0, 55.0])
+                   levels=[45.0, 50.0, 55.0], ground_h=80.0)
     with rasterio.open(tmp_path / "ref" / "levels.tif") as ds:
         expect = ds.read(list(ds.descriptions).index("LAmax") + 1)
     assert ref is not None

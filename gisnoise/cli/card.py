@@ -24,13 +24,19 @@ def command() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the card as JSON (validated, normalised).")
 @click.option("--p-el", "p_el", type=float, default=1.1, show_default=True,
               help="Nondimensional power for the level summary (the paper's Fig. 7: 1.1).")
-def show(card: str, as_json: bool, p_el: float) -> None:
+@click.option("--force", "force", is_flag=True,
+              help="Show an implausible card for inspection (it is still refused by fit, maps, service, QGIS).")
+def show(card: str, as_json: bool, p_el: float, force: bool = False) -> None:
     """Print CARD: phases, ansatz, parameters with standard deviations, statistics, provenance, notes."""
     from gisnoise.maps import directivity_grid
+    from gisnoise.model import card_problems
 
     if not (0 < p_el <= 100):  # a level summary at no or negative power is no summary: refused, not dropped
         raise InputError(f"p_el: must be in (0, 100] (nondimensional power), got {p_el:g}", field="p_el")
-    c = gcards.load(card)
+    c = gcards.load(card, force=force)
+    if force:
+        for problem in card_problems(c):
+            click.echo(f"IMPLAUSIBLE: {problem}", err=True)
     if as_json:
         click.echo(gcards.dumps(c), nl=False)
         return

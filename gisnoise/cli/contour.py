@@ -59,8 +59,14 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
 @click.option("--receiver-height", "receiver_height", type=float, default=1.5, show_default=True,
               help="Receiver height above ground, m.")
 @click.option("--ground-height", "ground_h", type=float, default=None,
-              help="Ellipsoidal height of flat ground without --dem, m "
-                   "[default: stated by the route, else the track's lowest point].")
+              help="Ellipsoidal height of flat ground without --dem, m [default: stated by the route, else the "
+                   "take-off or landing point of a track that starts or ends on the ground; a track that is "
+                   "airborne throughout needs --ground-height or --dem].")
+@click.option("--power-w", "power_w", type=click.FloatRange(min=0.0, min_open=True), default=None,
+              help="Constant electric power, W, for a flight log (.ulg, .bin) without battery current.")
+@click.option("--geoid-undulation", "geoid_undulation", type=float, default=None,
+              help="Geoid undulation N (ellipsoidal minus mean-sea-level height), m, for a flight log with "
+                   "heights above mean sea level (ArduPilot .bin).")
 @click.option("--crs", "crs", default=None, help="Projected CRS of the grid, e.g. EPSG:25832 [default: local UTM].")
 @click.option("--metrics", "metrics", default="LAmax,LAeq,SEL", show_default=True, callback=_metrics,
               help="Metrics: any of LAmax, LAeq, SEL.")
@@ -91,11 +97,13 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
             levels: list[float], dem: str | None, dem_offset: float, receiver_height: float, ground_h: float | None,
             crs: str | None, metrics: list[str], period: float | None, threshold: list[float] | None,
             snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool,
-            engine: str, population: str | None = None, buildings: str | None = None) -> None:
+            engine: str, population: str | None = None, buildings: str | None = None,
+            power_w: float | None = None, geoid_undulation: float | None = None) -> None:
     """Noise map of TRAJECTORY: DIR/levels.tif, DIR/contours.geojson (and DIR/map.png).
 
-    TRAJECTORY is a flight CSV (t, lat, lon, h, roll, pitch, yaw, power_w, phase), a GeoJSON
-    LineString with times, or waypoints (JSON or GeoJSON points).  Give one --card per flight
+    TRAJECTORY is a flight CSV (t, lat, lon, h, roll, pitch, yaw, power_w, phase), a PX4 .ulg or
+    ArduPilot .bin flight log, a GeoJSON LineString with times, or waypoints (JSON or GeoJSON
+    points).  Samples on the ground (landed, zero current) make no noise.  Give one --card per flight
     phase; a card serves its phase and the phases it lists.
     """
     from gisnoise.maps import make_map
@@ -106,7 +114,7 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
             metrics=metrics, crs=crs, dem=dem, receiver_height=receiver_height, ground_h=ground_h,
             dem_offset_m=dem_offset, uncertainty=uncertainty, plot=plot, period_s=period,
             threshold_db=threshold, snapshot_t=snapshot, substeps=substeps, background=background,
-            engine=engine, progress=update)
+            engine=engine, progress=update, geoid_undulation_m=geoid_undulation, power_w=power_w)
     res = paths["result"]
     g = res.grid
     auth = g.crs.to_authority()

@@ -10,6 +10,12 @@ from gisnoise.flight.clock import (
 from gisnoise.flight.dataflash import (
     read_dataflash,
 )
+from gisnoise.flight.ground import (
+    GROUND_RULE,
+    GROUND_TOLERANCE_M,
+    flying_segments,
+    ground_from_track,
+)
 from gisnoise.flight.logs import (
     FLIGHT_SUFFIXES,
     read_flight,
@@ -32,6 +38,7 @@ from gisnoise.flight.phases import (
     phase_by_speed,
 )
 from gisnoise.flight.routes import (
+    LOG_MAP_RATE_HZ,
     read_route,
     read_trajectory,
     trajectory_to_geojson,
@@ -57,4 +64,4 @@ from gisnoise.flight.waypoints import (
     route_from_waypoints,
 )
 
-__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'HOVER_MAX_SPEED_M_S', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'trajectory_from_path', 'trajectory_to_geojson']
+__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'GROUND_RULE', 'GROUND_TOLERANCE_M', 'flying_segments', 'ground_from_track', 'HOVER_MAX_SPEED_M_S', 'LOG_MAP_RATE_HZ', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'trajectory_from_path', 'trajectory_to_geojson']

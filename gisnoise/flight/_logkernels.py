@@ -11,11 +11,40 @@ import numpy as np
 
 from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
 from gisnoise.flight.clock import as_unix_time
+from gisnoise.flight.ground import GROUND_TOLERANCE_M, REST_SPEED_M_S
 from gisnoise.flight.phases import phase_by_speed
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import LocalFrame
 
 log = logging.getLogger(__name__)
+
+POWER_WAY_OUT = ("give a constant power (--power-w W, or power_w), merge a power_w column into a flight CSV, "
+                 "or use a card that does not need power")
+
+
+def _power(t: np.ndarray, batteries: Sequence[tuple[np.ndarray, np.ndarray]], power_w: float | None) -> np.ndarray:
+    """Summed battery power on ``t`` (W), or the constant ``power_w``."""
+    if power_w is not None:
+        if not (np.isfinite(power_w) and power_w > 0):
+            raise InputError(f"power_w must be a positive number of watts, got {power_w!r}", field="power_w")
+        return np.full(len(t), float(power_w))
+    power = np.zeros_like(t)
+    for tt, pw in batteries:
+        power += np.interp(t, tt, pw)
+    return power
+
+
+def _at_rest_low(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """On the ground where no landed flag tells: at rest (speed below REST_SPEED_M_S, smoothed over 1 s)
+    within GROUND_TOLERANCE_M of the track's lowest point."""
+    frame = LocalFrame(float(lat[0]), float(lon[0]), float(h[0]))
+    enu = np.stack(frame.to_enu(lat, lon, h), axis=-1)
+    vel = np.gradient(enu, t, axis=0)
+    c = np.vstack([np.zeros((1, 3)), np.cumsum(vel, axis=0)])
+    lo = np.searchsorted(t, t - 0.5, side="left")
+    hi = np.searchsorted(t, t + 0.5, side="right")
+    vs = (c[hi] - c[lo]) / (hi - lo)[:, None]
+    return (np.linalg.norm(vs, axis=1) < REST_SPEED_M_S) & (h - np.min(h) <= GROUND_TOLERANCE_M)
 
 
 def _time_base(src: str, tb: np.ndarray, spans: Sequence[tuple[float, float]], rate_hz: float | None) -> np.ndarray:
@@ -56,7 +85,7 @@ def _phase(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray, vtol:
 
 
 def _finish(src: str, t: np.ndarray, cols: dict[str, Any], start_utc: Any, utc_offset: float | None,
-            utc_field: str) -> Trajectory:
+            utc_field: str, metadata: dict[str, Any] | None = None) -> Trajectory:
     if start_utc is not None:
         if utc_offset is None:
             raise MissingColumnError(f"{src}: no GPS time in the log ('{utc_field}'), cannot align with start_utc",
@@ -64,4 +93,4 @@ def _finish(src: str, t: np.ndarray, cols: dict[str, Any], start_utc: Any, utc_o
         t_rel = t + utc_offset - as_unix_time(start_utc)
     else:
         t_rel = t - t[0]
-    return Trajectory(t=t_rel, source=src, **cols)
+    return Trajectory(t=t_rel, source=src, metadata=dict(metadata or {}), **cols)

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
-from gisnoise.flight._logkernels import _covering, _finish, _phase, _time_base
+from gisnoise.flight._logkernels import POWER_WAY_OUT, _at_rest_low, _covering, _finish, _phase, _power, _time_base
 from gisnoise.flight.clock import gps_to_unix
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
@@ -32,11 +32,16 @@ _INTEGER_FORMATS = set("bBhHiIqQ")
 
 
 def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undulation_m: float | None = None,
-                   rate_hz: float | None = None) -> Trajectory:
+                   rate_hz: float | None = None, power_w: float | None = None) -> Trajectory:
     """Read an ArduPilot DataFlash ``.bin`` log as a trajectory (see the module docstring).
 
     ArduPilot logs heights above mean sea level only, so ``geoid_undulation_m``
-    (ellipsoidal minus orthometric height at the site, m) is required.
+    (ellipsoidal minus orthometric height at the site, m) is required.  ``power_w``
+    (W) replaces the logged battery power by a constant (for logs without current).
+    Samples before arming, after disarming or landing (``EV`` events ARMED 10,
+    DISARMED 11, LAND_COMPLETE 18, NOT_LANDED 28, timed by the message before them in
+    old logs) are marked ``on_ground``; a log without these events marks samples at rest
+    (below 0.3 m/s) within 1 m of the track's lowest point.
     """
     try:
         from pymavlink import DFReader
@@ -50,9 +55,11 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
         reader = DFReader.DFReader_binary(src, zero_time_base=True)
     except Exception as exc:
         raise TrajectoryError(f"{src}: not a readable DataFlash log ({exc})", field="path") from None
-    wanted = ["GPS", "POS", "ATT", "BAT", "CURR", "CUR2", "RPM", "ARSP"]
+    wanted = ["GPS", "POS", "ATT", "BAT", "CURR", "CUR2", "RPM", "ARSP", "EV"]
     rows: dict[str, list[tuple[Any, ...]]] = {k: [] for k in wanted}
     fmts: dict[str, tuple[str, list[str]]] = {}
+    events: list[tuple[float, int]] = []   # (boot time s, event id); old EV messages carry no time
+    last_t = 0.0
     try:
         while True:
             try:
@@ -62,6 +69,14 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
             if m is None:
                 break
             name = m.get_type()
+            cols_m = m.fmt.columns
+            if name == "EV":
+                events.append((m.TimeUS / 1e6 if "TimeUS" in cols_m else last_t, int(m.Id)))
+                continue
+            if "TimeUS" in cols_m:
+                last_t = m.TimeUS / 1e6
+            elif name != "GPS" and "TimeMS" in cols_m:
+                last_t = m.TimeMS / 1e3
             if name not in fmts:
                 fmts[name] = (m.fmt.format, list(m.fmt.columns))
             rows[name].append(tuple(getattr(m, c) for c in m.fmt.columns))
@@ -103,7 +118,8 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
     tb, lat, lon, h_msl = tb[keep], lat[keep], lon[keep], h_msl[keep]
     if geoid_undulation_m is None:
         raise MissingColumnError(f"{src}: message '{pos_name}' gives heights above mean sea level only; "
-                                 "give geoid_undulation_m", field="geoid_undulation_m")
+                                 "give the geoid undulation (--geoid-undulation, or geoid_undulation_m)",
+                                 field="geoid_undulation_m")
     h = h_msl + float(geoid_undulation_m)
 
     att = table("ATT")
@@ -111,14 +127,12 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
         raise MissingColumnError(f"{src}: message 'ATT' missing (no attitude)", field="ATT")
     t_att = _ardupilot_boot_time("ATT", att)
 
-    batteries = _ardupilot_batteries(src, table, fmts)
+    batteries = _ardupilot_batteries(src, table, fmts) if power_w is None else []
     spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
     t = _time_base(src, tb, spans, rate_hz)
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
     roll, pitch, yaw = (_interp_deg(t, t_att, att[k]) for k in ("Roll", "Pitch", "Yaw"))
-    power = np.zeros_like(t)
-    for tt, pw in batteries:
-        power += np.interp(t, tt, pw)
+    power = _power(t, batteries, power_w)
     cols: dict[str, Any] = {"lat": lat_i, "lon": lon_i, "h": h_i, "roll": roll, "pitch": pitch, "yaw": yaw,
                             "power_w": power}
     arsp = table("ARSP")
@@ -129,7 +143,38 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
         cols["rpm"] = _covering(t, _ardupilot_boot_time("RPM", rpm), rpm["rpm1"], "RPM")
     cols = {k: v for k, v in cols.items() if v is not None}
     cols["phase"] = _phase(t, lat_i, lon_i, h_i, None)
-    return _finish(src, t, cols, start_utc, utc_offset, "GPS.Week")
+    landed = _landed_from_events(t, events)
+    cols["on_ground"] = landed if landed is not None else _at_rest_low(t, lat_i, lon_i, h_i)
+    meta = {"height_datum": f"mean sea level ({pos_name}.Alt) + geoid undulation",
+            "geoid_undulation_m": float(geoid_undulation_m),
+            "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}
+    return _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)
+
+
+_EV_ARMED, _EV_DISARMED, _EV_LAND_COMPLETE, _EV_NOT_LANDED = 10, 11, 18, 28
+
+
+def _landed_from_events(t: np.ndarray, events: list[tuple[float, int]]) -> np.ndarray | None:
+    """On the ground (bool per ``t``) from ArduPilot's arming and landing events, or None without them."""
+    ev = [(te, i) for te, i in events if i in (_EV_ARMED, _EV_DISARMED, _EV_LAND_COMPLETE, _EV_NOT_LANDED)]
+    if not ev:
+        return None
+    out = np.ones(len(t), dtype=bool)   # a vehicle starts disarmed and landed
+    armed, landed = False, True
+    t_prev = -np.inf
+    for te, i in sorted(ev) + [(np.inf, -1)]:
+        seg = (t >= t_prev) & (t < te)
+        out[seg] = not (armed and not landed)
+        if i == _EV_ARMED:
+            armed = True
+        elif i == _EV_DISARMED:
+            armed, landed = False, True
+        elif i == _EV_LAND_COMPLETE:
+            landed = True
+        elif i == _EV_NOT_LANDED:
+            landed = False
+        t_prev = te
+    return out
 
 
 def _ardupilot_boot_time(name: str, tab: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -174,7 +219,8 @@ def _ardupilot_batteries(src: str, table: Callable[[str], dict[str, np.ndarray] 
         t = _ardupilot_boot_time(name, cur)
         out.append((t, _scaled(fmts[name], "Volt", cur) * _scaled(fmts[name], "Curr", cur)))
     if not out:
-        raise MissingColumnError(f"{src}: message 'BAT' or 'CURR' missing (no electric power)", field="BAT")
+        raise MissingColumnError(f"{src}: message 'BAT' or 'CURR' missing (no electric power); {POWER_WAY_OUT}",
+                                 field="BAT")
     return out
 
 

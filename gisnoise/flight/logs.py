@@ -23,6 +23,14 @@ Time base
     ``time_utc_usec``; ArduPilot GPS week and milliseconds minus the leap seconds);
     without it, seconds since the first kept sample.
 
+On the ground
+    Samples while landed (PX4 ``vehicle_land_detected.landed``) are marked
+    ``on_ground``; without a landed flag (ArduPilot), samples at rest (below 0.3 m/s,
+    smoothed over 1 s) within 1 m of the track's lowest point are.  Samples with zero
+    battery current are not flying either
+    (:attr:`~gisnoise.flight.trajectory.Trajectory.flying`).  A log is never refused for its
+    on-ground samples.
+
 Heights
     Trajectories hold ellipsoidal heights.  PX4 logs give them (``alt_ellipsoid``);
     where only heights above mean sea level exist (ArduPilot, some PX4 topics), the
@@ -37,7 +45,8 @@ Phase (see :func:`~gisnoise.flight.phases.phase_by_speed`)
     vertical speed exceeds 1 m/s and the horizontal speed, else ``hover`` below 3 m/s
     horizontal speed, else ``horizontal``.
 
-A missing topic or message raises :class:`~gisnoise.errors.MissingColumnError`
+A log without battery voltage or current raises an error that names the way out:
+a constant ``power_w``.  A missing topic or message raises :class:`~gisnoise.errors.MissingColumnError`
 naming it and the file.
 """
 
@@ -58,7 +67,8 @@ FLIGHT_SUFFIXES = (".csv", ".ulg", ".bin")
 
 
 def read_flight(path: str | os.PathLike[str], *, start_utc: Any = None,
-                geoid_undulation_m: float | None = None, rate_hz: float | None = None) -> Trajectory:
+                geoid_undulation_m: float | None = None, rate_hz: float | None = None,
+                power_w: float | None = None) -> Trajectory:
     """Read a flight log (``.csv``, ``.ulg`` or ``.bin``) as a trajectory.
 
     Parameters
@@ -74,6 +84,9 @@ def read_flight(path: str | os.PathLike[str], *, start_utc: Any = None,
     rate_hz : float, optional
         Resample logs onto a uniform grid at this rate, Hz (default: the position
         samples).
+    power_w : float, optional
+        For ``.ulg`` and ``.bin``: a constant electric power, W, in place of the logged
+        battery power (logs without current); a flight CSV carries its own ``power_w``.
 
     Returns
     -------
@@ -83,9 +96,13 @@ def read_flight(path: str | os.PathLike[str], *, start_utc: Any = None,
     suffix = p.suffix.lower()
     if suffix == ".csv":
         return read_flight_csv(p)
+    if not p.is_file():
+        raise InputError(f"{p}: no such flight log", field="path")
     if suffix == ".ulg":
-        return read_ulog(p, start_utc=start_utc, geoid_undulation_m=geoid_undulation_m, rate_hz=rate_hz)
+        return read_ulog(p, start_utc=start_utc, geoid_undulation_m=geoid_undulation_m, rate_hz=rate_hz,
+                         power_w=power_w)
     if suffix == ".bin":
-        return read_dataflash(p, start_utc=start_utc, geoid_undulation_m=geoid_undulation_m, rate_hz=rate_hz)
+        return read_dataflash(p, start_utc=start_utc, geoid_undulation_m=geoid_undulation_m, rate_hz=rate_hz,
+                              power_w=power_w)
     raise InputError(f"{p}: unknown flight log type {p.suffix!r}; expected one of {', '.join(FLIGHT_SUFFIXES)}",
                      field="path")

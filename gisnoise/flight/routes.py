@@ -32,17 +32,22 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import TrajectoryError
+from gisnoise.flight.logs import read_flight
 from gisnoise.flight.paths import trajectory_from_path
 from gisnoise.flight.trajectory import Trajectory, read_flight_csv
 from gisnoise.flight.vehicle import VehicleModel
 from gisnoise.flight.waypoints import _WP_PREFIX, WAYPOINTS_SCHEMA, Route, _heights, _settings, route_from_waypoints
 
-__all__ = ["read_trajectory", "read_route", "trajectory_to_geojson"]
+__all__ = ["read_trajectory", "read_route", "trajectory_to_geojson", "LOG_MAP_RATE_HZ"]
+
+LOG_MAP_RATE_HZ = 10.0
+"""Rate at which :func:`read_route` samples a flight log (``.ulg``, ``.bin``) for a map, Hz."""
 
 
 def read_trajectory(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
-                    vehicle: VehicleModel | None = None) -> Trajectory:
-    """A trajectory from a flight CSV, a GeoJSON LineString with times, or waypoints.
+                    vehicle: VehicleModel | None = None, geoid_undulation_m: float | None = None,
+                    power_w: float | None = None) -> Trajectory:
+    """A trajectory from a flight CSV, a flight log, a GeoJSON LineString with times, or waypoints.
 
     Parameters
     ----------
@@ -54,13 +59,27 @@ def read_trajectory(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
         Added to DEM heights to give ellipsoidal heights, m.
     vehicle : VehicleModel, optional
         Overrides the document's vehicle for derived power.
+    geoid_undulation_m : float, optional
+        For flight logs with heights above mean sea level (``.bin``), m.
+    power_w : float, optional
+        For flight logs: a constant electric power in place of the logged one, W.
     """
-    return read_route(src, dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle).trajectory
+    route = read_route(src, dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle,
+                       geoid_undulation_m=geoid_undulation_m, power_w=power_w)
+    if route.ground_h_m is not None:
+        route.trajectory.metadata["ground_h_m"] = route.ground_h_m   # the ground the source states
+    return route.trajectory
 
 
 def read_route(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
-               vehicle: VehicleModel | None = None) -> Route:
-    """As :func:`read_trajectory`, also returning the ground height the source states."""
+               vehicle: VehicleModel | None = None, geoid_undulation_m: float | None = None,
+               power_w: float | None = None) -> Route:
+    """As :func:`read_trajectory`, also returning the ground height the source states.
+
+    The one reader of trajectories for every face: a flight CSV, a PX4 ``.ulg`` or an
+    ArduPilot ``.bin`` (any letter case, :func:`gisnoise.flight.logs.read_flight`), a
+    GeoJSON LineString with times, or waypoints.
+    """
     if isinstance(src, Trajectory):
         return Route(src)
     if isinstance(src, Route):
@@ -74,6 +93,10 @@ def read_route(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
         suffix = p.suffix.lower()
         if suffix == ".csv":
             return Route(read_flight_csv(p))
+        if suffix in (".ulg", ".bin"):
+            # maps sample a log at LOG_MAP_RATE_HZ: GPS at 1-5 Hz would miss short hops
+            return Route(read_flight(p, geoid_undulation_m=geoid_undulation_m, power_w=power_w,
+                                     rate_hz=LOG_MAP_RATE_HZ))
         try:
             text = p.read_text(encoding="utf-8-sig")
         except (OSError, UnicodeDecodeError) as exc:

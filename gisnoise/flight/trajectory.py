@@ -2,8 +2,14 @@
 
 The flight CSV (one row per log sample, sorted by time) has the columns
 ``t`` (s), ``lat``, ``lon`` (deg), ``h`` (m, ellipsoidal), ``roll``, ``pitch``,
-``yaw`` (deg), ``power_w`` (W) and optionally ``rpm``, ``airspeed_m_s`` and
-``phase``.  :class:`Trajectory` keeps angles in degrees as in the file; use
+``yaw`` (deg), ``power_w`` (W) and optionally ``rpm``, ``airspeed_m_s``,
+``phase`` and ``on_ground`` (1 or 0).
+
+Samples on the ground (a disarmed or landed vehicle) are part of a real log and are
+kept, marked as not flying: a sample is *not flying* when its ``on_ground`` flag is
+set or its electric power is zero or negative (no current drawn, or a current sensor's
+offset at rest).  Not-flying samples make no noise on a map and are masked in fits;
+:attr:`Trajectory.flying` is the one definition of the rule.  :class:`Trajectory` keeps angles in degrees as in the file; use
 :meth:`Trajectory.enu` and :meth:`Trajectory.attitude_rad` for the model.
 """
 
@@ -27,7 +33,7 @@ from gisnoise.limits import check_track
 __all__ = ["Trajectory", "read_flight_csv", "from_columns", "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
 
 REQUIRED_COLUMNS = ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w")
-OPTIONAL_COLUMNS = ("rpm", "airspeed_m_s", "phase")
+OPTIONAL_COLUMNS = ("rpm", "airspeed_m_s", "phase", "on_ground")
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,11 +51,15 @@ class Trajectory:
     roll, pitch, yaw : ndarray
         Z-Y-X Euler angles, deg (yaw wrapped into (-180, 180]).
     power_w : ndarray
-        Electric power, W.
+        Electric power, W (zero or negative on samples that are not flying).
     phase : ndarray of str
         Flight phase of each sample (``horizontal`` when the source has none).
     rpm, airspeed_m_s : ndarray or None
         Optional propeller speed (1/min) and airspeed (m/s).
+    on_ground : ndarray of bool or None
+        True where the source marks the vehicle as on the ground (landed, disarmed).
+    metadata : dict
+        Provenance the reader states, e.g. ``height_datum`` and ``geoid_undulation_m``.
     """
 
     t: np.ndarray
@@ -63,19 +73,26 @@ class Trajectory:
     phase: np.ndarray
     rpm: np.ndarray | None = None
     airspeed_m_s: np.ndarray | None = None
+    on_ground: np.ndarray | None = None
     source: str = field(default="trajectory", compare=False)
+    metadata: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         src = self.source
         n = None
         for f in fields(self):
-            if f.name in ("source",):
+            if f.name in ("source", "metadata"):
                 continue
             v = getattr(self, f.name)
             if v is None:
                 continue
             if f.name == "phase":
                 arr = np.asarray(v, dtype=object).astype(str)
+            elif f.name == "on_ground":
+                arr = np.asarray(v).astype(float)
+                if arr.ndim != 1 or not np.all((arr == 0) | (arr == 1)):
+                    raise TrajectoryError(f"{src}: field 'on_ground' must hold 0 or 1 per sample", field=f.name)
+                arr = arr.astype(bool)
             else:
                 arr = np.asarray(v, dtype=float)
                 if arr.ndim != 1:
@@ -103,10 +120,6 @@ class Trajectory:
                                   f"(t={self.t[i]:g} s after {self.t[i - 1]:g} s)", field="t")
         if np.any(np.abs(self.lat) > 90):
             raise TrajectoryError(f"{src}: field 'lat' outside [-90, 90] deg", field="lat")
-        if np.any(self.power_w <= 0):
-            i = int(np.flatnonzero(self.power_w <= 0)[0])
-            raise TrajectoryError(f"{src}: field 'power_w' must be positive, got {self.power_w[i]:g} at sample {i}",
-                                  field="power_w")
         check_track(self.t, self.lat, self.lon, self.h, self.roll, self.pitch, self.power_w, source=src,
                     error=TrajectoryError)  # the shared rule set (gisnoise.limits)
         bad = [p for p in np.unique(self.phase) if p not in PHASES]
@@ -120,6 +133,14 @@ class Trajectory:
     @property
     def duration_s(self) -> float:
         return float(self.t[-1] - self.t[0])
+
+    @property
+    def flying(self) -> np.ndarray:
+        """True on samples that fly: not marked ``on_ground`` and with positive electric power."""
+        fly = self.power_w > 0
+        if self.on_ground is not None:
+            fly &= ~self.on_ground
+        return fly
 
     def origin(self) -> LocalFrame:
         """A local frame at the first sample's ground point (h0 = min height)."""
@@ -154,12 +175,19 @@ class Trajectory:
         out["phase"] = self.phase[idx]
         return out
 
+    def flying_at(self, t: Any) -> np.ndarray:
+        """Whether the vehicle flies at times ``t`` (s): both samples around ``t`` fly (see :attr:`flying`)."""
+        t = np.asarray(t, dtype=float)
+        idx = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self) - 1)
+        fly = self.flying
+        return fly[idx] & fly[np.clip(idx + 1, 0, len(self) - 1)] & (t >= self.t[0]) & (t <= self.t[-1])
+
     def select(self, mask: Any) -> Trajectory:
         """A trajectory of the samples where ``mask`` is true."""
         m = np.asarray(mask)
         kw: dict[str, Any] = {f.name: (None if getattr(self, f.name) is None else getattr(self, f.name)[m])
-              for f in fields(self) if f.name != "source"}
-        return Trajectory(**kw, source=self.source)
+              for f in fields(self) if f.name not in ("source", "metadata")}
+        return Trajectory(**kw, source=self.source, metadata=dict(self.metadata))
 
     def with_(self, **changes: Any) -> Trajectory:
         return replace(self, **changes)
@@ -171,6 +199,8 @@ class Trajectory:
             if getattr(self, k) is not None:
                 out[k] = getattr(self, k)
         out["phase"] = self.phase
+        if self.on_ground is not None:
+            out["on_ground"] = self.on_ground.astype(int)
         return out
 
     def to_csv(self, path: str | os.PathLike[str] | None = None) -> str:
@@ -181,7 +211,7 @@ class Trajectory:
         w.writerow(list(cols))
         fmt = {"lat": "{:.9f}", "lon": "{:.9f}"}
         for i in range(len(self)):
-            w.writerow([v[i] if k == "phase" else fmt.get(k, "{:.6g}").format(v[i]) for k, v in cols.items()])
+            w.writerow([v[i] if k in ("phase", "on_ground") else fmt.get(k, "{:.6g}").format(v[i]) for k, v in cols.items()])
         text = buf.getvalue()
         if path is not None:
             Path(path).write_text(text, encoding="utf-8")
@@ -195,7 +225,7 @@ def from_columns(cols: Mapping[str, Any], *, source: str = "trajectory") -> Traj
         raise MissingColumnError(f"{source}: missing column(s) {', '.join(missing)}", field=missing[0])
     kw: dict[str, Any] = {}
     n = len(cols["t"])
-    for c in REQUIRED_COLUMNS + ("rpm", "airspeed_m_s"):
+    for c in REQUIRED_COLUMNS + ("rpm", "airspeed_m_s", "on_ground"):
         if c not in cols:
             continue
         try:

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
-from gisnoise.flight._logkernels import _covering, _finish, _phase, _time_base
+from gisnoise.flight._logkernels import POWER_WAY_OUT, _at_rest_low, _covering, _finish, _phase, _power, _time_base
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
@@ -29,11 +29,11 @@ __all__ = ["read_ulog", "quaternion_to_euler"]
 
 _ULOG_TOPICS = ("vehicle_global_position", "vehicle_gps_position", "sensor_gps", "vehicle_attitude",
                 "battery_status", "vtol_vehicle_status", "vehicle_status", "airspeed_validated", "airspeed",
-                "rpm", "esc_status")
+                "rpm", "esc_status", "vehicle_land_detected")
 
 
 def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undulation_m: float | None = None,
-              rate_hz: float | None = None) -> Trajectory:
+              rate_hz: float | None = None, power_w: float | None = None) -> Trajectory:
     """Read a PX4 ULog as a trajectory (see the module docstring for the topics used).
 
     Parameters
@@ -46,6 +46,12 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         Used only when no ellipsoidal height is logged, m.
     rate_hz : float, optional
         Uniform resampling rate, Hz.
+    power_w : float, optional
+        A constant electric power, W, in place of the logged battery power (for logs
+        without battery current).
+
+    Samples where ``vehicle_land_detected.landed`` is set are marked ``on_ground``; without
+    that topic, samples at rest near the track's lowest point.
     """
     try:
         from pyulog import ULog
@@ -78,7 +84,9 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         lat, lon = g["lat"].astype(float), g["lon"].astype(float)
         if "alt_ellipsoid" in g:
             h = g["alt_ellipsoid"].astype(float)
+            datum = "ellipsoid (vehicle_global_position.alt_ellipsoid)"
         else:
+            datum = "mean sea level (vehicle_global_position.alt) + geoid undulation"
             n_und = _undulation(src, gps_cols, geoid_undulation_m, "vehicle_global_position.alt_ellipsoid")
             h = g["alt"].astype(float) + n_und
         pos_name = "vehicle_global_position"
@@ -86,6 +94,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         tb, lat, lon, h_ell, h_msl = (gps_cols[k] for k in ("t", "lat", "lon", "h_ell", "h_msl"))
         h = h_ell if h_ell is not None else h_msl + _undulation(src, None, geoid_undulation_m,
                                                                f"{gps[0]}.alt_ellipsoid")  # type: ignore[index]
+        datum = "ellipsoid" if h_ell is not None else "mean sea level + geoid undulation"
         pos_name = gps[0]  # type: ignore[index]
     else:
         raise MissingColumnError(f"{src}: topic 'vehicle_global_position' or 'vehicle_gps_position' missing "
@@ -102,23 +111,26 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     q = np.stack([a[f"q[{i}]"] for i in range(4)], axis=-1).astype(float)
 
     # power: sum over battery instances of V * I
-    if "battery_status" not in topics:
-        raise MissingColumnError(f"{src}: topic 'battery_status' missing (no electric power)", field="battery_status")
     batteries = []
-    for b in topics["battery_status"]:
-        if "connected" in b and not np.any(b["connected"]):
-            continue
-        batteries.append((b["timestamp"] / 1e6, b["voltage_v"].astype(float) * b["current_a"].astype(float)))
-    if not batteries:
-        raise MissingColumnError(f"{src}: topic 'battery_status' has no connected battery", field="battery_status")
+    if power_w is None:
+        if "battery_status" not in topics:
+            raise MissingColumnError(f"{src}: topic 'battery_status' missing (no electric power); {POWER_WAY_OUT}",
+                                     field="battery_status")
+        for b in topics["battery_status"]:
+            if "connected" in b and not np.any(b["connected"]):
+                continue
+            if "current_a" not in b or "voltage_v" not in b:
+                continue
+            batteries.append((b["timestamp"] / 1e6, b["voltage_v"].astype(float) * b["current_a"].astype(float)))
+        if not batteries:
+            raise MissingColumnError(f"{src}: topic 'battery_status' has no connected battery with voltage and "
+                                     f"current; {POWER_WAY_OUT}", field="battery_status")
 
     spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
     t = _time_base(src, tb, spans, rate_hz)
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
     roll, pitch, yaw = quaternion_to_euler(_interp_quaternion(t, t_att, q))
-    power = np.zeros_like(t)
-    for tt, pw in batteries:
-        power += np.interp(t, tt, pw)
+    power = _power(t, batteries, power_w)
 
     cols: dict[str, Any] = {"lat": lat_i, "lon": lon_i, "h": h_i, "roll": roll, "pitch": pitch, "yaw": yaw,
                             "power_w": power}
@@ -136,11 +148,17 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
 
     vtol = _px4_vtol_state(topics, t)
     cols["phase"] = _phase(t, lat_i, lon_i, h_i, vtol)
+    if "vehicle_land_detected" in topics and "landed" in topics["vehicle_land_detected"][0]:
+        ld = topics["vehicle_land_detected"][0]
+        cols["on_ground"] = _step(t, ld["timestamp"] / 1e6, ld["landed"].astype(bool)).astype(bool)
+    else:
+        cols["on_ground"] = _at_rest_low(t, lat_i, lon_i, h_i)
 
     utc_offset = None
     if gps_cols is not None and gps_cols["utc_offset"] is not None:
         utc_offset = gps_cols["utc_offset"]
-    return _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec")
+    meta = {"height_datum": datum, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
+    return _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
 
 
 def quaternion_to_euler(q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -201,7 +219,8 @@ def _undulation(src: str, gps_cols: Mapping[str, Any] | None, given: float | Non
             and len(gps_cols["h_ell"]):
         return float(np.median(gps_cols["h_ell"] - gps_cols["h_msl"]))
     raise MissingColumnError(f"{src}: '{what}' missing (only heights above mean sea level); "
-                             "give geoid_undulation_m", field="geoid_undulation_m")
+                             "give the geoid undulation (--geoid-undulation, or geoid_undulation_m)",
+                             field="geoid_undulation_m")
 
 
 def _px4_rpm(topics: Mapping[str, list[dict[str, np.ndarray]]]) -> tuple[np.ndarray, np.ndarray] | None:

@@ -12,8 +12,11 @@ from gisnoise.identify.estimate import (
     start_values,
 )
 from gisnoise.identify.fit import (
+    P7_MAX_STD_DB,
+    STEADY_POWER_DEX,
     fit,
     fit_campaign,
+    identifiable_form,
     usable_rows,
 )
 from gisnoise.identify.report import (
@@ -27,6 +30,6 @@ from gisnoise.identify.report import (
 )
 from gisnoise.identify.result import FitResult
 
-__all__ = ['CORRELATION_VARIABLES', 'CancelFn', 'DEFAULT_BOUNDS', 'DEFAULT_RCOND', 'FitResult', 'ProgressFn',
+__all__ = ['P7_MAX_STD_DB', 'STEADY_POWER_DEX', 'identifiable_form', 'CORRELATION_VARIABLES', 'CancelFn', 'DEFAULT_BOUNDS', 'DEFAULT_RCOND', 'FitResult', 'ProgressFn',
            'correlation_data', 'directivity_data', 'fit', 'fit_arrays', 'fit_campaign', 'parameter_table',
            'residual_data', 'start_values', 'timeseries_data', 'usable_rows', 'write_report']

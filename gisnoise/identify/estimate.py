@@ -62,8 +62,11 @@ from gisnoise.model import Ansatz, ModelCard, get_ansatz
 
 __all__ = ["fit_arrays", "start_values", "DEFAULT_BOUNDS", "DEFAULT_RCOND", "ProgressFn", "CancelFn"]
 
-DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {"p6": (0.0, 10.0), "p7": (0.0, 150.0)}
-"""Bounds applied unless overridden: spreading exponent non-negative, background a plausible dB(A)."""
+DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {"p6": (0.5, 2.0), "p7": (0.0, 150.0)}
+"""Bounds applied unless overridden (each a physical limit): the spreading exponent ``p6`` between
+cylindrical (0.5) and twice spherical (2) spreading, the background ``p7`` a plausible A-weighted level.
+Directivity factors that turn Eq. 9 negative somewhere on the sphere make an implausible card, which
+the plausibility guard (:mod:`gisnoise.model.plausibility`) refuses before it is written."""
 
 DEFAULT_RCOND = 1e-3
 """Smallest relative singular value of the column-scaled weighted Jacobian accepted as identifiable."""

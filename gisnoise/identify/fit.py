@@ -15,13 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import Cancelled, InputError
+from gisnoise.errors import Cancelled, GisnoiseError, InputError, NotIdentifiableError
 from gisnoise.identify.estimate import fit_arrays
 from gisnoise.identify.result import FitResult
 from gisnoise.measure import Samples, read_campaign, series_key
-from gisnoise.model import PHASES, Ansatz
+from gisnoise.model import PHASES, Ansatz, check_testable, get_ansatz, get_effect
 
-__all__ = ["fit", "fit_campaign", "usable_rows"]
+__all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "P7_MAX_STD_DB"]
 
 
 def fit(
@@ -78,8 +78,25 @@ def fit(
     s = samples if bool(np.all(samples.valid)) else samples.select(samples.valid)
     if len(s) == 0:
         raise InputError("no valid samples to fit", field="samples")
-    return fit_arrays(s.level, s.inputs(ref), ansatz, mic=s.mic, series=series_key(s.mic, s.flight), time=s.t_r,
+    x = s.inputs(ref)
+    x.setdefault("mic", s.mic)   # microphone ids: effects match per-microphone facts (height above ground)
+    _check_effects(ansatz, x)
+    return fit_arrays(s.level, x, ansatz, mic=s.mic, series=series_key(s.mic, s.flight), time=s.t_r,
                       reference_power_w=ref, samples=s, phase=None, **options)
+
+
+def _check_effects(ansatz: str | Ansatz, x: Mapping[str, Any]) -> None:
+    """Refuse, in one line, an extended ansatz whose effect the data cannot support (missing inputs)."""
+    name = ansatz if isinstance(ansatz, str) else ansatz.name
+    for eff_name in name.split("+")[1:]:
+        try:
+            eff = get_effect(eff_name)
+        except GisnoiseError:
+            continue   # the registry's own message follows from fit_arrays
+        ok, why = check_testable(eff, x)
+        if not ok:
+            raise InputError(f"ansatz {name!r}: effect {eff_name!r} cannot be fitted to these data: {why}",
+                             field="ansatz")
 
 
 def fit_campaign(
@@ -145,8 +162,27 @@ def fit_campaign(
         have = sorted(set(np.unique(usable_rows(all_samples, None, include_low_snr=include_low_snr).phase).tolist()))
         raise InputError(f"no usable samples of phase {phase!r} in the campaign (phases with usable samples: "
                          f"{', '.join(have) or 'none'})", field="phase")
-    res = fit(s, ansatz, reference_power_w=float(ref), **kw)
-    info = {
+    fixed, held = identifiable_form(s, ansatz, kw.pop("fixed", None))
+    model = get_ansatz(ansatz) if isinstance(ansatz, str) else ansatz
+    bg = model.background
+    try:
+        res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed or None, **kw)
+        weak_bg = bg is not None and bg not in fixed and (bg in res.at_bounds or res.std.get(bg, 0.0) > P7_MAX_STD_DB)
+    except NotIdentifiableError as exc:
+        if bg is None or bg in fixed or bg not in getattr(exc, "parameters", ()):
+            raise
+        weak_bg = True
+    if weak_bg:   # too few background-dominated rows to fit p7: hold it at the campaign's background
+        level_bg = _campaign_background(s)
+        if level_bg is None:
+            raise InputError(f"the data cannot fit the background {bg} (too few background-dominated rows) and the "
+                             "campaign states none; give microphones[].background_db or --fix "
+                             f"{bg}=LEVEL", field=str(bg))
+        fixed[str(bg)] = level_bg
+        held[str(bg)] = (f"too few background-dominated rows to fit it; held at the campaign's background "
+                         f"{level_bg:.1f} dB(A)")
+        res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed, **kw)
+    info: dict[str, Any] = {
         "data": {
             "campaign": source if source is not None else str(getattr(camp, "folder", getattr(camp, "path", ""))),
             "phase": phase,
@@ -158,8 +194,55 @@ def fit_campaign(
     }
     if vehicle.get("name"):
         info["vehicle"] = vehicle["name"]
+    if held:
+        info["held_parameters"] = held
     res.info.update(info)
     return res
+
+
+STEADY_POWER_DEX = 0.02
+"""Spread of log10(P_el) over the fitted rows below which the power term p1 cannot be identified
+(a power varying by less than about 5 %)."""
+P7_MAX_STD_DB = 3.0
+"""Standard deviation of a fitted background p7 above which the data do not support it, dB."""
+
+
+def _campaign_background(samples: Samples) -> float | None:
+    """The campaign's background level (stated per microphone, else measured from the recordings), dB(A)."""
+    if samples.background_db is None:
+        return None
+    b = np.asarray(samples.background_db, dtype=float)
+    b = b[np.isfinite(b)]
+    return float(np.median(b)) if b.size else None
+
+
+def identifiable_form(samples: Samples, ansatz: str | Ansatz,
+                      fixed: Mapping[str, float] | None) -> tuple[dict[str, float], dict[str, str]]:
+    """The parameters the data cannot support, held at values the data state, and why.
+
+    * Steady power (log10 P_el spreads less than :data:`STEADY_POWER_DEX`): with a level offset
+      ``p0`` in the ansatz, ``p1 log10(P_el)`` is a constant the offset absorbs, so ``p1`` is held
+      at 0: the card is a level offset without power term, valid at the power flown (the card's
+      ``statistics.power_range_w``).
+    The background ``p7`` is judged by :func:`fit_campaign` after a first fit: when it ends on
+    a bound, is not identifiable or has a standard deviation above :data:`P7_MAX_STD_DB`, the
+    data hold too few background-dominated rows, and it is held at the campaign's background
+    (stated, or measured from the recordings).
+
+    Parameters the user fixed are left alone.  Returns the fixed values and, per held
+    parameter, the reason (the card's provenance states it).
+    """
+    model = get_ansatz(ansatz) if isinstance(ansatz, str) else ansatz
+    out = dict(fixed or {})
+    held: dict[str, str] = {}
+    pw = np.asarray(samples.power_w, dtype=float)
+    pw = pw[np.isfinite(pw) & (pw > 0)]
+    if {"p0", "p1"} <= set(model.params) and "p1" not in out and pw.size \
+            and np.log10(pw.max() / pw.min()) < STEADY_POWER_DEX:
+        out["p1"] = 0.0
+        held["p1"] = (f"steady power ({pw.min():.4g}-{pw.max():.4g} W): no power information; held at 0, the card "
+                      f"is a level offset p0 valid at the power flown")
+    return out, held
 
 
 def usable_rows(samples: Samples, phase: str | None, *, include_low_snr: bool = True) -> Samples:

@@ -13,7 +13,7 @@ import numpy as np
 from gisnoise import __version__
 from gisnoise.errors import FitError, InputError
 from gisnoise.measure import Samples
-from gisnoise.model import ModelCard
+from gisnoise.model import ModelCard, check_card
 
 __all__ = ["FitResult"]
 
@@ -248,13 +248,20 @@ class FitResult:
             prov.update(provenance)
         if notes is None:
             notes = same.notes if same is not None else ""
-        return ModelCard(
+        stats = dict(self.statistics())
+        pw = np.asarray(self.samples.power_w, dtype=float)
+        pw = pw[np.isfinite(pw) & (pw > 0)]
+        if pw.size:   # the powers the card holds for (the plausibility guard checks the card there)
+            stats["power_range_w"] = [float(pw.min()), float(pw.max())]
+        card = ModelCard(
             id=card_id, vehicle=vehicle, phase=ph, ansatz=self.ansatz, parameters=self.params,
             reference_power_w=float(self.reference_power_w),
             reference_distance_m=template.reference_distance_m if template else 40.0,
             covariance=tuple(tuple(float(v) for v in row) for row in cov),
-            statistics=self.statistics(), provenance=prov, notes=notes, phases=served,
+            statistics=stats, provenance=prov, notes=notes, phases=served,
         )
+        check_card(card, source=f"fit of {self.ansatz!r}: no card written")
+        return card
 
 
 def _slug(s: str) -> str:

@@ -12,6 +12,18 @@ or waypoints: :func:`gisnoise.flight.routes.read_trajectory`), chooses the recei
     isobands and isolines of the level bands in WGS84 (:mod:`gisnoise.maps.contours`);
 ``DIR/map.png``
     with ``plot=True``: the map with levels, contours, track, scale bar and legend.
+
+Two rules hold for every face:
+
+* the ground: without a DEM or a stated ground height, flat ground is taken from the
+  track only when the track starts or ends on the ground
+  (:func:`gisnoise.flight.ground_from_track`); otherwise the map is refused
+  (:class:`~gisnoise.errors.InputError` on ``ground_h``, naming ``--ground-height`` and
+  ``--dem``), since the receivers would be put at flight altitude;
+* on-ground samples (:attr:`gisnoise.flight.Trajectory.flying`) make no sound: the
+  metrics are evaluated over the flying stretches only (:func:`gisnoise.flight.flying_segments`)
+  and summed in energy (LAmax the largest, SEL and LAeq as energy sums over the whole
+  trajectory's period, time above added).
 """
 
 from __future__ import annotations
@@ -21,18 +33,20 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from gisnoise.errors import InputError
-from gisnoise.flight import Trajectory, read_route
+import numpy as np
+
+from gisnoise.errors import InputError, TrajectoryError
+from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
 from gisnoise.limits import check_receivers
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.contours import clip_warnings, parse_levels, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map
-from gisnoise.maps.result import METRICS, MapResult
-from gisnoise.model import ModelCard
+from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
+from gisnoise.model import ModelCard, check_card
 
-__all__ = ["make_map", "DEFAULT_LEVELS"]
+__all__ = ["make_map", "DEFAULT_LEVELS", "map_ground"]
 
 DEFAULT_LEVELS = (45.0, 50.0, 55.0, 60.0)
 
@@ -62,6 +76,8 @@ def make_map(
     engine: str = "auto",
     progress: Callable[[float], Any] | None = None,
     cancel: Callable[[], bool] | None = None,
+    geoid_undulation_m: float | None = None,
+    power_w: float | None = None,
 ) -> dict[str, Any]:
     """Noise map of a trajectory: evaluate on a grid and write GeoTIFF, GeoJSON (and PNG).
 
@@ -92,7 +108,8 @@ def make_map(
         Receiver height above ground, m.
     ground_h : float, optional
         Flat ground's ellipsoidal height without DEM, m (default: the height a waypoints
-        route states, else the track's lowest point).
+        route states, else the take-off or landing point of a track that starts or ends
+        on the ground; a track in the air is refused).
     dem_offset_m : float
         Added to DEM heights to reach the trajectory's vertical datum, m.
     uncertainty : bool
@@ -103,6 +120,9 @@ def make_map(
         Band drawn in ``map.png`` (default ``LAmax`` if computed, else the first level band).
     period_s, threshold_db, snapshot_t, substeps, background, engine
         Passed to :func:`~gisnoise.maps.evaluate.evaluate_grid`.
+    geoid_undulation_m, power_w : float, optional
+        For flight logs (``.bin``, ``.ulg``): the geoid undulation, m, and a constant power, W
+        (:func:`gisnoise.flight.read_route`).
     progress : callable, optional
         Called with the fraction done (0-1).
     cancel : callable, optional
@@ -121,12 +141,21 @@ def make_map(
         from gisnoise.maps.plots import require_matplotlib
 
         require_matplotlib()
-    route = read_route(trajectory, dem=dem, dem_offset_m=dem_offset_m)
+    route = read_route(trajectory, dem=dem, dem_offset_m=dem_offset_m, geoid_undulation_m=geoid_undulation_m,
+                       power_w=power_w)
     traj = route.trajectory
-    if ground_h is None and dem is None:
-        ground_h = route.ground_h_m
-    check_receivers(receiver_height, ground_h, traj.h)  # the shared rule set (gisnoise.limits)
     cardset = as_cardset(cards)
+    for card in cardset.cards:
+        check_card(card)   # the plausibility guard: an implausible card never makes a map
+    ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
+    check_receivers(receiver_height, ground_h, traj.h)  # the shared rule set (gisnoise.limits)
+    if traj.on_ground is not None:
+        silent = ~traj.on_ground & (traj.power_w <= 0)
+        if silent.any():
+            i = int(np.flatnonzero(silent)[0])
+            raise InputError(f"{traj.source}: electric power is zero on {int(silent.sum())} airborne samples (first "
+                             f"at t = {traj.t[i]:.2f} s: the battery current is not logged while flying); give a "
+                             f"constant power (--power-w W, field power_w)", field="power_w")
     grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
                                   background=background)
     out = Path(out_dir)
@@ -137,11 +166,15 @@ def make_map(
         if progress is not None:
             progress(0.9 * f)
 
-    result: MapResult = evaluate_grid(
-        traj, cardset, grid, metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground_h,
-        dem_offset_m=dem_offset_m, period_s=period_s, threshold_db=threshold_db, snapshot_t=snapshot_t,
-        background=background, substeps=substeps, uncertainty=uncertainty, engine=engine, progress=eval_progress,
-        cancel=cancel)
+    kw: dict[str, Any] = dict(metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground_h,
+                              dem_offset_m=dem_offset_m, threshold_db=threshold_db, background=background,
+                              substeps=substeps, uncertainty=uncertainty, engine=engine, cancel=cancel)
+    if bool(np.all(traj.flying)):
+        result: MapResult = evaluate_grid(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t,
+                                          progress=eval_progress, **kw)
+    else:
+        result = _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, eval_progress, kw)
+    _check_cells(result, traj.source)
     result.metadata["levels_db"] = lv
     warnings = warnings + clip_warnings(result, lv)
     result.metadata["warnings"] = warnings
@@ -161,3 +194,90 @@ def make_map(
     paths["trajectory"] = traj
     paths["warnings"] = warnings
     return paths
+
+
+def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: float | None = None) -> float | None:
+    """The flat ground's height for a map (m), by the ground rule of the module docstring.
+
+    ``ground_h`` (given) wins, then a DEM (None: the DEM is the ground), then the height the
+    source states (waypoints), then the take-off or landing point of the track; a track
+    that starts and ends in the air raises :class:`~gisnoise.errors.InputError`.
+    """
+    if ground_h is not None or dem is not None:
+        return ground_h
+    if stated_h is None:
+        stated_h = traj.metadata.get("ground_h_m")
+    if stated_h is not None:
+        return float(stated_h)
+    g = ground_from_track(traj)
+    if g is None:
+        lo = float(np.min(traj.h))
+        raise InputError(f"{traj.source}: ground unknown: the track neither starts nor ends on the ground (lowest "
+                         f"point {lo:.1f} m); give --ground-height M (field ground_h_m) or --dem DEM.tif",
+                         field="ground_h")
+    return g
+
+
+def _check_cells(result: MapResult, source: str) -> None:
+    """Refuse a map with a non-finite or implausible level cell (NaN: no value, e.g. outside a DEM)."""
+    from gisnoise.model import LEVEL_RANGE_DB
+
+    for name, a in result.bands.items():
+        if result.units.get(name) != "dB(A)":
+            continue
+        v = a[~np.isnan(a)]
+        bad = np.isinf(v) & (v > 0) | (v > LEVEL_RANGE_DB[1] + 40.0)
+        if bad.any():
+            raise InputError(f"{source}: band {name} has {int(bad.sum())} implausible cells (up to "
+                             f"{float(np.max(v)):.4g} dB(A)); no map written", field="cards")
+
+
+def _part_progress(progress: Callable[[float], Any], k: int, n: int) -> Callable[[float], Any]:
+    def update(f: float) -> None:
+        progress((k + f) / n)
+    return update
+
+
+def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: float | None,
+                     snapshot_t: float | None, progress: Callable[[float], Any], kw: dict[str, Any]) -> MapResult:
+    """Metrics over the flying stretches of ``traj`` summed in energy (see the module docstring)."""
+    segs = flying_segments(traj)
+    if not segs:
+        raise TrajectoryError(f"{traj.source}: no two consecutive flying samples (all on the ground or without "
+                              "power): nothing makes noise", field="power_w")
+    if kw.get("uncertainty") and len(segs) > 1:
+        raise InputError(f"{traj.source}: uncertainty bands need one flying stretch; the track lands and takes "
+                         f"off again ({len(segs)} stretches)", field="uncertainty")
+    period = traj.duration_s if period_s is None else period_s
+    results: list[MapResult] = []
+    for k, (i0, i1) in enumerate(segs):
+        part = traj.select(np.arange(i0, i1))
+        snap = snapshot_t if snapshot_t is not None and part.t[0] <= snapshot_t <= part.t[-1] else None
+        results.append(evaluate_grid(part, cardset, grid, period_s=period, snapshot_t=snap,
+                                     progress=_part_progress(progress, k, len(segs)), **kw))
+    first = results[0]
+    bands: dict[str, np.ndarray] = {}
+    for name in first.bands:
+        stack = np.stack([r.bands[name] for r in results if name in r.bands])
+        if name.startswith("TA"):
+            bands[name] = np.sum(stack, axis=0)
+        elif name in ("LAeq", "SEL"):
+            with np.errstate(divide="ignore"):
+                bands[name] = 10.0 * np.log10(np.sum(10.0 ** (stack / 10.0), axis=0))
+        else:
+            bands[name] = np.max(stack, axis=0)
+    if snapshot_t is not None:
+        name = snapshot_name(float(snapshot_t))
+        hit = [r for r in results if name in r.bands]
+        bands[name] = hit[0].bands[name] if hit else np.full(grid.shape, -np.inf)
+    meta = dict(first.metadata)
+    meta["units"] = {b: band_unit(b) for b in bands}
+    meta["trajectory"] = {"source": traj.source, "samples": len(traj), "t_start_s": float(traj.t[0]),
+                          "t_end_s": float(traj.t[-1]), "duration_s": traj.duration_s}
+    meta["snapshot_t_s"] = snapshot_t
+    meta["flying_stretches"] = [[float(traj.t[i0]), float(traj.t[i1 - 1])] for i0, i1 in segs]
+    meta["samples_on_ground"] = int(np.sum(~traj.flying))
+    meta["evaluation_instants"] = int(sum(r.metadata.get("evaluation_instants", 0) for r in results))
+    if "period_s" in meta:
+        meta["period_s"] = period
+    return MapResult(bands, first.grid, meta)

@@ -19,7 +19,7 @@ block of WAV input, default 0.125 s), per microphone ``full_scale_v`` (voltage o
 digital full scale of integer or float WAV samples, default 1 V) and
 ``background_db`` (the A-weighted background level, dB, replacing the estimate),
 per flight ``geoid_undulation_m`` (for logs that give heights above mean sea level
-only), and ``exclusions``: ``[{"flight": .., "t0": .., "t1": .., "mic": ..}]``
+only) and ``power_w`` (a constant electric power, W, for logs without battery current), and ``exclusions``: ``[{"flight": .., "t0": .., "t1": .., "mic": ..}]``
 (reception times, s since the flight's start; ``mic`` optional).
 
 :meth:`Campaign.samples <gisnoise.measure.parts.Campaign.samples>` turns the levels into one
@@ -165,7 +165,8 @@ def _load(folder: str | os.PathLike[str], *, strict: bool, exclusions: Iterable[
         if not f.log:
             continue
         try:
-            trajectories[f.id] = read_flight(f.log, start_utc=f.start_utc, geoid_undulation_m=f.geoid_undulation_m)
+            trajectories[f.id] = read_flight(f.log, start_utc=f.start_utc, geoid_undulation_m=f.geoid_undulation_m,
+                                             power_w=f.power_w)
         except GisnoiseError as exc:
             col.error(f.log, exc)
     # microphone files

@@ -209,8 +209,15 @@ def _parse_flights(cjs: str, root: Path, doc: Mapping[str, Any], col: _Collector
             col.add(cjs, f"{where}.geoid_undulation_m", f"{cjs}: field '{where}.geoid_undulation_m' must be a "
                     f"number, got {und!r}")
             continue
+        pw = f.get("power_w")
+        if pw is not None and not (_is_number(pw) and pw > 0):
+            col.add(cjs, f"{where}.power_w", f"{cjs}: field '{where}.power_w' must be a positive number of watts, "
+                    f"got {pw!r}")
+            continue
         logs = [root / "flights" / f"{fid}{s}" for s in FLIGHT_SUFFIXES]
-        found = [p for p in logs if p.is_file()]
+        fdir = root / "flights"
+        found = sorted(p for p in fdir.iterdir() if p.stem == fid and p.suffix.lower() in FLIGHT_SUFFIXES
+                       and p.is_file()) if fdir.is_dir() else []
         if not found:
             col.add(str(logs[0]), "flights", f"{logs[0]}: missing flight log for flight '{fid}' "
                     f"(.csv, .ulg or .bin)")
@@ -222,7 +229,8 @@ def _parse_flights(cjs: str, root: Path, doc: Mapping[str, Any], col: _Collector
         else:
             log_path = str(found[0])
         out.append(Flight(id=fid, start_utc=start, log=log_path,
-                          geoid_undulation_m=None if und is None else float(und)))
+                          geoid_undulation_m=None if und is None else float(und),
+                          power_w=None if pw is None else float(pw)))
     return out
 
 

@@ -55,12 +55,14 @@ class Microphone:
 
 @dataclass(frozen=True)
 class Flight:
-    """A flight: id, start instant (unix s, UTC), its log file and geoid undulation (m)."""
+    """A flight: id, start instant (unix s, UTC), its log file, geoid undulation (m) and, for logs
+    without battery current, a constant electric power (W)."""
 
     id: str
     start_utc: float
     log: str
     geoid_undulation_m: float | None = None
+    power_w: float | None = None
 
 
 @dataclass(frozen=True)

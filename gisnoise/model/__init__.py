@@ -71,8 +71,19 @@ from gisnoise.model.hemisphere_io import (
     read_hemisphere_csv,
     read_salford_xlsx,
 )
+from gisnoise.model.plausibility import (
+    LEVEL_RANGE_DB,
+    MAX_LEVEL_STD_DB,
+    ImplausibleCardError,
+    card_level_range,
+    card_problems,
+    check_card,
+    power_range_w,
+)
 
 __all__ = [
+    "LEVEL_RANGE_DB", "MAX_LEVEL_STD_DB", "ImplausibleCardError", "card_level_range", "card_problems", "check_card",
+    "power_range_w",
     "ATMOSPHERIC_ABSORPTION", "Ansatz", "BACKGROUND_EVENT", "BANK_ANGLE", "DOPPLER", "EFFECT_NAMES", "EMISSION_TIME",
     "Effect", "GROUND_REFLECTION", "HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "HemisphereCard", "MIN_REFLECTION_HEIGHT_M", "ModelCard", "PAPER", "PAPER_OFFSET", "PHASES",
     "REFERENCE_DISTANCE_M", "RPM", "SALFORD_ATMOSPHERE", "SCHEMA", "THIRD_OCTAVE", "WIND", "add_background", "additive", "ansatz_names",

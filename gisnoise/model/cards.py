@@ -33,6 +33,7 @@ from gisnoise.flight import PHASES
 from gisnoise.jsonio import JsonObject, read_json_file
 from gisnoise.model.ansatz import REFERENCE_DISTANCE_M, Ansatz
 from gisnoise.model.effects import get_ansatz
+from gisnoise.model.plausibility import check_card
 
 __all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "save", "load_card", "from_dict",
            "with_parameters", "register_card_schema"]
@@ -180,8 +181,9 @@ def _validate(card: ModelCard) -> None:
         _fail("field 'notes' must be a string", "notes")
 
 
-def from_dict(doc: Mapping[str, Any], *, source: str = "model card") -> ModelCard:
-    """Build a card from a parsed JSON object, checking the schema version."""
+def from_dict(doc: Mapping[str, Any], *, source: str = "model card", force: bool = False) -> ModelCard:
+    """Build a card from a parsed JSON object, checking the schema version and, unless ``force``
+    (inspection only), its plausibility (:func:`gisnoise.model.plausibility.check_card`)."""
     if not isinstance(doc, Mapping):
         raise CardError(f"{source}: expected a JSON object", field="schema")
     schema = doc.get("schema")
@@ -221,19 +223,22 @@ def from_dict(doc: Mapping[str, Any], *, source: str = "model card") -> ModelCar
         if k in kw and not isinstance(kw[k], Mapping):
             raise CardError(f"{source}: field '{k}' must be an object", field=k)
     try:
-        return ModelCard(**kw)
+        card = ModelCard(**kw)
     except CardError as exc:
         raise CardError(str(exc).replace("model card", source, 1), field=exc.field) from None
+    if not force:
+        check_card(card, source=source)
+    return card
 
 
-def loads(text: str | bytes, *, source: str = "model card") -> ModelCard:
-    """Parse a card from JSON text."""
+def loads(text: str | bytes, *, source: str = "model card", force: bool = False) -> ModelCard:
+    """Parse a card from JSON text (``force``: skip the plausibility guard, for inspection)."""
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise CardError(f"{source}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}",
                         field="json") from None
-    return from_dict(doc, source=source)
+    return from_dict(doc, source=source, force=force)
 
 
 def dumps(card: ModelCard) -> str:
@@ -241,8 +246,11 @@ def dumps(card: ModelCard) -> str:
     return jsonio.dumps(card.to_dict(), indent=2)
 
 
-def load(path: str | os.PathLike[str]) -> ModelCard:
+def load(path: str | os.PathLike[str], *, force: bool = False) -> ModelCard:
     """Read a card file, or a bundled card by its id (``demo-horizontal``); errors name the file.
+
+    An implausible card (:mod:`gisnoise.model.plausibility`) is refused unless ``force``
+    (for inspection only; the evaluator refuses it anyway).
 
     A name that is no existing file, has no suffix and no folder is looked up among the
     bundled cards (:func:`gisnoise.data.bundled_card_ids`).
@@ -260,7 +268,7 @@ def load(path: str | os.PathLike[str]) -> ModelCard:
             raise CardError(f"card: no file {name!r} and no bundled card of that id "
                             f"(bundled: {', '.join(bundled_card_ids())})", field="card") from None
     doc = read_json_file(path, what="card", error=CardError, field="card", json_field="json")
-    return from_dict(doc, source=str(path))
+    return from_dict(doc, source=str(path), force=force)
 
 
 def dump(card: ModelCard, fp: Any) -> None:

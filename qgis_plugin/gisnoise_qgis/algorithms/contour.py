@@ -108,9 +108,9 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             self.TRAJECTORY, "Trajectory layer (points or lines)",
             [QgsProcessing.TypeVectorPoint, QgsProcessing.TypeVectorLine], optional=True))
         self.addParameter(QgsProcessingParameterFile(
-            self.TRAJECTORY_FILE, "or a trajectory file (flight CSV or GeoJSON)",
+            self.TRAJECTORY_FILE, "or a trajectory file (flight CSV, GeoJSON, PX4 .ulg, ArduPilot .bin)",
             behavior=QgsProcessingParameterFile.File, optional=True,
-            fileFilter="Trajectories (*.csv *.geojson *.json);;All files (*)"))
+            fileFilter="Trajectories (*.csv *.geojson *.json *.ulg *.ULG *.bin *.BIN);;All files (*)"))
         for key, label, default, ftype in (
             (self.TIME_FIELD, "Time field (s; empty for lines: M values)", "t", QgsProcessingParameterField.Numeric),
             (self.ALTITUDE_FIELD, "Height field (m, ellipsoidal; empty: geometry Z)", "h",
@@ -144,7 +144,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             self.RECEIVER_HEIGHT, "Receiver height above ground (m)", QgsProcessingParameterNumber.Double, 1.5,
             minValue=0.0))
         self.addParameter(QgsProcessingParameterRasterLayer(
-            self.DEM, "Ground elevation (DEM; empty: flat ground at the trajectory's lowest point)", optional=True))
+            self.DEM, "Ground elevation (DEM; empty: the flat ground height, or the take-off/landing point)", optional=True))
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, "Grid CRS (projected, metres; empty: local UTM zone)", optional=True))
         self.addParameter(QgsProcessingParameterBoolean(
@@ -160,7 +160,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             param.setFlags(param.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
             self.addParameter(param)
         for key, label in ((self.GROUND_HEIGHT, "Flat ground height without a DEM (m, ellipsoidal; empty: the "
-                                                "trajectory's lowest point)"),
+                                                "take-off or landing point; a track in the air needs it)"),
                            (self.PERIOD, "LAeq period (s; empty: the trajectory's duration)"),
                            (self.THRESHOLD, "Time above this level (dB(A); empty: none)"),
                            (self.SNAPSHOT_T, "Snapshot at this time (s; empty: none)")):

@@ -1,0 +1,82 @@
+"""The ground rule of maps: a track in the air needs --ground-height or --dem; with the ground given the
+flyover map equals the closed form (point source, spherical spreading, straight track at constant speed)."""
+
+import numpy as np
+import pytest
+import rasterio
+from click.testing import CliRunner
+from pyproj import Transformer
+
+from gisnoise.cli.main import cli
+from gisnoise.flight import Trajectory, ground_from_track
+from gisnoise.geo import LocalFrame
+from gisnoise.model import ModelCard, save
+
+FRAME = LocalFrame(52.27, 10.52, 0.0)
+G0, HEIGHT, SPEED, X0, X1 = 70.0, 60.0, 10.0, -600.0, 600.0
+
+
+def flyover(dt=0.1):
+    t = np.arange(0.0, (X1 - X0) / SPEED + dt / 2, dt)
+    x = X0 + SPEED * t
+    lat, lon, h = FRAME.to_wgs84(x, np.zeros_like(t), np.full_like(t, HEIGHT))
+    return Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=np.full_like(t, 90.0),
+                      power_w=np.full_like(t, 3000.0), phase=np.full(t.size, "horizontal"))
+
+
+@pytest.fixture()
+def files(tmp_path):
+    card = ModelCard(id="omni", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0)
+    csv = tmp_path / "flyover.csv"
+    flyover().to_csv(csv)
+    return str(csv), str(save(card, tmp_path / "omni.json"))
+
+
+def run(*args):
+    return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
+
+
+def test_airborne_track_without_ground_exits_2_naming_both_options(tmp_path, files):
+    csv, card = files
+    r = run("contour", csv, "--card", card, "--out", str(tmp_path / "m"))
+    assert r.exit_code == 2
+    assert "--ground-height" in r.output and "--dem" in r.output
+    assert len(r.output.strip().splitlines()) == 1 and not (tmp_path / "m" / "levels.tif").exists()
+
+
+def test_with_ground_height_the_map_equals_the_closed_form_flyover(tmp_path, files):
+    csv, card = files
+    out = tmp_path / "m"
+    r = run("contour", csv, "--card", card, "--out", str(out), "--ground-height", "0", "--resolution", "25",
+            "--margin", "150", "--metrics", "LAmax,SEL")
+    assert r.exit_code == 0, r.output
+    with rasterio.open(out / "levels.tif") as ds:
+        bands = {n: ds.read(i + 1) for i, n in enumerate(ds.descriptions)}
+        rows, cols = np.mgrid[0:ds.height, 0:ds.width]
+        xs, ys = rasterio.transform.xy(ds.transform, rows.ravel(), cols.ravel(), offset="center")
+        to_ll = Transformer.from_crs(ds.crs, "EPSG:4326", always_xy=True)
+    lon, lat = to_ll.transform(np.asarray(xs), np.asarray(ys))
+    e, n, u = FRAME.to_enu(lat, lon, np.full(len(lat), 1.5))   # receivers 1.5 m above the ground at h = 0
+    r_perp = np.hypot(n, HEIGHT - u)
+    inside = (e > X0 + 100) & (e < X1 - 100)                    # closest approach within the track
+    lamax = G0 - 20.0 * np.log10(r_perp / 40.0)                 # p1 log10(P/P_ref) = 0, p6 = 1
+    # SEL = 10 log10 of the integral of 10^(L/10) dt with d^2 = r^2 + (x(t) - e)^2, x(t) = X0 + v t
+    integral = 10 ** (G0 / 10) * 40.0 ** 2 / (SPEED * r_perp) * (np.arctan((X1 - e) / r_perp)
+                                                                  - np.arctan((X0 - e) / r_perp))
+    sel = 10.0 * np.log10(integral)
+    np.testing.assert_allclose(bands["LAmax"].ravel()[inside], lamax[inside], atol=0.1)
+    np.testing.assert_allclose(bands["SEL"].ravel(), sel, atol=0.1)
+    assert inside.sum() > 100
+
+
+def test_ground_from_track_takes_a_take_off_or_landing_only():
+    tr = flyover()
+    assert ground_from_track(tr) is None
+    h = tr.h.copy()
+    h[:50] = h[:50] - np.linspace(60.0, 0.0, 50)                 # climbs from the ground
+    up = tr.with_(h=h, phase=np.where(np.arange(len(h)) < 50, "climb", "horizontal"))
+    assert ground_from_track(up) == pytest.approx(float(h[0]))
+    parked = tr.with_(on_ground=np.arange(len(h)) >= len(h) - 3)   # landed at the end (flag)
+    assert ground_from_track(parked) == pytest.approx(float(tr.h[-1]))

@@ -1,0 +1,181 @@
+"""Real flight logs end to end: the one trajectory reader, on-ground samples, maps and campaigns.
+
+Expectations come from pyulog and pymavlink directly, not from gisnoise.
+"""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rasterio
+from click.testing import CliRunner
+
+from gisnoise.cli.main import cli
+from gisnoise.flight import LOG_MAP_RATE_HZ, read_route
+from gisnoise.model import ModelCard, save
+
+pyulog = pytest.importorskip("pyulog")
+DFReader = pytest.importorskip("pymavlink.DFReader")
+
+DATA = Path(__file__).parent / "data"
+VTOL = DATA / "pyulog_sample_log_small_vtol.ulg"
+QUAD = DATA / "robologs_test_quad_fmuv5.ulg"
+COPTER = DATA / "dronekit_la_testdata_log171_copter.bin"
+N_SITE = 22.0   # geoid undulation given for the ArduPilot log (Canberra), m
+
+
+@pytest.fixture()
+def card(tmp_path):
+    c = ModelCard(id="omni", vehicle="test", phase="hover", ansatz="paper-offset",
+                  parameters=dict(p0=65.0, p1=10.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                  reference_power_w=300.0, phases=("horizontal", "climb", "sink", "transition"))
+    return str(save(c, tmp_path / "omni.json"))
+
+
+def run(*args):
+    return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
+
+
+def _ulog_expect(path):
+    """Time base start, position, power and landed flag as pyulog reads them (boot time, s)."""
+    u = pyulog.ULog(str(path))
+    d, batteries = {}, []
+    for x in u.data_list:
+        d.setdefault(x.name, x.data)
+        if x.name == "battery_status":
+            batteries.append(x.data)
+    if "vehicle_global_position" in d:
+        g = d["vehicle_global_position"]
+        tp, lat = g["timestamp"] / 1e6, g["lat"]
+    else:
+        g = d["vehicle_gps_position"]
+        ok = g["fix_type"] >= 3
+        tp, lat = g["timestamp"][ok] / 1e6, g["lat"][ok] / 1e7
+    bats = [(b["timestamp"] / 1e6, b["voltage_v"] * b["current_a"]) for b in batteries]
+    ta = d["vehicle_attitude"]["timestamp"] / 1e6
+    ld = d["vehicle_land_detected"]
+    t0 = max([tp[0], ta[0]] + [tb[0] for tb, _ in bats])
+    return t0, (tp, lat), bats, (ld["timestamp"] / 1e6, ld["landed"].astype(bool))
+
+
+@pytest.mark.parametrize("path", [VTOL, QUAD])
+def test_ulog_through_the_one_reader_equals_pyulog(path):
+    tr = read_route(path).trajectory
+    t0, (tp, lat), bats, (tl, landed) = _ulog_expect(path)
+    t_abs = t0 + tr.t
+    assert np.allclose(np.diff(tr.t), 1.0 / LOG_MAP_RATE_HZ)
+    np.testing.assert_allclose(tr.lat, np.interp(t_abs, tp, lat), atol=1e-9)
+    power = sum(np.interp(t_abs, tb, pw) for tb, pw in bats)   # every battery instance, V x I
+    np.testing.assert_allclose(tr.power_w, power, rtol=1e-6, atol=1e-6)
+    expect_landed = landed[np.clip(np.searchsorted(tl, t_abs, side="right") - 1, 0, len(tl) - 1)]
+    np.testing.assert_array_equal(tr.on_ground, expect_landed)
+    assert tr.metadata["height_datum"].startswith("ellipsoid")
+
+
+def test_quad_with_zero_current_on_the_ground_is_read_not_refused():
+    tr = read_route(QUAD).trajectory
+    assert tr.power_w.min() == 0.0 and tr.on_ground.any()          # 0 A on the ground, kept
+    assert not tr.flying[tr.power_w <= 0].any()                      # zero power never flies
+
+
+def test_dataflash_on_ground_until_not_landed_event_and_power_equal_pymavlink():
+    tr = read_route(COPTER, geoid_undulation_m=N_SITE).trajectory
+    r = DFReader.DFReader_binary(str(COPTER), zero_time_base=True)
+    curr, last, not_landed = [], 0.0, None
+    while True:
+        m = r.recv_match(type=["CURR", "ATT", "EV"])
+        if m is None:
+            break
+        if m.get_type() == "EV":
+            if m.Id == 28 and not_landed is None:   # NOT_LANDED
+                not_landed = last
+            continue
+        last = m.TimeMS / 1e3
+        if m.get_type() == "CURR":
+            curr.append((last, m.Volt / 100.0 * m.Curr / 100.0))   # hundredths of V and A
+    r.close()
+    c = np.array(curr)
+    assert not_landed is not None
+    # boot time of the trajectory's first sample: the first instant where GPS, ATT and CURR are all logged
+    gps_t = []
+    r = DFReader.DFReader_binary(str(COPTER), zero_time_base=True)
+    while (m := r.recv_match(type=["GPS", "ATT"])) is not None:
+        if m.get_type() == "GPS" and m.Status >= 3:
+            gps_t.append(m.T / 1e3)
+    r.close()
+    att0 = None
+    r = DFReader.DFReader_binary(str(COPTER), zero_time_base=True)
+    while (m := r.recv_match(type=["ATT"])) is not None:
+        att0 = m.TimeMS / 1e3
+        break
+    r.close()
+    t0 = max(gps_t[0], att0, c[0, 0])
+    t_abs = t0 + tr.t
+    np.testing.assert_allclose(tr.power_w, np.interp(t_abs, c[:, 0], c[:, 1]), rtol=1e-6)
+    np.testing.assert_array_equal(tr.on_ground, t_abs < not_landed)
+    assert tr.metadata["geoid_undulation_m"] == N_SITE and "mean sea level" in tr.metadata["height_datum"]
+
+
+@pytest.mark.parametrize("name,extra", [(VTOL, ()), (QUAD, ("--power-w", "150")),
+                                        (COPTER, ("--geoid-undulation", str(N_SITE)))])
+def test_every_log_makes_a_map_and_on_ground_samples_are_silent(tmp_path, card, name, extra):
+    log = tmp_path / (name.stem + name.suffix.upper())        # .ULG / .BIN as some autopilots write them
+    shutil.copy(name, log)
+    out = tmp_path / "map"
+    r = run("contour", str(log), "--card", card, "--out", str(out), "--resolution", "20", "--margin", "100",
+            *extra)
+    assert r.exit_code == 0, r.output
+    with rasterio.open(out / "levels.tif") as ds:
+        lamax = ds.read(list(ds.descriptions).index("LAmax") + 1)
+    tr = read_route(log, geoid_undulation_m=N_SITE, power_w=150.0 if extra and extra[0] == "--power-w" else None)
+    tr = tr.trajectory
+    # the loudest cell: 65 dB + 10 log10(P/300 W) at 40 m scaled by distance; never above the closest approach
+    # of the flying samples to a receiver 1.5 m above the take-off point
+    fly = tr.flying
+    ground = float(tr.h[0])
+    d_min = max(float(np.min(tr.h[fly] - ground - 1.5)), 0.1)
+    bound = 65.0 + 10.0 * np.log10(tr.power_w[fly].max() / 300.0) - 20.0 * np.log10(d_min / 40.0)
+    assert np.isfinite(lamax[lamax != -9999.0]).all()
+    assert 30.0 < lamax.max() <= bound + 1e-6
+
+
+def test_quad_log_with_zero_power_in_the_air_names_power_w(tmp_path, card):
+    r = run("contour", str(QUAD), "--card", card, "--out", str(tmp_path / "m"))
+    assert r.exit_code == 2
+    assert "--power-w" in r.output and len(r.output.strip().splitlines()) == 1
+
+
+def test_copter_log_without_undulation_names_the_option(tmp_path, card):
+    r = run("contour", str(COPTER), "--card", card, "--out", str(tmp_path / "m"))
+    assert r.exit_code == 2 and "--geoid-undulation" in r.output
+
+
+@pytest.mark.parametrize("name", [VTOL, QUAD, COPTER])
+def test_campaign_check_reads_every_log(tmp_path, name):
+    # the quad logs 0 A while airborne too: its flight states a constant power (flights[].power_w)
+    root = tmp_path / "camp"
+    (root / "flights").mkdir(parents=True)
+    (root / "mics" / "m1").mkdir(parents=True)
+    shutil.copy(name, root / "flights" / ("f1" + name.suffix.upper()))
+    from datetime import datetime, timezone
+
+    from gisnoise.flight import read_flight
+
+    tr = read_flight(name, geoid_undulation_m=N_SITE, start_utc=0.0)   # t in unix seconds (GPS clock of the log)
+    start = datetime.fromtimestamp(float(tr.t[0]) - 1.0, tz=timezone.utc).isoformat().replace("+00:00", "Z")
+    lat, lon = float(tr.lat[0]), float(tr.lon[0])
+    doc = {"schema": "gisnoise/campaign/1", "origin": {"lat": lat, "lon": lon, "h": float(tr.h.min())},
+           "speed_of_sound_m_s": 340.0, "weather": {"temperature_c": 10.0},
+           "vehicle": {"name": "v", "reference_power_w": 300.0},
+           "microphones": [{"id": "m1", "lat": lat + 1e-4, "lon": lon, "h": float(tr.h.min()) + 1.5,
+                            "mount": "free_field"}],
+           "flights": [{"id": "f1", "start_utc": start, "geoid_undulation_m": N_SITE}]}
+    if name == QUAD:
+        doc["flights"][0]["power_w"] = 150.0
+    (root / "campaign.json").write_text(json.dumps(doc))
+    t_r = np.arange(0.0, tr.duration_s + 2.0, 0.125)
+    (root / "mics" / "m1" / "f1.csv").write_text("t,LA\n" + "".join(f"{t:.3f},60.0\n" for t in t_r))
+    r = run("campaign", "check", str(root))
+    assert r.exit_code == 0, r.output

@@ -1,0 +1,169 @@
+"""Fits real data can support: a steady-power flyover campaign (three passes at one power).
+
+The levels are the paper-offset ansatz itself at emission time (one model definition) plus
+seeded noise; the truth is known, so the fitted card is judged against it.
+"""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gisnoise.cli.main import cli
+from gisnoise.flight import Trajectory
+from gisnoise.geo import LocalFrame, emission_angles
+from gisnoise.model import ImplausibleCardError, ModelCard, get_ansatz, load
+from gisnoise.model.cards import dumps
+
+FRAME = LocalFrame(52.27, 10.52, 80.0)
+TRUTH = dict(p0=64.0, p1=20.0, p2=0.08, p3=-0.28, p4=-0.2, p5=1.05, p6=1.0, p7=40.0)
+POWER_W, REF_W, C = 2400.0, 3000.0, 340.0
+MICS = {"m1": (0.0, 0.0), "m2": (0.0, 60.0), "m3": (0.0, -130.0)}   # east, north of the origin (m), 1.2 m up
+
+
+def _campaign(root, seed=3):
+    """Three straight passes (60 m eastbound, 90 m westbound, 45 m eastbound) at one power."""
+    rng = np.random.default_rng(seed)
+    (root / "flights").mkdir(parents=True)
+    # waypoints (t, east, north, up): passes of 60 s at 15 m/s joined by 10 s links
+    wp = np.array([(0, -450, 10, 60), (60, 450, 10, 60), (70, 450, -20, 90), (130, -450, -20, 90),
+                   (140, -450, 30, 45), (200, 450, 30, 45)], dtype=float)
+    t = np.arange(0.0, 200.0 + 1e-9, 0.1)
+    e, n, u = (np.interp(t, wp[:, 0], wp[:, k]) for k in (1, 2, 3))
+    yw = np.degrees(np.arctan2(np.gradient(e, t), np.gradient(n, t)))
+    lat, lon, h = FRAME.to_wgs84(e, n, u)
+    traj = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=yw, power_w=np.full_like(t, POWER_W),
+                      phase=np.full(t.size, "horizontal"))
+    traj.to_csv(root / "flights" / "f1.csv")
+    model = get_ansatz("paper-offset")
+    p = np.array([TRUTH[k] for k in model.params])
+    mics = []
+    for mid, (me, mn) in MICS.items():
+        (root / "mics" / mid).mkdir(parents=True)
+        r = np.stack([me - e, mn - n, 1.2 - u], axis=-1)
+        d, phi, theta = emission_angles(r[:, 0], r[:, 1], r[:, 2], np.radians(yw), 0 * t, 0 * t)
+        lv = model.level(p, {"d": d, "phi": phi, "theta": theta, "p_el": np.full_like(t, POWER_W / REF_W)})
+        t_r = t + d / C                                            # reception times of these emissions
+        grid = np.arange(0.5, t[-1], 0.125)
+        la = np.interp(grid, t_r, lv) + rng.normal(0.0, 0.5, grid.size)
+        rows = "".join(f"{a:.4f},{b:.3f}\n" for a, b in zip(grid, la, strict=True))
+        (root / "mics" / mid / "f1.csv").write_text("t,LA\n" + rows)
+        mlat, mlon, mh = FRAME.to_wgs84(me, mn, 1.2)
+        mics.append({"id": mid, "lat": float(mlat), "lon": float(mlon), "h": float(mh), "mount": "free_field",
+                     "background_db": 40.0})
+    doc = {"schema": "gisnoise/campaign/1", "origin": {"lat": 52.27, "lon": 10.52, "h": 80.0},
+           "speed_of_sound_m_s": C, "weather": {"temperature_c": 15.0},
+           "vehicle": {"name": "steady", "reference_power_w": REF_W}, "microphones": mics,
+           "flights": [{"id": "f1", "start_utc": "2024-05-04T10:00:00Z"}]}
+    (root / "campaign.json").write_text(json.dumps(doc))
+    return root
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    return _campaign(tmp_path_factory.mktemp("steady") / "camp")
+
+
+def run(*args):
+    return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
+
+
+def _truth_level(d, phi, theta):
+    model = get_ansatz("paper-offset")
+    p = np.array([TRUTH[k] for k in model.params])
+    return model.level_uav(p, {"d": d, "phi": phi, "theta": theta, "p_el": POWER_W / REF_W})
+
+
+def test_fit_writes_the_identifiable_form_and_its_level_below_the_track(tmp_path, campaign):
+    out = tmp_path / "card.json"
+    r = run("fit", str(campaign), "--phase", "horizontal", "--out", str(out))
+    assert r.exit_code == 0, r.output
+    card = load(out)
+    assert card.parameters["p1"] == 0.0                       # no power information: held, not fitted
+    assert "p1" in card.provenance["held_parameters"]
+    lo, hi = card.statistics["power_range_w"]
+    assert lo == pytest.approx(POWER_W) and hi == pytest.approx(POWER_W)
+    # the level straight below the track at 40 m and 60 m equals the truth within 0.3 dB
+    for d in (40.0, 60.0):
+        x = card.inputs(d, 0.0, -np.pi / 2, POWER_W)
+        assert float(card.level_uav(x)) == pytest.approx(float(_truth_level(d, 0.0, -np.pi / 2)), abs=0.3)
+
+
+def test_fix_p1_gives_a_sane_card_or_refuses(tmp_path, campaign):
+    from gisnoise.model import card_problems
+
+    out = tmp_path / "fixed.json"
+    r = run("fit", str(campaign), "--phase", "horizontal", "--fix", "p1=20", "--out", str(out))
+    if r.exit_code == 0:
+        card = load(out)
+        assert card_problems(card) == []
+        x = card.inputs(40.0, 0.0, -np.pi / 2, POWER_W)
+        assert float(card.level_uav(x)) == pytest.approx(float(_truth_level(40.0, 0.0, -np.pi / 2)), abs=0.3)
+    else:
+        assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1
+
+
+def _bad_card():
+    good = load("demo-horizontal")
+    return ModelCard(id="bad", vehicle="x", phase="horizontal", ansatz=good.ansatz,
+                     parameters={**good.parameters, "p2": -2958.0, "p6": 2.01},
+                     reference_power_w=good.reference_power_w)
+
+
+def test_implausible_card_is_refused_by_load_and_the_map_naming_p2(tmp_path):
+    path = tmp_path / "bad.json"
+    path.write_text(dumps(_bad_card()))
+    with pytest.raises(ImplausibleCardError, match="p2 = -2958"):
+        load(path)
+    assert load(path, force=True).parameters["p2"] == -2958.0   # inspection only
+    r = run("card", "show", str(path))
+    assert r.exit_code == 2 and "p2" in r.output
+    # the map refuses it even when handed the card object
+    from gisnoise.maps import make_map
+
+    t = np.arange(0.0, 10.0, 1.0)
+    lat, lon, h = FRAME.to_wgs84(10.0 * t, 0 * t, 0 * t + 60.0)
+    traj = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t + 90.0,
+                      power_w=0 * t + 3000.0, phase=np.full(t.size, "horizontal"))
+    with pytest.raises(ImplausibleCardError, match="p2"):
+        make_map(traj, [_bad_card()], tmp_path / "m", ground_h=80.0)
+    assert not (tmp_path / "m").exists()
+
+
+def test_card_with_infinite_std_is_refused_naming_the_parameter():
+    good = load("demo-horizontal")
+    cov = np.diag([0.01] * 8)
+    cov[1, 1] = 4.7e16 ** 2
+    c = ModelCard(id="unsure", vehicle="x", phase="horizontal", ansatz=good.ansatz, parameters=dict(good.parameters),
+                  reference_power_w=good.reference_power_w, covariance=tuple(map(tuple, cov)))
+    from gisnoise.model import card_problems
+
+    problems = card_problems(c)
+    assert problems and "p1" in problems[0]
+
+
+def test_no_traceback_from_any_effect_missing_its_inputs(tmp_path, campaign):
+    """Every BASE+EFFECT on a campaign without the effect's inputs: a card or one line, exit 2."""
+    from gisnoise.model import effect_names
+
+    doc = json.loads((campaign / "campaign.json").read_text())
+    plate = tmp_path / "plate"
+    import shutil
+
+    shutil.copytree(campaign, plate)
+    for m in doc["microphones"]:
+        m["height_agl_m"] = 0.0                      # ground plates
+    (plate / "campaign.json").write_text(json.dumps(doc))
+    for eff in effect_names():
+        for base in ("paper-offset", "paper"):
+            r = CliRunner().invoke(cli, ["-q", "fit", str(plate), "--phase", "horizontal", "--ansatz",
+                                         f"{base}+{eff}", "--out", str(tmp_path / "c.json")])
+            assert not (r.exception and not isinstance(r.exception, SystemExit)), (eff, r.exception)
+            assert r.exit_code in (0, 2), (eff, r.output)
+            if r.exit_code == 2:
+                assert len(r.output.strip().splitlines()) == 1, r.output
+            if eff == "rpm":
+                assert r.exit_code == 2 and "rpm" in r.output
+            if eff == "ground_reflection":   # a ground plate rules the reflection out, and the message says why
+                assert r.exit_code == 2 and "on the ground" in r.output
