@@ -141,7 +141,7 @@ def test_empty_trajectory(tmp_path, card_path):
 
 def test_grid_over_the_cell_limit(tmp_path, card_path):
     csv = write_csv(tmp_path / "f.csv", flyover())
-    r = run("contour", csv, "--card", card_path, "--out", str(tmp_path / "o"), "--resolution", "1",
+    r = run("contour", csv, "--card", card_path, "--out", str(tmp_path / "o"), "--resolution", "1", "--ground-height", "80",
             env={"GISNOISE_MAX_CELLS": "10000"})
     one_line_error(r, "resolution")
     assert "GISNOISE_MAX_CELLS" in (r.stderr if hasattr(r, "stderr") else r.output)

@@ -40,7 +40,7 @@ def ground_from_track(traj: Trajectory) -> float | None:
     >>> import numpy as np
     >>> t = np.arange(5.0)
     >>> z = np.zeros(5)
-    >>> fly = Trajectory(t=t, lat=z + 50, lon=z + 8, h=z + 160.0, roll=z, pitch=z, yaw=z, power_w=z + 900,
+    >>> fly = Trajectory(t=t, lat=z + 50, lon=8 + 1e-4 * t, h=z + 160.0, roll=z, pitch=z, yaw=z, power_w=z + 900,
     ...                  phase=np.full(5, "horizontal"))
     >>> ground_from_track(fly) is None
     True

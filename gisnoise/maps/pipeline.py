@@ -147,8 +147,10 @@ def make_map(
     cardset = as_cardset(cards)
     for card in cardset.cards:
         check_card(card)   # the plausibility guard: an implausible card never makes a map
+    # the shared rule set (gisnoise.limits): a ground the user gives lies below the flight; a ground taken from the
+    # track's own take-off or landing point is within the log's height noise of it by construction
+    check_receivers(receiver_height, ground_h, traj.h[traj.flying] if traj.flying.any() else traj.h)
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
-    check_receivers(receiver_height, ground_h, traj.h)  # the shared rule set (gisnoise.limits)
     if traj.on_ground is not None:
         silent = ~traj.on_ground & (traj.power_w <= 0)
         if silent.any():

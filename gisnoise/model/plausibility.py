@@ -63,6 +63,11 @@ def power_range_w(card: Any) -> tuple[float, float]:
     return ref * DEFAULT_POWER_FACTORS[0], ref * DEFAULT_POWER_FACTORS[1]
 
 
+def _is_table(card: Any) -> bool:
+    """A card whose source is a measured table (a hemisphere card), not an ansatz with parameters."""
+    return hasattr(card, "overall_a_db") and hasattr(card, "node_levels")
+
+
 def _base(card: Any) -> tuple[Any, np.ndarray, list[str], np.ndarray | None]:
     """The base ansatz, its parameter values and names, and their covariance block."""
     name = str(card.ansatz).split("+", 1)[0]
@@ -88,6 +93,11 @@ def _sphere_inputs(card: Any) -> dict[str, np.ndarray]:
 def card_level_range(card: Any) -> tuple[float, float]:
     """Lowest and highest UAV level (dB(A)) of a card at the reference distance over the emission
     sphere and its power range (see the module docstring)."""
+    if _is_table(card):
+        lv = np.asarray(card.overall_a_db, dtype=float)
+        if not np.all(np.isfinite(lv)):
+            return float("nan"), float("nan")
+        return float(np.min(lv)), float(np.max(lv))
     base, p, _, _ = _base(card)
     x = _sphere_inputs(card)
     with np.errstate(all="ignore"):
@@ -98,7 +108,18 @@ def card_level_range(card: Any) -> tuple[float, float]:
 
 
 def card_problems(card: Any) -> list[str]:
-    """What makes a card implausible (empty when it is plausible); each message names the parameters."""
+    """What makes a card implausible (empty when it is plausible); each message names the parameters.
+
+    A measured table (a hemisphere card) has no parameters: its A-weighted levels at its
+    reference radius must be finite and within the plausible range.
+    """
+    if _is_table(card):
+        lo, hi = card_level_range(card)
+        lo_ok, hi_ok = LEVEL_RANGE_DB
+        if not (np.isfinite(lo) and lo >= lo_ok and hi <= hi_ok):
+            return [f"table levels at {float(card.reference_distance_m):g} m range {lo:.4g} to {hi:.4g} dB(A), "
+                    f"outside the plausible {lo_ok:g} to {hi_ok:g} dB(A)"]
+        return []
     base, p, names, cov = _base(card)
     x = _sphere_inputs(card)
     bg = base.background

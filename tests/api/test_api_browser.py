@@ -129,8 +129,8 @@ def test_unreachable_tiles_show_a_notice(tmp_path):
 def test_a_job_shows_its_progress_then_its_contours(page):
     b = page
     _draw_route(b)
-    # a finer grid: a job of a few seconds
-    b.evaluate("document.getElementById('resolution').value = 5; document.getElementById('margin').value = 400;"
+    # a fine grid: a job of a few seconds on the fast engine
+    b.evaluate("document.getElementById('resolution').value = 1; document.getElementById('margin').value = 1000;"
                "document.getElementById('as-job').checked = true; document.getElementById('btn-compute').click();"
                "true")
     b.wait_for("gisnoise.shownJob != null", 20)
