@@ -94,7 +94,7 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
         responses=ERROR_RESPONSES,
         dependencies=[Depends(single_query_values)],
         default_response_class=AsciiJSONResponse,
-        docs_url=None,  # served below from the vendored swagger-ui: no network needed
+        docs_url=None,  # served below from the installed swagger-ui-bundle: no network needed
         redoc_url=None,
     )
     settings.data_dir.mkdir(parents=True, exist_ok=True)

@@ -72,4 +72,8 @@ def sample_route() -> Response:
 
 
 def mount_static(app: FastAPI, folder: Path) -> None:
+    """The page's files under ``/static``; swagger-ui (for ``/docs``) from the installed ``swagger-ui-bundle``."""
+    from swagger_ui_bundle import swagger_ui_path
+
+    app.mount("/static/vendor/swagger-ui", StaticFiles(directory=Path(str(swagger_ui_path))), name="swagger-ui")
     app.mount("/static", StaticFiles(directory=folder), name="static")
