@@ -36,10 +36,11 @@ from gisnoise.exposure.stats import (
     person_db_above,
     population_exposure,
     population_points,
+    population_scores,
 )
 
 __all__ = ['ASSESSMENT_HEIGHT_M', 'Buildings', 'CLASS_WIDTH_DB', 'DWELLING_FIELDS', 'FacadePoints', 'HEIGHT_FIELDS',
            'LevelsRaster', 'Population', 'RESIDENT_FIELDS', 'SCHEMA', 'area_above', 'class_edges', 'exposure_table',
            'facade_levels', 'facade_points', 'fraction_above', 'level_field', 'map_exposure', 'person_db_above', 'point_levels',
-           'population_exposure', 'population_points', 'read_buildings', 'read_levels', 'read_population',
+           'population_exposure', 'population_points', 'population_scores', 'read_buildings', 'read_levels', 'read_population',
            'write_exposure']

@@ -13,6 +13,16 @@ no value) are counted as ``people_without_level``, never put in a class.
 
 Area above a level uses the same rule on 2 x 2 sub-cells of the map's own cells.
 
+Only where it can count
+-----------------------
+Most of a planner's map lies below the lowest level.  From a cell's value, gradient and
+Hessian, :func:`_cell_upper` bounds the highest level any sub-cell square about a point of
+that cell can reach (absolute values of every Taylor term at the cell's farthest offset);
+points of cells whose bound lies below a level add exactly nothing above it and are never
+expanded.  Of the rest, squares entirely above a level count whole; only squares that the
+level cuts go through :func:`fraction_above`.  The sums are those of every point through
+:func:`fraction_above` (the tests check this against the plain sum).
+
 >>> float(fraction_above(60.0, 0.1, 0.0, 10.0, 60.0))  # the level runs through the middle
 0.5
 >>> float(fraction_above(60.0, 0.1, 0.0, 10.0, 60.25))  # a quarter of the square lies above 60.25 dB
@@ -34,7 +44,7 @@ from gisnoise.exposure.layers import LevelsRaster, Population
 from gisnoise.geo import GridSpec, apply_affine, transformer
 
 __all__ = ["CLASS_WIDTH_DB", "class_edges", "fraction_above", "level_field", "population_points",
-           "population_exposure", "area_above", "person_db_above"]
+           "population_exposure", "area_above", "person_db_above", "population_scores"]
 
 CLASS_WIDTH_DB = 5.0
 """Width of the exposure classes, dB."""
@@ -89,6 +99,32 @@ def _derivatives(band: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, ...]:
 
     gx, gy = d_dx(band), d_dy(band)
     return gx, gy, d_dx(gx), d_dy(gy), d_dy(gx)
+
+
+_TINY = 1e-9  # dB across a square below which fraction_above takes it flat
+_SAFE_DB = 1e-6  # rounding allowance of the bounds, dB
+
+
+def _cell_upper(band: np.ndarray, der: tuple[np.ndarray, ...], half_x: float, half_y: float,
+                side: float) -> np.ndarray:
+    """Per cell: an upper bound of ``L + (|gx| + |gy|) side / 2`` over points within ``half_x, half_y`` (m)
+    of the cell centre, ``L, gx, gy`` from :func:`level_field` (NaN where the band or a derivative is)."""
+    gx, gy, hxx, hyy, hxy = (np.abs(a) for a in der)
+    top = (band + gx * half_x + gy * half_y
+           + 0.5 * (hxx * half_x * half_x + 2 * hxy * half_x * half_y + hyy * half_y * half_y))
+    slope = (gx + hxx * half_x + hxy * half_y) + (gy + hxy * half_x + hyy * half_y)
+    return np.asarray(top + 0.5 * side * slope + _TINY + _SAFE_DB)
+
+
+def _sum_above(weights: np.ndarray, L: np.ndarray, gx: np.ndarray, gy: np.ndarray, side: float,
+               threshold: float) -> float:
+    """``sum(weights * fraction_above(L, gx, gy, side, threshold))``: squares the level does not cut
+    count 0 or 1 without the formula."""
+    half = 0.5 * side * (np.abs(gx) + np.abs(gy)) + _TINY
+    whole = L - half > threshold
+    cut = ~whole & (L + half >= threshold)
+    part = fraction_above(L[cut], gx[cut], gy[cut], side, threshold)
+    return float(np.sum(weights[whole]) + np.sum(weights[cut] * part))
 
 
 def level_field(band: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray,
@@ -159,6 +195,43 @@ def population_points(pop: Population, grid: GridSpec, *, max_points: int = 50_0
     return np.asarray(x), np.asarray(y), people, cell_m / k
 
 
+def _points_that_count(band: np.ndarray, grid: GridSpec, der: tuple[np.ndarray, ...], x: np.ndarray,
+                       y: np.ndarray, side: float, floor_db: float) -> np.ndarray:
+    """Indices of the points whose level square may reach ``floor_db`` (or that have no level)."""
+    col, row = apply_affine(~grid.transform, x, y)
+    c = np.floor(np.asarray(col)).astype(np.int64)
+    r = np.floor(np.asarray(row)).astype(np.int64)
+    h, w = band.shape
+    inside = (c >= 0) & (c < w) & (r >= 0) & (r < h)
+    rx, ry = grid.resolution
+    upper = _cell_upper(band, der, 0.5 * rx, 0.5 * ry, side)
+    below = np.zeros(x.shape, dtype=bool)
+    below[inside] = upper[r[inside], c[inside]] < floor_db  # NaN bounds (cells next to no value) stay in
+    return np.flatnonzero(~below)
+
+
+def population_scores(band: np.ndarray, grid: GridSpec, points: tuple[np.ndarray, np.ndarray, np.ndarray, float],
+                      edges: Sequence[float], floor_db: float | None = None) -> dict[str, Any]:
+    """People above each level of ``edges`` (``above``), people without a level and person-dB above
+    ``floor_db`` (default the lowest edge) of one band, in one pass over the population's sub-cells
+    (``points``: :func:`population_points`).  The levels are those of :func:`level_field` and the
+    fractions those of :func:`fraction_above`; sub-cells that cannot reach the lowest level are skipped
+    (module docstring)."""
+    x, y, people, side = points
+    if floor_db is None and not edges:
+        raise InputError("population scores: give levels or a floor", field="levels")
+    floor = min(edges) if floor_db is None else float(floor_db)
+    der = _derivatives(band, grid)
+    keep = _points_that_count(band, grid, der, x, y, side, min(floor, *edges) if edges else floor)
+    L, gx, gy = level_field(band, grid, x[keep], y[keep], der)
+    w = people[keep]
+    ok = np.isfinite(L) & np.isfinite(gx) & np.isfinite(gy)
+    L, gx, gy, wo = L[ok], gx[ok], gy[ok], w[ok]
+    above = [_sum_above(wo, L, gx, gy, side, e) for e in edges]
+    person_db = float(np.sum(wo * np.maximum(L - floor, 0.0)))
+    return {"above": above, "people_without_level": float(w[~ok].sum()), "person_db": person_db}
+
+
 def population_exposure(levels: LevelsRaster, pop: Population, *, metrics: Sequence[str] | None = None,
                         edges: Sequence[float] | None = None,
                         points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None) -> dict[str, Any]:
@@ -173,9 +246,8 @@ def population_exposure(levels: LevelsRaster, pop: Population, *, metrics: Seque
     for name in names:
         if name not in levels.bands:
             raise InputError(f"no band {name!r}; bands: {', '.join(levels.bands)}", field="metric")
-        L, gx, gy = level_field(levels.bands[name], levels.grid, x, y)
-        ok = np.isfinite(L) & np.isfinite(gx) & np.isfinite(gy)
-        above = [float(np.sum(people[ok] * fraction_above(L[ok], gx[ok], gy[ok], side, e))) for e in edges]
+        sums = population_scores(levels.bands[name], levels.grid, (x, y, people, side), edges)
+        above = sums["above"]
         classes = []
         for j, e in enumerate(edges):
             hi = edges[j + 1] if j + 1 < len(edges) else None
@@ -183,32 +255,39 @@ def population_exposure(levels: LevelsRaster, pop: Population, *, metrics: Seque
             classes.append({"from_db": e, "to_db": hi, "people": n})
         out[name] = {"classes": classes,
                      "above": [{"level_db": e, "people": a} for e, a in zip(edges, above, strict=True)],
-                     "people_without_level": float(people[~ok].sum())}
+                     "people_without_level": sums["people_without_level"]}
     return {"total_people": float(people.sum()), "subcell_m": side, "metrics": out}
 
 
-def area_above(band: np.ndarray, grid: GridSpec, edges: Sequence[float], *, rows_per_chunk: int = 256) -> list[float]:
+def area_above(band: np.ndarray, grid: GridSpec, edges: Sequence[float], *, chunk_cells: int = 1 << 20
+               ) -> list[float]:
     """Area (m^2) of the map where ``band`` exceeds each level.
 
     Each cell is split into 2 x 2 sub-cells whose levels follow the same rule as people's
-    (:func:`level_field`), each linear within itself (:func:`fraction_above`).
+    (:func:`level_field`), each linear within itself (:func:`fraction_above`); cells whose
+    bound lies below the lowest level are skipped (module docstring).
     """
+    edges = list(edges)
+    if not edges:
+        return []
     der = _derivatives(band, grid)
     rx, ry = grid.resolution
     t = grid.transform
     side = 0.5 * math.sqrt(rx * ry)
+    upper = _cell_upper(band, der, 0.25 * rx, 0.25 * ry, side)
+    all_rows, all_cols = np.nonzero(~(upper < min(edges)))
     off = np.array([0.25, 0.75])
     total = np.zeros(len(edges))
-    for r0 in range(0, grid.height, rows_per_chunk):
-        rows = np.arange(r0, min(grid.height, r0 + rows_per_chunk))
-        cc = (np.arange(grid.width)[None, :, None] + off[None, None, :])
-        rr = (rows[:, None, None] + off[None, None, :])
-        xx = np.broadcast_to((t.c + t.a * cc)[:, :, :, None], (rows.size, grid.width, 2, 2))
-        yy = np.broadcast_to((t.f + t.e * rr)[:, :, None, :], (rows.size, grid.width, 2, 2))
-        L, gx, gy = level_field(band, grid, xx.ravel(), yy.ravel(), der)
+    for s in range(0, all_rows.size, chunk_cells):
+        rows, cols = all_rows[s:s + chunk_cells], all_cols[s:s + chunk_cells]
+        cc = (cols[:, None, None] + off[None, :, None]).astype(float)
+        rr = (rows[:, None, None] + off[None, None, :]).astype(float)
+        xx = np.broadcast_to(t.c + t.a * cc, (rows.size, 2, 2)).ravel()
+        yy = np.broadcast_to(t.f + t.e * rr, (rows.size, 2, 2)).ravel()
+        L, gx, gy = level_field(band, grid, xx, yy, der)
         ok = np.isfinite(L) & np.isfinite(gx) & np.isfinite(gy)
-        for j, e in enumerate(edges):
-            total[j] += float(np.sum(fraction_above(L[ok], gx[ok], gy[ok], side, e)))
+        ones = np.ones(int(ok.sum()))
+        total += [_sum_above(ones, L[ok], gx[ok], gy[ok], side, e) for e in edges]
     return [float(v) * rx * ry / 4.0 for v in total]
 
 
@@ -218,7 +297,4 @@ def person_db_above(band: np.ndarray, grid: GridSpec, points: tuple[np.ndarray, 
 
     ``points`` are :func:`population_points`; each sub-cell's level is taken at its centre.
     """
-    x, y, people, _ = points
-    L, _, _ = level_field(band, grid, x, y)
-    ok = np.isfinite(L)
-    return float(np.sum(people[ok] * np.maximum(L[ok] - floor_db, 0.0)))
+    return float(population_scores(band, grid, points, [], floor_db)["person_db"])

@@ -29,9 +29,10 @@ from gisnoise.exposure import (
     Buildings,
     LevelsRaster,
     Population,
+    area_above,
     map_exposure,
-    person_db_above,
     population_points,
+    population_scores,
 )
 from gisnoise.flight import Trajectory, read_route
 from gisnoise.geo import GridSpec, grid_for_points
@@ -94,21 +95,24 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
     lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
                                                                "period_s": res.metadata.get("period_s")})
     pts = points if points is not None or population is None else population_points(population, grid)
-    ex = map_exposure(lr, population=population, buildings=buildings, trajectory=traj, cards=cards,
-                      metrics=[metric], edges=lv, ground_h=ground_h, points=pts)
     row: dict[str, Any] = {"duration_s": traj.duration_s, "track_length_m": _track_length(traj)}
     if population is not None and pts is not None:
-        above = ex["population"]["metrics"][metric]["above"]
-        row["people_above"] = {f"{a['level_db']:g}": a["people"] for a in above}
-        row["person_db"] = person_db_above(band, grid, pts, lv[0])
-        row["people_without_level"] = ex["population"]["metrics"][metric]["people_without_level"]
-    if buildings is not None:
+        ps = population_scores(band, grid, pts, lv)  # one pass: people above each level and person-dB
+        row["people_above"] = {f"{e:g}": a for e, a in zip(lv, ps["above"], strict=True)}
+        row["person_db"] = ps["person_db"]
+        row["people_without_level"] = ps["people_without_level"]
+    if buildings is None:
+        area = area_above(band, grid, lv)
+    else:
+        ex = map_exposure(lr, buildings=buildings, trajectory=traj, cards=cards, metrics=[metric], edges=lv,
+                          ground_h=ground_h)
+        area = [a["area_m2"] for a in ex["area_above"][metric]]
         bm = ex["buildings"]["metrics"][metric]
         row["peak_facade_db"] = bm["peak_facade_db"]
         row["peak_dwelling_db"] = bm.get("peak_db_at_dwellings", bm.get("peak_db_at_residents"))
         row["residents_above"] = _cumulative(bm["classes"], "residents")
         row["dwellings_above"] = _cumulative(bm["classes"], "dwellings")
-    row["area_above_m2"] = {f"{a['level_db']:g}": a["area_m2"] for a in ex["area_above"][metric]}
+    row["area_above_m2"] = {f"{e:g}": a for e, a in zip(lv, area, strict=True)}
     return row, band
 
 
