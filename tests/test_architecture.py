@@ -33,7 +33,7 @@ ALLOWED: dict[str, set[str]] = {
     "design": _LOW | {"measure", "model", "identify", "simulate"},
     "maps": _LOW | {"model"},
     "ops": _LOW | {"model", "maps"},
-    "exposure": _LOW | {"model", "maps"},
+    "exposure": _LOW | {"model", "maps", "ops"},
     "planning": _LOW | {"model", "maps", "exposure"},
 }
 FACES = {"cli", "service"}

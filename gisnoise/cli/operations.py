@@ -6,6 +6,7 @@ import click
 
 from gisnoise.cli.contour import _echo_bands_and_files
 from gisnoise.cli.options import out_dir_option, progress
+from gisnoise.errors import InputError
 
 
 @click.command("operations")
@@ -29,10 +30,19 @@ from gisnoise.cli.options import out_dir_option, progress
 @click.option("--levels", "levels", default=None,
               help="Contour levels of Lden and Lnight, dB(A), comma-separated [default: the schedule's].")
 @click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png: Lden with its contours.")
+@click.option("--population", "population", type=click.Path(dir_okay=False), default=None,
+              help="Population raster (GeoTIFF, people per cell, any CRS): also write DIR/exposure.json and "
+                   "exposure.md (people by 5 dB class of Lden, Lday, Levening, Lnight, LAmax and by events of NA<L>).")
+@click.option("--buildings", "buildings", type=click.Path(dir_okay=False), default=None,
+              help="Buildings with residents/dwellings (GeoPackage, GeoJSON, Shapefile): the same at each building's "
+                   "most exposed façade, in DIR/exposure.json and exposure.md (flat ground only).")
+@click.option("--facade-height", "facade_height", type=click.FloatRange(min=0.0, min_open=True), default=4.0,
+              show_default=True, help="Height of façade receivers above ground, m.")
 @click.pass_context
 def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, workers: int | None,
             single_process: bool, threads: int | None, tile_cells: int, memory_limit: str | None, levels: str | None,
-            plot: bool) -> None:
+            plot: bool, population: str | None = None, buildings: str | None = None,
+            facade_height: float = 4.0) -> None:
     """Noise of a day of operations: DIR/operations.tif, DIR/contours.geojson, DIR/summary.json.
 
     SCHEDULE is a JSON file (schema gisnoise/operations/1): model cards, the receiver grid
@@ -63,15 +73,29 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
             logging.getLogger(name).setLevel(logging.CRITICAL)
     sched = load_schedule(schedule)
     lv = None if levels is None else parse_levels(levels, field="levels")
+    pop = bld = None
+    if population or buildings:  # read the layers first: a bad layer costs no evaluation
+        from gisnoise.exposure import read_buildings, read_population
+
+        if buildings and sched.dem is not None:
+            raise InputError("buildings: façade levels need flat ground; the schedule gives a DEM", field="buildings")
+        pop = read_population(population) if population else None
+        bld = read_buildings(buildings) if buildings else None
     with progress(ctx, "operations", 1.0) as update:
         res = evaluate_operations(sched, scheduler=scheduler, workers=workers, single_process=single_process,
                                   threads=threads,
                                   tile_cells=tile_cells, memory_limit=memory_limit, progress=update)
     paths = write_operations(res, out, lv, plot=plot)
+    if pop is not None or bld is not None:
+        from gisnoise.exposure import operations_exposure, write_exposure
+
+        doc = operations_exposure(res, sched, population=pop, buildings=bld, facade_height_m=facade_height)
+        ex = write_exposure(doc, out)
+        paths["exposure"], paths["table"] = ex["exposure"], ex["table"]
     g = res.grid
     ex = res.metadata["execution"]
     how = (f"Dask ({ex['workers']} workers, {ex['tasks']} tasks)" if ex["executor"] == "dask"
            else f"{ex['threads']} threads")
     click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m; {len(res.metadata['flights'])} "
                f"flights; {res.metadata['tiles']} tiles on {how}")
-    _echo_bands_and_files(res, paths, ("levels", "contours", "summary", "map"))
+    _echo_bands_and_files(res, paths, ("levels", "contours", "summary", "map", "exposure", "table"))

@@ -14,6 +14,7 @@ from gisnoise.exposure.facades import (
     FacadePoints,
     facade_levels,
     facade_points,
+    most_exposed,
     point_levels,
 )
 from gisnoise.exposure.layers import (
@@ -27,20 +28,31 @@ from gisnoise.exposure.layers import (
     read_levels,
     read_population,
 )
+from gisnoise.exposure.operations import (
+    OPERATIONS_LEVELS,
+    operations_exposure,
+    operations_facade_levels,
+)
 from gisnoise.exposure.stats import (
     CLASS_WIDTH_DB,
+    EVENT_EDGES,
     area_above,
+    cell_values,
     class_edges,
+    events_area_above,
     fraction_above,
     level_field,
     person_db_above,
+    population_event_exposure,
     population_exposure,
     population_points,
     population_scores,
 )
 
-__all__ = ['ASSESSMENT_HEIGHT_M', 'Buildings', 'CLASS_WIDTH_DB', 'DWELLING_FIELDS', 'FacadePoints', 'HEIGHT_FIELDS',
-           'LevelsRaster', 'Population', 'RESIDENT_FIELDS', 'SCHEMA', 'area_above', 'class_edges', 'exposure_table',
-           'facade_levels', 'facade_points', 'fraction_above', 'level_field', 'map_exposure', 'person_db_above', 'point_levels',
-           'population_exposure', 'population_points', 'population_scores', 'read_buildings', 'read_levels', 'read_population',
-           'write_exposure']
+__all__ = ['ASSESSMENT_HEIGHT_M', 'Buildings', 'CLASS_WIDTH_DB', 'DWELLING_FIELDS', 'EVENT_EDGES', 'FacadePoints',
+           'HEIGHT_FIELDS', 'LevelsRaster', 'OPERATIONS_LEVELS', 'Population', 'RESIDENT_FIELDS', 'SCHEMA', 'area_above',
+           'cell_values', 'class_edges', 'events_area_above', 'exposure_table', 'facade_levels', 'facade_points',
+           'fraction_above', 'level_field', 'map_exposure', 'most_exposed', 'operations_exposure',
+           'operations_facade_levels', 'person_db_above', 'point_levels', 'population_event_exposure',
+           'population_exposure', 'population_points', 'population_scores', 'read_buildings', 'read_levels',
+           'read_population', 'write_exposure']

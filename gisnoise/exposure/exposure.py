@@ -21,7 +21,15 @@ import numpy as np
 from gisnoise.errors import InputError
 from gisnoise.exposure.facades import ASSESSMENT_HEIGHT_M, facade_levels
 from gisnoise.exposure.layers import Buildings, LevelsRaster, Population
-from gisnoise.exposure.stats import area_above, class_edges, population_exposure
+from gisnoise.exposure.stats import (
+    EVENT_EDGES,
+    area_above,
+    class_edges,
+    events_area_above,
+    population_event_exposure,
+    population_exposure,
+    population_points,
+)
 from gisnoise.flight import Trajectory
 from gisnoise.jsonio import to_jsonable
 
@@ -43,7 +51,8 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
                  trajectory: Trajectory | None = None, cards: Any = None, metrics: Sequence[str] | None = None,
                  edges: Sequence[float] | None = None, facade_height_m: float = ASSESSMENT_HEIGHT_M,
                  facade_spacing_m: float = 5.0, ground_h: float | None = None,
-                 points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None) -> dict[str, Any]:
+                 points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None,
+                 facades: dict[str, Any] | None = None, event_edges: Sequence[float] = EVENT_EDGES) -> dict[str, Any]:
     """The exposure document of a map (see the module docstring).
 
     Parameters
@@ -62,6 +71,12 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
     points : tuple, optional
         The population's sub-cells on the map's grid (:func:`gisnoise.exposure.population_points`),
         when already computed (several routes on one grid).
+    facades : dict, optional
+        Façade levels already computed (:func:`~gisnoise.exposure.facade_levels`, or
+        :func:`~gisnoise.exposure.operations_facade_levels` for a day of operations); then
+        ``trajectory`` and ``cards`` are not needed.
+    event_edges : sequence of float
+        Lower class edges of count bands (unit ``events``: N-above), default :data:`EVENT_EDGES`.
     """
     if population is None and buildings is None:
         raise InputError("exposure: give a population raster or buildings (or both)", field="population")
@@ -72,44 +87,67 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
         if n not in levels.bands:
             raise InputError(f"no band {n!r}; bands: {', '.join(levels.bands)}", field="metric")
     edges = list(edges) if edges is not None else class_edges()
+    ev_edges = [float(e) for e in event_edges]
+    counts = [n for n in names if levels.units.get(n) == "events"]
+    dbs = [n for n in names if n not in counts]
     res = levels.grid.resolution
+    area: dict[str, Any] = {}
+    for n in names:
+        e_n, a_n = (ev_edges, events_area_above(levels.bands[n], levels.grid, ev_edges)) if n in counts else \
+            (edges, area_above(levels.bands[n], levels.grid, edges))
+        area[n] = [{"level_db" if n in dbs else "level": e, "area_m2": a} for e, a in zip(e_n, a_n, strict=True)]
     doc: dict[str, Any] = {
         "schema": SCHEMA, "class_edges_db": edges, "class_width_db": edges[1] - edges[0] if len(edges) > 1 else None,
+        "units": {n: levels.units.get(n, "dB(A)") for n in names},
         "grid": levels.grid.to_dict(),
-        "area_above": {n: [{"level_db": e, "area_m2": a} for e, a in
-                           zip(edges, area_above(levels.bands[n], levels.grid, edges), strict=True)] for n in names},
+        "area_above": area,
         "area_rule": f"map cells of {res[0]:g} x {res[1]:g} m in 2 x 2 sub-cells, level linear within each",
     }
+    if counts:
+        doc["event_class_edges"] = ev_edges
+        doc["event_rule"] = ("count bands (N-above, events) are classed by the count of the map cell holding each "
+                             "population sub-cell, and their area in whole cells; a count is not interpolated")
     if population is not None:
-        pe = population_exposure(levels, population, metrics=names, edges=edges, points=points)
+        pts = points if points is not None else population_points(population, levels.grid)
+        pe: dict[str, Any] = population_exposure(levels, population, metrics=dbs, edges=edges, points=pts) if dbs \
+            else {"total_people": float(pts[2].sum()), "subcell_m": pts[3], "metrics": {}}
+        for n in counts:
+            pe["metrics"][n] = population_event_exposure(levels.bands[n], levels.grid, pts, ev_edges)
         doc["population"] = {"source": population.source, "total_people": pe["total_people"],
-                             "subcell_m": pe["subcell_m"], "metrics": pe["metrics"],
+                             "subcell_m": pe["subcell_m"], "metrics": {n: pe["metrics"][n] for n in names},
                              "rule": "population cells split into sub-cells of at most half a map cell; level linear "
                                      "within each sub-cell (second-order Taylor about the nearest map cell); people outside the map "
                                      "or without a level are counted in people_without_level"}
     if buildings is not None:
         doc["buildings"] = _buildings_doc(levels, buildings, trajectory, cards, names, edges, facade_height_m,
-                                          facade_spacing_m, ground_h)
+                                          facade_spacing_m, ground_h, facades, ev_edges)
     return doc
 
 
 def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, cards: Any, names: Sequence[str],
-                   edges: Sequence[float], height: float, spacing: float, ground_h: float | None) -> dict[str, Any]:
-    if traj is None or cards is None:
-        raise InputError("buildings: façade levels need the trajectory and its cards (--trajectory, --card)",
-                         field="trajectory")
-    if ground_h is None:
-        ground_h = levels.metadata.get("ground_h_m")
+                   edges: Sequence[float], height: float, spacing: float, ground_h: float | None,
+                   fl: dict[str, Any] | None, ev_edges: Sequence[float]) -> dict[str, Any]:
+    if fl is None:
+        if traj is None or cards is None:
+            raise InputError("buildings: façade levels need the trajectory and its cards (--trajectory, --card)",
+                             field="trajectory")
         if ground_h is None:
-            raise InputError("buildings: the map does not state a flat ground height; give --ground-height",
-                             field="ground_h")
-    metrics = [n for n in names if n in ("LAmax", "LAeq", "SEL")]
-    if not metrics:
-        raise InputError("buildings: façade levels are computed for LAmax, LAeq and SEL; the map has none of them",
-                         field="metric")
-    period = levels.metadata.get("period_s")
-    fl = facade_levels(b, traj, cards, ground_h=float(ground_h), metrics=metrics, spacing_m=spacing,
-                       height_m=height, period_s=period)
+            ground_h = levels.metadata.get("ground_h_m")
+            if ground_h is None:
+                raise InputError("buildings: the map does not state a flat ground height; give --ground-height",
+                                 field="ground_h")
+        metrics = [n for n in names if n in ("LAmax", "LAeq", "SEL")]
+        if not metrics:
+            raise InputError("buildings: façade levels are computed for LAmax, LAeq and SEL; the map has none of "
+                             "them", field="metric")
+        period = levels.metadata.get("period_s")
+        fl = facade_levels(b, traj, cards, ground_h=float(ground_h), metrics=metrics, spacing_m=spacing,
+                           height_m=height, period_s=period)
+    else:
+        metrics = [n for n in names if n in fl["buildings"]]
+        if not metrics:
+            raise InputError(f"buildings: no façade levels of {', '.join(names)}", field="metric")
+        height, spacing = fl["points"].height_m, fl["points"].spacing_m
     pts = fl["points"]
     out: dict[str, Any] = {
         "source": b.source, "n_buildings": b.n, "fields": b.fields, "facade_points": int(pts.x.size),
@@ -121,16 +159,19 @@ def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, 
     }
     for m in metrics:
         lv = fl["buildings"][m]["level"]
+        ev = levels.units.get(m) == "events"
+        e_m = ev_edges if ev else edges
+        lo, hi = ("from", "to") if ev else ("from_db", "to_db")
         entry: dict[str, Any] = {
-            "classes": [{"from_db": e, "to_db": edges[j + 1] if j + 1 < len(edges) else None,
+            "classes": [{lo: e, hi: e_m[j + 1] if j + 1 < len(e_m) else None,
                          "buildings": nb} for j, (e, nb) in
-                        enumerate(zip(edges, _building_classes(lv, None, edges), strict=True))],
+                        enumerate(zip(e_m, _building_classes(lv, None, e_m), strict=True))],
             "peak_facade_db": float(np.max(lv)),
         }
         for what, w in (("residents", b.residents), ("dwellings", b.dwellings)):
             if w is None:
                 continue
-            for c, v in zip(entry["classes"], _building_classes(lv, w, edges), strict=True):
+            for c, v in zip(entry["classes"], _building_classes(lv, w, e_m), strict=True):
                 c[what] = v
             occupied = w > 0
             entry[f"peak_db_at_{what}"] = float(np.max(lv[occupied])) if occupied.any() else None
@@ -148,13 +189,15 @@ def exposure_table(doc: dict[str, Any]) -> str:
     lines = ["# Exposure", ""]
     names = list(doc["area_above"])
     for n in names:
-        lines += [f"## {n}", "", "| class dB(A) | people | buildings | residents | dwellings | area above lower edge km² |",
-                  "|---|---|---|---|---|---|"]
+        ev = doc.get("units", {}).get(n) == "events"
+        e_n = doc["event_class_edges"] if ev else doc["class_edges_db"]
+        lines += [f"## {n}", "", f"| class {'events' if ev else 'dB(A)'} | people | buildings | residents | dwellings "
+                  "| area above lower edge km² |", "|---|---|---|---|---|---|"]
         pop = doc.get("population", {}).get("metrics", {}).get(n)
         bld = doc.get("buildings", {}).get("metrics", {}).get(n)
         for j, a in enumerate(doc["area_above"][n]):
-            lo = a["level_db"]
-            hi = doc["class_edges_db"][j + 1] if j + 1 < len(doc["class_edges_db"]) else None
+            lo = e_n[j]
+            hi = e_n[j + 1] if j + 1 < len(e_n) else None
             label = f"{lo:g}-{hi:g}" if hi is not None else f">= {lo:g}"
             cells = [label, f"{pop['classes'][j]['people']:.0f}" if pop else "-"]
             for key in ("buildings", "residents", "dwellings"):
@@ -164,7 +207,8 @@ def exposure_table(doc: dict[str, Any]) -> str:
         if pop:
             lines += ["", f"people without a level (outside the map): {pop['people_without_level']:.0f}"]
         if bld:
-            lines += [f"peak façade level: {bld['peak_facade_db']:.1f} dB(A)"]
+            lines += [f"peak façade value: {bld['peak_facade_db']:.0f} events" if ev else
+                      f"peak façade level: {bld['peak_facade_db']:.1f} dB(A)"]
         lines.append("")
     return "\n".join(lines)
 

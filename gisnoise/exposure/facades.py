@@ -36,7 +36,7 @@ from gisnoise.geo import WGS84, LocalFrame, emission_angles, transformer
 from gisnoise.maps import CardSet
 from gisnoise.model import ModelCard
 
-__all__ = ["FacadePoints", "facade_points", "point_levels", "facade_levels", "ASSESSMENT_HEIGHT_M"]
+__all__ = ["FacadePoints", "facade_points", "point_levels", "facade_levels", "most_exposed", "ASSESSMENT_HEIGHT_M"]
 
 ASSESSMENT_HEIGHT_M = 4.0
 """Default height of façade receivers above the ground, m."""
@@ -174,6 +174,13 @@ def facade_levels(b: Buildings, traj: Trajectory, cards: Any, *, ground_h: float
     """
     pts = facade_points(b, spacing_m=spacing_m, height_m=height_m, offset_m=offset_m)
     lv = point_levels(traj, cards, pts.lon, pts.lat, ground_h + height_m, period_s=period_s)
+    return most_exposed(b, pts, lv, metrics)
+
+
+def most_exposed(b: Buildings, pts: FacadePoints, lv: dict[str, np.ndarray], metrics: Sequence[str]
+                 ) -> dict[str, Any]:
+    """Per building and metric the highest value of its façade points ``lv[metric]`` (one per point of ``pts``),
+    the point and its wall; the same return as :func:`facade_levels`."""
     per: dict[str, Any] = {}
     for m in metrics:
         if m not in lv:

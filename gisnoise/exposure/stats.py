@@ -44,10 +44,13 @@ from gisnoise.exposure.layers import LevelsRaster, Population
 from gisnoise.geo import GridSpec, apply_affine, transformer
 
 __all__ = ["CLASS_WIDTH_DB", "class_edges", "fraction_above", "level_field", "population_points",
-           "population_exposure", "area_above", "person_db_above", "population_scores"]
+           "population_exposure", "area_above", "person_db_above", "population_scores",
+           "EVENT_EDGES", "cell_values", "events_area_above", "population_event_exposure"]
 
 CLASS_WIDTH_DB = 5.0
 """Width of the exposure classes, dB."""
+EVENT_EDGES = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+"""Lower edges of the classes of event counts (N-above bands), events."""
 
 
 def class_edges(lo_db: float = 35.0, hi_db: float = 85.0, width_db: float = CLASS_WIDTH_DB) -> list[float]:
@@ -298,3 +301,38 @@ def person_db_above(band: np.ndarray, grid: GridSpec, points: tuple[np.ndarray, 
     ``points`` are :func:`population_points`; each sub-cell's level is taken at its centre.
     """
     return float(population_scores(band, grid, points, [], floor_db)["person_db"])
+
+
+def cell_values(band: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The value of the map cell holding each point ``x, y`` (grid CRS); NaN outside the grid."""
+    col, row = apply_affine(~grid.transform, np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    c = np.floor(np.asarray(col)).astype(np.int64)
+    r = np.floor(np.asarray(row)).astype(np.int64)
+    h, w = band.shape
+    inside = (c >= 0) & (c < w) & (r >= 0) & (r < h)
+    out = np.full(c.shape, np.nan)
+    out[inside] = band[r[inside], c[inside]]
+    return out
+
+
+def events_area_above(band: np.ndarray, grid: GridSpec, edges: Sequence[float]) -> list[float]:
+    """Area (m^2) where a count band (N-above, events) reaches each edge: whole cells, as the band is
+    constant over a cell (a count changes in whole events, so it is not interpolated)."""
+    rx, ry = grid.resolution
+    return [float(np.sum(band >= e)) * rx * ry for e in edges]
+
+
+def population_event_exposure(band: np.ndarray, grid: GridSpec,
+                              points: tuple[np.ndarray, np.ndarray, np.ndarray, float],
+                              edges: Sequence[float]) -> dict[str, Any]:
+    """People by class of a count band (N-above, events): each sub-cell takes the count of the map cell
+    holding it; classes ``[edge_j, edge_j+1)``, the last open.  People outside the map or on cells
+    without value are ``people_without_level``."""
+    x, y, people, _ = points
+    v = cell_values(band, grid, x, y)
+    ok = np.isfinite(v)
+    above = [float(np.sum(people[ok & (v >= e)])) for e in edges]
+    classes = [{"from": e, "to": edges[j + 1] if j + 1 < len(edges) else None,
+                "people": above[j] - (above[j + 1] if j + 1 < len(edges) else 0.0)} for j, e in enumerate(edges)]
+    return {"classes": classes, "above": [{"level": e, "people": a} for e, a in zip(edges, above, strict=True)],
+            "people_without_level": float(people[~ok].sum())}
