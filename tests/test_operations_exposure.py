@@ -149,6 +149,21 @@ def test_cli_operations_writes_exposure_and_refuses_a_bad_layer_before_evaluatin
     assert "## Lden" in table and "## NA60" in table and "| class events |" in table
     ld = {a["level_db"]: a["people"] for a in ex["population"]["metrics"]["Lden"]["above"]}
     assert ld[50.0] == pytest.approx(DENSITY * disc_area(50.0, lden_offset_db()), rel=0.01)
+    # the folder read back by `gisnoise exposure` (float32 GeoTIFF): the same document
+    again = tmp_path / "again"
+    args = ["-q", "exposure", str(out), "--population", str(d / "pop.tif"), "--buildings", str(d / "b.gpkg"),
+            "--out", str(again)]
+    r = CliRunner().invoke(cli, [*args, "--schedule", str(tmp_path / "day.json")])
+    assert r.exit_code == 0, r.output
+    ex2 = json.loads((again / "exposure.json").read_text())
+    for m in ("Lden", "Lnight", "LAmax", "NA60"):
+        a1 = [a["people"] for a in ex["population"]["metrics"][m]["above"]]
+        a2 = [a["people"] for a in ex2["population"]["metrics"][m]["above"]]
+        assert a2 == pytest.approx(a1, rel=1e-4, abs=1e-6), m
+        assert ex2["buildings"]["metrics"][m]["peak_facade_db"] == pytest.approx(
+            ex["buildings"]["metrics"][m]["peak_facade_db"], abs=1e-9)
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 2 and "--schedule" in r.output
     bad = tmp_path / "bad"
     r = CliRunner().invoke(cli, ["operations", str(tmp_path / "day.json"), "--out", str(bad),
                                  "--buildings", str(tmp_path / "missing.gpkg")])

@@ -33,6 +33,8 @@ def _edges(value: str) -> list[float]:
               help="Attribute with the dwellings of a building [default: dwellings, households, units, flats].")
 @click.option("--trajectory", "trajectory", type=click.Path(dir_okay=False), default=None,
               help="The map's trajectory (for façade levels of --buildings).")
+@click.option("--schedule", "schedule", type=click.Path(dir_okay=False), default=None,
+              help="The schedule of a day of operations whose folder MAP_DIR is (for façade levels of --buildings).")
 @click.option("--card", "cards", multiple=True, type=click.Path(dir_okay=False),
               help="The map's model cards, one per phase (for façade levels of --buildings).")
 @click.option("--facade-height", "facade_height", type=float, default=4.0, show_default=True,
@@ -50,17 +52,22 @@ def _edges(value: str) -> list[float]:
 def command(map_dir: str, population: str | None, buildings: str | None, layer: str | None,
             residents_field: str | None, dwellings_field: str | None, trajectory: str | None,
             cards: tuple[str, ...], facade_height: float, facade_spacing: float, ground_h: float | None,
-            metrics: str | None, classes: str, out: str | None) -> None:
+            metrics: str | None, classes: str, out: str | None, schedule: str | None = None) -> None:
     """Exposure of the map in MAP_DIR (its levels.tif, or the GeoTIFF itself): people by 5 dB class
     of each level band (from --population), buildings, residents and dwellings at the most
     exposed façade (from --buildings), area above each level.  Writes exposure.json and exposure.md.
+
+    A folder of `gisnoise operations` (its operations.tif) is classed by Lden, Lday, Levening,
+    Lnight, LAmax and the events of each NA<L> band; its buildings need --schedule.
     """
     from gisnoise.exposure import map_exposure, read_buildings, read_levels, read_population, write_exposure
 
     p = Path(map_dir)
     tif = p / "levels.tif" if p.is_dir() else p
+    if p.is_dir() and not tif.is_file() and (p / "operations.tif").is_file():
+        tif = p / "operations.tif"
     if not tif.is_file():
-        raise InputError(f"map: no levels.tif in {p}", field="map")
+        raise InputError(f"map: no levels.tif or operations.tif in {p}", field="map")
     if population is None and buildings is None:
         raise InputError("exposure: give --population and/or --buildings", field="population")
     edges = _edges(classes)
@@ -68,6 +75,26 @@ def command(map_dir: str, population: str | None, buildings: str | None, layer: 
     pop = read_population(population) if population else None
     b = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field) \
         if buildings else None
+    if "Lden" in levels.bands:  # a day of operations
+        from gisnoise.exposure import operations_exposure
+
+        if metrics:
+            raise InputError("metrics: a day of operations is classed by all its level and N-above bands",
+                             field="metrics")
+        sched = None
+        if b is not None:
+            if schedule is None:
+                raise InputError("buildings: façade levels of a day of operations need --schedule", field="schedule")
+            from gisnoise.ops import load_schedule
+
+            sched = load_schedule(schedule)
+        doc = operations_exposure(levels, sched, population=pop, buildings=b, edges=edges,
+                                  facade_height_m=facade_height, facade_spacing_m=facade_spacing)
+        paths = write_exposure(doc, out if out is not None else (p if p.is_dir() else p.parent))
+        click.echo(paths["table"].read_text().rstrip())
+        for v in paths.values():
+            click.echo(f"wrote {v}")
+        return
     traj = None
     if b is not None:
         if trajectory is None or not cards:

@@ -77,11 +77,12 @@ def operations_facade_levels(b: Buildings, schedule: Schedule, *, ground_h: floa
     return most_exposed(b, pts, levels, list(levels))
 
 
-def operations_exposure(result: MapResult, schedule: Schedule, *, population: Population | None = None,
+def operations_exposure(result: MapResult | LevelsRaster, schedule: Schedule | None, *, population: Population | None = None,
                         buildings: Buildings | None = None, edges: Sequence[float] | None = None,
                         event_edges: Sequence[float] = EVENT_EDGES, facade_height_m: float = ASSESSMENT_HEIGHT_M,
                         facade_spacing_m: float = 5.0) -> dict[str, Any]:
-    """The exposure document of a day of operations (:func:`gisnoise.ops.evaluate_operations`'s result).
+    """The exposure document of a day of operations (:func:`gisnoise.ops.evaluate_operations`'s result,
+    or its ``operations.tif`` read back with :func:`gisnoise.exposure.read_levels`).
 
     People by class of ``Lden``, ``Lday``, ``Levening``, ``Lnight``, ``LAmax`` (5 dB classes of
     ``edges``) and of every ``NA<L>`` band (classes of ``event_edges``); with ``buildings`` the
@@ -95,6 +96,9 @@ def operations_exposure(result: MapResult, schedule: Schedule, *, population: Po
     lr = LevelsRaster({n: result.bands[n] for n in names}, result.grid, units, dict(result.metadata))
     fl = None
     if buildings is not None:
+        if schedule is None:
+            raise InputError("buildings: façade levels of a day of operations need its schedule (--schedule)",
+                             field="schedule")
         ground_h = result.metadata.get("ground_h_m")
         if ground_h is None:
             raise InputError("buildings: façade levels need flat ground (a ground height in the schedule, not a DEM)",
@@ -103,6 +107,8 @@ def operations_exposure(result: MapResult, schedule: Schedule, *, population: Po
                                       height_m=facade_height_m)
     doc = map_exposure(lr, population=population, buildings=buildings, metrics=names, edges=edges, facades=fl,
                        event_edges=event_edges)
-    doc["operations"] = {"schedule": schedule.source, "flights": [f.id for f in schedule.flights if f.total > 0],
-                         "lden": "EU Directive 2002/49/EC, Annex I", "floor_db": schedule.floor_db}
+    meta = result.metadata
+    doc["operations"] = {"schedule": schedule.source if schedule is not None else meta.get("schedule"),
+                         "flights": [f["id"] for f in meta.get("flights", [])],
+                         "lden": "EU Directive 2002/49/EC, Annex I", "floor_db": meta.get("floor_db")}
     return doc
