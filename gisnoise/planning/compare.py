@@ -85,6 +85,11 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
                 ) -> tuple[dict[str, Any], np.ndarray]:
     """The exposure scores of one route on a given grid, and its band of ``metric``.
 
+    One evaluator call for ``metric`` alone (no GeoTIFF, no contours), then people above each
+    level and person-dB in one pass over the population (:func:`gisnoise.exposure.population_scores`)
+    and the area above each level, both counted only where a level can be reached: the same
+    numbers as the exposure of the full map (``docs/planning.md``).
+
     ``points`` are the population's sub-cells on this grid
     (:func:`gisnoise.exposure.population_points`), computed once when several routes share the grid.
     """
