@@ -205,7 +205,7 @@ def exposure_table(doc: dict[str, Any]) -> str:
             cells.append(f"{a['area_m2'] / 1e6:.4f}")
             lines.append("| " + " | ".join(cells) + " |")
         if pop:
-            lines += ["", f"people without a level (outside the map): {pop['people_without_level']:.0f}"]
+            lines += ["", f"people without a level (outside the map or on cells without value): {pop['people_without_level']:.0f}"]
         if bld:
             lines += [f"peak façade value: {bld['peak_facade_db']:.0f} events" if ev else
                       f"peak façade level: {bld['peak_facade_db']:.1f} dB(A)"]
