@@ -275,8 +275,11 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             results[self.OUTPUT_TRACK] = track
         feedback.setProgress(98.0)
         shown = next(m for m in metrics if m in contoured)
-        self._style_outputs(results, context, levels, shown, metrics.index(shown) + 1)
-        self._save_styles(results, levels, shown, metrics.index(shown) + 1, feedback)
+        from gisnoise.maps import metric_levels
+
+        shown_levels = metric_levels(shown, levels)  # SEL's contours lie higher than the map's levels
+        self._style_outputs(results, context, shown_levels, shown, metrics.index(shown) + 1)
+        self._save_styles(results, shown_levels, shown, metrics.index(shown) + 1, feedback)
         feedback.setProgress(100.0)
         return results
 
