@@ -109,11 +109,15 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             "Trajectory: a point layer (one feature per log sample with time in s, height in m (WGS84 "
             "ellipsoidal; a field or the points' Z), roll, pitch, yaw in deg, electric power in W, phase), "
             "a line layer (one sample per vertex: Z = height, M = time; attitude, power and phase from the "
-            "feature's fields; yaw along the line unless a yaw field is given), or a flight CSV / GeoJSON "
-            "trajectory file as the gisnoise command line reads it.\n\n"
+            "feature's fields; yaw along the line unless a yaw field is given), a layer of waypoints (points "
+            "in order or a line's vertices; fields alt, speed, hold_s, seq, phase; read as waypoints when the "
+            "layer has no time, or by 'The layer holds'), flown by the vehicle model as a waypoints file, or a "
+            "file as the gisnoise command line reads it: flight CSV, GeoJSON, waypoints, PX4 .ulg, ArduPilot "
+            ".bin (constant power for a log without battery current, geoid undulation for ArduPilot).\n\n"
             "Outputs: a GeoTIFF with one band per metric (LAmax, LAeq over the flight, SEL), "
             "isobands and isolines of the chosen levels (properties metric, level and clipped: true where the "
-            "grid's edge cuts the contour; the default margin closes the lowest level of LAmax and LAeq), "
+            "grid's edge cuts the contour; the default margin closes the lowest level of LAmax and LAeq, and "
+            "of SEL, which is contoured 10 dB above the levels), "
             "styled with graduated colours by level."
         )
 
