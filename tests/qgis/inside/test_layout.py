@@ -65,7 +65,7 @@ def test_legend_items_name_the_classes_and_levels(layout_image):
     for node in model.rootGroup().findLayers():
         assert isinstance(node, QgsLayerTreeLayer)
         labels[node.layer().name()] = [n.data(0) for n in model.layerLegendNodes(node)]
-    cls = [f"LAmax {a:g}-{b:g} dB(A)" for a, b in zip(LEVELS, LEVELS[1:])] + [f"LAmax >= {LEVELS[-1]:g} dB(A)"]
+    cls = [f"LAmax {a:g}-{b:g} dB(A)" for a, b in zip(LEVELS[:-1], LEVELS[1:], strict=True)] + [f"LAmax >= {LEVELS[-1]:g} dB(A)"]
     # the band, the (transparent, white-drawn) cells below the lowest level, then the classes
     assert labels["noise grid"][-len(cls) - 1:] == [f"LAmax < {LEVELS[0]:g} dB(A)", *cls]
     assert "LAmax" in labels["noise grid"][0]
