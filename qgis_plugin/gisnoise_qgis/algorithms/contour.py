@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import tempfile
@@ -235,6 +236,12 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         dem = dem_layer.source() if dem_layer is not None else None
         dem_offset = self.parameterAsDouble(parameters, self.DEM_OFFSET, context)
         geoid = self._optional(parameters, self.GEOID_UNDULATION, context)
+        if path and path.lower().endswith(".bin") and importlib.util.find_spec("pymavlink") is None:
+            raise QgsProcessingException(
+                "reading an ArduPilot .bin log needs pymavlink in QGIS's Python (compiled, so the plugin does not "
+                "bundle it): Linux: python3 -m pip install --user pymavlink; Windows: in the OSGeo4W Shell, python -m "
+                "pip install pymavlink; macOS: /Applications/QGIS.app/Contents/MacOS/bin/python3 -m pip install "
+                "--user pymavlink; then restart QGIS (field TRAJECTORY_FILE)")
         if path:  # flight CSV, GeoJSON, waypoints, PX4 .ulg, ArduPilot .bin
             return read_route(path, dem=dem, dem_offset_m=dem_offset, geoid_undulation_m=geoid,
                               power_w=self._optional(parameters, self.POWER_W, context))

@@ -166,3 +166,20 @@ def test_a_log_without_battery_current_needs_the_constant_power(plugin, omni_car
 
     bands, names, *_ = read_raster(res["OUTPUT_RASTER"])
     assert names == ["LAmax", "LAeq", "SEL"] and bands[0].max() > 30.0
+
+
+def test_an_ardupilot_log_without_pymavlink_says_how_to_install_it(plugin, omni_card, tmp_path):
+    import importlib.util
+
+    from qgis.core import QgsProcessingException
+
+    params = {"TRAJECTORY_FILE": str(LOGS / "dronekit_la_testdata_log171_copter.bin"), "CARDS": [omni_card],
+              "GEOID_UNDULATION": 22.0, "RESOLUTION": 20.0, "MARGIN": 100.0}
+    if importlib.util.find_spec("pymavlink") is not None:  # this QGIS has it: the log maps
+        assert _run(tmp_path, "bin", **params)["OUTPUT_RASTER"]
+        return
+    with pytest.raises(QgsProcessingException) as err:
+        _run(tmp_path, "bin", **params)
+    msg = str(err.value)
+    assert msg.startswith("reading an ArduPilot .bin log needs pymavlink in QGIS's Python")
+    assert "OSGeo4W Shell" in msg and "QGIS.app" in msg and "TRAJECTORY_FILE" in msg
