@@ -64,7 +64,9 @@ def test_no_basemap_no_tiles(client):
 @pytest.mark.parametrize("kind,message", [
     ("missing", "no such file"), ("text", "is not an MBTiles file"), ("pmtiles", "PMTiles"),
     ("pbf", "holds pbf tiles; the web page draws raster tiles")])
-def test_serve_refuses_a_bad_basemap_in_one_line(tmp_path, kind, message):
+def test_serve_refuses_a_bad_basemap_in_one_line(tmp_path, monkeypatch, kind, message):
+    for name in ("GISNOISE_BASEMAP", "GISNOISE_DATA_DIR"):  # serve sets them; restored after the test
+        monkeypatch.setenv(name, "")
     path = tmp_path / ("tiles.pmtiles" if kind == "pmtiles" else "tiles.mbtiles")
     if kind == "text":
         path.write_text("not a database\n")
