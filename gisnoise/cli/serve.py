@@ -24,7 +24,7 @@ from gisnoise.errors import InputError
 @click.option("--log-level", default="info", show_default=True,
               type=click.Choice(["critical", "error", "warning", "info", "debug"]))
 @click.option("--basemap", type=click.Path(dir_okay=False), default=None,
-              help="MBTiles file of raster tiles the web page shows as its basemap, served at /basemap (offline "
+              help="MBTiles file or PMTiles archive of raster tiles the web page shows as its basemap, served at /basemap (offline "
                    "maps; default: $GISNOISE_BASEMAP, else the tile URL $GISNOISE_TILE_URL).")
 def command(host: str, port: int, data_dir: str | None, workers: int | None, log_level: str,
             basemap: str | None) -> None:

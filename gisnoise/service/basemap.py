@@ -1,12 +1,12 @@
-"""A basemap from a local MBTiles file, served by the service for the web page (offline maps).
+"""A basemap from a local MBTiles file or PMTiles archive, served by the service for the web page (offline maps).
 
 ``gisnoise serve --basemap tiles.mbtiles`` (or ``GISNOISE_BASEMAP``) serves the raster
-tiles of an MBTiles file (an SQLite database: table ``tiles`` with ``zoom_level``,
+tiles of a PMTiles v3 archive (:mod:`gisnoise.service.pmtiles`) or of an MBTiles file (an SQLite database: table ``tiles`` with ``zoom_level``,
 ``tile_column``, ``tile_row`` in the TMS scheme, and ``metadata`` with ``format`` and
 ``attribution``) at ``/basemap/{z}/{x}/{y}`` in the XYZ scheme the web page's tile layer
 asks for; the page's basemap is then that source, credited with the file's attribution.
-Vector tiles (``pbf``) cannot be drawn by the page and are refused, as are PMTiles (convert
-them to MBTiles, e.g. with ``pmtiles convert``) and files that are not MBTiles.
+Vector tiles (``pbf``, ``mvt``) cannot be drawn by the page and are refused, as are files
+that are neither.
 """
 
 from __future__ import annotations
@@ -20,6 +20,8 @@ from fastapi import APIRouter, Response
 from gisnoise.errors import InputError
 from gisnoise.service.deps import StateDep
 from gisnoise.service.errors import ApiError
+from gisnoise.service.pmtiles import MAGIC as PMTILES_MAGIC
+from gisnoise.service.pmtiles import PMTiles, open_pmtiles
 
 __all__ = ["MBTiles", "open_basemap", "router", "TILE_URL"]
 
@@ -57,17 +59,19 @@ class MBTiles:
         return bytes(row[0]) if row else None
 
 
-def open_basemap(path: str | Path) -> MBTiles:
-    """Open and check an MBTiles basemap; :class:`~gisnoise.errors.InputError` (field ``basemap``) names what is wrong."""
+def open_basemap(path: str | Path) -> MBTiles | PMTiles:
+    """Open and check an MBTiles or PMTiles basemap; :class:`~gisnoise.errors.InputError` (field ``basemap``) names
+    what is wrong."""
     p = Path(path)
     if not p.is_file():
         raise InputError(f"basemap: no such file {p}", field="basemap")
-    if p.suffix.lower() == ".pmtiles":
-        raise InputError(f"basemap: {p.name} is a PMTiles archive; the service serves MBTiles (convert it, e.g. "
-                         "pmtiles convert IN.pmtiles OUT.mbtiles)", field="basemap")
     with open(p, "rb") as fh:
-        if fh.read(16) != b"SQLite format 3\x00":
-            raise InputError(f"basemap: {p.name} is not an MBTiles file (an SQLite database)", field="basemap")
+        head = fh.read(16)
+    if head.startswith(PMTILES_MAGIC) or p.suffix.lower() == ".pmtiles":
+        return open_pmtiles(p)
+    if head != b"SQLite format 3\x00":
+        raise InputError(f"basemap: {p.name} is neither an MBTiles file (an SQLite database) nor a PMTiles archive",
+                         field="basemap")
     m = MBTiles(p, "", "", 0, 0)
     try:
         con = m._connect()

@@ -20,7 +20,7 @@ variable                                meaning
 ``GISNOISE_SEED_CARDS_DIR``             folder of card JSON files put in an empty store
 ``GISNOISE_TILE_URL``                   basemap tile URL template of the web page
                                         (empty: no basemap)
-``GISNOISE_BASEMAP``                    an MBTiles file served at /basemap as the web
+``GISNOISE_BASEMAP``                    an MBTiles or PMTiles file served at /basemap as the web
                                         page's basemap (instead of the tile URL)
 ======================================  =============================================
 """
@@ -69,7 +69,7 @@ class Settings(BaseSettings):
     tile_attribution: str = Field(default="&copy; OpenStreetMap contributors",
                                   description="Credit shown with the basemap tiles of tile_url once they load.")
 
-    basemap: Path | None = Field(default=None, description="MBTiles file of raster tiles served at /basemap/{z}/{x}/{y} "
+    basemap: Path | None = Field(default=None, description="MBTiles or PMTiles file of raster tiles served at /basemap/{z}/{x}/{y} "
                                                             "as the web page's basemap (offline); overrides tile_url.")
 
     @field_validator("api_keys", mode="before")

@@ -43,8 +43,67 @@ def make_mbtiles(path: Path, fmt: str = "png") -> Path:
     return path
 
 
-def test_tiles_are_served_in_the_xyz_scheme(make_client, tmp_path):
-    client = make_client(basemap=make_mbtiles(tmp_path / "world.mbtiles"))
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while True:
+        b = n & 0x7F
+        n >>= 7
+        out.append(b | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
+
+
+def make_pmtiles(path: Path, *, gzip_dirs: bool = False, tile_type: int = 2, internal: int | None = None) -> Path:
+    """The same tiles as :func:`make_mbtiles` in a PMTiles v3 archive written by the specification's layout:
+    tile ids along the Hilbert curve (the spec's own examples fix them: z1 (0,0) 1, (0,1) 2, (1,1) 3, (1,0) 4)."""
+    import gzip
+    import json
+    import struct
+
+    hilbert1 = {(0, 0): 1, (0, 1): 2, (1, 1): 3, (1, 0): 4}
+    tiles = {0: _png(LAND)}
+    for (x, y), rgb in Z1.items():
+        tiles[hilbert1[(x, y)]] = _png(rgb)
+    from gisnoise.service.pmtiles import zxy_to_tileid
+
+    assert all(zxy_to_tileid(1, x, y) == i for (x, y), i in hilbert1.items())
+    for z in (2, 3):
+        for x in range(1 << z):
+            for y in range(1 << z):
+                tiles[zxy_to_tileid(z, x, y)] = tiles[0]
+    ids = sorted(tiles)
+    blob, offsets = b"", []
+    for i in ids:
+        offsets.append(len(blob))
+        blob += tiles[i]
+    d = _varint(len(ids))
+    last = 0
+    for i in ids:
+        d += _varint(i - last)
+        last = i
+    d += b"".join(_varint(1) for _ in ids) + b"".join(_varint(len(tiles[i])) for i in ids)
+    d += b"".join(_varint(0 if k else offsets[k] + 1) for k in range(len(ids)))  # contiguous: 0 after the first
+    meta = json.dumps({"attribution": CREDIT}).encode()
+    comp = internal or (2 if gzip_dirs else 1)
+    if comp == 2:
+        d, meta = gzip.compress(d), gzip.compress(meta)
+    root_off = 127
+    meta_off = root_off + len(d)
+    data_off = meta_off + len(meta)
+    header = struct.pack("<7sB11QBBBBBBiiiiBii", b"PMTiles", 3, root_off, len(d), meta_off, len(meta), data_off, 0,
+                         data_off, len(blob), len(ids), len(ids), len(ids), 1, comp, 1, tile_type, 0, 3,
+                         -1800000000, -850000000, 1800000000, 850000000, 0, 0, 0)
+    path.write_bytes(header + d + meta + blob)
+    return path
+
+
+@pytest.mark.parametrize("kind", ["mbtiles", "pmtiles", "pmtiles-gzip"])
+def test_tiles_are_served_in_the_xyz_scheme(make_client, tmp_path, kind):
+    if kind == "mbtiles":
+        path = make_mbtiles(tmp_path / "world.mbtiles")
+    else:
+        path = make_pmtiles(tmp_path / "world.pmtiles", gzip_dirs=kind.endswith("gzip"))
+    client = make_client(basemap=path)
     cfg = client.get("/config.json").json()
     assert cfg["tile_url"] == "/basemap/{z}/{x}/{y}" and cfg["tile_attribution"] == CREDIT
     assert cfg["basemap_zoom"] == [0, 3]
@@ -62,16 +121,20 @@ def test_no_basemap_no_tiles(client):
 
 
 @pytest.mark.parametrize("kind,message", [
-    ("missing", "no such file"), ("text", "is not an MBTiles file"), ("pmtiles", "PMTiles"),
+    ("missing", "no such file"), ("text", "is neither an MBTiles file"),
+    ("pmtiles-brotli", "compresses its directories with brotli; the service reads none or gzip"),
+    ("pmtiles-mvt", "holds mvt tiles; the web page draws raster tiles"),
     ("pbf", "holds pbf tiles; the web page draws raster tiles")])
 def test_serve_refuses_a_bad_basemap_in_one_line(tmp_path, monkeypatch, kind, message):
     for name in ("GISNOISE_BASEMAP", "GISNOISE_DATA_DIR"):  # serve sets them; restored after the test
         monkeypatch.setenv(name, "")
-    path = tmp_path / ("tiles.pmtiles" if kind == "pmtiles" else "tiles.mbtiles")
+    path = tmp_path / ("tiles.pmtiles" if kind.startswith("pmtiles") else "tiles.mbtiles")
     if kind == "text":
         path.write_text("not a database\n")
-    elif kind == "pmtiles":
-        path.write_bytes(b"PMTiles\x03" + bytes(120))
+    elif kind == "pmtiles-brotli":
+        make_pmtiles(path, internal=3)
+    elif kind == "pmtiles-mvt":
+        make_pmtiles(path, tile_type=1)
     elif kind == "pbf":
         make_mbtiles(path, fmt="pbf")
     r = CliRunner().invoke(cli, ["serve", "--data-dir", str(tmp_path / "data"), "--basemap", str(path)],
