@@ -11,7 +11,7 @@ from gisnoise.cli.main import cli
 from gisnoise.data import card_path
 from gisnoise.data import sample_route_path as sample_route
 from gisnoise.flight import read_route
-from gisnoise.maps import CardSet, audible_distance, auto_margin, make_map
+from gisnoise.maps import SEL_OFFSET_DB, CardSet, audible_distance, auto_margin, level_table, make_map, sel_edge_bound
 from gisnoise.model import ModelCard
 
 DEMO = ["demo-horizontal", "demo-climb", "demo-sink"]
@@ -51,7 +51,8 @@ def levels_edges(path):
 
 
 def test_demo_default_extent_closes_the_lowest_level(tmp_path):
-    """The demo (scripts/demo) without --margin: no edge cell of LAmax or LAeq at or above 45 dB(A)."""
+    """The demo (scripts/demo) without --margin: no edge cell at or above the lowest level of its metric:
+    LAmax and LAeq below 45 dB(A), SEL below its lowest contour, 45 + 10 = 55 dB(A); nothing clipped, no warning."""
     pytest.importorskip("numba")
     r = CliRunner().invoke(cli, ["-q", "contour", str(sample_route()), *sum((["--card", c] for c in DEMO), []),
                                  "--out", str(tmp_path), "--resolution", "10", "--levels", DEMO_LEVELS,
@@ -61,16 +62,13 @@ def test_demo_default_extent_closes_the_lowest_level(tmp_path):
     edges = levels_edges(tmp_path / "levels.tif")
     assert edges["LAmax"].max() < 45.0
     assert edges["LAeq"].max() < 45.0
+    assert edges["SEL"].max() < 45.0 + SEL_OFFSET_DB
     doc = json.loads((tmp_path / "contours.geojson").read_text())
+    sel_levels = sorted({f["properties"]["level"] for f in doc["features"] if f["properties"]["metric"] == "SEL"})
+    assert sel_levels == [55.0, 60.0, 65.0, 70.0, 75.0]
     for f in doc["features"]:
-        p = f["properties"]
-        assert p["clipped"] == bool(edges[p["metric"]].max() >= p["level"])
-        if p["metric"] in ("LAmax", "LAeq"):
-            assert not p["clipped"]
-    # SEL grows with the event's duration: its low contours lie beyond the grid, and say so
-    assert any(f["properties"]["clipped"] for f in doc["features"] if f["properties"]["metric"] == "SEL")
-    assert "SEL 45" in r.output and "clipped" in r.output
-    assert "LAmax" not in " ".join(line for line in r.output.splitlines() if line.startswith("warning"))
+        assert f["properties"]["clipped"] is False
+    assert "warning" not in r.output and doc["gisnoise"]["warnings"] == []
 
 
 def test_a_forced_small_margin_flags_the_cut_contours_and_warns(tmp_path):
@@ -95,8 +93,10 @@ def test_the_cell_limit_cuts_the_default_extent_with_a_warning(tmp_path, monkeyp
     full, w = auto_margin(route.trajectory, cards, 45.0, resolution_m=20.0)
     assert w == []
     monkeypatch.setenv("GISNOISE_MAX_CELLS", "40000")
-    cut, w = auto_margin(route.trajectory, cards, 45.0, resolution_m=20.0)
-    assert cut < full and len(w) == 1 and "40,000 cells" in w[0]
+    cut, w = auto_margin(route.trajectory, cards, 45.0, resolution_m=20.0, sel=False)  # the map below: LAmax only
+    assert cut < full and len(w) == 1 and "40,000 cells" in w[0] and "LAmax 45 dB(A) contour" in w[0]
+    _cut, w_sel = auto_margin(route.trajectory, cards, 45.0, resolution_m=20.0)
+    assert "the SEL 55 dB(A) contour needs a margin above" in w_sel[0]
     paths = make_map(route.trajectory, cards, tmp_path, resolution_m=20.0, levels=[45.0], metrics=["LAmax"])
     assert paths["result"].grid.n_cells <= 40000
     assert paths["warnings"][0] == w[0]
@@ -132,3 +132,43 @@ def test_a_card_with_a_model_extension_is_bounded_by_its_base_with_a_warning(tmp
     m_base, w0 = auto_margin(traj, CardSet([base]), 45.0, resolution_m=20.0)
     assert m_ext == m_base and w0 == []
     assert len(w) == 1 and "paper-offset+bank_angle" in w[0] and "clipped" in w[0]
+
+
+def hover(seconds=30.0):
+    from gisnoise.flight import Trajectory
+    from gisnoise.geo import LocalFrame
+
+    f = LocalFrame(48.137, 11.575, 500.0)
+    lat, lon, h = f.to_wgs84(np.zeros(2), np.zeros(2), np.full(2, 40.0))
+    return Trajectory(t=np.array([0.0, seconds]), lat=lat, lon=lon, h=h, roll=np.zeros(2), pitch=np.zeros(2),
+                      yaw=np.zeros(2), power_w=np.full(2, 3000.0), phase=np.full(2, "horizontal"))
+
+
+def test_the_sel_bound_of_a_hover_is_its_level_plus_ten_log_duration():
+    """An omnidirectional hover of T = 30 s: SEL(r) = L(r) + 10 log10(T / 1 s), L(r) = 70 - 20 log10(r / 40 m)."""
+    from gisnoise.geo import transformer, utm_crs
+
+    traj = hover()
+    crs = utm_crs(11.575, 48.137)
+    x0, y0 = transformer("EPSG:4326", crs).transform(11.575, 48.137)
+    d, table = level_table([omni()], [3000.0])
+    for r in (200.0, 800.0, 3000.0):
+        # a square of half-side r about the hover: its nearest edge points lie at r
+        b = sel_edge_bound(traj, np.zeros(2, dtype=int), d, table, (x0 - r, y0 - r, x0 + r, y0 + r), crs,
+                           spacing_m=10.0)
+        truth = 70.0 - 20.0 * np.log10(r / 40.0) + 10.0 * np.log10(30.0)
+        # an upper bound, within one table step (20 log10 1.049 = 0.42 dB) and the shortened distances
+        assert truth <= b <= truth + 0.45 + 20.0 * np.log10(r / (0.998 * r - 5.0))
+
+
+def test_the_default_extent_closes_sel_of_a_long_hover():
+    """SEL of a hover grows with its duration: 300 s need a wider margin than LAmax alone, by the analytic distance."""
+    traj = hover(300.0)
+    cards = CardSet([omni()])
+    m_max, _ = auto_margin(traj, cards, 45.0, resolution_m=20.0, sel=False)
+    m_sel, w = auto_margin(traj, cards, 45.0, resolution_m=20.0)
+    r_max = 40.0 * 10.0 ** ((70.0 - 45.0) / 20.0)  # 711 m
+    r_sel = 40.0 * 10.0 ** ((70.0 + 10.0 * np.log10(300.0) - 55.0) / 20.0)  # SEL 55 at 3.9 km
+    assert r_max <= m_max <= r_max * 1.05 + 40.0
+    # within one table step (4.9 %), the bisection's cell and two cells of safety
+    assert w == [] and r_sel <= m_sel <= r_sel * 1.05 + 80.0

@@ -23,7 +23,11 @@ from gisnoise.errors import InputError
               help="Job worker threads (default: $GISNOISE_WORKERS, else 1).")
 @click.option("--log-level", default="info", show_default=True,
               type=click.Choice(["critical", "error", "warning", "info", "debug"]))
-def command(host: str, port: int, data_dir: str | None, workers: int | None, log_level: str) -> None:
+@click.option("--basemap", type=click.Path(dir_okay=False), default=None,
+              help="MBTiles file or PMTiles archive of raster tiles the web page shows as its basemap, served at /basemap (offline "
+                   "maps; default: $GISNOISE_BASEMAP, else the tile URL $GISNOISE_TILE_URL).")
+def command(host: str, port: int, data_dir: str | None, workers: int | None, log_level: str,
+            basemap: str | None) -> None:
     """Serve model cards, noise maps and fit/diagnose jobs over HTTP.
 
     \b
@@ -44,6 +48,8 @@ def command(host: str, port: int, data_dir: str | None, workers: int | None, log
         os.environ["GISNOISE_DATA_DIR"] = data_dir
     if workers is not None:
         os.environ["GISNOISE_WORKERS"] = str(workers)
+    if basemap is not None:
+        os.environ["GISNOISE_BASEMAP"] = basemap
     try:
         settings = Settings()
     except Exception as exc:  # pydantic's ValidationError: a bad GISNOISE_* variable
@@ -53,6 +59,13 @@ def command(host: str, port: int, data_dir: str | None, workers: int | None, log
         e = errors[0]
         name = "GISNOISE_" + "_".join(str(x) for x in e.get("loc", ())).upper()
         raise InputError(f"{name}: {e.get('msg')}, got {os.environ.get(name)!r}", field=name) from None
+    if settings.basemap is not None:
+        from gisnoise.service.basemap import open_basemap
+
+        try:
+            open_basemap(settings.basemap)
+        except InputError as exc:
+            raise InputError(str(exc).replace("basemap:", "--basemap:", 1), field="--basemap") from None
     app = create_app(settings)
     click.echo(f"gisnoise: serving on http://{host}:{port}/ (docs at /docs), data in {settings.data_dir}", err=True)
     uvicorn.run(app, host=host, port=port, log_level=log_level)

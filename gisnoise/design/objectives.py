@@ -188,7 +188,7 @@ class Evaluation:
 def _in_exclusion(plan: Plan, design: Design) -> np.ndarray:
     if not plan.exclusions:
         return np.zeros(plan.n_mics, dtype=bool)
-    import shapely
+    from gisnoise.geo import shapes as shapely
 
     union = shapely.union_all(list(plan.exclusions))
     return np.asarray(shapely.contains_xy(union, design.mic_e, design.mic_n), dtype=bool)

@@ -168,7 +168,7 @@ def optimize(model: DesignModel, objective: str = "paper", *, x0: Design | None 
 
     constraints: Any = ()
     if plan.exclusions:
-        import shapely
+        from gisnoise.geo import shapes as shapely
 
         union = shapely.union_all(list(plan.exclusions))
         shapely.prepare(union)

@@ -491,7 +491,7 @@ def resolve_plan(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[str] | N
 
 
 def _enu_polygon(poly: list[list[list[float]]], frame: LocalFrame, h0: float) -> Any:
-    import shapely
+    from gisnoise.geo import shapes as shapely
 
     rings = []
     for ring in poly:
@@ -508,7 +508,7 @@ def _check_feasible(mic_ids: Sequence[str], base: Design, shift: np.ndarray, pol
     """Refuse a plan whose exclusions cover every allowed position of some microphone."""
     if not polys:
         return
-    import shapely
+    from gisnoise.geo import shapes as shapely
 
     union = shapely.union_all(list(polys))
     for i, mid in enumerate(mic_ids):

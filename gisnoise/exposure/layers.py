@@ -169,7 +169,8 @@ def read_buildings(path: str | os.PathLike[str], *, layer: str | None = None, re
     :data:`HEIGHT_FIELDS` that the layer has.
     """
     import geopandas as gpd
-    import shapely
+
+    from gisnoise.geo import shapes as shapely
 
     p = Path(path)
     if not p.exists():

@@ -42,6 +42,7 @@ from gisnoise.maps.grids import (
     auto_margin,
     grid_for_map,
     grid_for_trajectory,
+    level_table,
 )
 from gisnoise.maps.instants import (
     FlightInstants,
@@ -80,9 +81,15 @@ from gisnoise.maps.result import (
     snapshot_name,
     threshold_name,
 )
+from gisnoise.maps.sel import (
+    SEL_OFFSET_DB,
+    metric_levels,
+    sel_edge_bound,
+    sel_margin,
+)
 from gisnoise.maps.threads import (
     default_threads,
     map_threads,
 )
 
-__all__ = ['audible_distance', 'auto_margin', 'band_unit', 'CardSet', 'class_colours', 'class_labels', 'clip_warnings', 'clipped_levels', 'colour_for', 'contour_features', 'contours_geojson', 'DEFAULT_ENGINE', 'default_threads', 'directivity_grid', 'ENGINES', 'evaluate_grid', 'evaluate_grid_fast', 'fast_engine_serves', 'FlightInstants', 'grid_for_map', 'grid_for_trajectory', 'isobands', 'ISOLINE_COLOUR', 'isolines', 'make_map', 'map_threads', 'MapResult', 'MAX_DISTANCE_M', 'METRICS', 'NODATA', 'NOISE_CLASSES', 'palette_doc', 'PALETTE_NAME', 'parse_levels', 'PHASE_COLOURS', 'plot_directivity', 'plot_map', 'prepare_flight', 'Receivers', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'SIZED_METRICS', 'snapshot_name', 'threshold_name', 'warm_up', 'window_lattice', 'WindowResult', 'write_geojson', 'write_geotiff', 'Z95']
+__all__ = ['audible_distance', 'auto_margin', 'band_unit', 'CardSet', 'class_colours', 'class_labels', 'clip_warnings', 'clipped_levels', 'colour_for', 'contour_features', 'contours_geojson', 'DEFAULT_ENGINE', 'default_threads', 'directivity_grid', 'ENGINES', 'evaluate_grid', 'evaluate_grid_fast', 'fast_engine_serves', 'FlightInstants', 'grid_for_map', 'grid_for_trajectory', 'isobands', 'ISOLINE_COLOUR', 'isolines', 'level_table', 'make_map', 'metric_levels', 'map_threads', 'MapResult', 'MAX_DISTANCE_M', 'METRICS', 'NODATA', 'NOISE_CLASSES', 'palette_doc', 'PALETTE_NAME', 'parse_levels', 'PHASE_COLOURS', 'plot_directivity', 'plot_map', 'prepare_flight', 'Receivers', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'SEL_OFFSET_DB', 'sel_edge_bound', 'sel_margin', 'SIZED_METRICS', 'snapshot_name', 'threshold_name', 'warm_up', 'window_lattice', 'WindowResult', 'write_geojson', 'write_geotiff', 'Z95']

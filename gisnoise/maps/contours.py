@@ -37,13 +37,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import shapely
 from shapely.geometry import LineString, MultiLineString, MultiPolygon, Polygon, mapping
 from shapely.geometry.polygon import orient
 
 from gisnoise.errors import InputError
 from gisnoise.geo import WGS84, transformer
+from gisnoise.geo import shapes as shapely
 from gisnoise.maps._checks import as_float
+from gisnoise.maps.sel import metric_levels
 
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.maps.result import MapResult
@@ -92,7 +93,7 @@ def clipped_levels(result: MapResult, levels: Any, *, metrics: Sequence[str] | N
     out: dict[str, list[float]] = {}
     for name in names:
         top = _edge_max(result.band(name))
-        cut = [lo for lo in lv if top >= lo]
+        cut = [lo for lo in metric_levels(name, lv) if top >= lo]
         if cut:
             out[name] = cut
     return out
@@ -202,7 +203,8 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
     ----------
     result : MapResult
     levels : sequence of float or str
-        Contour levels, dB(A).
+        Contour levels, dB(A); ``SEL`` is contoured :data:`gisnoise.maps.sel.SEL_OFFSET_DB` higher
+        (:func:`gisnoise.maps.sel.metric_levels`).
     metrics : sequence of str, optional
         Bands to contour; default every band in dB(A) (``LAmax``, ``LAeq``, ``SEL``,
         snapshot and ``*_p95``), not time above or standard deviations.
@@ -220,7 +222,8 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
         z = result.band(name)
         unit = units.get(name, "dB(A)")
         top = _edge_max(z)
-        bounds = [(lv[i], lv[i + 1] if i + 1 < len(lv) else None) for i in range(len(lv))]
+        mlv = metric_levels(name, lv)
+        bounds = [(mlv[i], mlv[i + 1] if i + 1 < len(mlv) else None) for i in range(len(mlv))]
         for lo, hi in bounds:
             polys = isobands(x, y, z, [lo] if hi is None else [lo, hi])
             geom = _finish_polygons([_to_wgs84(p, tr) for p in polys])
@@ -229,7 +232,7 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
             label = f"{name} >= {lo:g} {unit}" if hi is None else f"{name} {lo:g}-{hi:g} {unit}"
             features.append(_feature(geom, {"metric": name, "level": lo, "level_max": hi, "kind": "isoband",
                                             "unit": unit, "name": label, "clipped": bool(top >= lo)}))
-        for lo in lv:
+        for lo in mlv:
             lines = [_to_wgs84(g, tr) for g in isolines(x, y, z, lo)]
             lines = [shapely.set_precision(g, PRECISION_DEG) for g in lines]
             lines = [g for g in lines if isinstance(g, LineString) and not g.is_empty and len(g.coords) >= 2]

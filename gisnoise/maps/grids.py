@@ -12,9 +12,12 @@ is evaluated over the whole emission sphere at the loudest electric power the tr
 with that card, at distances from 1 m to 100 km; spreading is the card's (``p6`` in the
 paper's ansatz); atmospheric absorption, which only lowers levels, is left out, so the
 bound holds with it too.  The time-averaged level ``LAeq`` never exceeds ``LAmax``, so the
-same extent closes its lowest contour as well; the sound exposure level ``SEL`` grows with
-the event's duration and its low contours may lie far outside: features cut by the grid's
-edge carry ``"clipped": true`` (:mod:`gisnoise.maps.contours`).
+same extent closes its lowest contour as well.  The sound exposure level ``SEL`` grows with
+the event's duration; its contours lie :data:`gisnoise.maps.sel.SEL_OFFSET_DB` above the
+map's levels and the extent grows until the lowest of them closes too, by the same bound
+integrated over the event (:func:`gisnoise.maps.sel.sel_margin`).  Features cut by the
+grid's edge (a fixed margin, or the cell limit) carry ``"clipped": true``
+(:mod:`gisnoise.maps.contours`).
 
 Examples
 --------
@@ -40,9 +43,11 @@ from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import GridSpec, grid_for_points, max_cells
 from gisnoise.maps.cardset import CardSet
+from gisnoise.maps.sel import SEL_OFFSET_DB, sel_margin
 from gisnoise.model import ModelCard, get_ansatz
 
-__all__ = ["grid_for_trajectory", "grid_for_map", "auto_margin", "audible_distance", "MAX_DISTANCE_M", "SIZED_METRICS"]
+__all__ = ["grid_for_trajectory", "grid_for_map", "auto_margin", "audible_distance", "level_table", "MAX_DISTANCE_M",
+           "SIZED_METRICS"]
 
 MAX_DISTANCE_M = 100_000.0
 """Largest distance the bound looks at, m."""
@@ -74,9 +79,23 @@ def audible_distance(cards: Sequence[ModelCard], powers_w: Sequence[float], leve
     :class:`~gisnoise.errors.InputError` (field ``card``) for a card whose model needs inputs
     beyond distance, angles and power.
     """
-    phi, theta, d = np.meshgrid(_PHI, _THETA, _DISTANCES, indexing="ij")
+    d, table = level_table(cards, powers_w)
     far = 0.0
-    for card, pw in zip(cards, powers_w, strict=True):
+    for loud in table:
+        idx = np.flatnonzero(loud >= level_db)
+        if idx.size == 0:
+            continue
+        k = int(idx[-1])
+        far = max(far, float(d[min(k + 1, d.size - 1)]))
+    return far
+
+
+def level_table(cards: Sequence[ModelCard], powers_w: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """The distances (m) of :func:`audible_distance` and, per card, its loudest level over the emission
+    sphere at each of them at ``powers_w[i]`` (``-inf`` for a card without a positive power)."""
+    phi, theta, d = np.meshgrid(_PHI, _THETA, _DISTANCES, indexing="ij")
+    table = np.full((len(cards), _DISTANCES.size), -np.inf)
+    for i, (card, pw) in enumerate(zip(cards, powers_w, strict=True)):
         if not math.isfinite(float(pw)) or float(pw) <= 0:
             continue
         try:
@@ -84,13 +103,8 @@ def audible_distance(cards: Sequence[ModelCard], powers_w: Sequence[float], leve
         except InputError as exc:
             raise InputError(f"card {card.id!r}: its model cannot be bounded for the map's extent ({exc}); "
                              "give --margin", field="card") from None
-        loud = np.nanmax(lv, axis=(0, 1))
-        idx = np.flatnonzero(loud >= level_db)
-        if idx.size == 0:
-            continue
-        k = int(idx[-1])
-        far = max(far, float(_DISTANCES[min(k + 1, _DISTANCES.size - 1)]))
-    return far
+        table[i] = np.nanmax(lv, axis=(0, 1))
+    return _DISTANCES.copy(), table
 
 
 def _base_card(card: ModelCard) -> ModelCard:
@@ -118,20 +132,25 @@ def _target_uav_level(level_db: float, cards: Sequence[ModelCard], background: b
 
 def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolution_m: float = 10.0,
                 crs: Any = None, background: bool = False, min_margin_m: float = 100.0,
-                cell_limit: int | None = None) -> tuple[float, list[str]]:
+                cell_limit: int | None = None, sel: bool = True) -> tuple[float, list[str]]:
     """The default margin (m) of a map's grid, and the warnings that go with it.
 
     The margin is :func:`audible_distance` of the cards at ``lowest_db`` (at least
-    ``min_margin_m``, plus one cell), so no edge cell's maximum level reaches ``lowest_db``.
+    ``min_margin_m``, plus one cell), so no edge cell's maximum level reaches ``lowest_db``;
+    with ``sel`` it grows further until no edge cell's ``SEL`` reaches the lowest SEL contour,
+    ``lowest_db`` + :data:`gisnoise.maps.sel.SEL_OFFSET_DB` (:func:`gisnoise.maps.sel.sel_margin`).
     When that grid would exceed ``cell_limit`` (default ``GISNOISE_MAX_CELLS``) the margin is
     cut to the largest that fits, and a warning says so; when not even ``min_margin_m`` fits,
     that is returned and the grid's cell check refuses it.
     """
     idx = cardset.assign(traj.phase, traj.t)
-    cards, powers = [], []
+    cards: list[ModelCard] = []
+    powers: list[float] = []
+    row = np.full(len(cardset.cards), -1)
     for i, card in enumerate(cardset.cards):
         m = idx == i
         if m.any():
+            row[i] = len(cards)
             cards.append(card)
             powers.append(float(np.nanmax(np.asarray(traj.power_w, dtype=float)[m])))
     warnings: list[str] = []
@@ -141,13 +160,20 @@ def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolut
                         "contour; the grid uses a 500 m margin")
         return 500.0, warnings
     res = float(resolution_m)
+    ext_cards = cards
     try:
-        far = audible_distance(cards, powers, target)
+        distances, table = level_table(cards, powers)
     except InputError:  # a model extension needs inputs of the flight: bound its base ansatz, and say so
-        far = audible_distance([_base_card(c) for c in cards], powers, target)
+        ext_cards = [_base_card(c) for c in cards]
+        distances, table = level_table(ext_cards, powers)
         ext = ", ".join(sorted({c.ansatz for c in cards if "+" in c.ansatz}))
         warnings.append(f"the extent is bounded by the base ansatz of {ext}, without its effects; check the "
                         "contours' clipped flags")
+    far = 0.0
+    for loud in table:
+        above = np.flatnonzero(loud >= target)
+        if above.size:
+            far = max(far, float(distances[min(int(above[-1]) + 1, distances.size - 1)]))
     margin = max(far, float(min_margin_m)) + res
     base = grid_for_trajectory(traj, resolution_m, 0.0, crs)
     limit = max_cells() if cell_limit is None else int(cell_limit)
@@ -155,25 +181,73 @@ def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolut
     # cells of a margin m: (w0 + 2m)(h0 + 2m) / res^2 <= limit
     disc = (w0 + h0) ** 2 - 4.0 * (w0 * h0 - limit * res * res)
     fit = (-(w0 + h0) + math.sqrt(max(disc, 0.0))) / 4.0 - 2.0 * res
+    need = f"LAmax {lowest_db:g} dB(A)"
+    if sel:
+        sel_db = lowest_db + SEL_OFFSET_DB
+        bgs = [c.background_db for c in cards if c.background_db is not None] if background else []
+        rows, sel_table = _power_rows(traj, idx, cardset.cards, row, cards, ext_cards)
+        x0, y0, x1, y1 = base.bounds
+        m_sel = sel_margin(traj, rows, distances, sel_table, sel_db, (x0, y0, x1, y1), base.crs,
+                           start_m=margin, resolution_m=res, max_margin_m=max(fit, margin) + res,
+                           background_db=max(bgs) if bgs else None) + 2.0 * res
+        if m_sel > margin:
+            margin, need = m_sel, f"SEL {sel_db:g} dB(A)"
     if margin > fit:
         cut = math.floor(fit / res) * res
         if cut < min_margin_m:  # not even the least margin fits: the grid's cell check refuses it
             return float(min_margin_m), warnings
-        warnings.append(f"the {lowest_db:g} dB(A) contour of LAmax needs a {margin:,.0f} m margin; the grid is "
-                        f"cut to {cut:,.0f} m by the limit of {limit:,} cells; use a coarser resolution to see "
-                        "all of it")
+        warnings.append(f"the {need} contour needs a margin above {margin:,.0f} m; the grid is cut to {cut:,.0f} m "
+                        f"by the limit of {limit:,} cells; use a coarser resolution to see all of it")
         margin = cut
     return margin, warnings
 
 
+#: Power steps of the SEL bound: each sample's power is rounded up to a multiple of 10^(1/40) (1/4 dB in 10 log P).
+_POWER_STEP = 10.0 ** (1.0 / 40.0)
+
+
+def _power_rows(traj: Trajectory, idx: np.ndarray, all_cards: Sequence[ModelCard], row: np.ndarray,
+                cards: Sequence[ModelCard], bounded: Sequence[ModelCard]) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample's row of a level table of (card, power), and that table; with more than 64 pairs the powers
+    are rounded up to multiples of :data:`_POWER_STEP`.
+
+    The SEL bound sums every sample's level: each at its own power (rounded up; levels grow with
+    power as in :func:`audible_distance`), not the card's loudest.
+    """
+    power = np.asarray(traj.power_w, dtype=float)
+    exact = len(set(zip(idx.tolist(), power.tolist(), strict=True))) <= 64  # few powers: each its own row
+    with np.errstate(divide="ignore", invalid="ignore"):
+        step = np.where(power > 0, np.ceil(np.log(np.where(power > 0, power, 1.0)) / np.log(_POWER_STEP)), -1e9)
+    if exact:
+        step = np.where(power > 0, power, -1e9)
+    keys: dict[tuple[int, float], int] = {}
+    rows = np.full(power.size, -1)
+    tab_cards: list[ModelCard] = []
+    tab_powers: list[float] = []
+    for i in range(power.size):
+        k = int(row[idx[i]])
+        if k < 0 or step[i] < -1e8:
+            continue
+        key = (k, float(step[i]))
+        if key not in keys:
+            keys[key] = len(tab_cards)
+            tab_cards.append(bounded[k])
+            tab_powers.append(float(step[i]) if exact else float(_POWER_STEP ** step[i]))
+        rows[i] = keys[key]
+    if not tab_cards:
+        return rows, np.full((0, 1), -np.inf)
+    _d, table = level_table(tab_cards, tab_powers)
+    return rows, table
+
+
 def grid_for_map(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolution_m: float = 10.0,
                  margin_m: float | None = None, crs: Any = None, background: bool = False,
-                 cell_limit: int | None = None) -> tuple[GridSpec, list[str]]:
+                 cell_limit: int | None = None, sel: bool = True) -> tuple[GridSpec, list[str]]:
     """The receiver grid of a map and the warnings that go with it: :func:`grid_for_trajectory`
     with ``margin_m``, or with :func:`auto_margin` when it is None.
     """
     warnings: list[str] = []
     if margin_m is None:
         margin_m, warnings = auto_margin(traj, cardset, lowest_db, resolution_m=resolution_m, crs=crs,
-                                         background=background, cell_limit=cell_limit)
+                                         background=background, cell_limit=cell_limit, sel=sel)
     return grid_for_trajectory(traj, resolution_m, margin_m, crs), warnings

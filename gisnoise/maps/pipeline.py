@@ -159,7 +159,7 @@ def make_map(
                              f"at t = {traj.t[i]:.2f} s: the battery current is not logged while flying); give a "
                              f"constant power (--power-w W, field power_w)", field="power_w")
     grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
-                                  background=background)
+                                  background=background, sel="SEL" in metrics)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")

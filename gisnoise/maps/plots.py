@@ -17,6 +17,7 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.maps.palette import ISOLINE_COLOUR, PHASE_COLOURS, class_colours
+from gisnoise.maps.sel import metric_levels
 
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.flight import Trajectory
@@ -90,7 +91,8 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
     path : path
         Output PNG.
     levels : sequence of float
-        Contour levels, dB(A); the colours change at these levels.
+        Contour levels, dB(A); the colours change at these levels (``SEL``'s lie higher:
+        :func:`gisnoise.maps.sel.metric_levels`).
     trajectory : Trajectory, optional
         Drawn as the track, coloured by phase, with start and end marked.
     metric : str, optional
@@ -110,7 +112,7 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
             raise InputError("no level band to plot", field="metric")
         metric = "LAmax" if "LAmax" in names else names[0]
     z = np.asarray(result.band(metric), dtype=float)
-    lv = sorted(float(v) for v in levels)
+    lv = sorted(metric_levels(metric, [float(v) for v in levels]))  # SEL lies 10 dB higher
     grid = result.grid
     left, bottom, right, top = grid.bounds
     aspect = (top - bottom) / (right - left)

@@ -102,7 +102,7 @@ def _veh_dict(veh: VehicleModel) -> dict[str, Any]:
 
 
 def _closed_cells(grid: GridSpec, avoid: Sequence[Any]) -> np.ndarray:
-    import shapely
+    from gisnoise.geo import shapes as shapely
 
     closed = np.zeros(grid.shape, dtype=bool)
     if not avoid:
@@ -189,7 +189,7 @@ def _line_cost(cost: np.ndarray, grid: GridSpec, p: np.ndarray, q: np.ndarray) -
 
 
 def _clear(p: np.ndarray, q: np.ndarray, avoid_grown: Any) -> bool:
-    import shapely
+    from gisnoise.geo import shapes as shapely
 
     return avoid_grown is None or not shapely.intersects(shapely.LineString([p, q]), avoid_grown)
 
@@ -241,7 +241,7 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
     corridor width, turn radius, lengths, detour and the re-evaluated people above each
     level of both routes.
     """
-    import shapely
+    from gisnoise.geo import shapes as shapely
 
     if not (isinstance(altitude_m, (int, float)) and 0 < altitude_m <= 1000):
         raise InputError(f"altitude must be in (0, 1000] m, got {altitude_m!r}", field="altitude")

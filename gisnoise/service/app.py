@@ -15,6 +15,8 @@ from fastapi import Depends, FastAPI, Request
 
 from gisnoise import __version__
 from gisnoise.service import routes_campaign, routes_cards, routes_contours, routes_jobs, routes_planning, routes_web
+from gisnoise.service.basemap import open_basemap
+from gisnoise.service.basemap import router as basemap_router
 from gisnoise.service.cardstore import CardStore
 from gisnoise.service.deps import State, key_problem
 from gisnoise.service.errors import ApiError, install_handlers
@@ -99,11 +101,12 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
     )
     settings.data_dir.mkdir(parents=True, exist_ok=True)
     jobs = JobStore(settings.db_path, settings.jobs_dir)
+    basemap = open_basemap(settings.basemap) if settings.basemap is not None else None
     app.state.gisnoise = State(settings=settings, cards=CardStore(settings.cards_dir), jobs=jobs,
-                               pool=WorkerPool(jobs, _handlers(), settings.workers))
+                               pool=WorkerPool(jobs, _handlers(), settings.workers), basemap=basemap)
     install_handlers(app)
     for r in (routes_cards.router, routes_contours.router, routes_jobs.router, routes_campaign.router,
-              routes_planning.router, routes_web.router):
+              routes_planning.router, routes_web.router, basemap_router):
         app.include_router(r)
     routes_web.mount_static(app, STATIC_DIR)
 

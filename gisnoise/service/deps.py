@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hmac
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Request, Security
 from fastapi.security import APIKeyHeader
@@ -26,6 +26,7 @@ class State:
     cards: CardStore
     jobs: JobStore
     pool: WorkerPool
+    basemap: Any = None  # gisnoise.service.basemap.MBTiles served at /basemap, or None
 
 
 def get_state(request: Request) -> State:

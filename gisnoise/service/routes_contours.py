@@ -162,7 +162,8 @@ def _auto_margin(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, 
 
     with _core_fields():
         margin, _ = auto_margin(traj, CardSet(cards), min(req.levels), resolution_m=req.grid.resolution_m,
-                                crs=req.grid.crs, background=req.background, cell_limit=max_cells)
+                                crs=req.grid.crs, background=req.background, cell_limit=max_cells,
+                                sel="SEL" in req.metrics)
     return req.model_copy(update={"grid": req.grid.model_copy(update={"margin_m": margin})})
 
 

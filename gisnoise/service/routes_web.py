@@ -11,6 +11,7 @@ from fastapi.staticfiles import StaticFiles
 
 from gisnoise import __version__
 from gisnoise.data import data_path
+from gisnoise.service.basemap import TILE_URL
 from gisnoise.service.deps import StateDep
 from gisnoise.service.errors import ApiError
 from gisnoise.service.models import Health, MediaType
@@ -48,7 +49,11 @@ def config(state: StateDep) -> Response:
     from gisnoise.maps import palette_doc
 
     s = state.settings
-    body = {"version": __version__, "tile_url": s.tile_url, "tile_attribution": s.tile_attribution,
+    tile_url, credit = s.tile_url, s.tile_attribution
+    if state.basemap is not None:  # gisnoise serve --basemap FILE.mbtiles
+        tile_url, credit = TILE_URL, state.basemap.attribution
+    body = {"version": __version__, "tile_url": tile_url, "tile_attribution": credit,
+            "basemap_zoom": None if state.basemap is None else [state.basemap.min_zoom, state.basemap.max_zoom],
             "api_key_required": bool(s.api_keys),
             "sample_route": _sample_route_path() is not None, "palette": palette_doc()}
     return Response(json.dumps(body), media_type=MediaType.json.value)

@@ -20,6 +20,8 @@ variable                                meaning
 ``GISNOISE_SEED_CARDS_DIR``             folder of card JSON files put in an empty store
 ``GISNOISE_TILE_URL``                   basemap tile URL template of the web page
                                         (empty: no basemap)
+``GISNOISE_BASEMAP``                    an MBTiles or PMTiles file served at /basemap as the web
+                                        page's basemap (instead of the tile URL)
 ======================================  =============================================
 """
 
@@ -67,6 +69,9 @@ class Settings(BaseSettings):
     tile_attribution: str = Field(default="&copy; OpenStreetMap contributors",
                                   description="Credit shown with the basemap tiles of tile_url once they load.")
 
+    basemap: Path | None = Field(default=None, description="MBTiles or PMTiles file of raster tiles served at /basemap/{z}/{x}/{y} "
+                                                            "as the web page's basemap (offline); overrides tile_url.")
+
     @field_validator("api_keys", mode="before")
     @classmethod
     def _split_keys(cls, v: object) -> object:
@@ -74,7 +79,7 @@ class Settings(BaseSettings):
             return [k.strip() for k in v.split(",") if k.strip()]
         return v
 
-    @field_validator("seed_cards_dir", mode="before")
+    @field_validator("seed_cards_dir", "basemap", mode="before")
     @classmethod
     def _empty_is_none(cls, v: object) -> object:
         return None if v == "" else v

@@ -34,3 +34,22 @@ def test_web_default_closes_the_lowest_level_and_a_small_margin_is_flagged(clien
     cut = {f["properties"]["level"] for f in small["features"] if f["properties"]["clipped"]}
     assert 45.0 in cut and 65.0 not in cut
     assert small["gisnoise"]["warnings"][0].startswith("LAmax 45")
+
+
+def test_sel_asked_of_the_service_closes_its_lowest_contour(client):
+    """SEL is contoured 10 dB above the map's levels and the default extent closes the lowest of them."""
+    route = client.get("/samples/route").json()
+    req = {"trajectory": {"format": "geojson", "data": route}, **WEB_DEFAULT, "metrics": ["LAmax", "SEL"],
+           "grid": {"resolution_m": 40}}
+    r = client.post("/contours", json={**req, "output": "geotiff"})
+    assert r.status_code == 200, r.text
+    from rasterio.io import MemoryFile
+
+    with MemoryFile(r.content) as mf, mf.open() as ds:
+        sel = ds.read(list(ds.descriptions).index("SEL") + 1)
+    assert sel.max() > 75.0 and _edge(sel).max() < 45.0 + 10.0
+    doc = client.post("/contours", json=req).json()
+    assert doc["gisnoise"]["warnings"] == []
+    assert {f["properties"]["level"] for f in doc["features"] if f["properties"]["metric"] == "SEL"} == {
+        55.0, 60.0, 65.0, 70.0, 75.0}
+    assert not any(f["properties"]["clipped"] for f in doc["features"])

@@ -85,7 +85,10 @@ function setBasemap(url) {
   tileNotice("");
   if (!url) { tileNotice("No basemap is set: contours are drawn on a blank map."); return; }
   const credit = url === app.config.tile_url ? (app.config.tile_attribution || "") : "";
-  const layer = L.tileLayer(url, { maxZoom: 19, attribution: credit });
+  const opts = { maxZoom: 19, attribution: credit };
+  const zooms = url === app.config.tile_url ? app.config.basemap_zoom : null;  // a served MBTiles file
+  if (zooms) { opts.minNativeZoom = zooms[0]; opts.maxNativeZoom = zooms[1]; }
+  const layer = L.tileLayer(url, opts);
   layer.on("tileload", () => { app.tilesLoaded += 1; if (app.tilesLoaded === 1) tileNotice(""); });
   layer.on("tileerror", () => {
     app.tilesFailed += 1;

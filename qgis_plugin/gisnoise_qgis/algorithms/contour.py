@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import tempfile
@@ -41,8 +42,14 @@ from qgis.PyQt.QtCore import QVariant
 from . import styles
 from .base import FeedbackProgress, GisnoiseAlgorithm
 from .layers import trajectory_columns
+from .waypoints import ALT_REFERENCES, is_waypoint_layer, waypoints_document
 
 METRICS = ("LAmax", "LAeq", "SEL")
+#: What a trajectory layer holds: a flown track (times per sample) or waypoints (flown by the vehicle model).
+TRAJECTORY_KINDS = ("auto (waypoints when the layer has no time)", "flown track (time, attitude, power per sample)",
+                    "waypoints")
+ALT_REFERENCE_LABELS = ("the ground (AGL: the DEM or the flat ground height)", "mean sea level (needs the geoid "
+                        "undulation)", "the WGS84 ellipsoid")
 
 
 class NoiseMapAlgorithm(GisnoiseAlgorithm):
@@ -57,6 +64,14 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
     YAW_FIELD = "YAW_FIELD"
     POWER_FIELD = "POWER_FIELD"
     PHASE_FIELD = "PHASE_FIELD"
+    TRAJECTORY_KIND = "TRAJECTORY_KIND"
+    WAYPOINT_ALT_FIELD = "WAYPOINT_ALT_FIELD"
+    WAYPOINT_SPEED_FIELD = "WAYPOINT_SPEED_FIELD"
+    WAYPOINT_HOLD_FIELD = "WAYPOINT_HOLD_FIELD"
+    WAYPOINT_ORDER_FIELD = "WAYPOINT_ORDER_FIELD"
+    ALTITUDE_REFERENCE = "ALTITUDE_REFERENCE"
+    POWER_W = "POWER_W"
+    GEOID_UNDULATION = "GEOID_UNDULATION"
     CARDS = "CARDS"
     RESOLUTION = "RESOLUTION"
     MARGIN = "MARGIN"
@@ -95,11 +110,15 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             "Trajectory: a point layer (one feature per log sample with time in s, height in m (WGS84 "
             "ellipsoidal; a field or the points' Z), roll, pitch, yaw in deg, electric power in W, phase), "
             "a line layer (one sample per vertex: Z = height, M = time; attitude, power and phase from the "
-            "feature's fields; yaw along the line unless a yaw field is given), or a flight CSV / GeoJSON "
-            "trajectory file as the gisnoise command line reads it.\n\n"
+            "feature's fields; yaw along the line unless a yaw field is given), a layer of waypoints (points "
+            "in order or a line's vertices; fields alt, speed, hold_s, seq, phase; read as waypoints when the "
+            "layer has no time, or by 'The layer holds'), flown by the vehicle model as a waypoints file, or a "
+            "file as the gisnoise command line reads it: flight CSV, GeoJSON, waypoints, PX4 .ulg, ArduPilot "
+            ".bin (constant power for a log without battery current, geoid undulation for ArduPilot).\n\n"
             "Outputs: a GeoTIFF with one band per metric (LAmax, LAeq over the flight, SEL), "
             "isobands and isolines of the chosen levels (properties metric, level and clipped: true where the "
-            "grid's edge cuts the contour; the default margin closes the lowest level of LAmax and LAeq), "
+            "grid's edge cuts the contour; the default margin closes the lowest level of LAmax and LAeq, and "
+            "of SEL, which is contoured 10 dB above the levels), "
             "styled with graduated colours by level."
         )
 
@@ -125,6 +144,25 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             self.addParameter(QgsProcessingParameterField(
                 key, label, defaultValue=default, parentLayerParameterName=self.TRAJECTORY, type=ftype,
                 optional=True))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.TRAJECTORY_KIND, "The layer holds", options=list(TRAJECTORY_KINDS), defaultValue=0))
+        for key, label, default in (
+            (self.WAYPOINT_ALT_FIELD, "Waypoint altitude field (m, see altitude reference; empty: geometry Z)", "alt"),
+            (self.WAYPOINT_SPEED_FIELD, "Waypoint speed field (m/s; empty: the vehicle's cruise speed)", "speed"),
+            (self.WAYPOINT_HOLD_FIELD, "Waypoint hold time field (s; empty: no hold)", "hold_s"),
+            (self.WAYPOINT_ORDER_FIELD, "Waypoint order field (empty: feature order)", "seq"),
+        ):
+            self.addParameter(QgsProcessingParameterField(
+                key, label, defaultValue=default, parentLayerParameterName=self.TRAJECTORY,
+                type=QgsProcessingParameterField.Any, optional=True))
+        self.addParameter(QgsProcessingParameterEnum(
+            self.ALTITUDE_REFERENCE, "Waypoint altitudes are above", options=list(ALT_REFERENCE_LABELS),
+            defaultValue=0))
+        for key, label in ((self.POWER_W, "Constant electric power (W; for a flight log without battery current)"),
+                           (self.GEOID_UNDULATION, "Geoid undulation (m; ArduPilot logs and waypoints above mean sea "
+                                                   "level)")):
+            self.addParameter(QgsProcessingParameterNumber(key, label, QgsProcessingParameterNumber.Double,
+                                                           optional=True))
         self.addParameter(QgsProcessingParameterMultipleLayers(
             self.CARDS, "Model cards (JSON, one per phase)", layerType=QgsProcessing.TypeFile))
         self.addParameter(QgsProcessingParameterNumber(
@@ -179,8 +217,12 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             createByDefault=True))
 
     # ------------------------------------------------------------------ inputs
+    def _optional(self, parameters, key, context):
+        return None if parameters.get(key) in (None, "") else self.parameterAsDouble(parameters, key, context)
+
     def _trajectory(self, parameters, context, feedback):
-        from gisnoise.flight import trajectory as gtraj
+        """The route (``gisnoise.flight.Route``) of the layer or file, read by the core's one reader."""
+        from gisnoise.flight import read_route
 
         source = self.parameterAsSource(parameters, self.TRAJECTORY, context)
         path = self.parameterAsFile(parameters, self.TRAJECTORY_FILE, context)
@@ -190,18 +232,46 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         if source is None and not path:
             raise QgsProcessingException("no trajectory: give a trajectory layer (TRAJECTORY) or a trajectory "
                                          "file (TRAJECTORY_FILE)")
-        if path:
-            from gisnoise.flight import read_trajectory
+        dem_layer = self.parameterAsRasterLayer(parameters, self.DEM, context)
+        dem = dem_layer.source() if dem_layer is not None else None
+        dem_offset = self.parameterAsDouble(parameters, self.DEM_OFFSET, context)
+        geoid = self._optional(parameters, self.GEOID_UNDULATION, context)
+        if path and path.lower().endswith(".bin") and importlib.util.find_spec("pymavlink") is None:
+            raise QgsProcessingException(
+                "reading an ArduPilot .bin log needs pymavlink in QGIS's Python (compiled, so the plugin does not "
+                "bundle it): Linux: python3 -m pip install --user pymavlink; Windows: in the OSGeo4W Shell, python -m "
+                "pip install pymavlink; macOS: /Applications/QGIS.app/Contents/MacOS/bin/python3 -m pip install "
+                "--user pymavlink; then restart QGIS (field TRAJECTORY_FILE)")
+        if path:  # flight CSV, GeoJSON, waypoints, PX4 .ulg, ArduPilot .bin
+            return read_route(path, dem=dem, dem_offset_m=dem_offset, geoid_undulation_m=geoid,
+                              power_w=self._optional(parameters, self.POWER_W, context))
+        layer = self.parameterAsVectorLayer(parameters, self.TRAJECTORY, context)
+        name = layer.name() if layer is not None else "trajectory"
+        kind = TRAJECTORY_KINDS[self.parameterAsEnum(parameters, self.TRAJECTORY_KIND, context)]
+        time_field = self.parameterAsString(parameters, self.TIME_FIELD, context)
+        if kind == "waypoints" or (kind.startswith("auto") and is_waypoint_layer(source, time_field)):
+            names = {}
+            for col, key, default in (("alt", self.WAYPOINT_ALT_FIELD, "alt"), ("speed", self.WAYPOINT_SPEED_FIELD,
+                                                                               "speed"),
+                                      ("hold_s", self.WAYPOINT_HOLD_FIELD, "hold_s"),
+                                      ("seq", self.WAYPOINT_ORDER_FIELD, "seq"), ("phase", self.PHASE_FIELD, "phase")):
+                field = self.parameterAsString(parameters, key, context).strip()
+                # a default name the layer does not have means "not in the layer"; a name the user gave must exist
+                names[col] = "" if field == default and source.fields().lookupField(field) < 0 else field
+            ref = ALT_REFERENCES[self.parameterAsEnum(parameters, self.ALTITUDE_REFERENCE, context)]
+            doc = waypoints_document(source, context, feedback, fields=names, altitude_reference=ref,
+                                     ground_h_m=self._optional(parameters, self.GROUND_HEIGHT, context),
+                                     geoid_undulation_m=geoid, layer_name=name)
+            feedback.pushInfo(f"waypoint layer '{name}': {len(doc['waypoints'])} waypoints, altitudes {ref}")
+            return read_route(doc, dem=dem, dem_offset_m=dem_offset)
+        from gisnoise.flight import trajectory as gtraj
 
-            return read_trajectory(path)
         fields = {col: self.parameterAsString(parameters, key, context)
                   for col, key in (("t", self.TIME_FIELD), ("h", self.ALTITUDE_FIELD), ("roll", self.ROLL_FIELD),
                                    ("pitch", self.PITCH_FIELD), ("yaw", self.YAW_FIELD),
                                    ("power_w", self.POWER_FIELD), ("phase", self.PHASE_FIELD))}
-        layer = self.parameterAsVectorLayer(parameters, self.TRAJECTORY, context)
-        name = layer.name() if layer is not None else "trajectory"
         cols = trajectory_columns(source, context, feedback, fields=fields, layer_name=name)
-        return gtraj.from_columns(cols, source=f"trajectory layer '{name}'")
+        return read_route(gtraj.from_columns(cols, source=f"trajectory layer '{name}'"))
 
     def _cards(self, parameters, context):
         from gisnoise.model import cards as gcards
@@ -216,7 +286,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         from gisnoise.maps import make_map, parse_levels
 
         levels = parse_levels(self.parameterAsString(parameters, self.LEVELS, context), field="LEVELS")
-        traj = self._trajectory(parameters, context, feedback)
+        route = self._trajectory(parameters, context, feedback)
+        traj = route.trajectory
         cards = self._cards(parameters, context)
         metric_idx = self.parameterAsEnums(parameters, self.METRICS, context)
         metrics = tuple(METRICS[i] for i in sorted(metric_idx)) or METRICS
@@ -248,7 +319,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             if parameters.get(key) not in (None, ""):
                 kw[name] = self.parameterAsDouble(parameters, key, context)
         paths = make_map(
-            traj, cards, work,
+            route, cards, work,
             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
             margin_m=(None if parameters.get(self.MARGIN) in (None, "")
                       else self.parameterAsDouble(parameters, self.MARGIN, context)),
@@ -275,8 +346,11 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             results[self.OUTPUT_TRACK] = track
         feedback.setProgress(98.0)
         shown = next(m for m in metrics if m in contoured)
-        self._style_outputs(results, context, levels, shown, metrics.index(shown) + 1)
-        self._save_styles(results, levels, shown, metrics.index(shown) + 1, feedback)
+        from gisnoise.maps import metric_levels
+
+        shown_levels = metric_levels(shown, levels)  # SEL's contours lie higher than the map's levels
+        self._style_outputs(results, context, shown_levels, shown, metrics.index(shown) + 1)
+        self._save_styles(results, shown_levels, shown, metrics.index(shown) + 1, feedback)
         feedback.setProgress(100.0)
         return results
 

@@ -172,8 +172,7 @@ class QuieterRouteAlgorithm(_PlanningBase):
         return (p.x(), p.y())
 
     def compute(self, parameters, context, feedback):
-        import shapely
-
+        from gisnoise.geo import shapes
         from gisnoise.planning import optimize_route, waypoints_geojson, write_comparison
 
         polys = []
@@ -183,7 +182,7 @@ class QuieterRouteAlgorithm(_PlanningBase):
             for f in layer.getFeatures():
                 g = f.geometry()
                 g.transform(tr)
-                shp = shapely.from_wkb(bytes(g.asWkb()))
+                shp = shapes.from_wkb(bytes(g.asWkb()))
                 polys.extend(list(shp.geoms) if shp.geom_type == "MultiPolygon" else [shp])
         res = optimize_route(self._lonlat(parameters, self.START, context), self._lonlat(parameters, self.GOAL, context),
                              _cards(self, parameters, context), population=_population(self, parameters, context),

@@ -38,10 +38,11 @@ def _run(tmp_path, **params):
 
 
 def test_layer_without_time_field_names_the_field(plugin, tmp_path):
+    """Read as a flown track (TRAJECTORY_KIND 1; by default a layer without time is read as waypoints)."""
     from qgis.core import QgsProcessingException
 
     with pytest.raises(QgsProcessingException) as err:
-        _run(tmp_path, TRAJECTORY=_point_layer(with_time=False))
+        _run(tmp_path, TRAJECTORY=_point_layer(with_time=False), TRAJECTORY_KIND=1)
     msg = str(err.value)
     assert "time field" in msg and "'t'" in msg and "TIME_FIELD" in msg
 
@@ -67,7 +68,7 @@ def test_qgis_keeps_running_after_bad_input(plugin, tmp_path):
     from qgis.core import QgsApplication, QgsProcessingException
 
     with pytest.raises(QgsProcessingException):
-        _run(tmp_path / "bad", TRAJECTORY=_point_layer(with_time=False))
+        _run(tmp_path / "bad", TRAJECTORY=_point_layer(with_time=False), TRAJECTORY_KIND=1)
     res = _run(tmp_path, TRAJECTORY=_point_layer(with_time=True), RESOLUTION=25.0, MARGIN=100.0)
     assert (tmp_path / "grid.tif").is_file() and res["OUTPUT_BANDS"]
     assert QgsApplication.instance() is not None

@@ -1,0 +1,160 @@
+"""Planar geometry on shapely 2 or shapely 1.8: the shapely 2 names the core uses.
+
+QGIS 3.22 LTR and the Linux distributions that package it (Debian 12, Ubuntu 22.04) bring
+shapely 1.8 in the Python QGIS runs; a compiled shapely 2 cannot be shipped in a plugin zip
+that must load on every platform.  The core therefore calls shapely through this module
+(``from gisnoise.geo import shapes as shapely``): with shapely 2 each name is shapely's own
+function; with shapely 1.8 the same result is computed with 1.8's API (``shapely.ops``,
+``shapely.vectorized``, methods of the geometries).  :data:`NAMES` lists what is offered;
+a test checks that the core uses nothing else of it.
+
+Arrays of coordinates keep their shape (``contains_xy``, ``points``, ``distance``), as in
+shapely 2.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import shapely as _shapely
+from shapely import wkb as _wkb
+from shapely.geometry import LineString, MultiLineString, MultiPolygon, Point, Polygon, box
+from shapely.validation import make_valid
+
+__all__ = ["LineString", "MultiLineString", "MultiPolygon", "NAMES", "Point", "Polygon", "SHAPELY2", "VERSION",
+           "box", "buffer", "contains_xy", "distance", "from_wkb", "intersects", "make_valid", "points", "prepare",
+           "set_precision", "transform", "union_all"]
+
+#: The installed shapely's version.
+VERSION: str = str(_shapely.__version__)
+#: True with shapely 2.x (its vectorised functions are used), False with 1.8 (tests set it to compare).
+SHAPELY2: bool = int(VERSION.split(".")[0]) >= 2
+#: The names the core may use through this module.
+NAMES = frozenset(n for n in __all__ if n not in ("NAMES", "SHAPELY2", "VERSION"))
+
+
+def union_all(geoms: Sequence[Any]) -> Any:
+    """Union of the geometries (shapely 1.8: ``shapely.ops.unary_union``)."""
+    if SHAPELY2:
+        return _shapely.union_all(list(geoms))
+    from shapely.ops import unary_union
+
+    return unary_union(list(geoms))
+
+
+def contains_xy(geom: Any, x: Any, y: Any) -> np.ndarray:
+    """Whether each point ``(x, y)`` lies in the interior of ``geom``; the shape of ``x``."""
+    xa, ya = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    if SHAPELY2:
+        return np.asarray(_shapely.contains_xy(geom, xa, ya), dtype=bool)
+    from shapely import vectorized
+
+    flat = vectorized.contains(geom, xa.ravel(), ya.ravel())
+    return np.asarray(flat, dtype=bool).reshape(xa.shape)
+
+
+def points(x: Any, y: Any) -> np.ndarray:
+    """An object array of Points, the shape of ``x``."""
+    xa, ya = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    if SHAPELY2:
+        return np.asarray(_shapely.points(xa, ya))
+    out = np.empty(xa.shape, dtype=object)
+    for idx in np.ndindex(xa.shape):
+        out[idx] = Point(float(xa[idx]), float(ya[idx]))
+    return out
+
+
+def distance(geom: Any, others: Any) -> Any:
+    """Distance from ``geom`` to each geometry of ``others`` (an array or one geometry)."""
+    if SHAPELY2:
+        return _shapely.distance(geom, others)
+    arr = np.asarray(others, dtype=object)
+    if arr.ndim == 0:
+        return float(geom.distance(arr.item()))
+    out = np.empty(arr.shape, dtype=float)
+    for idx in np.ndindex(arr.shape):
+        out[idx] = geom.distance(arr[idx])
+    return out
+
+
+def buffer(geom: Any, dist: float) -> Any:
+    """``geom`` grown by ``dist``; arcs of 8 segments a quarter circle on both paths."""
+    return _shapely.buffer(geom, dist, quad_segs=8) if SHAPELY2 else geom.buffer(dist, 8)
+
+
+def intersects(a: Any, b: Any) -> bool:
+    """Whether two geometries share a point."""
+    return bool(_shapely.intersects(a, b)) if SHAPELY2 else bool(a.intersects(b))
+
+
+def prepare(geom: Any) -> None:
+    """Prepare ``geom`` in place for repeated predicates (shapely 1.8: nothing to do)."""
+    if SHAPELY2:
+        _shapely.prepare(geom)
+
+
+def from_wkb(data: bytes) -> Any:
+    """The geometry of well-known binary ``data``."""
+    return _wkb.loads(bytes(data))
+
+
+def transform(geom: Any, fn: Callable[[np.ndarray], np.ndarray]) -> Any:
+    """``geom`` with its coordinates mapped by ``fn`` (an ``(N, 2)`` array to an ``(N, 2)`` array)."""
+    if SHAPELY2:
+        return _shapely.transform(geom, fn)
+    from shapely.ops import transform as ops_transform
+
+    def xy(x: Any, y: Any, z: Any = None) -> tuple[np.ndarray, np.ndarray]:
+        out = np.asarray(fn(np.column_stack([np.asarray(x, dtype=float), np.asarray(y, dtype=float)])))
+        return out[:, 0], out[:, 1]
+
+    return ops_transform(xy, geom)
+
+
+def set_precision(geom: Any, grid_size: float) -> Any:
+    """``geom`` with coordinates snapped to multiples of ``grid_size``.
+
+    shapely 1.8 has no ``set_precision``: the coordinates are rounded, repeated points
+    dropped, lines that collapse to a point become empty and polygons are repaired with
+    ``make_valid`` (shapely 2 does the same in one step).
+    """
+    if SHAPELY2:
+        return _shapely.set_precision(geom, grid_size)
+    return _snap(geom, float(grid_size))
+
+
+def _snap_coords(coords: Any, g: float) -> np.ndarray:
+    c = np.round(np.asarray(coords, dtype=float)[:, :2] / g) * g
+    if len(c) > 1:
+        keep = np.concatenate([[True], np.any(np.diff(c, axis=0) != 0.0, axis=1)])
+        c = c[keep]
+    return c
+
+
+def _snap(geom: Any, g: float) -> Any:
+    kind = geom.geom_type
+    if geom.is_empty:
+        return geom
+    if kind == "Point":
+        return Point(*_snap_coords(geom.coords, g)[0])
+    if kind == "LineString":
+        c = _snap_coords(geom.coords, g)
+        return LineString(c) if len(c) >= 2 else LineString()
+    if kind == "Polygon":
+        rings = [_snap_coords(r.coords, g) for r in (geom.exterior, *geom.interiors)]
+        if len(rings[0]) < 4:
+            return Polygon()
+        poly = Polygon(rings[0], [r for r in rings[1:] if len(r) >= 4])
+        return poly if poly.is_valid else make_valid(poly)
+    if kind == "MultiLineString":
+        return MultiLineString([p for p in (_snap(part, g) for part in geom.geoms) if not p.is_empty])
+    if kind == "MultiPolygon":
+        parts: list[Polygon] = []
+        for part in geom.geoms:
+            q = _snap(part, g)
+            parts.extend([q] if q.geom_type == "Polygon" else [p for p in getattr(q, "geoms", [])
+                                                               if p.geom_type == "Polygon"])
+        return MultiPolygon([p for p in parts if not p.is_empty])
+    raise TypeError(f"set_precision: no shapely 1.8 path for a {kind}")
