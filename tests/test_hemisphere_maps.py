@@ -88,10 +88,37 @@ def test_hemisphere_and_parametric_cards_mix_by_phase(m300):
     assert set(ref.metadata["phases"]) == {"climb", "horizontal"}
 
 
-def test_fast_engine_refuses_what_it_does_not_compute_for_hemispheres(m300):
-    traj = straight_flight(v=V, height=H, n0=-20.0, n1=20.0, dt=0.5)
-    grid = centred_grid(10.0, 3, 3)
-    with pytest.raises(InputError, match="numpy") as e:
-        evaluate_grid(traj, [m300], grid, engine="fast", ground_h=0.0, threshold_db=60.0)
-    assert e.value.field == "engine"
+def test_fast_engine_time_above_snapshot_and_floor_agree_with_numpy(m300):
+    """Time above levels, a snapshot and the audibility floor on the fast hemisphere path equal the reference."""
+    traj = straight_flight(v=V, height=H, n0=-150.0, n1=150.0, dt=0.25)
+    grid = centred_grid(20.0, 11, 41)  # 200 m along the track, 800 m across
+    kw = dict(ground_h=0.0, receiver_height=1.5, metrics=("LAmax", "LAeq"), threshold_db=[45.0, 60.0],
+              snapshot_t=30.0)
+    ref = evaluate_grid(traj, [m300], grid, engine="numpy", **kw)
+    fast = evaluate_grid(traj, [m300], grid, engine="fast", **kw)
+    assert fast.metadata["engine"] == "fast"
+    for name in ("LAmax", "LAeq", "LA@30s"):
+        np.testing.assert_allclose(fast.bands[name], ref.bands[name], atol=0.01)
+    for name in ("TA45", "TA60"):  # time above: linear between instants, a level 0.01 dB off moves a crossing
+        np.testing.assert_allclose(fast.bands[name], ref.bands[name], atol=0.01)
+    assert np.nanmax(ref.bands["TA45"]) > 10.0 and np.nanmin(ref.bands["TA60"]) == 0.0
+    # floor: cells certainly below it are skipped (NaN), the others exact
+    floor = 50.0
+    fl = evaluate_grid(traj, [m300], grid, engine="fast", floor_db=floor, **kw)
+    skipped = np.isnan(fl.bands["LAmax"])
+    assert fl.metadata["cells_below_floor"] == int(skipped.sum()) > 0
+    assert np.all(ref.bands["LAmax"][skipped] < floor)
+    np.testing.assert_allclose(fl.bands["LAmax"][~skipped], ref.bands["LAmax"][~skipped], atol=0.01)
 
+
+def test_fast_engine_refuses_cells_beyond_the_tables_reach(m300):
+    from gisnoise.maps import receivers_for
+    from gisnoise.maps.hemisource import prepare_flight, run_hemi_window
+
+    traj = straight_flight(v=V, height=H, n0=-20.0, n1=20.0, dt=0.5)
+    grid = centred_grid(100.0, 21, 3)  # 2.1 km wide
+    rc = receivers_for(grid, [traj], ground_h=0.0)
+    fl = prepare_flight(traj, [m300], rc.frame, reach_m=500.0)
+    with pytest.raises(InputError, match="reach") as e:
+        run_hemi_window(fl, rc, 0, 3, 0, 21)
+    assert e.value.field == "grid"

@@ -1,0 +1,398 @@
+"""The numba window kernel of the fast engine for flights with measured hemispheres (float32, vectorized).
+
+:func:`_hemi_window_kernel` is the parametric window kernel of :mod:`gisnoise.maps._numba`
+(same receivers' lattice, incremental body vectors, audibility skipping, accumulators and
+time above) with a second kind of instant: a hemisphere card.  Per cell and instant it
+evaluates the card's stated scheme (:class:`~gisnoise.model.HemisphereCard`: bilinear in the
+table angles of the nodes' A-weighted levels at the receiver's distance) from tables prepared
+in NumPy by :mod:`gisnoise.maps.hemisource`:
+
+* **Angles without libm.**  ``phi_t = atan2(-x_b, |z_b|)`` and ``theta_t = atan2(y_b, |z_b|)``
+  by the kernel's polynomial ``atan`` (5e-7 rad).
+* **Table angle -> fractional node index by bins.**  Each axis is cut into bins narrower
+  than its smallest node spacing, so a bin holds at most one node ``k_s``; the fractional
+  index ``u`` is piecewise linear with its kinks at the nodes,
+  ``u = c + S1 min(a, k_s) + S2 max(a - k_s, 0)`` (four small-table reads, no search):
+  bilinear interpolation in ``u`` on the integers is bilinear interpolation in the angles.
+* **Distance by one table.**  Per node, the A-weighted level without spherical spreading,
+  ``T_q(d) = 10 lg sum_b 10^((L_b,q + A_b - alpha_b (d - r0)) / 10)``, is tabulated on a grid
+  uniform in ``s = log2(d^2)`` and read linearly; the spreading ``-20 lg(d / r0)`` is added
+  exactly from ``s`` (the kernel's polynomial ``log2``).  The level is the trilinear
+  interpolation of the table (4 nodes x 2 distances) minus the spreading.
+* **Filled nodes.**  One read of a 4-bit mask per lower node gives the weight on filled
+  nodes; the energy times it is summed separately (``efill``) for the map's metadata.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gisnoise.maps import _numba as _k
+
+numba = _k.numba
+if numba is not None:
+    from llvmlite import ir as _ir
+    from numba.core import types as _nbt
+
+#: Columns of the per-card rows ``hs`` (float64) the kernel reads.
+(H_TAB, H_NN, H_NJ, H_SI, H_SJ, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
+ H_TA0, H_TINV, H_TNB, H_TBO, H_MASK, H_K0) = range(21)
+N_HS = 21
+
+_CSP = 10.0 / math.log2(10.0)
+"""``20 lg d = _CSP log2(d^2)``, dB."""
+
+
+if numba is not None:
+    _F0 = np.float32(0.0)
+    _F1 = np.float32(1.0)
+    _F32_CSP = np.float32(_CSP)
+    _K10 = _k._K10
+    _DB_PER_LOG2 = _k._DB_PER_LOG2
+    _FLUSH = _k._FLUSH
+
+    @_k._intrinsic
+    def _vectorize_gathers(typingctx):
+        """Mark the calling function's array arguments ``noalias`` and prefer 512-bit vectors.
+
+        LLVM vectorizes a loop that reads tables at computed indices (gathers) only when it
+        knows the stores cannot touch the tables; every caller passes distinct arrays and
+        writes only to its output arrays.  Speed only: with or without it the results are
+        the same.
+        """
+
+        def codegen(context, builder, sig, args):
+            for arg in builder.function.args[2:]:  # after the return and exception pointers
+                if isinstance(arg.type, _ir.PointerType):
+                    arg.add_attribute("noalias")
+            try:  # see gisnoise.maps._numba._prefer_512bit_vectors
+                set.add(builder.function.attributes, '"prefer-vector-width"="512"')
+            except Exception:  # pragma: no cover
+                pass
+            return context.get_dummy_value()
+
+        return _nbt.none(), codegen
+
+    @_k.jit(fastmath=True, error_model="numpy", inline="always")
+    def _atan_s(y, x):
+        """``atan2(y, x)`` for ``x >= 0`` (float32), in [-pi/2, pi/2]."""
+        r = _k._atan2_pos(abs(y), x)
+        return -r if y < _F0 else r
+
+    @_k.jit(fastmath=True, error_model="numpy", nogil=True)
+    def _hemi_points(xq, yq, zq, dmin2_, tab, hs, pbins, tbins, mask, s0_, inv_hs_, nd_, h):
+        """The kernel's level and filled weight for arrays of body vectors, hemisphere card ``h`` (tests)."""
+        _vectorize_gathers()
+        n = xq.size
+        levo = np.empty(n, np.float32)
+        fwo = np.empty(n, np.float32)
+        hrow = hs[h]
+        tb = np.int32(hrow[H_TAB])
+        nn = np.int32(hrow[H_NN])
+        nj = np.int32(hrow[H_NJ])
+        si = np.int32(hrow[H_SI])
+        sj = np.int32(hrow[H_SJ])
+        imax = np.int32(hrow[H_IMAX])
+        jmax = np.int32(hrow[H_JMAX])
+        amin = np.float32(hrow[H_AMIN])
+        amax = np.float32(hrow[H_AMAX])
+        bmin = np.float32(hrow[H_BMIN])
+        bmax = np.float32(hrow[H_BMAX])
+        pa0 = np.float32(hrow[H_PA0])
+        pinv = np.float32(hrow[H_PINV])
+        pnb = np.int32(hrow[H_PNB])
+        pbo = np.int32(hrow[H_PBO])
+        ta0 = np.float32(hrow[H_TA0])
+        tinv = np.float32(hrow[H_TINV])
+        tnb = np.int32(hrow[H_TNB])
+        tbo = np.int32(hrow[H_TBO])
+        mo = np.int32(hrow[H_MASK])
+        k0 = np.float32(hrow[H_K0])
+        dmin2 = np.float32(dmin2_)
+        s0 = np.float32(s0_)
+        inv_hs = np.float32(inv_hs_)
+        nd = np.int32(nd_)
+        for q in range(n):
+            xb = np.float32(xq[q])
+            yb = np.float32(yq[q])
+            zb = np.float32(zq[q])
+            d2 = xb * xb + yb * yb + zb * zb
+            s = _k._log2(max(d2, dmin2))
+            zc = abs(zb)
+            ap = _atan_s(-xb, zc)
+            bt = _atan_s(yb, zc)
+            out = (zb < _F0) or (ap < amin) or (ap > amax) or (bt < bmin) or (bt > bmax)
+            ap = min(max(ap, amin), amax)
+            bt = min(max(bt, bmin), bmax)
+            # fractional node indices from the bins
+            mp = min(np.int32((ap - pa0) * pinv), pnb - 1) + pbo
+            ks = pbins[mp, 0]
+            u = pbins[mp, 1] + pbins[mp, 2] * min(ap, ks) + pbins[mp, 3] * max(ap - ks, _F0)
+            mt = min(np.int32((bt - ta0) * tinv), tnb - 1) + tbo
+            kt = tbins[mt, 0]
+            v = tbins[mt, 1] + tbins[mt, 2] * min(bt, kt) + tbins[mt, 3] * max(bt - kt, _F0)
+            ii = min(max(np.int32(u), np.int32(0)), imax)
+            jj = min(max(np.int32(v), np.int32(0)), jmax)
+            wa = min(max(u - np.float32(ii), _F0), _F1)
+            wb = min(max(v - np.float32(jj), _F0), _F1)
+            x = (s - s0) * inv_hs
+            kd = min(max(np.int32(x), np.int32(0)), nd - 2)
+            fd = x - np.float32(kd)
+            node = ii * nj + jj
+            ro = tb + kd * nn + node
+            t00 = tab[ro] + fd * (tab[ro + nn] - tab[ro])
+            t01 = tab[ro + sj] + fd * (tab[ro + sj + nn] - tab[ro + sj])
+            t10 = tab[ro + si] + fd * (tab[ro + si + nn] - tab[ro + si])
+            t11 = tab[ro + si + sj] + fd * (tab[ro + si + sj + nn] - tab[ro + si + sj])
+            w00 = (_F1 - wa) * (_F1 - wb)
+            w01 = (_F1 - wa) * wb
+            w10 = wa * (_F1 - wb)
+            w11 = wa * wb
+            lev = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
+            bits = mask[mo + node]
+            fw = (w00 * np.float32(bits & 1) + w01 * np.float32((bits >> 1) & 1) + w10 * np.float32((bits >> 2) & 1)
+                  + w11 * np.float32((bits >> 3) & 1))
+            fw = _F1 if out else fw
+            levo[q] = lev
+            fwo[q] = fw
+        return levo, fwo
+
+    @_k.jit(fastmath=True, error_model="numpy", nogil=True)
+    def _hemi_window_kernel(P, U, dh, has_dem, k, m0, c0, ncw, src, C, gain, cidx, coef, w, dt, radius, thr,
+                            kind, hs, tab, pbins, tbins, mask, s0, inv_hs, nd,
+                            emax, energy, ta, computed, efill):  # pragma: no cover - compiled
+        """:func:`gisnoise.maps._numba._window_kernel` with hemisphere instants (``kind[i] >= 0``: row of ``hs``).
+
+        Extra output ``efill``: ``sum w_i 10^(L_i/10) f_i`` with ``f_i`` the weight on filled nodes.
+        """
+        _vectorize_gathers()
+        nr = P.shape[0]
+        ns = (P.shape[1] - 1) // 2
+        n = src.shape[0]
+        nt = thr.shape[0]
+        thr32 = np.empty(nt, np.float32)
+        for t in range(nt):
+            thr32[t] = np.float32(thr[t])
+        lcur = np.empty(k, np.float32)
+        lprev = np.empty(k, np.float32)
+        eacc = np.zeros(k, np.float32)
+        facc = np.zeros(k, np.float32)
+        tacc = np.zeros((nt, k), np.float32)
+        e0 = np.empty(3)
+        e1 = np.empty(3)
+        e2 = np.empty(3)
+        n0 = np.empty(3)
+        n1 = np.empty(3)
+        lo_b = np.empty(3)
+        hi_b = np.empty(3)
+        inv_k = 1.0 / k
+        half_k = 0.5 * k
+        half_k32 = np.float32(half_k)
+        s032 = np.float32(s0)
+        ihs32 = np.float32(inv_hs)
+        nd32 = np.int32(nd)
+        for r in range(nr):
+            for sg in range(ns):
+                a = (m0 + sg) * k
+                lo = max(a, c0)
+                hi = min(a + k, c0 + ncw)
+                if hi <= lo:
+                    continue
+                m = hi - lo
+                q0 = lo - a
+                jl = lo - c0
+                for c in range(3):
+                    pa = P[r, 2 * sg, c]
+                    pm = P[r, 2 * sg + 1, c]
+                    pb = P[r, 2 * sg + 2, c]
+                    e0[c] = pm
+                    e1[c] = (pb - pa) * inv_k
+                    e2[c] = 2.0 * (pa - 2.0 * pm + pb) * inv_k * inv_k
+                    n0[c] = 0.5 * (U[r, 2 * sg, c] + U[r, 2 * sg + 2, c]) if has_dem else 0.0
+                    n1[c] = (U[r, 2 * sg + 2, c] - U[r, 2 * sg, c]) * inv_k if has_dem else 0.0
+                    lo_b[c] = np.inf
+                    hi_b[c] = -np.inf
+                for q in range(q0, q0 + m):
+                    u = q - half_k
+                    for c in range(3):
+                        v = e0[c] + u * (e1[c] + u * e2[c])
+                        if has_dem:
+                            v += dh[r, jl + q - q0] * (n0[c] + u * n1[c])
+                        lo_b[c] = min(lo_b[c], v)
+                        hi_b[c] = max(hi_b[c], v)
+                cx = 0.5 * (lo_b[0] + hi_b[0])
+                cy = 0.5 * (lo_b[1] + hi_b[1])
+                cz = 0.5 * (lo_b[2] + hi_b[2])
+                rad = 0.5 * math.sqrt((hi_b[0] - lo_b[0]) ** 2 + (hi_b[1] - lo_b[1]) ** 2
+                                      + (hi_b[2] - lo_b[2]) ** 2) + 0.01
+                audible = False
+                for i in range(n):
+                    if radius[i] < 0.0:
+                        continue
+                    dist = math.sqrt((src[i, 0] - cx) ** 2 + (src[i, 1] - cy) ** 2 + (src[i, 2] - cz) ** 2)
+                    if dist - rad <= radius[i]:
+                        audible = True
+                        break
+                if not audible:
+                    continue
+                em = emax[r, jl:jl + m]
+                en = energy[r, jl:jl + m]
+                ef = efill[r, jl:jl + m]
+                dhr = dh[r, jl:jl + m] if has_dem else dh[0, 0:1]
+                for q in range(m):
+                    computed[r, jl + q] = 1
+                for i in range(n):
+                    ci = cidx[i]
+                    v0 = e0[0] - src[i, 0]
+                    v1 = e0[1] - src[i, 1]
+                    v2 = e0[2] - src[i, 2]
+                    ax = np.float32(C[i, 0, 0] * v0 + C[i, 0, 1] * v1 + C[i, 0, 2] * v2)
+                    ay = np.float32(C[i, 1, 0] * v0 + C[i, 1, 1] * v1 + C[i, 1, 2] * v2)
+                    az = np.float32(C[i, 2, 0] * v0 + C[i, 2, 1] * v1 + C[i, 2, 2] * v2)
+                    bx = np.float32(C[i, 0, 0] * e1[0] + C[i, 0, 1] * e1[1] + C[i, 0, 2] * e1[2])
+                    by = np.float32(C[i, 1, 0] * e1[0] + C[i, 1, 1] * e1[1] + C[i, 1, 2] * e1[2])
+                    bz = np.float32(C[i, 2, 0] * e1[0] + C[i, 2, 1] * e1[1] + C[i, 2, 2] * e1[2])
+                    dx = np.float32(C[i, 0, 0] * e2[0] + C[i, 0, 1] * e2[1] + C[i, 0, 2] * e2[2])
+                    dy = np.float32(C[i, 1, 0] * e2[0] + C[i, 1, 1] * e2[1] + C[i, 1, 2] * e2[2])
+                    dz = np.float32(C[i, 2, 0] * e2[0] + C[i, 2, 1] * e2[1] + C[i, 2, 2] * e2[2])
+                    nx = ny = nz = tx = ty = tz = _F0
+                    if has_dem:
+                        nx = np.float32(C[i, 0, 0] * n0[0] + C[i, 0, 1] * n0[1] + C[i, 0, 2] * n0[2])
+                        ny = np.float32(C[i, 1, 0] * n0[0] + C[i, 1, 1] * n0[1] + C[i, 1, 2] * n0[2])
+                        nz = np.float32(C[i, 2, 0] * n0[0] + C[i, 2, 1] * n0[1] + C[i, 2, 2] * n0[2])
+                        tx = np.float32(C[i, 0, 0] * n1[0] + C[i, 0, 1] * n1[1] + C[i, 0, 2] * n1[2])
+                        ty = np.float32(C[i, 1, 0] * n1[0] + C[i, 1, 1] * n1[1] + C[i, 1, 2] * n1[2])
+                        tz = np.float32(C[i, 2, 0] * n1[0] + C[i, 2, 1] * n1[1] + C[i, 2, 2] * n1[2])
+                    wt = np.float32(w[i])
+                    hk = kind[i]
+                    if hk >= 0:
+                        hrow = hs[hk]
+                        tb = np.int32(hrow[H_TAB])
+                        nn = np.int32(hrow[H_NN])
+                        nj = np.int32(hrow[H_NJ])
+                        si = np.int32(hrow[H_SI])
+                        sj = np.int32(hrow[H_SJ])
+                        imax = np.int32(hrow[H_IMAX])
+                        jmax = np.int32(hrow[H_JMAX])
+                        amin = np.float32(hrow[H_AMIN])
+                        amax = np.float32(hrow[H_AMAX])
+                        bmin = np.float32(hrow[H_BMIN])
+                        bmax = np.float32(hrow[H_BMAX])
+                        pa0 = np.float32(hrow[H_PA0])
+                        pinv = np.float32(hrow[H_PINV])
+                        pnb = np.int32(hrow[H_PNB])
+                        pbo = np.int32(hrow[H_PBO])
+                        ta0 = np.float32(hrow[H_TA0])
+                        tinv = np.float32(hrow[H_TINV])
+                        tnb = np.int32(hrow[H_TNB])
+                        tbo = np.int32(hrow[H_TBO])
+                        mo = np.int32(hrow[H_MASK])
+                        k0 = np.float32(hrow[H_K0])
+                        dmin2 = np.float32(coef[ci, 9])
+                        for q in range(m):
+                            qf = np.float32(q0 + q) - half_k32
+                            hh = dhr[q] if has_dem else _F0
+                            xb = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
+                            yb = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
+                            zb = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
+                            d2 = xb * xb + yb * yb + zb * zb
+                            s = _k._log2(max(d2, dmin2))
+                            zc = abs(zb)
+                            ap = _atan_s(-xb, zc)
+                            bt = _atan_s(yb, zc)
+                            out = (zb < _F0) or (ap < amin) or (ap > amax) or (bt < bmin) or (bt > bmax)
+                            ap = min(max(ap, amin), amax)
+                            bt = min(max(bt, bmin), bmax)
+                            # fractional node indices from the bins
+                            mp = min(np.int32((ap - pa0) * pinv), pnb - 1) + pbo
+                            ks = pbins[mp, 0]
+                            u = pbins[mp, 1] + pbins[mp, 2] * min(ap, ks) + pbins[mp, 3] * max(ap - ks, _F0)
+                            mt = min(np.int32((bt - ta0) * tinv), tnb - 1) + tbo
+                            kt = tbins[mt, 0]
+                            v = tbins[mt, 1] + tbins[mt, 2] * min(bt, kt) + tbins[mt, 3] * max(bt - kt, _F0)
+                            ii = min(max(np.int32(u), np.int32(0)), imax)
+                            jj = min(max(np.int32(v), np.int32(0)), jmax)
+                            wa = min(max(u - np.float32(ii), _F0), _F1)
+                            wb = min(max(v - np.float32(jj), _F0), _F1)
+                            x = (s - s032) * ihs32
+                            kd = min(max(np.int32(x), np.int32(0)), nd32 - 2)
+                            fd = x - np.float32(kd)
+                            node = ii * nj + jj
+                            ro = tb + kd * nn + node
+                            t00 = tab[ro] + fd * (tab[ro + nn] - tab[ro])
+                            t01 = tab[ro + sj] + fd * (tab[ro + sj + nn] - tab[ro + sj])
+                            t10 = tab[ro + si] + fd * (tab[ro + si + nn] - tab[ro + si])
+                            t11 = tab[ro + si + sj] + fd * (tab[ro + si + sj + nn] - tab[ro + si + sj])
+                            w00 = (_F1 - wa) * (_F1 - wb)
+                            w01 = (_F1 - wa) * wb
+                            w10 = wa * (_F1 - wb)
+                            w11 = wa * wb
+                            lev = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
+                            bits = mask[mo + node]
+                            fw = (w00 * np.float32(bits & 1) + w01 * np.float32((bits >> 1) & 1) + w10 * np.float32((bits >> 2) & 1)
+                                  + w11 * np.float32((bits >> 3) & 1))
+                            fw = _F1 if out else fw
+                            e = _k._exp2(lev * _K10)
+                            em[q] = max(em[q], e)
+                            eacc[q] += wt * e
+                            facc[q] += wt * e * fw
+                            lcur[q] = lev
+                    else:
+                        g = np.float32(gain[i])
+                        p2 = np.float32(coef[ci, 0])
+                        cp3 = np.float32(coef[ci, 1])
+                        sp3 = np.float32(coef[ci, 2])
+                        p4 = np.float32(coef[ci, 3])
+                        cp5 = np.float32(coef[ci, 4])
+                        sp5 = np.float32(coef[ci, 5])
+                        c6 = np.float32(coef[ci, 6])
+                        kk = np.float32(coef[ci, 7])
+                        e7 = np.float32(coef[ci, 8])
+                        dmin2 = np.float32(coef[ci, 9])
+                        for q in range(m):
+                            qf = np.float32(q0 + q) - half_k32
+                            hh = dhr[q] if has_dem else _F0
+                            xb = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
+                            yb = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
+                            zb = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
+                            lev, e = _k._cell(xb, yb, zb, g, p2, cp3, sp3, p4, cp5, sp5, c6, kk, e7, dmin2)
+                            em[q] = max(em[q], e)
+                            eacc[q] += wt * e
+                            lcur[q] = lev
+                        if nt > 0 and e7 != _F0:
+                            for q in range(m):
+                                lcur[q] = _k._log2(_k._exp2(lcur[q] * _K10) + e7) * _DB_PER_LOG2
+                    if nt > 0:
+                        if i > 0:
+                            dti = np.float32(dt[i])
+                            for t in range(nt):
+                                tv = thr32[t]
+                                tac = tacc[t]
+                                for q in range(m):
+                                    x0 = lprev[q] - tv
+                                    x1 = lcur[q] - tv
+                                    up0 = x0 >= _F0
+                                    up1 = x1 >= _F0
+                                    fr = _F0
+                                    if up0 and up1:
+                                        fr = _F1
+                                    elif up0 != up1:
+                                        fr = max(x0, x1) / abs(x0 - x1)
+                                    tac[q] += dti * fr
+                        for q in range(m):
+                            lprev[q] = lcur[q]
+                    if (i + 1) % _FLUSH == 0 or i == n - 1:
+                        for q in range(m):
+                            en[q] += eacc[q]
+                            eacc[q] = _F0
+                            ef[q] += facc[q]
+                            facc[q] = _F0
+                        for t in range(nt):
+                            tat = ta[t, r, jl:jl + m]
+                            tac = tacc[t]
+                            for q in range(m):
+                                tat[q] += tac[q]
+                                tac[q] = _F0
+        return 0
