@@ -122,3 +122,25 @@ def test_fast_engine_refuses_cells_beyond_the_tables_reach(m300):
     with pytest.raises(InputError, match="reach") as e:
         run_hemi_window(fl, rc, 0, 3, 0, 21)
     assert e.value.field == "grid"
+
+
+def test_operations_tiles_take_a_hemisphere_card(m300):
+    """A day with an M300 flight: the tiles' Lday and TA equal the NumPy engine's single-flight map times the count."""
+    import dataclasses
+
+    from gisnoise.ops import Flight, Schedule, evaluate_operations
+
+    traj = dataclasses.replace(straight_flight(v=V, height=H, n0=-150.0, n1=150.0, dt=0.5), source="m300")
+    grid = centred_grid(25.0, 12, 9)
+    count = 7
+    sched = Schedule(flights=(Flight("m300", traj, {"day": count}),), cards=[m300], grid=grid, ground_h_m=0.0,
+                     thresholds_db=(55.0,), receiver_height_m=1.5)
+    ops = evaluate_operations(sched, threads=1, tile_cells=40)  # several tiles
+    assert ops.metadata["tiles"] > 1
+    ref = evaluate_grid(traj, [m300], grid, engine="numpy", ground_h=0.0, receiver_height=1.5,
+                        metrics=("LAmax", "SEL"), threshold_db=55.0)
+    day_s = 12 * 3600.0  # the directive's day: 07-19 h
+    lday = ref.bands["SEL"] + 10 * np.log10(count / day_s)
+    np.testing.assert_allclose(ops.bands["Lday"], lday, atol=0.01)
+    np.testing.assert_allclose(ops.bands["LAmax"], ref.bands["LAmax"], atol=0.01)
+    np.testing.assert_allclose(ops.bands["TA55"], count * ref.bands["TA55"], atol=0.01 * count)

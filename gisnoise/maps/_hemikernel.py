@@ -52,6 +52,7 @@ if numba is not None:
     _K10 = _k._K10
     _DB_PER_LOG2 = _k._DB_PER_LOG2
     _FLUSH = _k._FLUSH
+    _LO = np.int64(0xFFFFFFFF)
 
     @_k._intrinsic
     def _vectorize_gathers(typingctx):
@@ -82,13 +83,14 @@ if numba is not None:
         return -r if y < _F0 else r
 
     @_k.jit(fastmath=True, error_model="numpy", nogil=True)
-    def _hemi_points(xq, yq, zq, dmin2_, tab, hs, pbins, tbins, mask, s0_, inv_hs_, nd_, h):
-        """The kernel's level and filled weight for arrays of body vectors, hemisphere card ``h`` (tests)."""
+    def _hemi_cells(xb, yb, zb, m, dmin2, hrow, tab, axg, axinv, s0, inv_hs, nd, sc, lev, ene, fwo):
+        """Level, energy and weight on filled nodes of ``m`` body vectors of one hemisphere card (row ``hrow``).
+
+        Three vectorized passes over the cells: distance and table angles; fractional node
+        indices, ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals
+        (one product on a uniform axis); the table reads.  ``sc``: scratch ``(5, >= m)``.
+        """
         _vectorize_gathers()
-        n = xq.size
-        levo = np.empty(n, np.float32)
-        fwo = np.empty(n, np.float32)
-        hrow = hs[h]
         tb = np.int32(hrow[H_TAB])
         nn = np.int32(hrow[H_NN])
         nj = np.int32(hrow[H_NJ])
@@ -100,68 +102,102 @@ if numba is not None:
         amax = np.float32(hrow[H_AMAX])
         bmin = np.float32(hrow[H_BMIN])
         bmax = np.float32(hrow[H_BMAX])
-        pa0 = np.float32(hrow[H_PA0])
-        pinv = np.float32(hrow[H_PINV])
-        pnb = np.int32(hrow[H_PNB])
-        pbo = np.int32(hrow[H_PBO])
-        ta0 = np.float32(hrow[H_TA0])
-        tinv = np.float32(hrow[H_TINV])
-        tnb = np.int32(hrow[H_TNB])
-        tbo = np.int32(hrow[H_TBO])
-        mo = np.int32(hrow[H_MASK])
         k0 = np.float32(hrow[H_K0])
-        dmin2 = np.float32(dmin2_)
-        s0 = np.float32(s0_)
-        inv_hs = np.float32(inv_hs_)
-        nd = np.int32(nd_)
-        for q in range(n):
-            xb = np.float32(xq[q])
-            yb = np.float32(yq[q])
-            zb = np.float32(zq[q])
-            d2 = xb * xb + yb * yb + zb * zb
-            s = _k._log2(max(d2, dmin2))
-            zc = abs(zb)
-            ap = _atan_s(-xb, zc)
-            bt = _atan_s(yb, zc)
-            out = (zb < _F0) or (ap < amin) or (ap > amax) or (bt < bmin) or (bt > bmax)
-            ap = min(max(ap, amin), amax)
-            bt = min(max(bt, bmin), bmax)
-            # fractional node indices from the bins
-            mp = min(np.int32((ap - pa0) * pinv), pnb - 1) + pbo
-            ks = pbins[mp, 0]
-            u = pbins[mp, 1] + pbins[mp, 2] * min(ap, ks) + pbins[mp, 3] * max(ap - ks, _F0)
-            mt = min(np.int32((bt - ta0) * tinv), tnb - 1) + tbo
-            kt = tbins[mt, 0]
-            v = tbins[mt, 1] + tbins[mt, 2] * min(bt, kt) + tbins[mt, 3] * max(bt - kt, _F0)
+        d2min = np.float32(dmin2)
+        s032 = np.float32(s0)
+        ihs = np.float32(inv_hs)
+        ndm2 = np.int32(nd - 2)
+        S = sc[0]
+        A = sc[1]
+        B = sc[2]
+        OUT = sc[3]
+        V = sc[4]
+        for q in range(m):
+            x = xb[q]
+            y = yb[q]
+            z = zb[q]
+            S[q] = _k._log2(max(x * x + y * y + z * z, d2min))
+            zc = abs(z)
+            ap = _atan_s(-x, zc)
+            bt = _atan_s(y, zc)
+            out = (z < _F0) or (ap < amin) or (ap > amax) or (bt < bmin) or (bt > bmax)
+            OUT[q] = _F1 if out else _F0
+            A[q] = min(max(ap, amin), amax)
+            B[q] = min(max(bt, bmin), bmax)
+        for ax in range(2):
+            X = A if ax == 0 else B
+            Uo = lev if ax == 0 else V  # lev holds u until the last pass
+            g0 = np.float32(hrow[H_PA0 if ax == 0 else H_TA0])
+            uinv = np.float32(hrow[H_PINV if ax == 0 else H_TINV])
+            off = np.int32(hrow[H_PBO if ax == 0 else H_TBO])
+            nint = np.int32(hrow[H_PNB if ax == 0 else H_TNB])
+            if uinv > _F0 or nint == 0:
+                for q in range(m):
+                    Uo[q] = (X[q] - g0) * uinv
+            else:
+                for q in range(m):
+                    Uo[q] = _F0
+                for kk in range(nint):
+                    gk = axg[off + kk]
+                    ik = axinv[off + kk]
+                    for q in range(m):
+                        Uo[q] += min(max((X[q] - gk) * ik, _F0), _F1)
+        for q in range(m):
+            u = lev[q]
+            v = V[q]
             ii = min(max(np.int32(u), np.int32(0)), imax)
             jj = min(max(np.int32(v), np.int32(0)), jmax)
             wa = min(max(u - np.float32(ii), _F0), _F1)
             wb = min(max(v - np.float32(jj), _F0), _F1)
-            x = (s - s0) * inv_hs
-            kd = min(max(np.int32(x), np.int32(0)), nd - 2)
+            s = S[q]
+            x = (s - s032) * ihs
+            kd = min(max(np.int32(x), np.int32(0)), ndm2)
             fd = x - np.float32(kd)
-            node = ii * nj + jj
-            ro = tb + kd * nn + node
-            t00 = tab[ro] + fd * (tab[ro + nn] - tab[ro])
-            t01 = tab[ro + sj] + fd * (tab[ro + sj + nn] - tab[ro + sj])
-            t10 = tab[ro + si] + fd * (tab[ro + si + nn] - tab[ro + si])
-            t11 = tab[ro + si + sj] + fd * (tab[ro + si + sj + nn] - tab[ro + si + sj])
+            node = np.int32(ii * nj + jj)
+            ro = np.int32(tb + kd * nn + node)
+            p00 = tab[ro]
+            p01 = tab[ro + sj]
+            p10 = tab[ro + si]
+            p11 = tab[ro + si + sj]
+            l00 = np.int32(p00 & _LO)
+            l01 = np.int32(p01 & _LO)
+            l10 = np.int32(p10 & _LO)
+            l11 = np.int32(p11 & _LO)
+            a00 = _k._i32_as_f32(l00)
+            a01 = _k._i32_as_f32(l01)
+            a10 = _k._i32_as_f32(l10)
+            a11 = _k._i32_as_f32(l11)
+            t00 = a00 + fd * (_k._i32_as_f32(np.int32(p00 >> 32)) - a00)
+            t01 = a01 + fd * (_k._i32_as_f32(np.int32(p01 >> 32)) - a01)
+            t10 = a10 + fd * (_k._i32_as_f32(np.int32(p10 >> 32)) - a10)
+            t11 = a11 + fd * (_k._i32_as_f32(np.int32(p11 >> 32)) - a11)
             w00 = (_F1 - wa) * (_F1 - wb)
             w01 = (_F1 - wa) * wb
             w10 = wa * (_F1 - wb)
             w11 = wa * wb
-            lev = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
-            bits = mask[mo + node]
-            fw = (w00 * np.float32(bits & 1) + w01 * np.float32((bits >> 1) & 1) + w10 * np.float32((bits >> 2) & 1)
-                  + w11 * np.float32((bits >> 3) & 1))
-            fw = _F1 if out else fw
-            levo[q] = lev
-            fwo[q] = fw
+            lv = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
+            fw = (w00 * np.float32(l00 & 1) + w01 * np.float32(l01 & 1) + w10 * np.float32(l10 & 1)
+                  + w11 * np.float32(l11 & 1))
+            fwo[q] = max(fw, OUT[q])
+            lev[q] = lv
+            ene[q] = _k._exp2(lv * _K10)
+        return 0
+
+    @_k.jit(fastmath=True, error_model="numpy", nogil=True)
+    def _hemi_points(xq, yq, zq, dmin2, tab, hs, axg, axinv, s0, inv_hs, nd, h):
+        """The kernel's level and filled weight for arrays of body vectors, hemisphere card ``h`` (tests)."""
+        n = xq.size
+        levo = np.empty(n, np.float32)
+        ene = np.empty(n, np.float32)
+        fwo = np.empty(n, np.float32)
+        sc = np.empty((5, n), np.float32)
+        _hemi_cells(xq.astype(np.float32), yq.astype(np.float32), zq.astype(np.float32), n, dmin2, hs[h], tab, axg,
+                    axinv, s0, inv_hs, nd, sc, levo, ene, fwo)
         return levo, fwo
 
     @_k.jit(fastmath=True, error_model="numpy", nogil=True)
     def _hemi_window_kernel(P, U, dh, has_dem, k, m0, c0, ncw, src, C, gain, cidx, coef, w, dt, radius, thr,
-                            kind, hs, tab, pbins, tbins, mask, s0, inv_hs, nd,
+                            kind, hs, tab, axg, axinv, s0, inv_hs, nd,
                             emax, energy, ta, computed, efill):  # pragma: no cover - compiled
         """:func:`gisnoise.maps._numba._window_kernel` with hemisphere instants (``kind[i] >= 0``: row of ``hs``).
 
@@ -180,6 +216,12 @@ if numba is not None:
         eacc = np.zeros(k, np.float32)
         facc = np.zeros(k, np.float32)
         tacc = np.zeros((nt, k), np.float32)
+        xs = np.empty(k, np.float32)
+        ys = np.empty(k, np.float32)
+        zs = np.empty(k, np.float32)
+        ecur = np.empty(k, np.float32)
+        fcur = np.empty(k, np.float32)
+        sc = np.empty((5, k), np.float32)
         e0 = np.empty(3)
         e1 = np.empty(3)
         e2 = np.empty(3)
@@ -190,9 +232,6 @@ if numba is not None:
         inv_k = 1.0 / k
         half_k = 0.5 * k
         half_k32 = np.float32(half_k)
-        s032 = np.float32(s0)
-        ihs32 = np.float32(inv_hs)
-        nd32 = np.int32(nd)
         for r in range(nr):
             for sg in range(ns):
                 a = (m0 + sg) * k
@@ -268,77 +307,19 @@ if numba is not None:
                     wt = np.float32(w[i])
                     hk = kind[i]
                     if hk >= 0:
-                        hrow = hs[hk]
-                        tb = np.int32(hrow[H_TAB])
-                        nn = np.int32(hrow[H_NN])
-                        nj = np.int32(hrow[H_NJ])
-                        si = np.int32(hrow[H_SI])
-                        sj = np.int32(hrow[H_SJ])
-                        imax = np.int32(hrow[H_IMAX])
-                        jmax = np.int32(hrow[H_JMAX])
-                        amin = np.float32(hrow[H_AMIN])
-                        amax = np.float32(hrow[H_AMAX])
-                        bmin = np.float32(hrow[H_BMIN])
-                        bmax = np.float32(hrow[H_BMAX])
-                        pa0 = np.float32(hrow[H_PA0])
-                        pinv = np.float32(hrow[H_PINV])
-                        pnb = np.int32(hrow[H_PNB])
-                        pbo = np.int32(hrow[H_PBO])
-                        ta0 = np.float32(hrow[H_TA0])
-                        tinv = np.float32(hrow[H_TINV])
-                        tnb = np.int32(hrow[H_TNB])
-                        tbo = np.int32(hrow[H_TBO])
-                        mo = np.int32(hrow[H_MASK])
-                        k0 = np.float32(hrow[H_K0])
-                        dmin2 = np.float32(coef[ci, 9])
                         for q in range(m):
                             qf = np.float32(q0 + q) - half_k32
                             hh = dhr[q] if has_dem else _F0
-                            xb = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
-                            yb = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
-                            zb = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
-                            d2 = xb * xb + yb * yb + zb * zb
-                            s = _k._log2(max(d2, dmin2))
-                            zc = abs(zb)
-                            ap = _atan_s(-xb, zc)
-                            bt = _atan_s(yb, zc)
-                            out = (zb < _F0) or (ap < amin) or (ap > amax) or (bt < bmin) or (bt > bmax)
-                            ap = min(max(ap, amin), amax)
-                            bt = min(max(bt, bmin), bmax)
-                            # fractional node indices from the bins
-                            mp = min(np.int32((ap - pa0) * pinv), pnb - 1) + pbo
-                            ks = pbins[mp, 0]
-                            u = pbins[mp, 1] + pbins[mp, 2] * min(ap, ks) + pbins[mp, 3] * max(ap - ks, _F0)
-                            mt = min(np.int32((bt - ta0) * tinv), tnb - 1) + tbo
-                            kt = tbins[mt, 0]
-                            v = tbins[mt, 1] + tbins[mt, 2] * min(bt, kt) + tbins[mt, 3] * max(bt - kt, _F0)
-                            ii = min(max(np.int32(u), np.int32(0)), imax)
-                            jj = min(max(np.int32(v), np.int32(0)), jmax)
-                            wa = min(max(u - np.float32(ii), _F0), _F1)
-                            wb = min(max(v - np.float32(jj), _F0), _F1)
-                            x = (s - s032) * ihs32
-                            kd = min(max(np.int32(x), np.int32(0)), nd32 - 2)
-                            fd = x - np.float32(kd)
-                            node = ii * nj + jj
-                            ro = tb + kd * nn + node
-                            t00 = tab[ro] + fd * (tab[ro + nn] - tab[ro])
-                            t01 = tab[ro + sj] + fd * (tab[ro + sj + nn] - tab[ro + sj])
-                            t10 = tab[ro + si] + fd * (tab[ro + si + nn] - tab[ro + si])
-                            t11 = tab[ro + si + sj] + fd * (tab[ro + si + sj + nn] - tab[ro + si + sj])
-                            w00 = (_F1 - wa) * (_F1 - wb)
-                            w01 = (_F1 - wa) * wb
-                            w10 = wa * (_F1 - wb)
-                            w11 = wa * wb
-                            lev = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
-                            bits = mask[mo + node]
-                            fw = (w00 * np.float32(bits & 1) + w01 * np.float32((bits >> 1) & 1) + w10 * np.float32((bits >> 2) & 1)
-                                  + w11 * np.float32((bits >> 3) & 1))
-                            fw = _F1 if out else fw
-                            e = _k._exp2(lev * _K10)
+                            xs[q] = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
+                            ys[q] = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
+                            zs[q] = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
+                        _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc,
+                                    lcur, ecur, fcur)
+                        for q in range(m):
+                            e = ecur[q]
                             em[q] = max(em[q], e)
                             eacc[q] += wt * e
-                            facc[q] += wt * e * fw
-                            lcur[q] = lev
+                            facc[q] += wt * e * fcur[q]
                     else:
                         g = np.float32(gain[i])
                         p2 = np.float32(coef[ci, 0])

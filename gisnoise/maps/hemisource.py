@@ -82,35 +82,20 @@ _PLACEHOLDER = ModelCard(id="hemisphere", vehicle="hemisphere", phase="horizonta
 # --------------------------------------------------------------------------- tables
 
 
-def _axis_bins(grid_deg: np.ndarray) -> tuple[float, float, int, np.ndarray]:
-    """Bins of a table axis: ``(a0, 1 / width, count, rows)``; rows ``(k_s, c, S1, S2)`` in radians.
+def _axis(grid_deg: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """A table axis as the kernel reads it: ``(g0, 1 / spacing or 0, nodes, 1 / interval widths)`` in radians.
 
-    Bins are narrower than the smallest node spacing (a uniform axis: one bin per interval),
-    so each holds at most one node ``k_s``; the fractional node index in a bin is
-    ``u = c + S1 min(a, k_s) + S2 max(a - k_s, 0)``.
+    On a uniform axis the fractional node index is ``(a - g0) / spacing``; otherwise the kernel
+    sums ``clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the intervals (piecewise linear, kinks
+    at the nodes: bilinear interpolation in it is bilinear interpolation in the angles).
     """
     g = np.radians(np.asarray(grid_deg, dtype=float))
-    n = g.size
-    if n == 1:
-        return float(g[0]), 1.0, 1, np.array([[1e30, 0.0, 0.0, 0.0]], np.float32)
+    if g.size == 1:
+        return float(g[0]), 0.0, g.astype(np.float32), np.zeros(1, np.float32)
     sp = np.diff(g)
-    uniform = np.ptp(sp) <= 1e-12 * sp.max()
-    width = float(sp[0]) if uniform else float(sp.min()) * 0.999
-    nb = max(1, int(math.ceil((g[-1] - g[0]) / width - 1e-9)))
-    rows = np.empty((nb, 4))
-    for m in range(nb):
-        lo = g[0] + m * width
-        hi = lo + width
-        i = int(np.clip(np.searchsorted(g, lo, side="right") - 1, 0, n - 2))
-        s1 = 1.0 / (g[i + 1] - g[i])
-        c = i - s1 * g[i]
-        inside = np.flatnonzero((g > lo + 1e-12) & (g < hi - 1e-12)) if not uniform else np.zeros(0, int)
-        if inside.size and inside[0] <= n - 2:
-            k = int(inside[0])
-            rows[m] = (g[k], c, s1, 1.0 / (g[k + 1] - g[k]))
-        else:
-            rows[m] = (hi, c, s1, s1)
-    return float(g[0]), 1.0 / width, nb, rows.astype(np.float32)
+    uniform = np.ptp(sp) <= 1e-9 * sp.max()
+    return float(g[0]), (1.0 / float(sp.mean()) if uniform else 0.0), g.astype(np.float32), \
+        np.append(1.0 / sp, 0.0).astype(np.float32)
 
 
 def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, step: float = DIST_STEP
@@ -135,7 +120,7 @@ class HemiTables:
     ``kind[i]``: row of ``hs`` of instant ``i``'s hemisphere card, -1 for a parametric card;
     ``hs``: per card the offsets and scalars (columns ``H_*``); ``tab``: the distance tables
     (float32, one shared distance grid ``s0 + k hs_step`` in ``log2(d^2)``, ``nd`` points);
-    ``pbins``, ``tbins``: axis bins; ``mask``: per node the filled bits of its 4-node stencil;
+    ``axg``, ``axinv``: the axes' nodes and inverse interval widths (rad, float32);
     ``reach_m``: the farthest distance the tables cover; ``bound``: per card, the largest node
     level at each table distance (dB, for the audibility radius).
     """
@@ -143,9 +128,8 @@ class HemiTables:
     kind: np.ndarray
     hs: np.ndarray
     tab: np.ndarray
-    pbins: np.ndarray
-    tbins: np.ndarray
-    mask: np.ndarray
+    axg: np.ndarray
+    axinv: np.ndarray
     s0: float
     hs_step: float
     nd: int
@@ -156,51 +140,52 @@ class HemiTables:
 def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> HemiTables:
     """Kernel tables of ``cards`` (kind left empty); placeholders when there is none."""
     if not cards:
-        return HemiTables(kind=np.zeros(0, np.int64), hs=np.zeros((1, _hk.N_HS)), tab=np.zeros(2, np.float32),
-                          pbins=np.zeros((1, 4), np.float32), tbins=np.zeros((1, 4), np.float32),
-                          mask=np.zeros(1, np.int32), s0=0.0, hs_step=1.0, nd=2, reach_m=math.inf,
+        return HemiTables(kind=np.zeros(0, np.int64), hs=np.zeros((1, _hk.N_HS)), tab=np.zeros(2, np.int64),
+                          axg=np.zeros(1, np.float32), axinv=np.zeros(1, np.float32), s0=0.0, hs_step=1.0, nd=2, reach_m=math.inf,
                           bound=np.zeros((0, 2)))
     d_lo = d_min * 0.999
-    rows, tabs, pb, tb, masks, bounds = [], [], [], [], [], []
-    off_t = off_p = off_b = off_m = 0
+    rows, tabs, axg, axinv, bounds = [], [], [], [], []
+    off_t = off_a = off_m = 0
     s0 = hs = 0.0
     for card in cards:
         tab, s0, hs = distance_table(card, d_lo, reach_m)
         nd = tab.shape[0]
         ni, nj = card.phi_deg.size, card.theta_deg.size
         si, sj = (nj if ni > 1 else 0), (1 if nj > 1 else 0)
-        pa0, pinv, pnb, prow = _axis_bins(card.phi_deg)
-        ta0, tinv, tnb, trow = _axis_bins(card.theta_deg)
-        filled = ~card.measured
-        f = np.pad(filled, ((0, 1), (0, 1)), mode="edge")
-        ii, jj = np.meshgrid(np.arange(ni), np.arange(nj), indexing="ij")
-        i1, j1 = ii + (1 if ni > 1 else 0), jj + (1 if nj > 1 else 0)
-        bits = (f[ii, jj].astype(np.int32) | (f[ii, j1].astype(np.int32) << 1) | (f[i1, jj].astype(np.int32) << 2)
-                | (f[i1, j1].astype(np.int32) << 3))
+        pa0, pinv, pg, pi_ = _axis(card.phi_deg)
+        ta0, tinv, tg, ti_ = _axis(card.theta_deg)
         r0 = float(card.reference_distance_m)
         row = np.zeros(_hk.N_HS)
         row[[_hk.H_TAB, _hk.H_NN, _hk.H_NJ, _hk.H_SI, _hk.H_SJ, _hk.H_IMAX, _hk.H_JMAX]] = (
             off_t, ni * nj, nj, si, sj, max(ni - 2, 0), max(nj - 2, 0))
         gp, gt = np.radians(card.phi_deg), np.radians(card.theta_deg)
         row[[_hk.H_AMIN, _hk.H_AMAX, _hk.H_BMIN, _hk.H_BMAX]] = gp[0], gp[-1], gt[0], gt[-1]
-        row[[_hk.H_PA0, _hk.H_PINV, _hk.H_PNB, _hk.H_PBO]] = pa0, pinv, pnb, off_p
-        row[[_hk.H_TA0, _hk.H_TINV, _hk.H_TNB, _hk.H_TBO]] = ta0, tinv, tnb, off_b
+        row[[_hk.H_PA0, _hk.H_PINV, _hk.H_PNB, _hk.H_PBO]] = pa0, pinv, ni - 1, off_a
+        row[[_hk.H_TA0, _hk.H_TINV, _hk.H_TNB, _hk.H_TBO]] = ta0, tinv, nj - 1, off_a + ni
         row[[_hk.H_MASK, _hk.H_K0]] = off_m, 20.0 * math.log10(r0)
         rows.append(row)
-        tabs.append(tab.astype(np.float32).ravel())
-        pb.append(prow)
-        tb.append(trow)
-        masks.append(bits.ravel())
+        tabs.append(_pairs(tab, ~card.measured.ravel()))
+        axg += [pg, tg]
+        axinv += [pi_, ti_]
         s = s0 + hs * np.arange(nd)
         bounds.append(tab.max(axis=1) - _hk._CSP * s + 20.0 * math.log10(r0))
-        off_t += tab.size
-        off_p += pnb
-        off_b += tnb
+        off_t += (nd - 1) * ni * nj
+        off_a += ni + nj
         off_m += ni * nj
-    nd = int(tabs[0].size // (cards[0].phi_deg.size * cards[0].theta_deg.size))
     return HemiTables(kind=np.zeros(0, np.int64), hs=np.array(rows), tab=np.concatenate(tabs),
-                      pbins=np.concatenate(pb), tbins=np.concatenate(tb), mask=np.concatenate(masks).astype(np.int32),
+                      axg=np.concatenate(axg), axinv=np.concatenate(axinv),
                       s0=float(s0), hs_step=float(hs), nd=nd, reach_m=float(reach_m), bound=np.array(bounds))
+
+
+def _pairs(tab: np.ndarray, filled: np.ndarray) -> np.ndarray:
+    """The kernel's table: per distance step and node the float32 levels at both ends as one int64.
+
+    Low 32 bits the level at ``d_k``, high 32 bits at ``d_k+1``; the lowest bit of each level is
+    the node's filled flag (1 filled, 0 measured; it moves the level by at most 1 ulp, 1e-5 dB).
+    """
+    b = tab.astype(np.float32).view(np.uint32) & np.uint32(0xFFFFFFFE)
+    b = b | filled.astype(np.uint32)[None, :]
+    return ((b[:-1].astype(np.uint64) | (b[1:].astype(np.uint64) << np.uint64(32))).view(np.int64)).ravel()
 
 
 def _radius(bound: np.ndarray, s0: float, hs: float, floor_db: float | None) -> float:
@@ -243,7 +228,7 @@ def _with_hemispheres(t: np.ndarray, state: dict[str, np.ndarray], idx: np.ndarr
         kind[sel] = h
         gain[sel] = 0.0
         radius[sel] = _radius(tables.bound[h], tables.s0, tables.hs_step, floor_db)
-    tables = HemiTables(kind, tables.hs, tables.tab, tables.pbins, tables.tbins, tables.mask, tables.s0,
+    tables = HemiTables(kind, tables.hs, tables.tab, tables.axg, tables.axinv, tables.s0,
                         tables.hs_step, tables.nd, tables.reach_m, tables.bound)
     return HemiFlight(t=fl.t, src=fl.src, C=fl.C, gain=gain, cidx=fl.cidx, coef=fl.coef, w=fl.w, dt=fl.dt,
                       radius=radius, source=fl.source, hemi=tables)
@@ -333,8 +318,7 @@ def run_hemi_window(fl: HemiFlight, rc: Receivers, r0: int, r1: int, c0: int, c1
     ta = np.zeros((thr.size, nr, ncw), np.float64)
     computed = np.zeros((nr, ncw), np.uint8)
     _hk._hemi_window_kernel(P, U, dh, rc.dh is not None, k, c0 // k, c0, ncw, fl.src, fl.C, fl.gain, fl.cidx,
-                            fl.coef, fl.w, fl.dt, fl.radius, thr, ht.kind, ht.hs, ht.tab, ht.pbins, ht.tbins,
-                            ht.mask, ht.s0, 1.0 / ht.hs_step, ht.nd, emax, energy, ta, computed, efill)
+                            fl.coef, fl.w, fl.dt, fl.radius, thr, ht.kind, ht.hs, ht.tab, ht.axg, ht.axinv, ht.s0, 1.0 / ht.hs_step, ht.nd, emax, energy, ta, computed, efill)
     return HemiWindowResult(emax, energy, ta, computed.astype(bool), efill)
 
 
@@ -464,5 +448,5 @@ def hemisphere_level_points(card: HemisphereCard, xb: Any, yb: Any, zb: Any, *, 
     reach = max(float(d.max()) * 1.05 + 10.0, 10.0) if d.size else 10.0
     ht = _tables([card], float(min_distance_m), reach)
     lev, fw = _hk._hemi_points(xb.ravel(), yb.ravel(), zb.ravel(), float(min_distance_m) ** 2, ht.tab, ht.hs,
-                               ht.pbins, ht.tbins, ht.mask, ht.s0, 1.0 / ht.hs_step, ht.nd, 0)
+                               ht.axg, ht.axinv, ht.s0, 1.0 / ht.hs_step, ht.nd, 0)
     return lev.reshape(xb.shape), fw.reshape(xb.shape)
