@@ -38,6 +38,7 @@ from gisnoise.flight import Trajectory
 from gisnoise.maps import _hemikernel as _hk
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.cardset import as_cardset
+from gisnoise.maps.hemifill import hemisphere_atmospheres
 from gisnoise.maps.instants import FlightInstants, _instants
 from gisnoise.maps.instants import prepare_flight as _prepare_parametric
 from gisnoise.maps.instants import snapshot_instant as _snapshot_parametric
@@ -220,7 +221,7 @@ def _with_hemispheres(t: np.ndarray, state: dict[str, np.ndarray], idx: np.ndarr
     with np.errstate(divide="ignore", invalid="ignore"):
         fl = _instants(t, state, idx, stand_in, frame, background=background, min_distance_m=min_distance_m,
                        floor_db=floor_db, source=source)
-    tables = _tables([cards[k] for k in hemi_k], float(min_distance_m), float(reach_m))  # type: ignore[misc]
+    tables = _tables([cards[k] for k in hemi_k], float(min_distance_m), float(reach_m))
     kind = np.full(t.size, -1, np.int64)
     gain, radius = fl.gain.copy(), fl.radius.copy()
     for h, k in enumerate(hemi_k):
@@ -429,6 +430,7 @@ def evaluate_hemisphere_fast(req: MapRequest, opts: MapOptions) -> MapResult:
     tot = float(res.energy[ok].sum())
     meta.update({"engine": "fast", "floor_db": floor, "cells_below_floor": int(below.sum()),
                  "hemisphere_filled_energy_share": float(res.efill[ok].sum()) / tot if tot > 0 else 0.0,
+                 "hemisphere_atmospheres": hemisphere_atmospheres([req.cardset.cards[k] for k in used]),
                  "hemisphere_interpolation": "bilinear in the table angles of the nodes' A-weighted levels at the "
                                              "receiver's distance (ISO 9613-1 absorption in the card's map "
                                              "atmosphere)"})
