@@ -154,7 +154,7 @@ if numba is not None:
             kd = min(max(np.int32(x), np.int32(0)), ndm2)
             fd = x - np.float32(kd)
             node = np.int32(ii * nj + jj)
-            ro = np.int32(tb + kd * nn + node)
+            ro = np.int32(tb + node * nn + kd)
             p00 = tab[ro]
             p01 = tab[ro + sj]
             p10 = tab[ro + si]

@@ -158,7 +158,7 @@ def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> He
         r0 = float(card.reference_distance_m)
         row = np.zeros(_hk.N_HS)
         row[[_hk.H_TAB, _hk.H_NN, _hk.H_NJ, _hk.H_SI, _hk.H_SJ, _hk.H_IMAX, _hk.H_JMAX]] = (
-            off_t, ni * nj, nj, si, sj, max(ni - 2, 0), max(nj - 2, 0))
+            off_t, nd - 1, nj, si * (nd - 1), sj * (nd - 1), max(ni - 2, 0), max(nj - 2, 0))
         gp, gt = np.radians(card.phi_deg), np.radians(card.theta_deg)
         row[[_hk.H_AMIN, _hk.H_AMAX, _hk.H_BMIN, _hk.H_BMAX]] = gp[0], gp[-1], gt[0], gt[-1]
         row[[_hk.H_PA0, _hk.H_PINV, _hk.H_PNB, _hk.H_PBO]] = pa0, pinv, ni - 1, off_a
@@ -179,14 +179,17 @@ def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> He
 
 
 def _pairs(tab: np.ndarray, filled: np.ndarray) -> np.ndarray:
-    """The kernel's table: per distance step and node the float32 levels at both ends as one int64.
+    """The kernel's table: per node and distance step the float32 levels at both ends as one int64.
+
+    Node-major (the distance steps of a node adjacent): neighbouring cells read neighbouring entries.
 
     Low 32 bits the level at ``d_k``, high 32 bits at ``d_k+1``; the lowest bit of each level is
     the node's filled flag (1 filled, 0 measured; it moves the level by at most 1 ulp, 1e-5 dB).
     """
     b = tab.astype(np.float32).view(np.uint32) & np.uint32(0xFFFFFFFE)
     b = b | filled.astype(np.uint32)[None, :]
-    return ((b[:-1].astype(np.uint64) | (b[1:].astype(np.uint64) << np.uint64(32))).view(np.int64)).ravel()
+    pairs = (b[:-1].astype(np.uint64) | (b[1:].astype(np.uint64) << np.uint64(32))).view(np.int64)
+    return np.ascontiguousarray(pairs.T).ravel()
 
 
 def _radius(bound: np.ndarray, s0: float, hs: float, floor_db: float | None) -> float:
