@@ -144,3 +144,36 @@ def test_operations_tiles_take_a_hemisphere_card(m300):
     np.testing.assert_allclose(ops.bands["Lday"], lday, atol=0.01)
     np.testing.assert_allclose(ops.bands["LAmax"], ref.bands["LAmax"], atol=0.01)
     np.testing.assert_allclose(ops.bands["TA55"], count * ref.bands["TA55"], atol=0.01 * count)
+
+
+def test_two_hemisphere_cards_and_a_parametric_card_by_phase(m300):
+    """Several hemisphere cards in one flight (their tables side by side) and a parametric card: fast == NumPy."""
+    import dataclasses
+
+    from gisnoise.model import sample_card
+
+    climb = dataclasses.replace(sample_card(omni_card("climb"), phi_deg=np.arange(-90.0, 91.0, 30.0),
+                                            theta_deg=np.array([-90.0, -20.0, 0.0, 45.0, 90.0])), phase="climb")
+    sink = omni_card("sink")
+    traj = straight_flight(v=V, height=H, n0=-90.0, n1=90.0, dt=0.2)
+    n = len(traj)
+    ph = np.where(np.arange(n) < n // 3, "climb", np.where(np.arange(n) < 2 * n // 3, "horizontal", "sink"))
+    traj = dataclasses.replace(traj, phase=ph)
+    grid = centred_grid(15.0, 9, 7)
+    kw = dict(ground_h=0.0, receiver_height=1.5, metrics=("LAmax", "SEL"), threshold_db=50.0)
+    ref = evaluate_grid(traj, [m300, climb, sink], grid, engine="numpy", **kw)
+    fast = evaluate_grid(traj, [m300, climb, sink], grid, engine="fast", **kw)
+    for name in ("LAmax", "SEL", "TA50"):
+        np.testing.assert_allclose(fast.bands[name], ref.bands[name], atol=0.01)
+    assert fast.metadata["hemisphere_filled_energy_share"] == pytest.approx(
+        ref.metadata["hemisphere_filled_energy_share"], abs=1e-4)
+
+
+def test_auto_engine_takes_the_fast_engine_for_hemisphere_cards(m300):
+    from gisnoise.maps import fast_engine_serves
+
+    assert fast_engine_serves([m300, omni_card("climb")]) is None
+    traj = straight_flight(v=V, height=H, n0=-20.0, n1=20.0, dt=0.5)
+    res = evaluate_grid(traj, [m300], centred_grid(10.0, 3, 3), ground_h=0.0, metrics=("LAmax",))
+    assert res.metadata["engine"] == "fast"
+    assert fast_engine_serves([m300], uncertainty=True) is not None

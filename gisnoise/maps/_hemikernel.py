@@ -5,22 +5,28 @@
 time above) with a second kind of instant: a hemisphere card.  Per cell and instant it
 evaluates the card's stated scheme (:class:`~gisnoise.model.HemisphereCard`: bilinear in the
 table angles of the nodes' A-weighted levels at the receiver's distance) from tables prepared
-in NumPy by :mod:`gisnoise.maps.hemisource`:
+in NumPy by :mod:`gisnoise.maps.hemisource`.
 
-* **Angles without libm.**  ``phi_t = atan2(-x_b, |z_b|)`` and ``theta_t = atan2(y_b, |z_b|)``
-  by the kernel's polynomial ``atan`` (5e-7 rad).
-* **Table angle -> fractional node index by bins.**  Each axis is cut into bins narrower
-  than its smallest node spacing, so a bin holds at most one node ``k_s``; the fractional
-  index ``u`` is piecewise linear with its kinks at the nodes,
-  ``u = c + S1 min(a, k_s) + S2 max(a - k_s, 0)`` (four small-table reads, no search):
-  bilinear interpolation in ``u`` on the integers is bilinear interpolation in the angles.
-* **Distance by one table.**  Per node, the A-weighted level without spherical spreading,
+Three vectorized passes over the cells of a run (:func:`_hemi_cells`, called once per instant
+and row segment, so that no per-cell call passes arrays):
+
+* **Distance and angles without libm.**  ``s = log2(d^2)`` (the kernel's polynomial ``log2``),
+  ``phi_t = atan2(-x_b, |z_b|)`` and ``theta_t = atan2(y_b, |z_b|)`` by its polynomial ``atan``
+  (5e-7 rad).
+* **Fractional node indices without search.**  ``(a - g_0) / spacing`` on a uniform axis, else
+  ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals: piecewise linear
+  with its kinks at the nodes, so bilinear interpolation in ``u`` on the integers is bilinear
+  interpolation in the angles.
+* **One read per node.**  Per node, the A-weighted level without spherical spreading,
   ``T_q(d) = 10 lg sum_b 10^((L_b,q + A_b - alpha_b (d - r0)) / 10)``, is tabulated on a grid
-  uniform in ``s = log2(d^2)`` and read linearly; the spreading ``-20 lg(d / r0)`` is added
-  exactly from ``s`` (the kernel's polynomial ``log2``).  The level is the trilinear
-  interpolation of the table (4 nodes x 2 distances) minus the spreading.
-* **Filled nodes.**  One read of a 4-bit mask per lower node gives the weight on filled
-  nodes; the energy times it is summed separately (``efill``) for the map's metadata.
+  uniform in ``s``; each int64 entry holds the float32 levels at both ends of a step (node-major,
+  so neighbouring cells read neighbouring entries), the lowest bit of each the node's filled
+  flag.  The level is the trilinear interpolation (4 nodes x 2 distances) minus the spreading
+  ``-20 lg(d / r0)``, exact from ``s``; the filled flags weighted like the nodes give the weight
+  on filled nodes, whose energy is summed separately (``efill``) for the map's metadata.
+
+The loops read tables at computed indices (gathers); LLVM vectorizes them only when the array
+arguments are known not to overlap (:func:`_vectorize_gathers`).
 """
 
 from __future__ import annotations
@@ -38,8 +44,8 @@ if numba is not None:
 
 #: Columns of the per-card rows ``hs`` (float64) the kernel reads.
 (H_TAB, H_NN, H_NJ, H_SI, H_SJ, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
- H_TA0, H_TINV, H_TNB, H_TBO, H_MASK, H_K0) = range(21)
-N_HS = 21
+ H_TA0, H_TINV, H_TNB, H_TBO, H_K0) = range(20)
+N_HS = 20
 
 _CSP = 10.0 / math.log2(10.0)
 """``20 lg d = _CSP log2(d^2)``, dB."""

@@ -146,7 +146,7 @@ def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> He
                           bound=np.zeros((0, 2)))
     d_lo = d_min * 0.999
     rows, tabs, axg, axinv, bounds = [], [], [], [], []
-    off_t = off_a = off_m = 0
+    off_t = off_a = 0
     s0 = hs = 0.0
     for card in cards:
         tab, s0, hs = distance_table(card, d_lo, reach_m)
@@ -163,7 +163,7 @@ def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> He
         row[[_hk.H_AMIN, _hk.H_AMAX, _hk.H_BMIN, _hk.H_BMAX]] = gp[0], gp[-1], gt[0], gt[-1]
         row[[_hk.H_PA0, _hk.H_PINV, _hk.H_PNB, _hk.H_PBO]] = pa0, pinv, ni - 1, off_a
         row[[_hk.H_TA0, _hk.H_TINV, _hk.H_TNB, _hk.H_TBO]] = ta0, tinv, nj - 1, off_a + ni
-        row[[_hk.H_MASK, _hk.H_K0]] = off_m, 20.0 * math.log10(r0)
+        row[_hk.H_K0] = 20.0 * math.log10(r0)
         rows.append(row)
         tabs.append(_pairs(tab, ~card.measured.ravel()))
         axg += [pg, tg]
@@ -172,7 +172,6 @@ def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> He
         bounds.append(tab.max(axis=1) - _hk._CSP * s + 20.0 * math.log10(r0))
         off_t += (nd - 1) * ni * nj
         off_a += ni + nj
-        off_m += ni * nj
     return HemiTables(kind=np.zeros(0, np.int64), hs=np.array(rows), tab=np.concatenate(tabs),
                       axg=np.concatenate(axg), axinv=np.concatenate(axinv),
                       s0=float(s0), hs_step=float(hs), nd=nd, reach_m=float(reach_m), bound=np.array(bounds))
