@@ -89,12 +89,15 @@ if numba is not None:
         return -r if y < _F0 else r
 
     @_k.jit(fastmath=True, error_model="numpy", nogil=True)
-    def _hemi_cells(xb, yb, zb, m, dmin2, hrow, tab, axg, axinv, s0, inv_hs, nd, sc, lev, ene, fwo):
+    def _hemi_cells(xb, yb, zb, m, dmin2, hrow, tab, axg, axinv, s0, inv_hs, nd, sc, lev, ene, fwo, wt, em, eacc,
+                    facc):
         """Level, energy and weight on filled nodes of ``m`` body vectors of one hemisphere card (row ``hrow``).
 
         Three vectorized passes over the cells: distance and table angles; fractional node
         indices, ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals
         (one product on a uniform axis); the table reads.  ``sc``: scratch ``(5, >= m)``.
+        With ``wt > 0`` the energies are added to the accumulators ``em`` (maximum), ``eacc``
+        (``wt e``) and ``facc`` (``wt e fw``) instead of being written to ``ene`` and ``fwo``.
         """
         _vectorize_gathers()
         tb = np.int32(hrow[H_TAB])
@@ -113,6 +116,8 @@ if numba is not None:
         s032 = np.float32(s0)
         ihs = np.float32(inv_hs)
         ndm2 = np.int32(nd - 2)
+        w32 = np.float32(wt)
+        acc = w32 > _F0
         S = sc[0]
         A = sc[1]
         B = sc[2]
@@ -184,9 +189,16 @@ if numba is not None:
             lv = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
             fw = (w00 * np.float32(l00 & 1) + w01 * np.float32(l01 & 1) + w10 * np.float32(l10 & 1)
                   + w11 * np.float32(l11 & 1))
-            fwo[q] = max(fw, OUT[q])
+            fw = max(fw, OUT[q])
             lev[q] = lv
-            ene[q] = _k._exp2(lv * _K10)
+            e = _k._exp2(lv * _K10)
+            if acc:
+                em[q] = max(em[q], e)
+                eacc[q] += w32 * e
+                facc[q] += w32 * e * fw
+            else:
+                ene[q] = e
+                fwo[q] = fw
         return 0
 
     @_k.jit(fastmath=True, error_model="numpy", nogil=True)
@@ -198,7 +210,7 @@ if numba is not None:
         fwo = np.empty(n, np.float32)
         sc = np.empty((5, n), np.float32)
         _hemi_cells(xq.astype(np.float32), yq.astype(np.float32), zq.astype(np.float32), n, dmin2, hs[h], tab, axg,
-                    axinv, s0, inv_hs, nd, sc, levo, ene, fwo)
+                    axinv, s0, inv_hs, nd, sc, levo, ene, fwo, 0.0, ene, ene, ene)
         return levo, fwo
 
     @_k.jit(fastmath=True, error_model="numpy", nogil=True)
@@ -319,13 +331,14 @@ if numba is not None:
                             xs[q] = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
                             ys[q] = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
                             zs[q] = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
-                        _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc,
-                                    lcur, ecur, fcur)
-                        for q in range(m):
-                            e = ecur[q]
-                            em[q] = max(em[q], e)
-                            eacc[q] += wt * e
-                            facc[q] += wt * e * fcur[q]
+                        if wt > _F0:
+                            _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc,
+                                        lcur, ecur, fcur, wt, em, eacc, facc)
+                        else:  # a zero weight (repeated instant): the maximum still counts
+                            _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc,
+                                        lcur, ecur, fcur, 0.0, em, eacc, facc)
+                            for q in range(m):
+                                em[q] = max(em[q], ecur[q])
                     else:
                         g = np.float32(gain[i])
                         p2 = np.float32(coef[ci, 0])
