@@ -232,7 +232,7 @@ def warm_up() -> dict[str, Any]:
 
     from gisnoise.flight import Trajectory
     from gisnoise.geo import GridSpec, LocalFrame
-    from gisnoise.model import ModelCard
+    from gisnoise.model import ModelCard, sample_card
 
     require_numba()
     t0 = time.perf_counter()
@@ -250,6 +250,7 @@ def warm_up() -> dict[str, Any]:
                       substeps=1, uncertainty=False, chunk_cells=None, block_size=1, min_distance_m=1.0,
                       temperature_c=15.0, kernel=None, progress=None, cancel=None, floor_db=None, threads=1)
     evaluate_fast(traj, card, grid, opts)
+    evaluate_fast(traj, sample_card(card), grid, opts)  # the hemisphere kernel (maps/_hemikernel.py)
     level_from_body(card, 1.0, 1.0, 1.0, 1000.0)
     return {"seconds": time.perf_counter() - t0, "cached": bool(_kernels.cache_used)}
 
