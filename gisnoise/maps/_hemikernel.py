@@ -38,9 +38,6 @@ import numpy as np
 from gisnoise.maps import _numba as _k
 
 numba = _k.numba
-if numba is not None:
-    from llvmlite import ir as _ir
-    from numba.core import types as _nbt
 
 #: Columns of the per-card rows ``hs`` (float64) the kernel reads.
 (H_TAB, H_NN, H_NJ, H_SI, H_SJ, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
@@ -72,7 +69,7 @@ if numba is not None:
 
         def codegen(context, builder, sig, args):
             for arg in builder.function.args[2:]:  # after the return and exception pointers
-                if isinstance(arg.type, _ir.PointerType):
+                if isinstance(arg.type, _k._ir.PointerType):
                     arg.add_attribute("noalias")
             try:  # see gisnoise.maps._numba._prefer_512bit_vectors
                 set.add(builder.function.attributes, '"prefer-vector-width"="512"')
@@ -80,7 +77,7 @@ if numba is not None:
                 pass
             return context.get_dummy_value()
 
-        return _nbt.none(), codegen
+        return _k._nbt.none(), codegen
 
     @_k.jit(fastmath=True, error_model="numpy", inline="always")
     def _atan_s(y, x):
