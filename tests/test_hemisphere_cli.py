@@ -84,3 +84,51 @@ def test_set_atmosphere_for_maps(m300_json, tmp_path):
     assert c.propagation_atmosphere["temperature_c"] == 5.0 and c.atmosphere["temperature_c"] == 25.0
     r = run("card", "show", str(out))
     assert "on maps   5 C, 40 % RH" in r.output
+
+
+def _flyover_csv(path):
+    from gisnoise.geo import LocalFrame
+
+    t = np.arange(0.0, 40.1, 1.0)
+    lat, lon, h = LocalFrame(52.0, 10.0, 0.0).to_wgs84(np.zeros(t.size), -100.0 + 5.0 * t, np.full(t.size, 10.0))
+    rows = ["t,lat,lon,h,roll,pitch,yaw,power_w,phase"]
+    rows += [f"{a},{b:.9f},{c:.9f},{d},0,0,0,1000,horizontal" for a, b, c, d in zip(t, lat, lon, h, strict=True)]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_contour_atmosphere_option(m300_json, tmp_path):
+    """``contour --atmosphere``: the hemisphere card's absorption in that atmosphere; refused when it cannot apply."""
+    rasterio = pytest.importorskip("rasterio")
+    from gisnoise.maps import make_map
+
+    traj = _flyover_csv(tmp_path / "fly.csv")
+    common = ["--resolution", "20", "--margin", "300", "--ground-height", "0", "--metrics", "LAmax",
+              "--engine", "numpy"]
+    r = run("contour", str(traj), "--card", str(m300_json), "--out", str(tmp_path / "cold"), "--atmosphere", "0,10",
+            *common)
+    assert r.exit_code == 0, r.output
+    card = cards.load(m300_json).in_atmosphere(0.0, 10.0)
+    ref = make_map(str(traj), [card], tmp_path / "ref", resolution_m=20.0, margin_m=300.0, ground_h=0.0,
+                   metrics=["LAmax"], engine="numpy")
+    warm = make_map(str(traj), [str(m300_json)], tmp_path / "warm", resolution_m=20.0, margin_m=300.0, ground_h=0.0,
+                    metrics=["LAmax"], engine="numpy")
+    with rasterio.open(tmp_path / "cold" / "levels.tif") as a, rasterio.open(ref["levels"]) as b, \
+            rasterio.open(warm["levels"]) as c:
+        cold, same, default = a.read(1), b.read(1), c.read(1)
+    np.testing.assert_allclose(cold, same, atol=1e-9)
+    assert ref["result"].metadata["hemisphere_atmospheres"]["m300"] == {
+        "temperature_c": 0.0, "humidity_pct": 10.0, "pressure_kpa": 101.325}
+    # dry cold air (0 C, 10 % RH) absorbs the kHz bands more than the table's 25 C, 70 % (ISO 9613-1): quieter
+    k = list(card.bands_hz).index(2000.0)
+    assert card.absorption_db_m[k] > 1.5 * cards.load(m300_json).absorption_db_m[k]
+    assert np.all(cold <= default + 1e-4) and np.nanmax(default - cold) > 0.5
+    bad = run("contour", str(traj), "--card", str(m300_json), "--out", str(tmp_path / "x"), "--atmosphere", "20",
+              *common)
+    assert bad.exit_code == 2 and "atmosphere" in bad.output
+    hot = run("contour", str(traj), "--card", str(m300_json), "--out", str(tmp_path / "y"), "--atmosphere",
+              "90,50", *common)
+    assert hot.exit_code == 2 and "map_atmosphere.temperature_c" in hot.output
+    par = run("contour", str(traj), "--card", "demo-horizontal", "--out", str(tmp_path / "z"), "--atmosphere",
+              "20,50", *common)
+    assert par.exit_code == 2 and "atmosphere" in par.output

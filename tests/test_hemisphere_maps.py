@@ -88,10 +88,92 @@ def test_hemisphere_and_parametric_cards_mix_by_phase(m300):
     assert set(ref.metadata["phases"]) == {"climb", "horizontal"}
 
 
-def test_fast_engine_refuses_what_it_does_not_compute_for_hemispheres(m300):
-    traj = straight_flight(v=V, height=H, n0=-20.0, n1=20.0, dt=0.5)
-    grid = centred_grid(10.0, 3, 3)
-    with pytest.raises(InputError, match="numpy") as e:
-        evaluate_grid(traj, [m300], grid, engine="fast", ground_h=0.0, threshold_db=60.0)
-    assert e.value.field == "engine"
+def test_fast_engine_time_above_snapshot_and_floor_agree_with_numpy(m300):
+    """Time above levels, a snapshot and the audibility floor on the fast hemisphere path equal the reference."""
+    traj = straight_flight(v=V, height=H, n0=-150.0, n1=150.0, dt=0.25)
+    grid = centred_grid(20.0, 11, 41)  # 200 m along the track, 800 m across
+    kw = dict(ground_h=0.0, receiver_height=1.5, metrics=("LAmax", "LAeq"), threshold_db=[45.0, 60.0],
+              snapshot_t=30.0)
+    ref = evaluate_grid(traj, [m300], grid, engine="numpy", **kw)
+    fast = evaluate_grid(traj, [m300], grid, engine="fast", **kw)
+    assert fast.metadata["engine"] == "fast"
+    for name in ("LAmax", "LAeq", "LA@30s"):
+        np.testing.assert_allclose(fast.bands[name], ref.bands[name], atol=0.01)
+    for name in ("TA45", "TA60"):  # time above: linear between instants, a level 0.01 dB off moves a crossing
+        np.testing.assert_allclose(fast.bands[name], ref.bands[name], atol=0.01)
+    assert np.nanmax(ref.bands["TA45"]) > 10.0 and np.nanmin(ref.bands["TA60"]) == 0.0
+    # floor: cells certainly below it are skipped (NaN), the others exact
+    floor = 50.0
+    fl = evaluate_grid(traj, [m300], grid, engine="fast", floor_db=floor, **kw)
+    skipped = np.isnan(fl.bands["LAmax"])
+    assert fl.metadata["cells_below_floor"] == int(skipped.sum()) > 0
+    assert np.all(ref.bands["LAmax"][skipped] < floor)
+    np.testing.assert_allclose(fl.bands["LAmax"][~skipped], ref.bands["LAmax"][~skipped], atol=0.01)
 
+
+def test_fast_engine_refuses_cells_beyond_the_tables_reach(m300):
+    from gisnoise.maps import receivers_for
+    from gisnoise.maps.hemisource import prepare_flight, run_hemi_window
+
+    traj = straight_flight(v=V, height=H, n0=-20.0, n1=20.0, dt=0.5)
+    grid = centred_grid(100.0, 21, 3)  # 2.1 km wide
+    rc = receivers_for(grid, [traj], ground_h=0.0)
+    fl = prepare_flight(traj, [m300], rc.frame, reach_m=500.0)
+    with pytest.raises(InputError, match="reach") as e:
+        run_hemi_window(fl, rc, 0, 3, 0, 21)
+    assert e.value.field == "grid"
+
+
+def test_operations_tiles_take_a_hemisphere_card(m300):
+    """A day with an M300 flight: the tiles' Lday and TA equal the NumPy engine's single-flight map times the count."""
+    import dataclasses
+
+    from gisnoise.ops import Flight, Schedule, evaluate_operations
+
+    traj = dataclasses.replace(straight_flight(v=V, height=H, n0=-150.0, n1=150.0, dt=0.5), source="m300")
+    grid = centred_grid(25.0, 12, 9)
+    count = 7
+    sched = Schedule(flights=(Flight("m300", traj, {"day": count}),), cards=[m300], grid=grid, ground_h_m=0.0,
+                     thresholds_db=(55.0,), receiver_height_m=1.5)
+    ops = evaluate_operations(sched, threads=1, tile_cells=40)  # several tiles
+    assert ops.metadata["tiles"] > 1
+    ref = evaluate_grid(traj, [m300], grid, engine="numpy", ground_h=0.0, receiver_height=1.5,
+                        metrics=("LAmax", "SEL"), threshold_db=55.0)
+    day_s = 12 * 3600.0  # the directive's day: 07-19 h
+    lday = ref.bands["SEL"] + 10 * np.log10(count / day_s)
+    np.testing.assert_allclose(ops.bands["Lday"], lday, atol=0.01)
+    np.testing.assert_allclose(ops.bands["LAmax"], ref.bands["LAmax"], atol=0.01)
+    np.testing.assert_allclose(ops.bands["TA55"], count * ref.bands["TA55"], atol=0.01 * count)
+
+
+def test_two_hemisphere_cards_and_a_parametric_card_by_phase(m300):
+    """Several hemisphere cards in one flight (their tables side by side) and a parametric card: fast == NumPy."""
+    import dataclasses
+
+    from gisnoise.model import sample_card
+
+    climb = dataclasses.replace(sample_card(omni_card("climb"), phi_deg=np.arange(-90.0, 91.0, 30.0),
+                                            theta_deg=np.array([-90.0, -20.0, 0.0, 45.0, 90.0])), phase="climb")
+    sink = omni_card("sink")
+    traj = straight_flight(v=V, height=H, n0=-90.0, n1=90.0, dt=0.2)
+    n = len(traj)
+    ph = np.where(np.arange(n) < n // 3, "climb", np.where(np.arange(n) < 2 * n // 3, "horizontal", "sink"))
+    traj = dataclasses.replace(traj, phase=ph)
+    grid = centred_grid(15.0, 9, 7)
+    kw = dict(ground_h=0.0, receiver_height=1.5, metrics=("LAmax", "SEL"), threshold_db=50.0)
+    ref = evaluate_grid(traj, [m300, climb, sink], grid, engine="numpy", **kw)
+    fast = evaluate_grid(traj, [m300, climb, sink], grid, engine="fast", **kw)
+    for name in ("LAmax", "SEL", "TA50"):
+        np.testing.assert_allclose(fast.bands[name], ref.bands[name], atol=0.01)
+    assert fast.metadata["hemisphere_filled_energy_share"] == pytest.approx(
+        ref.metadata["hemisphere_filled_energy_share"], abs=1e-4)
+
+
+def test_auto_engine_takes_the_fast_engine_for_hemisphere_cards(m300):
+    from gisnoise.maps import fast_engine_serves
+
+    assert fast_engine_serves([m300, omni_card("climb")]) is None
+    traj = straight_flight(v=V, height=H, n0=-20.0, n1=20.0, dt=0.5)
+    res = evaluate_grid(traj, [m300], centred_grid(10.0, 3, 3), ground_h=0.0, metrics=("LAmax",))
+    assert res.metadata["engine"] == "fast"
+    assert fast_engine_serves([m300], uncertainty=True) is not None

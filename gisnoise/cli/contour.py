@@ -26,6 +26,31 @@ def _metrics(ctx: click.Context, param: click.Parameter, value: str) -> list[str
     return [m.strip() for m in value.split(",") if m.strip()]
 
 
+def _atmosphere(ctx: click.Context, param: click.Parameter, value: Any) -> tuple[float, ...] | None:
+    """``T,RH[,P]`` (deg C, %, kPa) as numbers."""
+    if value is None:
+        return None
+    try:
+        parts = tuple(float(v) for v in str(value).split(","))
+    except ValueError:
+        raise InputError(f"atmosphere: expected TEMPERATURE_C,HUMIDITY_PCT[,PRESSURE_KPA], got {value!r}",
+                         field="atmosphere") from None
+    if len(parts) not in (2, 3):
+        raise InputError(f"atmosphere: expected 2 or 3 numbers (C, % RH[, kPa]), got {value!r}", field="atmosphere")
+    return parts
+
+
+def _cards_in_atmosphere(cards: Sequence[str], atmosphere: tuple[float, ...]) -> list[Any]:
+    """The cards loaded, hemisphere cards propagating through ``atmosphere`` on the map."""
+    from gisnoise.model import HemisphereCard, load
+
+    loaded = [load(c) for c in cards]
+    if not any(isinstance(c, HemisphereCard) for c in loaded):
+        raise InputError("atmosphere: applies to hemisphere cards (their ISO 9613-1 absorption); none of the "
+                         "cards is one", field="atmosphere")
+    return [c.in_atmosphere(*atmosphere) if isinstance(c, HemisphereCard) else c for c in loaded]
+
+
 def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str]) -> None:
     """Echo the maximum of every band of ``res`` (a MapResult) that has values, then ``wrote <path>``
     for each of ``keys`` that ``paths`` holds (shared by the contour and operations commands)."""
@@ -88,6 +113,10 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
                    "extensions such as +bank_angle, +rpm), equal to 'numpy' within 0.01 dB and tens of times "
                    "faster.  'numpy': the reference (any ansatz, the --uncertainty bands).  'auto': 'fast' "
                    "unless --uncertainty or a card with a receiver-dependent term needs 'numpy'.")
+@click.option("--atmosphere", "atmosphere", default=None, callback=_atmosphere, metavar="T,RH[,P]",
+              help="Atmosphere of the hemisphere cards' absorption on the map: temperature (C), relative humidity "
+                   "(%) and optionally pressure (kPa, default 101.325) [default: each card's map atmosphere, "
+                   "else the one its table was back-propagated with].")
 @click.option("--population", "population", type=click.Path(dir_okay=False), default=None,
               help="Population raster (GeoTIFF, people per cell): also write DIR/exposure.json and exposure.md.")
 @click.option("--buildings", "buildings", type=click.Path(dir_okay=False), default=None,
@@ -98,7 +127,8 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
             crs: str | None, metrics: list[str], period: float | None, threshold: list[float] | None,
             snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool,
             engine: str, population: str | None = None, buildings: str | None = None,
-            power_w: float | None = None, geoid_undulation: float | None = None) -> None:
+            power_w: float | None = None, geoid_undulation: float | None = None,
+            atmosphere: tuple[float, ...] | None = None) -> None:
     """Noise map of TRAJECTORY: DIR/levels.tif, DIR/contours.geojson (and DIR/map.png).
 
     TRAJECTORY is a flight CSV (t, lat, lon, h, roll, pitch, yaw, power_w, phase), a PX4 .ulg or
@@ -110,7 +140,8 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
 
     with progress(ctx, "evaluating", 1.0) as update:
         paths = make_map(
-            trajectory, list(cards), out, resolution_m=resolution, margin_m=margin, levels=levels,
+            trajectory, list(cards) if atmosphere is None else _cards_in_atmosphere(cards, atmosphere), out,
+            resolution_m=resolution, margin_m=margin, levels=levels,
             metrics=metrics, crs=crs, dem=dem, receiver_height=receiver_height, ground_h=ground_h,
             dem_offset_m=dem_offset, uncertainty=uncertainty, plot=plot, period_s=period,
             threshold_db=threshold, snapshot_t=snapshot, substeps=substeps, background=background,

@@ -44,9 +44,11 @@ from gisnoise.maps.grids import (
     grid_for_trajectory,
     level_table,
 )
+from gisnoise.maps.hemisource import (
+    prepare_flight,
+)
 from gisnoise.maps.instants import (
     FlightInstants,
-    prepare_flight,
 )
 from gisnoise.maps.palette import (
     ISOLINE_COLOUR,

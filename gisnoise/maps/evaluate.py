@@ -37,7 +37,8 @@ positions, power linearly, angles on the circle, phase from the earlier sample).
 ``engine="fast"``
     the numba kernel in float32 (:mod:`gisnoise.maps.fastkernel`): the ansatzes ``paper``
     and ``paper-offset`` and their extensions by per-instant effects (``bank_angle``,
-    ``rpm``; :mod:`gisnoise.maps.fast_effects`), the same bands within 0.01 dB, an optional
+    ``rpm``; :mod:`gisnoise.maps.fast_effects`) and measured hemisphere cards
+    (:mod:`gisnoise.maps.hemisource`), the same bands within 0.01 dB, an optional
     audibility floor.
 """
 
@@ -59,7 +60,7 @@ from gisnoise.maps.fastkernel import evaluate_fast
 from gisnoise.maps.prepare import MapOptions
 from gisnoise.maps.reference import DEFAULT_BLOCK, evaluate_numpy
 from gisnoise.maps.result import METRICS, MapResult
-from gisnoise.model import ModelCard
+from gisnoise.model import HemisphereCard, ModelCard
 
 __all__ = ["DEFAULT_ENGINE", "ENGINES", "evaluate_grid", "evaluate_grid_fast", "fast_engine_serves"]
 
@@ -77,7 +78,7 @@ def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, unce
 
     It cannot without numba, with the uncertainty bands or a ``kernel=`` replacement, or
     for a card whose ansatz is neither ``paper``/``paper-offset`` nor one of their
-    extensions by per-instant effects.
+    extensions by per-instant effects (hemisphere cards it computes).
     """
     if _numba.numba is None:
         return "numba is not installed"
@@ -86,6 +87,8 @@ def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, unce
     if kernel is not None:
         return "a kernel replacement belongs to the NumPy engine"
     for c in as_cardset(cards).cards:
+        if isinstance(c, HemisphereCard):  # measured hemispheres: their kernel (maps/hemisource.py)
+            continue
         try:
             base_card(c)
         except CardError as exc:

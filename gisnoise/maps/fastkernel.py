@@ -43,7 +43,7 @@ from gisnoise.maps import _numba as _kernels
 from gisnoise.maps._checks import as_float
 from gisnoise.maps._poly import _ATAN_C, _EXP2_C, _LOG2_C, _poly_eval  # noqa: F401  (the kernel's polynomials)
 from gisnoise.maps.hemifill import has_hemisphere
-from gisnoise.maps.hemisource import evaluate_hemisphere_fast
+from gisnoise.maps.hemisource import HemiFlight, evaluate_hemisphere_fast, run_hemi_window
 from gisnoise.maps.instants import (
     FAST_ANSATZES,
     FlightInstants,
@@ -140,6 +140,8 @@ def run_window(fl: FlightInstants, rc: Receivers, r0: int, r1: int, c0: int, c1:
     :func:`window_lattice`, when already computed.
     """
     require_numba()
+    if isinstance(fl, HemiFlight):  # a flight with hemisphere cards: their kernel (maps/hemisource.py)
+        return run_hemi_window(fl, rc, r0, r1, c0, c1, thresholds, lattice=lattice)  # type: ignore[return-value]
     W = rc.grid.width
     if not (0 <= r0 < r1 <= rc.grid.height and 0 <= c0 < c1 <= W):
         raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the grid {rc.grid.shape}",
@@ -230,7 +232,7 @@ def warm_up() -> dict[str, Any]:
 
     from gisnoise.flight import Trajectory
     from gisnoise.geo import GridSpec, LocalFrame
-    from gisnoise.model import ModelCard
+    from gisnoise.model import ModelCard, sample_card
 
     require_numba()
     t0 = time.perf_counter()
@@ -248,6 +250,7 @@ def warm_up() -> dict[str, Any]:
                       substeps=1, uncertainty=False, chunk_cells=None, block_size=1, min_distance_m=1.0,
                       temperature_c=15.0, kernel=None, progress=None, cancel=None, floor_db=None, threads=1)
     evaluate_fast(traj, card, grid, opts)
+    evaluate_fast(traj, sample_card(card), grid, opts)  # the hemisphere kernel (maps/_hemikernel.py)
     level_from_body(card, 1.0, 1.0, 1.0, 1000.0)
     return {"seconds": time.perf_counter() - t0, "cached": bool(_kernels.cache_used)}
 

@@ -13,12 +13,17 @@ import numpy as np
 from gisnoise.geo import emission_angles
 from gisnoise.model import HemisphereCard
 
-__all__ = ["has_hemisphere", "filled_weights"]
+__all__ = ["has_hemisphere", "filled_weights", "hemisphere_atmospheres"]
 
 
 def has_hemisphere(cards: Any) -> bool:
     """True when any card of the set is a hemisphere card."""
     return any(isinstance(c, HemisphereCard) for c in cards)
+
+
+def hemisphere_atmospheres(cards: Any) -> dict[str, dict[str, float]]:
+    """The atmosphere of each hemisphere card's absorption on the map, by card id (for the metadata)."""
+    return {c.id: c.propagation_atmosphere for c in cards if isinstance(c, HemisphereCard)}
 
 
 def filled_weights(rcv: np.ndarray, src: np.ndarray, att: np.ndarray, card_idx: np.ndarray, cards: Any

@@ -1,309 +1,456 @@
 """Measured hemispheres (:class:`~gisnoise.model.HemisphereCard`) in the fast engine.
 
-When a map's cards include a hemisphere card, ``engine="fast"`` runs this numba kernel (float64)
-in place of the parametric one: it evaluates the hemisphere instants and, mixed in by phase,
-the ``paper`` / ``paper-offset`` instants (the same Eq. 8-10 as :mod:`gisnoise.model.ansatz`).
+When a flight's cards include a hemisphere card, the fast engine runs the window kernel of
+:mod:`gisnoise.maps._hemikernel` (float32, vectorized; how it is fast is told there) in place
+of the parametric one: it evaluates the hemisphere instants and, mixed in by phase, the
+``paper`` / ``paper-offset`` instants exactly as the parametric kernel does.  It computes
+everything the parametric fast path computes: LAmax, LAeq, SEL, time above levels, snapshots
+and the audibility floor; the operations of :mod:`gisnoise.ops` run it per tile through
+:func:`prepare_flight` and :func:`~gisnoise.maps.fastkernel.run_window`.
 
 The hemisphere's level follows the card's stated scheme (bilinear interpolation in the table
-angles of the nodes' A-weighted levels at the receiver's distance).  The kernel reads the
-nodes' levels from a table over ``ln d`` (:func:`distance_table`, built by
-:meth:`HemisphereCard.node_levels`, the model's definition) with linear interpolation; the
-step keeps the difference to the exact per-band sum below 0.001 dB (tested against the NumPy
-engine).  The metadata states ``hemisphere_filled_energy_share``: the share of the map's
-energy (sum over cells of the SEL energy) from hemisphere instants that came from filled
-cells of the table.
+angles of the nodes' A-weighted levels at the receiver's distance).  Per node, the level
+without spherical spreading is tabulated (:func:`distance_table`, from
+:meth:`HemisphereCard.node_levels`, the model's definition) on distances log-spaced by
+:data:`DIST_STEP` (in ``ln d``) and read linearly; the difference to the exact per-band sum
+stays below 0.001 dB (tested).  The table reaches :data:`DEFAULT_REACH_M` from the UAV, or
+the map's farthest cell; a window farther out is refused (field ``grid``).
 
-Refused here (use ``engine="numpy"``): time-above thresholds, snapshots, the audibility floor.
+**Audibility floor.**  The bound of a hemisphere instant is the largest node level at the
+distance (bilinear interpolation never exceeds its nodes), plus the table's largest step in
+spreading: beyond the distance where it falls below the floor, cells are skipped.
+
+The metadata states ``hemisphere_filled_energy_share``: the share of the map's energy (sum
+over cells of the SEL energy) from hemisphere instants that came from filled table nodes.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from gisnoise.errors import Cancelled, InputError
-from gisnoise.geo import WGS84, body_vector, transformer
-from gisnoise.maps import _numba as _kernels
+from gisnoise.flight import Trajectory
+from gisnoise.maps import _hemikernel as _hk
 from gisnoise.maps._checks import as_float
-from gisnoise.maps.instants import card_coefficients
+from gisnoise.maps.cardset import as_cardset
+from gisnoise.maps.hemifill import hemisphere_atmospheres
+from gisnoise.maps.instants import FlightInstants, _instants
+from gisnoise.maps.instants import prepare_flight as _prepare_parametric
+from gisnoise.maps.instants import snapshot_instant as _snapshot_parametric
 from gisnoise.maps.prepare import (
     MapOptions,
     MapRequest,
     band_order,
     eval_states,
-    ground_on_grid,
-    local_frame,
     map_metadata,
-    trapezoid_weights,
+    snapshot_state,
 )
-from gisnoise.maps.result import MapResult
+from gisnoise.maps.receivers import Receivers, receivers_for
+from gisnoise.maps.result import MapResult, snapshot_name, threshold_name
 from gisnoise.maps.threads import default_threads, map_threads
-from gisnoise.model import HemisphereCard
+from gisnoise.model import HemisphereCard, ModelCard
 
-__all__ = ["N_DISTANCES", "distance_table", "evaluate_hemisphere_fast"]
+__all__ = [
+    "DEFAULT_REACH_M",
+    "DIST_STEP",
+    "HemiFlight",
+    "HemiTables",
+    "HemiWindowResult",
+    "distance_table",
+    "evaluate_hemisphere_fast",
+    "hemisphere_level_points",
+    "prepare_flight",
+    "run_hemi_window",
+    "snapshot_instant",
+]
 
-N_DISTANCES = 2048
-"""Distances of the kernel's table, log-spaced from the nearest to the farthest receiver."""
+DIST_STEP = 0.02
+"""Step of the kernel's distance table in ``ln d`` (about 2 % of the distance)."""
+DEFAULT_REACH_M = 200_000.0
+"""Farthest distance from the UAV the table covers when no map is given (operations), m."""
 
-numba = _kernels.numba
-
-_LUT_PER_DEG = 10
-_NLUT = 180 * _LUT_PER_DEG + 1
-_LN10_10 = math.log(10.0) / 10.0
-"""Bins per degree of the table-angle lookup (the lower node of each bin's start)."""
-
-
-def _lut(grid: np.ndarray) -> np.ndarray:
-    """Index of the last node at or below the start of every bin over -90..90 deg."""
-    edges = -90.0 + np.arange(180 * _LUT_PER_DEG + 1) / _LUT_PER_DEG
-    return np.clip(np.searchsorted(grid, edges, side="right") - 1, 0, max(grid.size - 2, 0)).astype(np.int64)
+_PLACEHOLDER = ModelCard(id="hemisphere", vehicle="hemisphere", phase="horizontal", ansatz="paper-offset",
+                         parameters=dict(p0=0.0, p1=0.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=0.0, p7=0.0),
+                         reference_power_w=1.0, reference_distance_m=1.0)
+"""Stands for a hemisphere card in the parametric preparation (its rows are replaced)."""
 
 
-def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, n: int = N_DISTANCES
+# --------------------------------------------------------------------------- tables
+
+
+def _axis(grid_deg: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """A table axis as the kernel reads it: ``(g0, 1 / spacing or 0, nodes, 1 / interval widths)`` in radians.
+
+    On a uniform axis the fractional node index is ``(a - g0) / spacing``; otherwise the kernel
+    sums ``clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the intervals (piecewise linear, kinks
+    at the nodes: bilinear interpolation in it is bilinear interpolation in the angles).
+    """
+    g = np.radians(np.asarray(grid_deg, dtype=float))
+    if g.size == 1:
+        return float(g[0]), 0.0, g.astype(np.float32), np.zeros(1, np.float32)
+    sp = np.diff(g)
+    uniform = np.ptp(sp) <= 1e-9 * sp.max()
+    return float(g[0]), (1.0 / float(sp.mean()) if uniform else 0.0), g.astype(np.float32), \
+        np.append(1.0 / sp, 0.0).astype(np.float32)
+
+
+def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, step: float = DIST_STEP
                    ) -> tuple[np.ndarray, float, float]:
-    """Nodes' A-weighted levels at ``n`` distances log-spaced over ``[d_lo, d_hi]``: ``(nodes, n)``, ``ln d_lo``, step."""
-    u0, u1 = math.log(d_lo), math.log(max(d_hi, d_lo * 1.001))
-    du = (u1 - u0) / (n - 1)
-    d = np.exp(u0 + du * np.arange(n))
-    nodes = card.phi_deg.size * card.theta_deg.size
-    tab = np.empty((nodes, n))
-    for k0 in range(0, n, 64):
-        lv = card.node_levels(d[k0:k0 + 64])
-        tab[:, k0:k0 + lv.shape[0]] = lv.reshape(lv.shape[0], nodes).T
-    return tab, u0, du
+    """Nodes' A-weighted levels without spherical spreading on distances log-spaced over ``[d_lo, d_hi]``.
+
+    Returns ``(table, s0, hs)``: ``table[k, node]`` (float64, nodes row-major ``phi, theta``) at
+    ``d_k`` with ``log2(d_k^2) = s0 + k hs``; the level at ``d_k`` is ``table - 20 lg(d_k / r0)``.
+    """
+    hs = 2.0 * step / math.log(2.0)
+    s0 = 2.0 * math.log2(d_lo)
+    nd = max(2, int(math.ceil((2.0 * math.log2(max(d_hi, d_lo * 1.001)) - s0) / hs)) + 2)
+    d = 2.0 ** ((s0 + hs * np.arange(nd)) / 2.0)
+    lv = card.node_levels(d).reshape(nd, -1)
+    return lv + 20.0 * np.log10(d / float(card.reference_distance_m))[:, None], s0, hs
 
 
-if numba is not None:
-    @_kernels.jit(inline="always")
-    def _locate(grid: np.ndarray, off: int, n: int, lut: np.ndarray, loff: int, a: float) -> tuple[int, float]:
-        if n == 1:
-            return 0, 0.0
-        if a <= grid[off]:
-            return 0, 0.0
-        if a >= grid[off + n - 1]:
-            return n - 2, 1.0
-        i = lut[loff + int((a + 90.0) * _LUT_PER_DEG)]
-        while i < n - 2 and grid[off + i + 1] <= a:
-            i += 1
-        g0 = grid[off + i]
-        return i, (a - g0) / (grid[off + i + 1] - g0)
+@dataclass(frozen=True, eq=False)
+class HemiTables:
+    """The hemisphere cards of a flight as the kernel reads them (:mod:`gisnoise.maps._hemikernel`).
 
-    @_kernels.jit(nogil=True, error_model="numpy")
-    def _hemi_kernel(rcv, src, R, kind, gain, coef, w, dmin2,
-                     phig, phio, phin, thg, tho, thn, tab, tabo, meas, measo, u0, du, nd, plut, tlut,
-                     emax, energy, efill):  # pragma: no cover - compiled
-        nc = rcv.shape[0]
-        ns = src.shape[0]
-        rad = 180.0 / math.pi
-        half_pi = 0.5 * math.pi
-        for c in range(nc):
-            em = 0.0
-            en = 0.0
-            ef = 0.0
-            for s in range(ns):
-                de = rcv[c, 0] - src[s, 0]
-                dn = rcv[c, 1] - src[s, 1]
-                du_ = rcv[c, 2] - src[s, 2]
-                xb = R[s, 0, 0] * de + R[s, 0, 1] * dn + R[s, 0, 2] * du_
-                yb = R[s, 1, 0] * de + R[s, 1, 1] * dn + R[s, 1, 2] * du_
-                zb = R[s, 2, 0] * de + R[s, 2, 1] * dn + R[s, 2, 2] * du_
-                d2 = xb * xb + yb * yb + zb * zb
-                k = kind[s]
-                if k < 0:
-                    d2c = max(d2, coef[s, 9])
-                    h = math.sqrt(xb * xb + yb * yb)
-                    phi = math.atan2(yb, xb)
-                    theta = math.atan2(-zb, h)
-                    sp = math.sin(phi) * coef[s, 1] - math.cos(phi) * coef[s, 2]
-                    st = math.sin(theta) * coef[s, 4] - math.cos(theta) * coef[s, 5]
-                    lv = (gain[s] * (1.0 + coef[s, 0] * sp * (theta + half_pi)) * (1.0 + coef[s, 3] * st)
-                          - coef[s, 6] * math.log2(d2c) + coef[s, 7])
-                    e = math.exp(lv * _LN10_10) + coef[s, 8]
-                    fw = 0.0
-                else:
-                    d = math.sqrt(max(d2, dmin2))
-                    zc = abs(zb)
-                    a = math.atan2(-xb, zc) * rad
-                    b = math.atan2(yb, zc) * rad
-                    ni = phin[k]
-                    nj = thn[k]
-                    i, wi = _locate(phig, phio[k], ni, plut, k * _NLUT, a)
-                    j, wj = _locate(thg, tho[k], nj, tlut, k * _NLUT, b)
-                    i1 = min(i + 1, ni - 1)
-                    j1 = min(j + 1, nj - 1)
-                    x = (math.log(d) - u0) / du
-                    kd = min(max(int(x), 0), nd - 2)
-                    fd = min(max(x - kd, 0.0), 1.0)
-                    base = tabo[k]
-                    lv = 0.0
-                    fw = 0.0
-                    for q in range(4):
-                        ii = i if q < 2 else i1
-                        jj = j if q % 2 == 0 else j1
-                        ww = (1.0 - wi if q < 2 else wi) * (1.0 - wj if q % 2 == 0 else wj)
-                        node = ii * nj + jj
-                        r = base + node * nd + kd
-                        lv += ww * (tab[r] * (1.0 - fd) + tab[r + 1] * fd)
-                        if meas[measo[k] + node] == 0:
-                            fw += ww
-                    if zb < 0.0 or a < phig[phio[k]] or a > phig[phio[k] + ni - 1] \
-                            or b < thg[tho[k]] or b > thg[tho[k] + nj - 1]:
-                        fw = 1.0
-                    e = math.exp(lv * _LN10_10)
-                if e > em:
-                    em = e
-                en += w[s] * e
-                ef += w[s] * e * fw
-            emax[c] = em
-            energy[c] = en
-            efill[c] = ef
+    ``kind[i]``: row of ``hs`` of instant ``i``'s hemisphere card, -1 for a parametric card;
+    ``hs``: per card the offsets and scalars (columns ``H_*``); ``tab``: the distance tables
+    (float32, one shared distance grid ``s0 + k hs_step`` in ``log2(d^2)``, ``nd`` points);
+    ``axg``, ``axinv``: the axes' nodes and inverse interval widths (rad, float32);
+    ``reach_m``: the farthest distance the tables cover; ``bound``: per card, the largest node
+    level at each table distance (dB, for the audibility radius).
+    """
+
+    kind: np.ndarray
+    hs: np.ndarray
+    tab: np.ndarray
+    axg: np.ndarray
+    axinv: np.ndarray
+    s0: float
+    hs_step: float
+    nd: int
+    reach_m: float
+    bound: np.ndarray
 
 
-def _rotations(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
-    """ENU -> body rotation matrices ``(n, 3, 3)``, columns the images of east, north, up."""
-    n = yaw.size
-    R = np.empty((n, 3, 3))
-    for col, v in enumerate(np.eye(3)):
-        xb, yb, zb = body_vector(v[0], v[1], v[2], yaw, pitch, roll)
-        R[:, 0, col], R[:, 1, col], R[:, 2, col] = xb, yb, zb
-    return R
+def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> HemiTables:
+    """Kernel tables of ``cards`` (kind left empty); placeholders when there is none."""
+    if not cards:
+        return HemiTables(kind=np.zeros(0, np.int64), hs=np.zeros((1, _hk.N_HS)), tab=np.zeros(2, np.int64),
+                          axg=np.zeros(1, np.float32), axinv=np.zeros(1, np.float32), s0=0.0, hs_step=1.0, nd=2, reach_m=math.inf,
+                          bound=np.zeros((0, 2)))
+    d_lo = d_min * 0.999
+    rows, tabs, axg, axinv, bounds = [], [], [], [], []
+    off_t = off_a = 0
+    s0 = hs = 0.0
+    for card in cards:
+        tab, s0, hs = distance_table(card, d_lo, reach_m)
+        nd = tab.shape[0]
+        ni, nj = card.phi_deg.size, card.theta_deg.size
+        si, sj = (nj if ni > 1 else 0), (1 if nj > 1 else 0)
+        pa0, pinv, pg, pi_ = _axis(card.phi_deg)
+        ta0, tinv, tg, ti_ = _axis(card.theta_deg)
+        r0 = float(card.reference_distance_m)
+        row = np.zeros(_hk.N_HS)
+        row[[_hk.H_TAB, _hk.H_NN, _hk.H_NJ, _hk.H_SI, _hk.H_SJ, _hk.H_IMAX, _hk.H_JMAX]] = (
+            off_t, nd - 1, nj, si * (nd - 1), sj * (nd - 1), max(ni - 2, 0), max(nj - 2, 0))
+        gp, gt = np.radians(card.phi_deg), np.radians(card.theta_deg)
+        row[[_hk.H_AMIN, _hk.H_AMAX, _hk.H_BMIN, _hk.H_BMAX]] = gp[0], gp[-1], gt[0], gt[-1]
+        row[[_hk.H_PA0, _hk.H_PINV, _hk.H_PNB, _hk.H_PBO]] = pa0, pinv, ni - 1, off_a
+        row[[_hk.H_TA0, _hk.H_TINV, _hk.H_TNB, _hk.H_TBO]] = ta0, tinv, nj - 1, off_a + ni
+        row[_hk.H_K0] = 20.0 * math.log10(r0)
+        rows.append(row)
+        tabs.append(_pairs(tab, ~card.measured.ravel()))
+        axg += [pg, tg]
+        axinv += [pi_, ti_]
+        s = s0 + hs * np.arange(nd)
+        bounds.append(tab.max(axis=1) - _hk._CSP * s + 20.0 * math.log10(r0))
+        off_t += (nd - 1) * ni * nj
+        off_a += ni + nj
+    return HemiTables(kind=np.zeros(0, np.int64), hs=np.array(rows), tab=np.concatenate(tabs),
+                      axg=np.concatenate(axg), axinv=np.concatenate(axinv),
+                      s0=float(s0), hs_step=float(hs), nd=nd, reach_m=float(reach_m), bound=np.array(bounds))
+
+
+def _pairs(tab: np.ndarray, filled: np.ndarray) -> np.ndarray:
+    """The kernel's table: per node and distance step the float32 levels at both ends as one int64.
+
+    Node-major (the distance steps of a node adjacent): neighbouring cells read neighbouring entries.
+
+    Low 32 bits the level at ``d_k``, high 32 bits at ``d_k+1``; the lowest bit of each level is
+    the node's filled flag (1 filled, 0 measured; it moves the level by at most 1 ulp, 1e-5 dB).
+    """
+    b = tab.astype(np.float32).view(np.uint32) & np.uint32(0xFFFFFFFE)
+    b = b | filled.astype(np.uint32)[None, :]
+    pairs = (b[:-1].astype(np.uint64) | (b[1:].astype(np.uint64) << np.uint64(32))).view(np.int64)
+    return np.ascontiguousarray(pairs.T).ravel()
+
+
+def _radius(bound: np.ndarray, s0: float, hs: float, floor_db: float | None) -> float:
+    """Distance beyond which the level bound of a card is below ``floor_db`` (inf: none; -1: never above)."""
+    if floor_db is None:
+        return math.inf
+    seg = np.maximum(bound[:-1], bound[1:]) + _hk._CSP * hs  # bound over each step of the table
+    above = np.flatnonzero(seg >= floor_db)
+    if above.size == 0:
+        return -1.0
+    k = int(above[-1]) + 1
+    if k >= bound.size - 1:
+        return math.inf
+    return 2.0 ** ((s0 + hs * k) / 2.0) * (1.0 + 1e-9) + 1e-3
+
+
+# --------------------------------------------------------------------------- flights
+
+
+@dataclass(frozen=True, eq=False)
+class HemiFlight(FlightInstants):
+    """A flight's instants (:class:`~gisnoise.maps.instants.FlightInstants`) with hemisphere cards' tables."""
+
+    hemi: HemiTables | None = None
+
+
+def _with_hemispheres(t: np.ndarray, state: dict[str, np.ndarray], idx: np.ndarray, cards: Sequence[ModelCard],
+                      frame: Any, *, background: bool, min_distance_m: float, floor_db: float | None,
+                      source: str, reach_m: float) -> HemiFlight:
+    hemi_k = [k for k in sorted(set(idx.tolist())) if isinstance(cards[k], HemisphereCard)]
+    stand_in = [(_PLACEHOLDER if isinstance(c, HemisphereCard) else c) for c in cards]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fl = _instants(t, state, idx, stand_in, frame, background=background, min_distance_m=min_distance_m,
+                       floor_db=floor_db, source=source)
+    tables = _tables([cards[k] for k in hemi_k], float(min_distance_m), float(reach_m))
+    kind = np.full(t.size, -1, np.int64)
+    gain, radius = fl.gain.copy(), fl.radius.copy()
+    for h, k in enumerate(hemi_k):
+        sel = idx == k
+        kind[sel] = h
+        gain[sel] = 0.0
+        radius[sel] = _radius(tables.bound[h], tables.s0, tables.hs_step, floor_db)
+    tables = HemiTables(kind, tables.hs, tables.tab, tables.axg, tables.axinv, tables.s0,
+                        tables.hs_step, tables.nd, tables.reach_m, tables.bound)
+    return HemiFlight(t=fl.t, src=fl.src, C=fl.C, gain=gain, cidx=fl.cidx, coef=fl.coef, w=fl.w, dt=fl.dt,
+                      radius=radius, source=fl.source, hemi=tables)
+
+
+def prepare_flight(traj: Trajectory, cards: Any, frame: Any, *, substeps: int = 1, background: bool = False,
+                   min_distance_m: float = 1.0, floor_db: float | None = None,
+                   reach_m: float | None = None) -> FlightInstants:
+    """:func:`gisnoise.maps.instants.prepare_flight` for card sets that may hold hemisphere cards.
+
+    Without a hemisphere card it is the parametric preparation; with one, a :class:`HemiFlight`
+    whose tables reach ``reach_m`` from the UAV (default :data:`DEFAULT_REACH_M`).
+    """
+    cardset = as_cardset(cards)
+    if not any(isinstance(c, HemisphereCard) for c in cardset.cards):
+        return _prepare_parametric(traj, cardset, frame, substeps=substeps, background=background,
+                                   min_distance_m=min_distance_m, floor_db=floor_db)
+    idx_samples = cardset.assign(traj.phase, traj.t, source=traj.source)
+    t_eval, state, src_sample = eval_states(traj, int(substeps))
+    return _with_hemispheres(t_eval, state, idx_samples[src_sample], cardset.cards, frame, background=background,
+                             min_distance_m=min_distance_m, floor_db=floor_db, source=traj.source,
+                             reach_m=DEFAULT_REACH_M if reach_m is None else reach_m)
+
+
+def snapshot_instant(traj: Trajectory, cards: Any, frame: Any, t_s: float, *, background: bool = False,
+                     min_distance_m: float = 1.0, floor_db: float | None = None,
+                     reach_m: float | None = None) -> FlightInstants:
+    """:func:`gisnoise.maps.instants.snapshot_instant` for card sets that may hold hemisphere cards."""
+    cardset = as_cardset(cards)
+    if not any(isinstance(c, HemisphereCard) for c in cardset.cards):
+        return _snapshot_parametric(traj, cardset, frame, t_s, background=background,
+                                    min_distance_m=min_distance_m, floor_db=floor_db)
+    state, idx = snapshot_state(traj, cardset, t_s)
+    return _with_hemispheres(np.array([float(t_s)]), state, idx, cardset.cards, frame, background=background,
+                             min_distance_m=min_distance_m, floor_db=floor_db, source=traj.source,
+                             reach_m=DEFAULT_REACH_M if reach_m is None else reach_m)
+
+
+# --------------------------------------------------------------------------- running the kernel
+
+
+@dataclass(frozen=True, eq=False)
+class HemiWindowResult:
+    """:class:`~gisnoise.maps.fastkernel.WindowResult` plus ``efill``: the energy from filled nodes."""
+
+    emax: np.ndarray
+    energy: np.ndarray
+    ta: np.ndarray
+    computed: np.ndarray
+    efill: np.ndarray
+
+
+def run_hemi_window(fl: HemiFlight, rc: Receivers, r0: int, r1: int, c0: int, c1: int,
+                    thresholds: Sequence[float] = (), *, lattice: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> HemiWindowResult:
+    """The hemisphere kernel on rows ``r0:r1``, columns ``c0:c1`` (as :func:`~gisnoise.maps.fastkernel.run_window`)."""
+    if _hk.numba is None:
+        raise InputError("engine 'fast' needs numba (pip install 'gisnoise[fast]')", field="engine")
+    ht = fl.hemi
+    assert ht is not None
+    W = rc.grid.width
+    if not (0 <= r0 < r1 <= rc.grid.height and 0 <= c0 < c1 <= W):
+        raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the grid {rc.grid.shape}",
+                         field="window")
+    k = rc.seg
+    P, U = rc.lattice(r0, r1, c0 // k, -(-c1 // k)) if lattice is None else lattice
+    nr, ncw = r1 - r0, c1 - c0
+    if rc.dh is not None:
+        o_r, o_c = rc.dh_origin
+        if r0 < o_r or c0 < o_c or r1 - o_r > rc.dh.shape[0] or c1 - o_c > rc.dh.shape[1]:
+            raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the receivers' DEM heights",
+                             field="window")
+        dh = np.ascontiguousarray(rc.dh[r0 - o_r:r1 - o_r, c0 - o_c:c1 - o_c])
+    else:
+        dh = np.zeros((1, 1), np.float32)
+    # the tables must reach every cell of the window from every hemisphere instant
+    hsel = ht.kind >= 0
+    if hsel.any():
+        far = _farthest(rc, fl.src[hsel], r0, r1, c0, c1)
+        if far > ht.reach_m:
+            raise InputError(f"grid: cells lie up to {far:.0f} m from the UAV, beyond the hemisphere tables' reach "
+                             f"of {ht.reach_m:.0f} m", field="grid")
+    thr = np.asarray(list(thresholds), dtype=np.float64)
+    emax = np.zeros((nr, ncw), np.float32)
+    energy = np.zeros((nr, ncw), np.float64)
+    efill = np.zeros((nr, ncw), np.float64)
+    ta = np.zeros((thr.size, nr, ncw), np.float64)
+    computed = np.zeros((nr, ncw), np.uint8)
+    _hk._hemi_window_kernel(P, U, dh, rc.dh is not None, k, c0 // k, c0, ncw, fl.src, fl.C, fl.gain, fl.cidx,
+                            fl.coef, fl.w, fl.dt, fl.radius, thr, ht.kind, ht.hs, ht.tab, ht.axg, ht.axinv, ht.s0, 1.0 / ht.hs_step, ht.nd, emax, energy, ta, computed, efill)
+    return HemiWindowResult(emax, energy, ta, computed.astype(bool), efill)
+
+
+def _run_grid(fl: HemiFlight, rc: Receivers, thresholds: Sequence[float], threads: int | None, chunk: int,
+              progress: Callable[[float], Any] | None, cancel: Callable[[], bool] | None) -> HemiWindowResult:
+    H, W = rc.grid.shape
+    nthreads = default_threads() if threads is None else max(1, int(threads))
+    rows = max(1, min(int(chunk) // W, -(-H // (4 * nthreads))))
+    blocks = [(r, min(r + rows, H)) for r in range(0, H, rows)]
+    nt = len(list(thresholds))
+    out = HemiWindowResult(np.zeros((H, W), np.float32), np.zeros((H, W)), np.zeros((nt, H, W)),
+                           np.zeros((H, W), bool), np.zeros((H, W)))
+    done = 0
+
+    def put(b: tuple[int, int], res: HemiWindowResult) -> None:
+        nonlocal done
+        r0, r1 = b
+        out.emax[r0:r1], out.energy[r0:r1], out.ta[:, r0:r1] = res.emax, res.energy, res.ta
+        out.computed[r0:r1], out.efill[r0:r1] = res.computed, res.efill
+        done += r1 - r0
+        if progress is not None:
+            progress(done / H)
+
+    def check() -> None:
+        if cancel is not None and cancel():
+            raise Cancelled("cancelled", field="cancel")
+
+    map_threads(lambda b: run_hemi_window(fl, rc, b[0], b[1], 0, W, thresholds), blocks, put, nthreads, poll=check)
+    return out
+
+
+def _farthest(rc: Receivers, src: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> float:
+    """Largest distance from the points ``src`` (ENU) to the cells of a window (a box around its edges), m."""
+    t = rc.grid.transform
+    f = np.linspace(0.0, 1.0, 9)
+    cols = np.concatenate([c0 + f * (c1 - c0), c0 + f * (c1 - c0), np.full(9, c0), np.full(9, c1)])
+    rows = np.concatenate([np.full(9, r0), np.full(9, r1), r0 + f * (r1 - r0), r0 + f * (r1 - r0)])
+    lon, lat = rc.grid.to_wgs84(t.c + t.a * cols, t.f + t.e * rows)
+    p = np.stack(rc.frame.to_enu(lat, lon, np.full(lat.shape, rc.h_ref)), axis=-1)
+    dz = 0.0 if rc.dh is None else float(np.abs(rc.dh).max())
+    lo_b, hi_b = p.min(axis=0) - dz - 1.0, p.max(axis=0) + dz + 1.0
+    return float(np.sqrt(np.sum(np.maximum(np.abs(src - lo_b), np.abs(src - hi_b)) ** 2, axis=1)).max())
+
+
+def _db(x: np.ndarray) -> np.ndarray:
+    with np.errstate(divide="ignore"):
+        return 10.0 * np.log10(x)
 
 
 def evaluate_hemisphere_fast(req: MapRequest, opts: MapOptions) -> MapResult:
     """The fast engine for card sets with hemisphere cards (module docstring); ``req`` from ``check_request``."""
-    if numba is None:
+    if _hk.numba is None:
         raise InputError("engine 'fast' needs numba (pip install 'gisnoise[fast]')", field="engine")
-    if req.thresholds or req.snap is not None:
-        raise InputError("engine 'fast' computes LAmax, LAeq and SEL of hemisphere cards; use engine='numpy' "
-                         "for time above and snapshots", field="engine")
-    if opts.floor_db is not None:
-        raise InputError("floor_db: the audibility floor does not apply to hemisphere cards; leave it out",
-                         field="floor_db")
-    traj, grid, cardset = req.traj, req.grid, req.cardset
-    hr = as_float(opts.receiver_height, "receiver_height")
-    cidx_samples = cardset.assign(traj.phase, traj.t, source=traj.source)
-    used = sorted(set(cidx_samples.tolist()))
-    t_eval, state, src_sample = eval_states(traj, req.substeps)
-    cidx = cidx_samples[src_sample]
-    ns = t_eval.size
-    w = trapezoid_weights(t_eval)
+    traj, grid, metrics, thresholds, period, snap = req.traj, req.grid, req.metrics, req.thresholds, req.period, req.snap
+    floor = None if opts.floor_db is None else as_float(opts.floor_db, "floor_db")
+    chunk = opts.chunk_cells
+    if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
+        raise InputError(f"chunk_cells must be >= 1, got {chunk!r}", field="chunk_cells")
+    chunk = (1 << 17) if chunk is None else int(chunk)
+    rc = receivers_for(grid, [traj], receiver_height=opts.receiver_height, dem=opts.dem, ground_h=opts.ground_h,
+                       dem_offset_m=opts.dem_offset_m)
+    frame = rc.frame
+    s_enu = np.stack(frame.to_enu(traj.lat, traj.lon, traj.h), axis=-1)
+    reach = _farthest(rc, s_enu, 0, grid.height, 0, grid.width) * 1.05 + 10.0
+    kw = dict(background=opts.background, min_distance_m=req.min_distance_m, floor_db=floor, reach_m=reach)
+    fl = prepare_flight(traj, req.cardset, frame, substeps=req.substeps, **kw)  # type: ignore[arg-type]
+    share = 1.0 if snap is None else fl.n / (fl.n + 1.0)
+    progress = opts.progress
 
-    ground = ground_on_grid(grid, [traj], dem=opts.dem, ground_h=opts.ground_h, dem_offset_m=opts.dem_offset_m)
-    lon_c, lat_c = grid.centre_wgs84()
-    frame = local_frame(lat_c, lon_c, ground.h0)
-    src = np.ascontiguousarray(np.stack(frame.to_enu(state["lat"], state["lon"], state["h"]), axis=-1))
-    R = _rotations(np.radians(state["yaw"]), np.radians(state["pitch"]), np.radians(state["roll"]))
-    x, y = grid.flat_centres(0, grid.n_cells)
-    lon, lat = transformer(grid.crs, WGS84).transform(x, y)
-    ground_flat = None if ground.heights is None else ground.heights.ravel()
-    hgt = (np.full(grid.n_cells, ground.h0) if ground_flat is None else ground_flat) + hr
-    valid = np.isfinite(hgt)
-    hgt = np.where(valid, hgt, ground.h0 + hr)
-    rcv = np.ascontiguousarray(np.stack(frame.to_enu(lat, lon, hgt), axis=-1))
+    def prog(f: float) -> None:
+        if progress is not None:
+            progress(share * f)
 
-    # distances the table must span
-    lo_b, hi_b = rcv.min(axis=0), rcv.max(axis=0)
-    far = np.sqrt(np.sum(np.maximum(np.abs(src - lo_b), np.abs(src - hi_b)) ** 2, axis=1)).max()
-    dmin = float(req.min_distance_m)
-    # per-instant card description
-    kind = np.full(ns, -1, np.int64)
-    gain = np.zeros(ns)
-    coef = np.zeros((ns, 10))
-    phig, phio, phin, thg, tho, thn, tabs, tabo, meas, measo = [], [], [], [], [], [], [], [], [], []
-    hemi_no: dict[int, int] = {}
-    u0 = du = 0.0
-    off_p = off_t = off_tab = off_m = 0
-    for k in used:
-        card = cardset.cards[k]
-        sel = cidx == k
-        if isinstance(card, HemisphereCard):
-            h = hemi_no.setdefault(k, len(hemi_no))
-            kind[sel] = h
-            d_lo = min(dmin, float(card.reference_distance_m)) * 0.999
-            tab, u0, du = distance_table(card, d_lo, max(far, 2.0 * d_lo) * 1.001)
-            phig.append(card.phi_deg)
-            phio.append(off_p)
-            phin.append(card.phi_deg.size)
-            off_p += card.phi_deg.size
-            thg.append(card.theta_deg)
-            tho.append(off_t)
-            thn.append(card.theta_deg.size)
-            off_t += card.theta_deg.size
-            tabs.append(tab.ravel())
-            tabo.append(off_tab)
-            off_tab += tab.size
-            meas.append(card.measured.ravel().astype(np.uint8))
-            measo.append(off_m)
-            off_m += card.measured.size
-        else:
-            p0, p1, row = card_coefficients(card, background=opts.background, min_distance_m=dmin)
-            gain[sel] = p0 + p1 * np.log10(np.asarray(state["power_w"], dtype=float)[sel] / card.reference_power_w)
-            coef[sel] = row
-    # all hemisphere cards share one distance grid: rebuild them on the widest span if there are several
-    if len(hemi_no) > 1:
-        d_lo = min(min(dmin, float(cardset.cards[k].reference_distance_m)) for k in hemi_no) * 0.999
-        d_hi = max(far, 2.0 * d_lo) * 1.001
-        tabs = []
-        for k in hemi_no:
-            tab, u0, du = distance_table(cardset.cards[k], d_lo, d_hi)  # type: ignore[arg-type]
-            tabs.append(tab.ravel())
-
-    def cat(parts: list[Any], dtype: Any) -> np.ndarray:
-        return np.ascontiguousarray(np.concatenate(parts).astype(dtype)) if parts else np.zeros(1, dtype)
-
-    args = (src, R, kind, gain, coef, w, dmin * dmin,
-            cat(phig, float), np.array(phio or [0], np.int64), np.array(phin or [1], np.int64),
-            cat(thg, float), np.array(tho or [0], np.int64), np.array(thn or [1], np.int64),
-            cat(tabs, float), np.array(tabo or [0], np.int64), cat(meas, np.uint8),
-            np.array(measo or [0], np.int64), float(u0), float(du) or 1.0, N_DISTANCES,
-            cat([_lut(g) for g in phig], np.int64), cat([_lut(g) for g in thg], np.int64))
-
-    n = grid.n_cells
-    emax, energy, efill = np.zeros(n), np.zeros(n), np.zeros(n)
-    nthreads = default_threads() if opts.threads is None else max(1, int(opts.threads))
-    step = max(1, min(1 << 14, -(-n // (4 * nthreads))))
-    blocks = [(c0, min(c0 + step, n)) for c0 in range(0, n, step)]
-    done = 0
-
-    def run(b: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        c0, c1 = b
-        m = c1 - c0
-        out = np.zeros(m), np.zeros(m), np.zeros(m)
-        _hemi_kernel(rcv[c0:c1], *args, *out)
-        return out
-
-    def put(b: tuple[int, int], res: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
-        nonlocal done
-        emax[b[0]:b[1]], energy[b[0]:b[1]], efill[b[0]:b[1]] = res
-        done += b[1] - b[0]
-        if opts.progress is not None:
-            opts.progress(done / n)
-
-    def poll() -> None:
-        if opts.cancel is not None and opts.cancel():
-            raise Cancelled("cancelled", field="cancel")
-
-    map_threads(run, blocks, put, nthreads, poll=poll)
-
-    metrics = req.metrics
-    bands: dict[str, np.ndarray] = {name: np.full(n, np.nan) for name in band_order(metrics, [], None, False)}
-    with np.errstate(divide="ignore"):
-        if "LAmax" in metrics:
-            bands["LAmax"] = 10.0 * np.log10(emax)
-        if "SEL" in metrics:
-            bands["SEL"] = 10.0 * np.log10(energy)
-        if "LAeq" in metrics:
-            assert req.period is not None
-            bands["LAeq"] = 10.0 * np.log10(energy / req.period)
-    for a in bands.values():
-        a[~valid] = np.nan
-    shaped = {k: v.reshape(grid.shape) for k, v in bands.items()}
-    meta = map_metadata(req, shaped, ns, hr, ground.description, opts.background, used)
-    tot = float(energy[valid].sum())
-    meta.update({"engine": "fast", "floor_db": None, "cells_below_floor": 0,
-                 "hemisphere_filled_energy_share": float(efill[valid].sum()) / tot if tot > 0 else 0.0,
+    res = _run_grid(fl, rc, thresholds, opts.threads, chunk, prog, opts.cancel)  # type: ignore[arg-type]
+    below = ~res.computed
+    bands: dict[str, np.ndarray] = {name: np.full(grid.shape, np.nan)
+                                    for name in band_order(metrics, thresholds, snap, False)}
+    if "LAmax" in metrics:
+        bands["LAmax"] = _db(res.emax.astype(np.float64))
+    if "SEL" in metrics:
+        bands["SEL"] = _db(res.energy)
+    if "LAeq" in metrics:
+        assert period is not None
+        bands["LAeq"] = _db(res.energy / period)
+    for i, thr in enumerate(thresholds):
+        a = res.ta[i].copy()
+        if floor is None or thr < floor:
+            a[below] = np.nan
+        bands[threshold_name(thr)] = a
+    for name in ("LAmax", "SEL", "LAeq"):
+        if name in bands:
+            bands[name][below] = np.nan
+    if snap is not None:
+        s_state, s_idx = snapshot_state(traj, req.cardset, snap)
+        s_fl = _with_hemispheres(np.array([float(snap)]), s_state, s_idx, req.cardset.cards, frame,
+                                 source=traj.source, **kw)  # type: ignore[arg-type]
+        s = _run_grid(s_fl, rc, (), opts.threads, chunk, None if progress is None else
+                      (lambda f: progress(share + (1 - share) * f)), opts.cancel)
+        a = _db(s.emax.astype(np.float64))
+        a[~s.computed] = np.nan
+        bands[snapshot_name(snap)] = a
+    if rc.valid is not None and not rc.valid.all():
+        for a in bands.values():
+            a[~rc.valid] = np.nan
+    used = sorted(set(req.cardset.assign(traj.phase, traj.t, source=traj.source).tolist()))
+    meta = map_metadata(req, bands, fl.n, float(opts.receiver_height), rc.ground or {}, opts.background, used)
+    ok = np.ones(grid.shape, bool) if rc.valid is None else rc.valid
+    tot = float(res.energy[ok].sum())
+    meta.update({"engine": "fast", "floor_db": floor, "cells_below_floor": int(below.sum()),
+                 "hemisphere_filled_energy_share": float(res.efill[ok].sum()) / tot if tot > 0 else 0.0,
+                 "hemisphere_atmospheres": hemisphere_atmospheres([req.cardset.cards[k] for k in used]),
                  "hemisphere_interpolation": "bilinear in the table angles of the nodes' A-weighted levels at the "
-                                             "receiver's distance (ISO 9613-1 absorption in the card's atmosphere)"})
-    return MapResult(bands=shaped, grid=grid, metadata=meta)
+                                             "receiver's distance (ISO 9613-1 absorption in the card's map "
+                                             "atmosphere)"})
+    return MapResult(bands=bands, grid=grid, metadata=meta)
+
+
+def hemisphere_level_points(card: HemisphereCard, xb: Any, yb: Any, zb: Any, *, min_distance_m: float = 1.0
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's level (dB(A), float32) and weight on filled nodes for body vectors ``(xb, yb, zb)`` (m).
+
+    For the tests against :meth:`HemisphereCard.level_direction` (the NumPy engine's definition).
+    """
+    if _hk.numba is None:
+        raise InputError("engine 'fast' needs numba (pip install 'gisnoise[fast]')", field="engine")
+    xb, yb, zb = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (xb, yb, zb)))
+    d = np.sqrt(xb ** 2 + yb ** 2 + zb ** 2)
+    reach = max(float(d.max()) * 1.05 + 10.0, 10.0) if d.size else 10.0
+    ht = _tables([card], float(min_distance_m), reach)
+    lev, fw = _hk._hemi_points(xb.ravel(), yb.ravel(), zb.ravel(), float(min_distance_m) ** 2, ht.tab, ht.hs,
+                               ht.axg, ht.axinv, ht.s0, 1.0 / ht.hs_step, ht.nd, 0)
+    return lev.reshape(xb.shape), fw.reshape(xb.shape)

@@ -34,7 +34,7 @@ from gisnoise.acoustics import speed_of_sound
 from gisnoise.errors import Cancelled, CardError, GisnoiseError, InputError
 from gisnoise.geo import WGS84, emission_angles, transformer
 from gisnoise.maps._checks import as_float
-from gisnoise.maps.hemifill import filled_weights, has_hemisphere
+from gisnoise.maps.hemifill import filled_weights, has_hemisphere, hemisphere_atmospheres
 from gisnoise.maps.prepare import (
     MapOptions,
     band_order,
@@ -423,6 +423,8 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
     meta = map_metadata(req, bands, ns, hr, ground.description, opts.background, used, speed_of_sound_m_s=c_sound)
     if hemi:
         meta["hemisphere_filled_energy_share"] = e_fill / e_all if e_all > 0 else 0.0
+    if has_hemisphere(cardset.cards):
+        meta["hemisphere_atmospheres"] = hemisphere_atmospheres([cardset.cards[k] for k in used])
     if uncertainty:
         meta["uncertainty"] = ("delta method through the ansatz Jacobian with the cards' covariance; "
                                "*_std standard deviation (dB); *_p95 = level - 1.645 std, the level exceeded "

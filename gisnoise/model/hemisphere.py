@@ -243,13 +243,21 @@ class HemisphereCard(ModelCard):
     def node_levels(self, d: Any) -> np.ndarray:
         """A-weighted level of every node at distance ``d`` (m): ``(…d, phi, theta)``."""
         d = np.asarray(d, dtype=float)
+        flat = d.reshape(-1)
         r0 = float(self.reference_distance_m)
         la, alpha = self._weighted  # type: ignore[attr-defined]
-        ex = (la[None] - alpha[None, :, None, None] * (d.reshape(-1)[:, None, None, None] - r0)) / 10.0
-        top = ex.max(axis=1, keepdims=True)
-        lv = 10.0 * (top[:, 0] + np.log10(np.sum(10.0 ** (ex - top), axis=1)))
-        lv = lv - 20.0 * np.log10(d.reshape(-1) / r0)[:, None, None]
-        return lv.reshape(d.shape + lv.shape[1:])
+        nb = la.shape[0]
+        la2 = la.reshape(nb, -1)
+        # sum_b 10^((la_b - alpha_b x) / 10) as a matrix product, scaled so that nothing overflows:
+        # 10^(c_k/10) sum_b G[k, b] E[b, node] with E = 10^((la - top_b)/10), G = 10^((top_b - alpha_b x_k - c_k)/10)
+        top = la2.max(axis=1)
+        ex = top[None, :] - alpha[None, :] * (flat[:, None] - r0)
+        c = ex.max(axis=1)
+        g = 10.0 ** ((ex - c[:, None]) / 10.0)
+        e = 10.0 ** ((la2 - top[:, None]) / 10.0)
+        s = np.maximum(g @ e, 1e-300)
+        lv = 10.0 * np.log10(s) + c[:, None] - 20.0 * np.log10(flat / r0)[:, None]
+        return lv.reshape(d.shape + la.shape[1:])
 
     def interpolation(self, phi: Any, theta: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray,
                                                            np.ndarray]:

@@ -1,0 +1,395 @@
+"""The numba window kernel of the fast engine for flights with measured hemispheres (float32, vectorized).
+
+:func:`_hemi_window_kernel` is the parametric window kernel of :mod:`gisnoise.maps._numba`
+(same receivers' lattice, incremental body vectors, audibility skipping, accumulators and
+time above) with a second kind of instant: a hemisphere card.  Per cell and instant it
+evaluates the card's stated scheme (:class:`~gisnoise.model.HemisphereCard`: bilinear in the
+table angles of the nodes' A-weighted levels at the receiver's distance) from tables prepared
+in NumPy by :mod:`gisnoise.maps.hemisource`.
+
+Three vectorized passes over the cells of a run (:func:`_hemi_cells`, called once per instant
+and row segment, so that no per-cell call passes arrays):
+
+* **Distance and angles without libm.**  ``s = log2(d^2)`` (the kernel's polynomial ``log2``),
+  ``phi_t = atan2(-x_b, |z_b|)`` and ``theta_t = atan2(y_b, |z_b|)`` by its polynomial ``atan``
+  (5e-7 rad).
+* **Fractional node indices without search.**  ``(a - g_0) / spacing`` on a uniform axis, else
+  ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals: piecewise linear
+  with its kinks at the nodes, so bilinear interpolation in ``u`` on the integers is bilinear
+  interpolation in the angles.
+* **One read per node.**  Per node, the A-weighted level without spherical spreading,
+  ``T_q(d) = 10 lg sum_b 10^((L_b,q + A_b - alpha_b (d - r0)) / 10)``, is tabulated on a grid
+  uniform in ``s``; each int64 entry holds the float32 levels at both ends of a step (node-major,
+  so neighbouring cells read neighbouring entries), the lowest bit of each the node's filled
+  flag.  The level is the trilinear interpolation (4 nodes x 2 distances) minus the spreading
+  ``-20 lg(d / r0)``, exact from ``s``; the filled flags weighted like the nodes give the weight
+  on filled nodes, whose energy is summed separately (``efill``) for the map's metadata.
+
+The loops read tables at computed indices (gathers); LLVM vectorizes them only when the array
+arguments are known not to overlap (:func:`_vectorize_gathers`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gisnoise.maps import _numba as _k
+
+numba = _k.numba
+
+#: Columns of the per-card rows ``hs`` (float64) the kernel reads.
+(H_TAB, H_NN, H_NJ, H_SI, H_SJ, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
+ H_TA0, H_TINV, H_TNB, H_TBO, H_K0) = range(20)
+N_HS = 20
+
+_CSP = 10.0 / math.log2(10.0)
+"""``20 lg d = _CSP log2(d^2)``, dB."""
+
+
+if numba is not None:
+    _F0 = np.float32(0.0)
+    _F1 = np.float32(1.0)
+    _F32_CSP = np.float32(_CSP)
+    _K10 = _k._K10
+    _DB_PER_LOG2 = _k._DB_PER_LOG2
+    _FLUSH = _k._FLUSH
+    _LO = np.int64(0xFFFFFFFF)
+
+    @_k._intrinsic
+    def _vectorize_gathers(typingctx):
+        """Mark the calling function's array arguments ``noalias`` and prefer 512-bit vectors.
+
+        LLVM vectorizes a loop that reads tables at computed indices (gathers) only when it
+        knows the stores cannot touch the tables; every caller passes distinct arrays and
+        writes only to its output arrays.  Speed only: with or without it the results are
+        the same.
+        """
+
+        def codegen(context, builder, sig, args):
+            for arg in builder.function.args[2:]:  # after the return and exception pointers
+                if isinstance(arg.type, _k._ir.PointerType):
+                    arg.add_attribute("noalias")
+            try:  # see gisnoise.maps._numba._prefer_512bit_vectors
+                set.add(builder.function.attributes, '"prefer-vector-width"="512"')
+            except Exception:  # pragma: no cover
+                pass
+            return context.get_dummy_value()
+
+        return _k._nbt.none(), codegen
+
+    @_k.jit(fastmath=True, error_model="numpy", inline="always")
+    def _atan_s(y, x):
+        """``atan2(y, x)`` for ``x >= 0`` (float32), in [-pi/2, pi/2]."""
+        r = _k._atan2_pos(abs(y), x)
+        return -r if y < _F0 else r
+
+    @_k.jit(fastmath=True, error_model="numpy", nogil=True)
+    def _hemi_cells(xb, yb, zb, m, dmin2, hrow, tab, axg, axinv, s0, inv_hs, nd, sc, lev, ene, fwo, wt, em, eacc,
+                    facc):
+        """Level, energy and weight on filled nodes of ``m`` body vectors of one hemisphere card (row ``hrow``).
+
+        Three vectorized passes over the cells: distance and table angles; fractional node
+        indices, ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals
+        (one product on a uniform axis); the table reads.  ``sc``: scratch ``(5, >= m)``.
+        With ``wt > 0`` the energies are added to the accumulators ``em`` (maximum), ``eacc``
+        (``wt e``) and ``facc`` (``wt e fw``) instead of being written to ``ene`` and ``fwo``.
+        """
+        _vectorize_gathers()
+        tb = np.int32(hrow[H_TAB])
+        nn = np.int32(hrow[H_NN])
+        nj = np.int32(hrow[H_NJ])
+        si = np.int32(hrow[H_SI])
+        sj = np.int32(hrow[H_SJ])
+        imax = np.int32(hrow[H_IMAX])
+        jmax = np.int32(hrow[H_JMAX])
+        amin = np.float32(hrow[H_AMIN])
+        amax = np.float32(hrow[H_AMAX])
+        bmin = np.float32(hrow[H_BMIN])
+        bmax = np.float32(hrow[H_BMAX])
+        k0 = np.float32(hrow[H_K0])
+        d2min = np.float32(dmin2)
+        s032 = np.float32(s0)
+        ihs = np.float32(inv_hs)
+        ndm2 = np.int32(nd - 2)
+        w32 = np.float32(wt)
+        acc = w32 > _F0
+        S = sc[0]
+        A = sc[1]
+        B = sc[2]
+        OUT = sc[3]
+        V = sc[4]
+        for q in range(m):
+            x = xb[q]
+            y = yb[q]
+            z = zb[q]
+            S[q] = _k._log2(max(x * x + y * y + z * z, d2min))
+            zc = abs(z)
+            ap = _atan_s(-x, zc)
+            bt = _atan_s(y, zc)
+            out = (z < _F0) or (ap < amin) or (ap > amax) or (bt < bmin) or (bt > bmax)
+            OUT[q] = _F1 if out else _F0
+            A[q] = min(max(ap, amin), amax)
+            B[q] = min(max(bt, bmin), bmax)
+        for ax in range(2):
+            X = A if ax == 0 else B
+            Uo = lev if ax == 0 else V  # lev holds u until the last pass
+            g0 = np.float32(hrow[H_PA0 if ax == 0 else H_TA0])
+            uinv = np.float32(hrow[H_PINV if ax == 0 else H_TINV])
+            off = np.int32(hrow[H_PBO if ax == 0 else H_TBO])
+            nint = np.int32(hrow[H_PNB if ax == 0 else H_TNB])
+            if uinv > _F0 or nint == 0:
+                for q in range(m):
+                    Uo[q] = (X[q] - g0) * uinv
+            else:
+                for q in range(m):
+                    Uo[q] = _F0
+                for kk in range(nint):
+                    gk = axg[off + kk]
+                    ik = axinv[off + kk]
+                    for q in range(m):
+                        Uo[q] += min(max((X[q] - gk) * ik, _F0), _F1)
+        for q in range(m):
+            u = lev[q]
+            v = V[q]
+            ii = min(max(np.int32(u), np.int32(0)), imax)
+            jj = min(max(np.int32(v), np.int32(0)), jmax)
+            wa = min(max(u - np.float32(ii), _F0), _F1)
+            wb = min(max(v - np.float32(jj), _F0), _F1)
+            s = S[q]
+            x = (s - s032) * ihs
+            kd = min(max(np.int32(x), np.int32(0)), ndm2)
+            fd = x - np.float32(kd)
+            node = np.int32(ii * nj + jj)
+            ro = np.int32(tb + node * nn + kd)
+            p00 = tab[ro]
+            p01 = tab[ro + sj]
+            p10 = tab[ro + si]
+            p11 = tab[ro + si + sj]
+            l00 = np.int32(p00 & _LO)
+            l01 = np.int32(p01 & _LO)
+            l10 = np.int32(p10 & _LO)
+            l11 = np.int32(p11 & _LO)
+            a00 = _k._i32_as_f32(l00)
+            a01 = _k._i32_as_f32(l01)
+            a10 = _k._i32_as_f32(l10)
+            a11 = _k._i32_as_f32(l11)
+            t00 = a00 + fd * (_k._i32_as_f32(np.int32(p00 >> 32)) - a00)
+            t01 = a01 + fd * (_k._i32_as_f32(np.int32(p01 >> 32)) - a01)
+            t10 = a10 + fd * (_k._i32_as_f32(np.int32(p10 >> 32)) - a10)
+            t11 = a11 + fd * (_k._i32_as_f32(np.int32(p11 >> 32)) - a11)
+            w00 = (_F1 - wa) * (_F1 - wb)
+            w01 = (_F1 - wa) * wb
+            w10 = wa * (_F1 - wb)
+            w11 = wa * wb
+            lv = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
+            fw = (w00 * np.float32(l00 & 1) + w01 * np.float32(l01 & 1) + w10 * np.float32(l10 & 1)
+                  + w11 * np.float32(l11 & 1))
+            fw = max(fw, OUT[q])
+            lev[q] = lv
+            e = _k._exp2(lv * _K10)
+            if acc:
+                em[q] = max(em[q], e)
+                eacc[q] += w32 * e
+                facc[q] += w32 * e * fw
+            else:
+                ene[q] = e
+                fwo[q] = fw
+        return 0
+
+    @_k.jit(fastmath=True, error_model="numpy", nogil=True)
+    def _hemi_points(xq, yq, zq, dmin2, tab, hs, axg, axinv, s0, inv_hs, nd, h):
+        """The kernel's level and filled weight for arrays of body vectors, hemisphere card ``h`` (tests)."""
+        n = xq.size
+        levo = np.empty(n, np.float32)
+        ene = np.empty(n, np.float32)
+        fwo = np.empty(n, np.float32)
+        sc = np.empty((5, n), np.float32)
+        _hemi_cells(xq.astype(np.float32), yq.astype(np.float32), zq.astype(np.float32), n, dmin2, hs[h], tab, axg,
+                    axinv, s0, inv_hs, nd, sc, levo, ene, fwo, 0.0, ene, ene, ene)
+        return levo, fwo
+
+    @_k.jit(fastmath=True, error_model="numpy", nogil=True)
+    def _hemi_window_kernel(P, U, dh, has_dem, k, m0, c0, ncw, src, C, gain, cidx, coef, w, dt, radius, thr,
+                            kind, hs, tab, axg, axinv, s0, inv_hs, nd,
+                            emax, energy, ta, computed, efill):  # pragma: no cover - compiled
+        """:func:`gisnoise.maps._numba._window_kernel` with hemisphere instants (``kind[i] >= 0``: row of ``hs``).
+
+        Extra output ``efill``: ``sum w_i 10^(L_i/10) f_i`` with ``f_i`` the weight on filled nodes.
+        """
+        _vectorize_gathers()
+        nr = P.shape[0]
+        ns = (P.shape[1] - 1) // 2
+        n = src.shape[0]
+        nt = thr.shape[0]
+        thr32 = np.empty(nt, np.float32)
+        for t in range(nt):
+            thr32[t] = np.float32(thr[t])
+        lcur = np.empty(k, np.float32)
+        lprev = np.empty(k, np.float32)
+        eacc = np.zeros(k, np.float32)
+        facc = np.zeros(k, np.float32)
+        tacc = np.zeros((nt, k), np.float32)
+        xs = np.empty(k, np.float32)
+        ys = np.empty(k, np.float32)
+        zs = np.empty(k, np.float32)
+        ecur = np.empty(k, np.float32)
+        fcur = np.empty(k, np.float32)
+        sc = np.empty((5, k), np.float32)
+        e0 = np.empty(3)
+        e1 = np.empty(3)
+        e2 = np.empty(3)
+        n0 = np.empty(3)
+        n1 = np.empty(3)
+        lo_b = np.empty(3)
+        hi_b = np.empty(3)
+        inv_k = 1.0 / k
+        half_k = 0.5 * k
+        half_k32 = np.float32(half_k)
+        for r in range(nr):
+            for sg in range(ns):
+                a = (m0 + sg) * k
+                lo = max(a, c0)
+                hi = min(a + k, c0 + ncw)
+                if hi <= lo:
+                    continue
+                m = hi - lo
+                q0 = lo - a
+                jl = lo - c0
+                for c in range(3):
+                    pa = P[r, 2 * sg, c]
+                    pm = P[r, 2 * sg + 1, c]
+                    pb = P[r, 2 * sg + 2, c]
+                    e0[c] = pm
+                    e1[c] = (pb - pa) * inv_k
+                    e2[c] = 2.0 * (pa - 2.0 * pm + pb) * inv_k * inv_k
+                    n0[c] = 0.5 * (U[r, 2 * sg, c] + U[r, 2 * sg + 2, c]) if has_dem else 0.0
+                    n1[c] = (U[r, 2 * sg + 2, c] - U[r, 2 * sg, c]) * inv_k if has_dem else 0.0
+                    lo_b[c] = np.inf
+                    hi_b[c] = -np.inf
+                for q in range(q0, q0 + m):
+                    u = q - half_k
+                    for c in range(3):
+                        v = e0[c] + u * (e1[c] + u * e2[c])
+                        if has_dem:
+                            v += dh[r, jl + q - q0] * (n0[c] + u * n1[c])
+                        lo_b[c] = min(lo_b[c], v)
+                        hi_b[c] = max(hi_b[c], v)
+                cx = 0.5 * (lo_b[0] + hi_b[0])
+                cy = 0.5 * (lo_b[1] + hi_b[1])
+                cz = 0.5 * (lo_b[2] + hi_b[2])
+                rad = 0.5 * math.sqrt((hi_b[0] - lo_b[0]) ** 2 + (hi_b[1] - lo_b[1]) ** 2
+                                      + (hi_b[2] - lo_b[2]) ** 2) + 0.01
+                audible = False
+                for i in range(n):
+                    if radius[i] < 0.0:
+                        continue
+                    dist = math.sqrt((src[i, 0] - cx) ** 2 + (src[i, 1] - cy) ** 2 + (src[i, 2] - cz) ** 2)
+                    if dist - rad <= radius[i]:
+                        audible = True
+                        break
+                if not audible:
+                    continue
+                em = emax[r, jl:jl + m]
+                en = energy[r, jl:jl + m]
+                ef = efill[r, jl:jl + m]
+                dhr = dh[r, jl:jl + m] if has_dem else dh[0, 0:1]
+                for q in range(m):
+                    computed[r, jl + q] = 1
+                for i in range(n):
+                    ci = cidx[i]
+                    v0 = e0[0] - src[i, 0]
+                    v1 = e0[1] - src[i, 1]
+                    v2 = e0[2] - src[i, 2]
+                    ax = np.float32(C[i, 0, 0] * v0 + C[i, 0, 1] * v1 + C[i, 0, 2] * v2)
+                    ay = np.float32(C[i, 1, 0] * v0 + C[i, 1, 1] * v1 + C[i, 1, 2] * v2)
+                    az = np.float32(C[i, 2, 0] * v0 + C[i, 2, 1] * v1 + C[i, 2, 2] * v2)
+                    bx = np.float32(C[i, 0, 0] * e1[0] + C[i, 0, 1] * e1[1] + C[i, 0, 2] * e1[2])
+                    by = np.float32(C[i, 1, 0] * e1[0] + C[i, 1, 1] * e1[1] + C[i, 1, 2] * e1[2])
+                    bz = np.float32(C[i, 2, 0] * e1[0] + C[i, 2, 1] * e1[1] + C[i, 2, 2] * e1[2])
+                    dx = np.float32(C[i, 0, 0] * e2[0] + C[i, 0, 1] * e2[1] + C[i, 0, 2] * e2[2])
+                    dy = np.float32(C[i, 1, 0] * e2[0] + C[i, 1, 1] * e2[1] + C[i, 1, 2] * e2[2])
+                    dz = np.float32(C[i, 2, 0] * e2[0] + C[i, 2, 1] * e2[1] + C[i, 2, 2] * e2[2])
+                    nx = ny = nz = tx = ty = tz = _F0
+                    if has_dem:
+                        nx = np.float32(C[i, 0, 0] * n0[0] + C[i, 0, 1] * n0[1] + C[i, 0, 2] * n0[2])
+                        ny = np.float32(C[i, 1, 0] * n0[0] + C[i, 1, 1] * n0[1] + C[i, 1, 2] * n0[2])
+                        nz = np.float32(C[i, 2, 0] * n0[0] + C[i, 2, 1] * n0[1] + C[i, 2, 2] * n0[2])
+                        tx = np.float32(C[i, 0, 0] * n1[0] + C[i, 0, 1] * n1[1] + C[i, 0, 2] * n1[2])
+                        ty = np.float32(C[i, 1, 0] * n1[0] + C[i, 1, 1] * n1[1] + C[i, 1, 2] * n1[2])
+                        tz = np.float32(C[i, 2, 0] * n1[0] + C[i, 2, 1] * n1[1] + C[i, 2, 2] * n1[2])
+                    wt = np.float32(w[i])
+                    hk = kind[i]
+                    if hk >= 0:
+                        for q in range(m):
+                            qf = np.float32(q0 + q) - half_k32
+                            hh = dhr[q] if has_dem else _F0
+                            xs[q] = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
+                            ys[q] = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
+                            zs[q] = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
+                        if wt > _F0:
+                            _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc,
+                                        lcur, ecur, fcur, wt, em, eacc, facc)
+                        else:  # a zero weight (repeated instant): the maximum still counts
+                            _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc,
+                                        lcur, ecur, fcur, 0.0, em, eacc, facc)
+                            for q in range(m):
+                                em[q] = max(em[q], ecur[q])
+                    else:
+                        g = np.float32(gain[i])
+                        p2 = np.float32(coef[ci, 0])
+                        cp3 = np.float32(coef[ci, 1])
+                        sp3 = np.float32(coef[ci, 2])
+                        p4 = np.float32(coef[ci, 3])
+                        cp5 = np.float32(coef[ci, 4])
+                        sp5 = np.float32(coef[ci, 5])
+                        c6 = np.float32(coef[ci, 6])
+                        kk = np.float32(coef[ci, 7])
+                        e7 = np.float32(coef[ci, 8])
+                        dmin2 = np.float32(coef[ci, 9])
+                        for q in range(m):
+                            qf = np.float32(q0 + q) - half_k32
+                            hh = dhr[q] if has_dem else _F0
+                            xb = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
+                            yb = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
+                            zb = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
+                            lev, e = _k._cell(xb, yb, zb, g, p2, cp3, sp3, p4, cp5, sp5, c6, kk, e7, dmin2)
+                            em[q] = max(em[q], e)
+                            eacc[q] += wt * e
+                            lcur[q] = lev
+                        if nt > 0 and e7 != _F0:
+                            for q in range(m):
+                                lcur[q] = _k._log2(_k._exp2(lcur[q] * _K10) + e7) * _DB_PER_LOG2
+                    if nt > 0:
+                        if i > 0:
+                            dti = np.float32(dt[i])
+                            for t in range(nt):
+                                tv = thr32[t]
+                                tac = tacc[t]
+                                for q in range(m):
+                                    x0 = lprev[q] - tv
+                                    x1 = lcur[q] - tv
+                                    up0 = x0 >= _F0
+                                    up1 = x1 >= _F0
+                                    fr = _F0
+                                    if up0 and up1:
+                                        fr = _F1
+                                    elif up0 != up1:
+                                        fr = max(x0, x1) / abs(x0 - x1)
+                                    tac[q] += dti * fr
+                        for q in range(m):
+                            lprev[q] = lcur[q]
+                    if (i + 1) % _FLUSH == 0 or i == n - 1:
+                        for q in range(m):
+                            en[q] += eacc[q]
+                            eacc[q] = _F0
+                            ef[q] += facc[q]
+                            facc[q] = _F0
+                        for t in range(nt):
+                            tat = ta[t, r, jl:jl + m]
+                            tac = tacc[t]
+                            for q in range(m):
+                                tat[q] += tac[q]
+                                tac[q] = _F0
+        return 0
