@@ -187,12 +187,70 @@ def isolines(x: Any, y: Any, z: Any, level: float) -> list[LineString]:
     return [LineString(seg) for seg in _generator(x, y, z).lines(float(level)) if len(seg) >= 2]
 
 
-def _to_wgs84(geom: Any, tr: Any) -> Any:
-    def fn(xy: np.ndarray) -> np.ndarray:
-        lon, lat = tr.transform(xy[:, 0], xy[:, 1])
-        return np.column_stack([lon, lat])
+def _bulk_wgs84(arrays: list[np.ndarray], tr: Any) -> list[np.ndarray]:
+    """The (n, 2) point arrays in WGS84 longitude/latitude, in one call of the transformer."""
+    if not arrays:
+        return []
+    allpts = np.concatenate(arrays)
+    lon, lat = tr.transform(allpts[:, 0], allpts[:, 1])
+    out = np.column_stack([lon, lat])
+    ends = np.cumsum([len(a) for a in arrays])
+    return np.split(out, ends[:-1])
 
-    return shapely.transform(geom, fn)
+
+def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[tuple[float, float | None]],
+                     lv: list[float], tr: Any) -> tuple[list[MultiPolygon | None], list[MultiLineString | None]]:
+    """Isobands (one per bound) and isolines (one per level) of one band, in WGS84, finished.
+
+    One contour generator serves every level; the points of all levels are transformed to
+    WGS84 in one call; snapping to :data:`PRECISION_DEG`, repair and orientation as
+    :func:`isobands` and :func:`isolines` define them (exterior rings counter-clockwise, holes clockwise).
+    """
+    nb, nl = len(bounds), len(lv)
+    if z.ndim != 2 or z.shape[0] < 2 or z.shape[1] < 2 or not np.isfinite(z).any():
+        return [None] * nb, [None] * nl
+    gen = _generator(x, y, z)
+    top = float(np.nanmax(z)) + 1.0
+    rings: list[np.ndarray] = []  # every ring of every polygon of every bound, projected
+    polys: list[tuple[int, int, int]] = []  # (bound, first ring, ring count)
+    for b, (lo, hi) in enumerate(bounds):
+        up = top if hi is None else float(hi)
+        if up <= lo:
+            continue
+        pts, offs = gen.filled(float(lo), up)
+        for pt, off in zip(pts, offs, strict=True):
+            rr = [pt[off[i]:off[i + 1]] for i in range(len(off) - 1)]
+            rr = [r for r in rr if len(r) >= 4]
+            if rr:
+                polys.append((b, len(rings), len(rr)))
+                rings.extend(rr)
+    segs: list[np.ndarray] = []
+    seg_level: list[int] = []
+    for j, lo in enumerate(lv):
+        for seg in gen.lines(float(lo)):
+            if len(seg) >= 2:
+                segs.append(seg)
+                seg_level.append(j)
+    wgs = _bulk_wgs84(rings + segs, tr)
+    wrings, wsegs = wgs[:len(rings)], wgs[len(rings):]
+    bands: list[list[Polygon]] = [[] for _ in range(nb)]
+    if polys:
+        geoms = np.array([Polygon(wrings[i0], wrings[i0 + 1:i0 + n]) for _, i0, n in polys], dtype=object)
+        keep = ~(shapely.is_empty(geoms) | (shapely.area(geoms) == 0))
+        snapped = shapely.set_precision(shapely.make_valid(geoms), PRECISION_DEG)
+        for (b, _, _), k, g in zip(polys, keep, snapped, strict=True):
+            if not k:
+                continue
+            for part in _valid_polygons(g):
+                if part.area > 0:
+                    bands[b].append(orient(part, sign=1.0))
+    lines: list[list[LineString]] = [[] for _ in range(nl)]
+    if wsegs:
+        snapped_l = shapely.set_precision(np.array([LineString(s) for s in wsegs], dtype=object), PRECISION_DEG)
+        for j, g in zip(seg_level, snapped_l, strict=True):
+            if isinstance(g, LineString) and not g.is_empty and len(g.coords) >= 2:
+                lines[j].append(g)
+    return ([MultiPolygon(p) if p else None for p in bands], [MultiLineString(ln) if ln else None for ln in lines])
 
 
 def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[dict]:
@@ -216,46 +274,42 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
     tr = transformer(grid.crs, WGS84)
     units = result.units
     features: list[dict] = []
+    bounds = [(lv[i], lv[i + 1] if i + 1 < len(lv) else None) for i in range(len(lv))]
     for name in names:
-        z = result.band(name)
+        z = np.asarray(result.band(name), dtype=float)
         unit = units.get(name, "dB(A)")
         top = _edge_max(z)
-        bounds = [(lv[i], lv[i + 1] if i + 1 < len(lv) else None) for i in range(len(lv))]
-        for lo, hi in bounds:
-            polys = isobands(x, y, z, [lo] if hi is None else [lo, hi])
-            geom = _finish_polygons([_to_wgs84(p, tr) for p in polys])
+        bands, lines = _band_geometries(x, y, z, bounds, lv, tr)
+        for (lo, hi), geom in zip(bounds, bands, strict=True):
             if geom is None:
                 continue
             label = f"{name} >= {lo:g} {unit}" if hi is None else f"{name} {lo:g}-{hi:g} {unit}"
             features.append(_feature(geom, {"metric": name, "level": lo, "level_max": hi, "kind": "isoband",
                                             "unit": unit, "name": label, "clipped": bool(top >= lo)}))
-        for lo in lv:
-            lines = [_to_wgs84(g, tr) for g in isolines(x, y, z, lo)]
-            lines = [shapely.set_precision(g, PRECISION_DEG) for g in lines]
-            lines = [g for g in lines if isinstance(g, LineString) and not g.is_empty and len(g.coords) >= 2]
-            if not lines:
+        for lo, ml in zip(lv, lines, strict=True):
+            if ml is None:
                 continue
-            features.append(_feature(MultiLineString(lines), {
+            features.append(_feature(ml, {
                 "metric": name, "level": lo, "level_max": None, "kind": "isoline", "unit": unit,
                 "name": f"{name} {lo:g} {unit}", "clipped": bool(top >= lo)}))
     return features
 
 
-def _finish_polygons(polys: list[Polygon]) -> MultiPolygon | None:
-    """Snap to :data:`PRECISION_DEG`, repair, orient (exterior CCW, holes CW)."""
-    out: list[Polygon] = []
-    for p in polys:
-        q = shapely.set_precision(p, PRECISION_DEG)
-        for part in _valid_polygons(q):
-            if part.area > 0:
-                out.append(orient(part, sign=1.0))
-    if not out:
-        return None
-    return MultiPolygon(out)
+def _coords(ring: Any) -> list:
+    """A ring's or line's positions as lists, rounded to 9 decimals (as :func:`round` does)."""
+    a = shapely.get_coordinates(ring)
+    return (np.rint(a * 1e9) / 1e9).tolist()
 
 
 def _feature(geom: Any, props: dict) -> dict:
-    return {"type": "Feature", "geometry": _plain(mapping(geom)), "properties": props}
+    if isinstance(geom, MultiPolygon):
+        coords = [[_coords(p.exterior), *(_coords(h) for h in p.interiors)] for p in geom.geoms]
+        g = {"type": "MultiPolygon", "coordinates": coords}
+    elif isinstance(geom, MultiLineString):
+        g = {"type": "MultiLineString", "coordinates": [_coords(ln) for ln in geom.geoms]}
+    else:
+        g = _plain(mapping(geom))
+    return {"type": "Feature", "geometry": g, "properties": props}
 
 
 def _plain(obj: Any) -> Any:
