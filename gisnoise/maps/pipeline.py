@@ -78,6 +78,7 @@ def make_map(
     cancel: Callable[[], bool] | None = None,
     geoid_undulation_m: float | None = None,
     power_w: float | None = None,
+    outputs: Sequence[str] = ("levels", "contours"),
 ) -> dict[str, Any]:
     """Noise map of a trajectory: evaluate on a grid and write GeoTIFF, GeoJSON (and PNG).
 
@@ -127,16 +128,23 @@ def make_map(
         Called with the fraction done (0-1).
     cancel : callable, optional
         Polled; returning true raises :class:`~gisnoise.errors.Cancelled`.
+    outputs : sequence of str
+        The files to write: ``levels`` (levels.tif) and/or ``contours`` (contours.geojson);
+        a service answering with one of them writes only that one.
 
     Returns
     -------
     dict
-        ``levels`` (Path of levels.tif), ``contours`` (Path of contours.geojson),
+        ``levels`` (Path of levels.tif), ``contours`` (Path of contours.geojson) as ``outputs`` asks,
         ``map`` (Path of map.png, with ``plot``), ``result`` (:class:`MapResult`),
         ``trajectory`` (:class:`Trajectory`), ``warnings`` (list of str: extent cut by the cell
         limit, clipped contours).
     """
     lv = parse_levels(levels)
+    unknown = sorted(set(outputs) - {"levels", "contours"})
+    if unknown or not outputs:
+        raise InputError(f"outputs: give levels and/or contours, got {', '.join(map(str, outputs)) or 'none'}",
+                         field="outputs")
     if plot:
         from gisnoise.maps.plots import require_matplotlib
 
@@ -182,8 +190,10 @@ def make_map(
     result.metadata["warnings"] = warnings
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Any] = {}
-    paths["levels"] = write_geotiff(result, out / "levels.tif")
-    paths["contours"] = write_geojson(result, out / "contours.geojson", lv)
+    if "levels" in outputs:
+        paths["levels"] = write_geotiff(result, out / "levels.tif")
+    if "contours" in outputs:
+        paths["contours"] = write_geojson(result, out / "contours.geojson", lv)
     if progress is not None:
         progress(0.97)
     if plot:

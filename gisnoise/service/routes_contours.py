@@ -185,8 +185,9 @@ def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
 
 def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path, *,
                    progress: Callable[..., None] | None = None,
-                   cancel: Callable[[], bool] | None = None) -> dict[str, Path]:
-    """Write levels.tif and contours.geojson for a request with the core's ``make_map``.
+                   cancel: Callable[[], bool] | None = None,
+                   files: tuple[str, ...] = ("levels.tif", "contours.geojson")) -> dict[str, Path]:
+    """Write levels.tif and/or contours.geojson (``files``) for a request with the core's ``make_map``.
 
     Returns the paths by file name.
     """
@@ -207,8 +208,13 @@ def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest
                          receiver_height=req.receiver_height_m, ground_h=ground_h,
                          uncertainty=req.uncertainty, plot=False,
                          period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
-                         substeps=req.substeps, background=req.background, progress=progress, cancel=cancel)
-    return {"levels.tif": Path(paths["levels"]), "contours.geojson": Path(paths["contours"])}
+                         substeps=req.substeps, background=req.background, progress=progress, cancel=cancel,
+                         outputs=tuple(_OUTPUTS[f] for f in files))
+    return {f: Path(paths[_OUTPUTS[f]]) for f in files}
+
+
+_OUTPUTS = {"levels.tif": "levels", "contours.geojson": "contours"}
+"""File names of a map -> ``make_map``'s outputs."""
 
 
 def _want_tiff(req: ContourRequest, accept: str) -> bool:
@@ -239,6 +245,10 @@ def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Traject
     s = state.settings
     with limits.override(max_samples=s.max_trajectory_samples):  # bounds routes before they are sampled
         traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
+    stated = traj.metadata.get("ground_h_m")
+    if req.ground_h_m is None and isinstance(req.trajectory, GeoJSONTrajectory) and stated is not None:
+        # the ground the waypoints route states, read with the trajectory (make_map_files would read the route again)
+        req = req.model_copy(update={"ground_h_m": float(stated)})
     cards = resolve_cards(req, state.cards)
     req = _auto_margin(traj, cards, req, s.max_cells)
     return req, traj, cards, _grid_cells(traj, req, s.max_cells)
@@ -271,8 +281,8 @@ async def contours(req: ContourRequest, request: Request, state: StateDep,
 
 def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool) -> bytes:
     with _sync_slots, tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
-        paths = make_map_files(traj, cards, req, Path(tmp))
-        return paths["levels.tif" if tiff else "contours.geojson"].read_bytes()
+        name = "levels.tif" if tiff else "contours.geojson"  # only the file the answer carries
+        return make_map_files(traj, cards, req, Path(tmp), files=(name,))[name].read_bytes()
 
 
 @router.post("/jobs/contours", status_code=202, response_model=JobInfo, dependencies=WRITE,
