@@ -22,8 +22,9 @@ from gisnoise.cli.options import out_dir_option, progress
                    "The default without --scheduler and --workers.")
 @click.option("--threads", "threads", type=click.IntRange(min=1), default=None,
               help="Threads of the one-process run [default: $GISNOISE_THREADS, else the CPUs].")
-@click.option("--tile-cells", "tile_cells", type=click.IntRange(min=1), default=1 << 18, show_default=True,
-              help="Cells per tile: the unit of work and of memory per task.")
+@click.option("--tile-cells", "tile_cells", type=click.IntRange(min=1), default=None,
+              help="Cells per tile: the unit of work and of memory per task [default: 262144 (2^18); in one "
+                   "process also small enough for eight tiles a thread].")
 @click.option("--memory-limit", "memory_limit", default=None,
               help="Memory per worker of a local cluster, e.g. 2GiB [default: Dask's].")
 @click.option("--levels", "levels", default=None,
@@ -31,7 +32,7 @@ from gisnoise.cli.options import out_dir_option, progress
 @click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png: Lden with its contours.")
 @click.pass_context
 def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, workers: int | None,
-            single_process: bool, threads: int | None, tile_cells: int, memory_limit: str | None, levels: str | None,
+            single_process: bool, threads: int | None, tile_cells: int | None, memory_limit: str | None, levels: str | None,
             plot: bool) -> None:
     """Noise of a day of operations: DIR/operations.tif, DIR/contours.geojson, DIR/summary.json.
 
