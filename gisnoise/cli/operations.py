@@ -53,6 +53,7 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     Dask's own log lines show with -v only.
     """
     import logging
+    import os
 
     from gisnoise.maps import parse_levels
     from gisnoise.ops import evaluate_operations, load_schedule, write_operations
@@ -62,6 +63,10 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     if logging.getLogger().getEffectiveLevel() > logging.INFO:  # without -v: no Dask chatter, no shutdown noise
         for name in ("distributed", "tornado", "asyncio", "bokeh"):
             logging.getLogger(name).setLevel(logging.CRITICAL)
+        # Dask sets its loggers' levels from its configuration when distributed is imported (after the lines
+        # above), in this process and in a local cluster's worker processes: the same setting through the
+        # environment reaches them all
+        os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")
     sched = load_schedule(schedule)
     lv = None if levels is None else parse_levels(levels, field="levels")
     with progress(ctx, "operations", 1.0) as update:
