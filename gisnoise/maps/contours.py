@@ -238,7 +238,12 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     if polys:
         geoms = np.array([Polygon(wrings[i0], wrings[i0 + 1:i0 + n]) for _, i0, n in polys], dtype=object)
         keep = ~(shapely.is_empty(geoms) | (shapely.area(geoms) == 0))
-        snapped = shapely.set_precision(shapely.make_valid(geoms), PRECISION_DEG)
+        # snapped to the grid in NumPy; GEOS's precision reduction (which also repairs) only where that is invalid
+        snapped = np.array([_snapped_polygon(wrings[i0:i0 + n]) for _, i0, n in polys], dtype=object)
+        bad = np.array([g is None for g in snapped]) | ~shapely.is_valid(np.where(
+            np.array([g is None for g in snapped]), geoms, snapped))
+        if bad.any():
+            snapped[bad] = shapely.set_precision(shapely.make_valid(geoms[bad]), PRECISION_DEG)
         for (b, _, _), k, g in zip(polys, keep, snapped, strict=True):
             if not k:
                 continue
@@ -246,12 +251,30 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
                 if part.area > 0:
                     bands[b].append(orient(part, sign=1.0))
     lines: list[list[LineString]] = [[] for _ in range(nl)]
-    if wsegs:
-        snapped_l = shapely.set_precision(np.array([LineString(s) for s in wsegs], dtype=object), PRECISION_DEG)
-        for j, g in zip(seg_level, snapped_l, strict=True):
-            if isinstance(g, LineString) and not g.is_empty and len(g.coords) >= 2:
-                lines[j].append(g)
+    for j, seg in zip(seg_level, wsegs, strict=True):
+        pts = _snapped(seg)
+        if len(pts) >= 2:
+            lines[j].append(LineString(pts))
     return ([MultiPolygon(p) if p else None for p in bands], [MultiLineString(ln) if ln else None for ln in lines])
+
+
+def _snapped(pts: np.ndarray) -> np.ndarray:
+    """Positions on the :data:`PRECISION_DEG` grid, consecutive repeats dropped (as GEOS's snapping does)."""
+    q = np.rint(pts / PRECISION_DEG) * PRECISION_DEG
+    if len(q) > 1:
+        q = q[np.r_[True, np.any(q[1:] != q[:-1], axis=1)]]
+    return q
+
+
+def _snapped_polygon(rings: list[np.ndarray]) -> Polygon | None:
+    """The polygon of ``rings`` snapped by :func:`_snapped`; None when a ring collapses (GEOS then repairs)."""
+    out = []
+    for r in rings:
+        q = _snapped(r)
+        if len(q) < 4 or np.any(q[0] != q[-1]):
+            return None
+        out.append(q)
+    return Polygon(out[0], out[1:])
 
 
 def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[dict]:
@@ -385,34 +408,47 @@ def geojson_text(doc: dict) -> str:
     text = json.dumps(swap(doc), allow_nan=False, separators=(",", ":"))
     if not arrays:
         return text
+    bodies = _positions_texts(arrays)
     quoted = json.dumps(_TOKEN)[:-1]  # as json.dumps writes the token: opening quote, escaped NUL, name
     pieces = text.split(quoted)
     out = [pieces[0]]
     for piece in pieces[1:]:
         end = piece.index('"')
-        out.append(_positions_text(arrays[int(piece[:end])]))
+        out.append(bodies[int(piece[:end])])
         out.append(piece[end + 1:])
     return "".join(out)
 
 
 def _positions_text(a: np.ndarray) -> str:
     """``[[x,y],...]`` of an (n, 2) array with |values| < 1000, 8 decimals (formed with blanks, then packed)."""
-    a = np.asarray(a, dtype=float).reshape(-1, 2)
-    n = len(a)
-    if n == 0:
-        return "[]"
-    if not np.isfinite(a).all() or np.abs(a).max() >= 999.5:
+    return _positions_texts([a])[0]
+
+
+def _positions_texts(arrays: list[np.ndarray]) -> list[str]:
+    """:func:`_positions_text` of many arrays, formatted together (one pass of NumPy for all positions)."""
+    flat = [np.asarray(a, dtype=float).reshape(-1, 2) for a in arrays]
+    sizes = [len(a) for a in flat]
+    a = np.concatenate(flat) if flat else np.zeros((0, 2))
+    if a.size and (not np.isfinite(a).all() or np.abs(a).max() >= 999.5):
         raise ValueError("positions must be finite and below 1000 in magnitude")
     k = np.rint(a * 1e8).astype(np.int64)
     w = _WIDTH
-    row = np.empty((n, 2 * w + 4), np.uint8)  # [x,y],
+    row = np.empty((len(a), 2 * w + 4), np.uint8)  # [x,y],
     row[:, 0] = ord("[")
     row[:, 1:1 + w] = _numbers(k[:, 0])
     row[:, 1 + w] = ord(",")
     row[:, 2 + w:2 + 2 * w] = _numbers(k[:, 1])
     row[:, 2 + 2 * w] = ord("]")
     row[:, 3 + 2 * w] = ord(",")
-    return "[" + row.tobytes()[:-1].replace(b" ", b"").decode("ascii") + "]"
+    raw = row.tobytes()
+    out: list[str] = []
+    start = 0
+    step = row.shape[1]
+    for n in sizes:
+        chunk = raw[start * step:(start + n) * step - 1]  # without the last comma
+        out.append("[" + chunk.replace(b" ", b"").decode("ascii") + "]")
+        start += n
+    return out
 
 
 _WIDTH = 13

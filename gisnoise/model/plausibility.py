@@ -26,7 +26,7 @@ made (:func:`gisnoise.maps.make_map`, so the command line, the service and QGIS)
 
 from __future__ import annotations
 
-import json
+import pickle
 import threading
 from collections import OrderedDict
 from collections.abc import Sequence
@@ -164,19 +164,17 @@ def card_problems(card: Any) -> list[str]:
     return out
 
 
-_PLAUSIBLE: OrderedDict[str, None] = OrderedDict()
-"""Contents (JSON) of cards found plausible, most recent last: a card is checked once per process."""
+_PLAUSIBLE: OrderedDict[bytes, None] = OrderedDict()
+"""Contents (pickled) of cards found plausible, most recent last: a card is checked once per process."""
 _PLAUSIBLE_MAX = 256
 _PLAUSIBLE_LOCK = threading.Lock()
 
 
-def _content_key(card: Any) -> str | None:
-    to_dict = getattr(card, "to_dict", None)
-    if to_dict is None:
-        return None
+def _content_key(card: Any) -> bytes | None:
+    """The card's whole content as bytes (its pickle: every field, arrays included), or None."""
     try:
-        return f"{type(card).__name__}:" + json.dumps(to_dict(), sort_keys=True, default=str)
-    except (TypeError, ValueError):
+        return pickle.dumps(card, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:  # noqa: BLE001 - a card that cannot be pickled is simply checked every time
         return None
 
 

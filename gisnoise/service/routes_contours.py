@@ -186,10 +186,12 @@ def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
 def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path, *,
                    progress: Callable[..., None] | None = None,
                    cancel: Callable[[], bool] | None = None,
-                   files: tuple[str, ...] = ("levels.tif", "contours.geojson")) -> dict[str, Path]:
+                   files: tuple[str, ...] = ("levels.tif", "contours.geojson"),
+                   timing: dict[str, float] | None = None) -> dict[str, Path]:
     """Write levels.tif and/or contours.geojson (``files``) for a request with the core's ``make_map``.
 
-    Returns the paths by file name.
+    Returns the paths by file name; ``timing`` (when given) receives ``make_map``'s seconds
+    (``evaluate``, ``total``).
     """
     from gisnoise.maps import make_map
 
@@ -210,6 +212,8 @@ def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest
                          period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
                          substeps=req.substeps, background=req.background, progress=progress, cancel=cancel,
                          outputs=tuple(_OUTPUTS[f] for f in files))
+    if timing is not None:
+        timing.update(paths["timing_s"])
     return {f: Path(paths[_OUTPUTS[f]]) for f in files}
 
 
@@ -272,17 +276,21 @@ async def contours(req: ContourRequest, request: Request, state: StateDep,
         require_key(request, request.headers.get("x-api-key"))  # a job is a write
         return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
     tiff = _want_tiff(req, request.headers.get("accept", ""))
-    data = await run_in_threadpool(_sync_map, traj, cards, req, tiff)
+    timing: dict[str, float] = {}
+    data = await run_in_threadpool(_sync_map, traj, cards, req, tiff, timing)
+    # where the time went (W3C Server-Timing, ms): the evaluator and the whole map (route planners tune with it)
+    headers = {"Server-Timing": f"evaluate;dur={1000 * timing['evaluate']:.1f}, map;dur={1000 * timing['total']:.1f}"}
     if tiff:
-        return Response(data, media_type=MediaType.geotiff.value,
-                        headers={"Content-Disposition": 'attachment; filename="levels.tif"'})
-    return Response(data, media_type=MediaType.geojson.value)
+        headers["Content-Disposition"] = 'attachment; filename="levels.tif"'
+        return Response(data, media_type=MediaType.geotiff.value, headers=headers)
+    return Response(data, media_type=MediaType.geojson.value, headers=headers)
 
 
-def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool) -> bytes:
+def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool,
+              timing: dict[str, float] | None = None) -> bytes:
     with _sync_slots, tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
         name = "levels.tif" if tiff else "contours.geojson"  # only the file the answer carries
-        return make_map_files(traj, cards, req, Path(tmp), files=(name,))[name].read_bytes()
+        return make_map_files(traj, cards, req, Path(tmp), files=(name,), timing=timing)[name].read_bytes()
 
 
 @router.post("/jobs/contours", status_code=202, response_model=JobInfo, dependencies=WRITE,
