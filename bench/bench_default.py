@@ -201,7 +201,7 @@ def main(quick: bool = False, kernel_only: bool = False, rounds: int = 3) -> Non
     R: dict[str, list[float]] = {k: [] for k in ("blk", "whole", "blk_cpu", "fast", "fast_cpu", "floor", "floor_cpu",
                                                  "proc", "r_fast_blk", "r_fast_whole", "r_floor_blk",
                                                  "r_floor_whole", "r_cpu_blk", "r_proc_blk", "r_proc_whole",
-                                                 "load")}
+                                                 "proc_cpu", "r_proc_cpu", "load")}
     diffs: list[float] = []
     skipped = 0
     for rnd in range(rounds):
