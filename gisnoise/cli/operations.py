@@ -23,8 +23,9 @@ from gisnoise.errors import InputError
                    "The default without --scheduler and --workers.")
 @click.option("--threads", "threads", type=click.IntRange(min=1), default=None,
               help="Threads of the one-process run [default: $GISNOISE_THREADS, else the CPUs].")
-@click.option("--tile-cells", "tile_cells", type=click.IntRange(min=1), default=1 << 18, show_default=True,
-              help="Cells per tile: the unit of work and of memory per task.")
+@click.option("--tile-cells", "tile_cells", type=click.IntRange(min=1), default=None,
+              help="Cells per tile: the unit of work and of memory per task [default: 262144 (2^18); in one "
+                   "process also small enough for eight tiles a thread].")
 @click.option("--memory-limit", "memory_limit", default=None,
               help="Memory per worker of a local cluster, e.g. 2GiB [default: Dask's].")
 @click.option("--levels", "levels", default=None,
@@ -40,7 +41,7 @@ from gisnoise.errors import InputError
               show_default=True, help="Height of façade receivers above ground, m.")
 @click.pass_context
 def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, workers: int | None,
-            single_process: bool, threads: int | None, tile_cells: int, memory_limit: str | None, levels: str | None,
+            single_process: bool, threads: int | None, tile_cells: int | None, memory_limit: str | None, levels: str | None,
             plot: bool, population: str | None = None, buildings: str | None = None,
             facade_height: float = 4.0) -> None:
     """Noise of a day of operations: DIR/operations.tif, DIR/contours.geojson, DIR/summary.json.
@@ -62,6 +63,7 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     Dask's own log lines show with -v only.
     """
     import logging
+    import os
 
     from gisnoise.maps import parse_levels
     from gisnoise.ops import evaluate_operations, load_schedule, write_operations
@@ -71,6 +73,10 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     if logging.getLogger().getEffectiveLevel() > logging.INFO:  # without -v: no Dask chatter, no shutdown noise
         for name in ("distributed", "tornado", "asyncio", "bokeh"):
             logging.getLogger(name).setLevel(logging.CRITICAL)
+        # Dask sets its loggers' levels from its configuration when distributed is imported (after the lines
+        # above), in this process and in a local cluster's worker processes: the same setting through the
+        # environment reaches them all
+        os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "error")
     sched = load_schedule(schedule)
     lv = None if levels is None else parse_levels(levels, field="levels")
     pop = bld = None

@@ -365,6 +365,16 @@ def _multicopter_leg(dense: _Dense, a: _Wp, b: _Wp, heading: float, veh: Vehicle
               pitch=0.0, roll=0.0, power=power, speed=sp, phase=phase)
 
 
+def _rate_limited(q: np.ndarray, c: float) -> np.ndarray:
+    """``q[i] = min(q[i], q[i - 1] + c)`` in order, at once: ``min over j <= i of q[j] + c (i - j)``.
+
+    >>> _rate_limited(np.array([0.0, 9.0, 9.0, 1.0, 9.0]), 2.0).tolist()
+    [0.0, 2.0, 4.0, 1.0, 3.0]
+    """
+    ci = c * np.arange(q.size)
+    return ci + np.minimum.accumulate(q - ci)
+
+
 def _forward_section(dense: _Dense, wps: Sequence[_Wp], veh: VehicleModel, start_rest: bool,
                      end_rest: bool) -> float:
     """Fly wing-borne through ``wps`` with fly-by turns; returns the final course (rad)."""
@@ -448,12 +458,11 @@ def _forward_section(dense: _Dense, wps: Sequence[_Wp], veh: VehicleModel, start
     v = vlim.copy()
     if start_rest:
         v[0] = 0.0
-    for i in range(1, ns):
-        v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2 * acc * ds))
+    # speed limited by the acceleration forwards and backwards: v[i] = min(v[i], sqrt(v[i -+ 1]^2 + 2 acc ds))
+    v = np.sqrt(_rate_limited(v * v, 2 * acc * ds))
     if end_rest:
         v[-1] = 0.0
-    for i in range(ns - 2, -1, -1):
-        v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * acc * ds))
+    v = np.sqrt(_rate_limited((v * v)[::-1], 2 * acc * ds))[::-1]
     dt = 2 * ds / np.maximum(v[:-1] + v[1:], 1e-9)
     t = np.concatenate([[0.0], np.cumsum(dt)])
     gamma = np.arctan(np.gradient(u_s, sg))

@@ -29,6 +29,9 @@ How the kernel is fast (all in float32, where the level keeps about 1e-5 dB):
 * **Cells beyond audibility are skipped, provably.**  A segment is skipped when, at every
   instant, its cells' distance to the UAV is beyond the instant's audibility radius
   (:mod:`gisnoise.maps.instants`).
+* **Coefficients folded per instant.**  ``p2 cos p3``, ``p4 sin p5``, ``gain log2(10)/10``
+  and the like are formed once per instant, and the kernel works in ``log2`` of the energy
+  (levels in dB are formed only where time above needs them).
 * **Accumulators.**  The maximum and the trapezoid energy ``sum w_i 10^(L_i/10)`` per
   cell; float32 partial sums over at most 32 instants are added to the float64 outputs.
 
@@ -108,7 +111,9 @@ if numba is not None:
     _EXP_LO = np.float32(-126.0)
     _EXP_HI = np.float32(126.0)
     _K10 = np.float32(_LOG2_10 / 10.0)  # 10^(L/10) = 2^(L * _K10)
+    _K10_64 = _LOG2_10 / 10.0
     _DB_PER_LOG2 = np.float32(10.0 / _LOG2_10)  # L = log2(e) * _DB_PER_LOG2
+    _DB_PER_K10 = _DB_PER_LOG2
     _F127 = np.float32(127.0)
     _TWO23 = np.float32(2.0 ** 23)
     _BIAS_BITS = np.float32(127.0 * 2.0 ** 23)
@@ -193,18 +198,26 @@ if numba is not None:
     @_jit(fastmath=_FM, error_model="numpy", inline="always")
     def _cell(xb, yb, zb, g, p2, cp3, sp3, p4, cp5, sp5, c6, kk, e7, dmin2):
         """Level ``L_UAV`` (dB) and energy ``10^(L/10)`` (+ background) from the body vector."""
+        y = _cell_log2(xb, yb, zb, g * _K10, p2 * cp3, p2 * sp3, p4 * cp5, p4 * sp5, c6 * _K10, kk * _K10, dmin2)
+        return y * _DB_PER_K10, _exp2(y) + e7
+
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
+    def _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2):
+        """``log2`` of the energy ``10^(L/10)`` from the body vector, with the card's row pre-scaled per instant.
+
+        ``gk = g K``, ``a3, b3 = p2 (cos p3, sin p3)``, ``a5, b5 = p4 (cos p5, sin p5)``,
+        ``c6k = c6 K``, ``kkk = kk K`` with ``K = log2(10) / 10``: Eq. 9's products folded
+        into the coefficients once per instant instead of once per cell.
+        """
         h2 = xb * xb + yb * yb
         d2 = h2 + zb * zb
         ih = _ONE / np.sqrt(max(h2, _TINY))
         idd = _ONE / np.sqrt(max(d2, _TINY))
         h = h2 * ih
-        s_az = (yb * cp3 - xb * sp3) * ih
-        s_po = -(zb * cp5 + h * sp5) * idd
+        s_az = (yb * a3 - xb * b3) * ih
+        s_po = -(zb * a5 + h * b5) * idd
         th = _atan2_pos(h, zb)
-        a = _ONE + p2 * s_az * th
-        b = _ONE + p4 * s_po
-        lev = g * a * b - c6 * _log2(max(d2, dmin2)) + kk
-        return lev, _exp2(lev * _K10) + e7
+        return gk * (_ONE + s_az * th) * (_ONE + s_po) - c6k * _log2(max(d2, dmin2)) + kkk
 
     @_jit(fastmath=_FM, error_model="numpy", nogil=True)
     def _level_points(xb, yb, zb, g, coef):
@@ -324,15 +337,14 @@ if numba is not None:
                     dx = np.float32(C[i, 0, 0] * e2[0] + C[i, 0, 1] * e2[1] + C[i, 0, 2] * e2[2])
                     dy = np.float32(C[i, 1, 0] * e2[0] + C[i, 1, 1] * e2[1] + C[i, 1, 2] * e2[2])
                     dz = np.float32(C[i, 2, 0] * e2[0] + C[i, 2, 1] * e2[1] + C[i, 2, 2] * e2[2])
-                    g = np.float32(gain[i])
-                    p2 = np.float32(coef[ci, 0])
-                    cp3 = np.float32(coef[ci, 1])
-                    sp3 = np.float32(coef[ci, 2])
-                    p4 = np.float32(coef[ci, 3])
-                    cp5 = np.float32(coef[ci, 4])
-                    sp5 = np.float32(coef[ci, 5])
-                    c6 = np.float32(coef[ci, 6])
-                    kk = np.float32(coef[ci, 7])
+                    # the card's row folded per instant (see _cell_log2)
+                    gk = np.float32(gain[i] * _K10_64)
+                    a3 = np.float32(coef[ci, 0] * coef[ci, 1])
+                    b3 = np.float32(coef[ci, 0] * coef[ci, 2])
+                    a5 = np.float32(coef[ci, 3] * coef[ci, 4])
+                    b5 = np.float32(coef[ci, 3] * coef[ci, 5])
+                    c6k = np.float32(coef[ci, 6] * _K10_64)
+                    kkk = np.float32(coef[ci, 7] * _K10_64)
                     e7 = np.float32(coef[ci, 8])
                     dmin2 = np.float32(coef[ci, 9])
                     wi = np.float32(w[i])
@@ -349,24 +361,31 @@ if numba is not None:
                             xb = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
                             yb = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
                             zb = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
-                            lev, e = _cell(xb, yb, zb, g, p2, cp3, sp3, p4, cp5, sp5, c6, kk, e7, dmin2)
+                            y = _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2)
+                            e = _exp2(y) + e7
                             em[q] = max(em[q], e)
                             eacc[q] += wi * e
-                            lcur[q] = lev
+                            if nt > 0:
+                                lcur[q] = y
                     else:
                         for q in range(m):
                             qf = np.float32(q0 + q) - half_k32
                             xb = ax + qf * (bx + qf * dx)
                             yb = ay + qf * (by + qf * dy)
                             zb = az + qf * (bz + qf * dz)
-                            lev, e = _cell(xb, yb, zb, g, p2, cp3, sp3, p4, cp5, sp5, c6, kk, e7, dmin2)
+                            y = _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2)
+                            e = _exp2(y) + e7
                             em[q] = max(em[q], e)
                             eacc[q] += wi * e
-                            lcur[q] = lev
-                    if nt > 0:
+                            if nt > 0:
+                                lcur[q] = y
+                    if nt > 0:  # lcur: log2 of the UAV's energy -> level with the background, dB
                         if e7 != _ZERO:
                             for q in range(m):
-                                lcur[q] = _log2(_exp2(lcur[q] * _K10) + e7) * _DB_PER_LOG2
+                                lcur[q] = _log2(_exp2(lcur[q]) + e7) * _DB_PER_LOG2
+                        else:
+                            for q in range(m):
+                                lcur[q] = lcur[q] * _DB_PER_LOG2
                         if i > 0:
                             dti = np.float32(dt[i])
                             for t in range(nt):

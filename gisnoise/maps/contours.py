@@ -49,7 +49,7 @@ from gisnoise.maps.sel import metric_levels
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.maps.result import MapResult
 
-__all__ = ["isobands", "isolines", "contour_features", "contours_geojson", "write_geojson", "parse_levels",
+__all__ = ["isobands", "isolines", "contour_features", "contours_geojson", "write_geojson", "geojson_text", "parse_levels",
            "clipped_levels", "clip_warnings"]
 
 PRECISION_DEG = 1e-8
@@ -122,7 +122,8 @@ def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
         x, z = x[::-1], z[:, ::-1]
     if y.size > 1 and y[1] < y[0]:  # north-up rasters: rows run southwards
         y, z = y[::-1], z[::-1, :]
-    return contourpy.contour_generator(x, y, np.ma.masked_invalid(z),
+    zz = z if np.isfinite(z).all() else np.ma.masked_invalid(z)  # a mask costs contourpy time: only when needed
+    return contourpy.contour_generator(x, y, zz,
                                        line_type="Separate", fill_type="OuterOffset")
 
 
@@ -188,12 +189,90 @@ def isolines(x: Any, y: Any, z: Any, level: float) -> list[LineString]:
     return [LineString(seg) for seg in _generator(x, y, z).lines(float(level)) if len(seg) >= 2]
 
 
-def _to_wgs84(geom: Any, tr: Any) -> Any:
-    def fn(xy: np.ndarray) -> np.ndarray:
-        lon, lat = tr.transform(xy[:, 0], xy[:, 1])
-        return np.column_stack([lon, lat])
+def _bulk_wgs84(arrays: list[np.ndarray], tr: Any) -> list[np.ndarray]:
+    """The (n, 2) point arrays in WGS84 longitude/latitude, in one call of the transformer."""
+    if not arrays:
+        return []
+    allpts = np.concatenate(arrays)
+    lon, lat = tr.transform(allpts[:, 0], allpts[:, 1])
+    out = np.column_stack([lon, lat])
+    ends = np.cumsum([len(a) for a in arrays])
+    return np.split(out, ends[:-1])
 
-    return shapely.transform(geom, fn)
+
+def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[tuple[float, float | None]],
+                     lv: list[float], tr: Any) -> tuple[list[MultiPolygon | None], list[MultiLineString | None]]:
+    """Isobands (one per bound) and isolines (one per level) of one band, in WGS84, finished.
+
+    One contour generator serves every level; the points of all levels are transformed to
+    WGS84 in one call; snapping to :data:`PRECISION_DEG`, repair and orientation as
+    :func:`isobands` and :func:`isolines` define them (exterior rings counter-clockwise, holes clockwise).
+    """
+    nb, nl = len(bounds), len(lv)
+    if z.ndim != 2 or z.shape[0] < 2 or z.shape[1] < 2 or not np.isfinite(z).any():
+        return [None] * nb, [None] * nl
+    gen = _generator(x, y, z)
+    top = float(np.nanmax(z)) + 1.0
+    rings: list[np.ndarray] = []  # every ring of every polygon of every bound, projected
+    polys: list[tuple[int, int, int]] = []  # (bound, first ring, ring count)
+    for b, (lo, hi) in enumerate(bounds):
+        up = top if hi is None else float(hi)
+        if up <= lo:
+            continue
+        pts, offs = gen.filled(float(lo), up)
+        for pt, off in zip(pts, offs, strict=True):
+            rr = [pt[off[i]:off[i + 1]] for i in range(len(off) - 1)]
+            rr = [r for r in rr if len(r) >= 4]
+            if rr:
+                polys.append((b, len(rings), len(rr)))
+                rings.extend(rr)
+    segs: list[np.ndarray] = []
+    seg_level: list[int] = []
+    for j, lo in enumerate(lv):
+        for seg in gen.lines(float(lo)):
+            if len(seg) >= 2:
+                segs.append(seg)
+                seg_level.append(j)
+    wgs = _bulk_wgs84(rings + segs, tr)
+    wrings, wsegs = wgs[:len(rings)], wgs[len(rings):]
+    bands: list[list[Polygon]] = [[] for _ in range(nb)]
+    if polys:
+        for b, i0, n in polys:
+            geom = Polygon(wrings[i0], wrings[i0 + 1:i0 + n])
+            if geom.is_empty or geom.area == 0:
+                continue
+            # snapped to the grid in NumPy; GEOS's precision reduction (which also repairs) only where that is invalid
+            g = _snapped_polygon(wrings[i0:i0 + n])
+            if g is None or not g.is_valid:
+                g = shapely.set_precision(shapely.make_valid(geom), PRECISION_DEG)
+            for part in _valid_polygons(g):
+                if part.area > 0:
+                    bands[b].append(orient(part, sign=1.0))
+    lines: list[list[LineString]] = [[] for _ in range(nl)]
+    for j, seg in zip(seg_level, wsegs, strict=True):
+        pts = _snapped(seg)
+        if len(pts) >= 2:
+            lines[j].append(LineString(pts))
+    return ([MultiPolygon(p) if p else None for p in bands], [MultiLineString(ln) if ln else None for ln in lines])
+
+
+def _snapped(pts: np.ndarray) -> np.ndarray:
+    """Positions on the :data:`PRECISION_DEG` grid, consecutive repeats dropped (as GEOS's snapping does)."""
+    q = np.rint(pts / PRECISION_DEG) * PRECISION_DEG
+    if len(q) > 1:
+        q = q[np.r_[True, np.any(q[1:] != q[:-1], axis=1)]]
+    return q
+
+
+def _snapped_polygon(rings: list[np.ndarray]) -> Polygon | None:
+    """The polygon of ``rings`` snapped by :func:`_snapped`; None when a ring collapses (GEOS then repairs)."""
+    out = []
+    for r in rings:
+        q = _snapped(r)
+        if len(q) < 4 or np.any(q[0] != q[-1]):
+            return None
+        out.append(q)
+    return Polygon(out[0], out[1:])
 
 
 def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[dict]:
@@ -209,6 +288,11 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
         Bands to contour; default every band in dB(A) (``LAmax``, ``LAeq``, ``SEL``,
         snapshot and ``*_p95``), not time above or standard deviations.
     """
+    return _features(result, levels, metrics, arrays=False)
+
+
+def _features(result: MapResult, levels: Any, metrics: Sequence[str] | None, *, arrays: bool) -> list[dict]:
+    """:func:`contour_features`; with ``arrays`` the positions stay numpy arrays (for :func:`geojson_text`)."""
     lv = parse_levels(levels)
     names = result.level_bands() if metrics is None else list(metrics)
     for n in names:
@@ -219,46 +303,42 @@ def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] |
     units = result.units
     features: list[dict] = []
     for name in names:
-        z = result.band(name)
+        z = np.asarray(result.band(name), dtype=float)
         unit = units.get(name, "dB(A)")
         top = _edge_max(z)
         mlv = metric_levels(name, lv)
         bounds = [(mlv[i], mlv[i + 1] if i + 1 < len(mlv) else None) for i in range(len(mlv))]
-        for lo, hi in bounds:
-            polys = isobands(x, y, z, [lo] if hi is None else [lo, hi])
-            geom = _finish_polygons([_to_wgs84(p, tr) for p in polys])
+        bands, lines = _band_geometries(x, y, z, bounds, mlv, tr)
+        for (lo, hi), geom in zip(bounds, bands, strict=True):
             if geom is None:
                 continue
             label = f"{name} >= {lo:g} {unit}" if hi is None else f"{name} {lo:g}-{hi:g} {unit}"
-            features.append(_feature(geom, {"metric": name, "level": lo, "level_max": hi, "kind": "isoband",
+            features.append(_feature(geom, arrays, {"metric": name, "level": lo, "level_max": hi, "kind": "isoband",
                                             "unit": unit, "name": label, "clipped": bool(top >= lo)}))
-        for lo in mlv:
-            lines = [_to_wgs84(g, tr) for g in isolines(x, y, z, lo)]
-            lines = [shapely.set_precision(g, PRECISION_DEG) for g in lines]
-            lines = [g for g in lines if isinstance(g, LineString) and not g.is_empty and len(g.coords) >= 2]
-            if not lines:
+        for lo, ml in zip(mlv, lines, strict=True):
+            if ml is None:
                 continue
-            features.append(_feature(MultiLineString(lines), {
+            features.append(_feature(ml, arrays, {
                 "metric": name, "level": lo, "level_max": None, "kind": "isoline", "unit": unit,
                 "name": f"{name} {lo:g} {unit}", "clipped": bool(top >= lo)}))
     return features
 
 
-def _finish_polygons(polys: list[Polygon]) -> MultiPolygon | None:
-    """Snap to :data:`PRECISION_DEG`, repair, orient (exterior CCW, holes CW)."""
-    out: list[Polygon] = []
-    for p in polys:
-        q = shapely.set_precision(p, PRECISION_DEG)
-        for part in _valid_polygons(q):
-            if part.area > 0:
-                out.append(orient(part, sign=1.0))
-    if not out:
-        return None
-    return MultiPolygon(out)
+def _coords(ring: Any, arrays: bool) -> Any:
+    """A ring's or line's positions rounded to 9 decimals (as :func:`round` does): lists, or an array."""
+    a = np.rint(np.asarray(ring.coords, dtype=float)[:, :2] * 1e9) / 1e9
+    return a if arrays else a.tolist()
 
 
-def _feature(geom: Any, props: dict) -> dict:
-    return {"type": "Feature", "geometry": _plain(mapping(geom)), "properties": props}
+def _feature(geom: Any, arrays: bool, props: dict) -> dict:
+    if isinstance(geom, MultiPolygon):
+        coords = [[_coords(p.exterior, arrays), *(_coords(h, arrays) for h in p.interiors)] for p in geom.geoms]
+        g = {"type": "MultiPolygon", "coordinates": coords}
+    elif isinstance(geom, MultiLineString):
+        g = {"type": "MultiLineString", "coordinates": [_coords(ln, arrays) for ln in geom.geoms]}
+    else:
+        g = _plain(mapping(geom))
+    return {"type": "Feature", "geometry": g, "properties": props}
 
 
 def _plain(obj: Any) -> Any:
@@ -273,7 +353,10 @@ def _plain(obj: Any) -> Any:
 
 def contours_geojson(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> dict:
     """A GeoJSON FeatureCollection (RFC 7946) of :func:`contour_features`."""
-    feats = contour_features(result, levels, metrics=metrics)
+    return _collection(result, levels, metrics, contour_features(result, levels, metrics=metrics))
+
+
+def _collection(result: MapResult, levels: Any, metrics: Sequence[str] | None, feats: list[dict]) -> dict:
     return {"type": "FeatureCollection", "features": feats,
             "gisnoise": {"levels": parse_levels(levels),
                          "warnings": clip_warnings(result, levels, metrics=metrics),
@@ -283,11 +366,107 @@ def contours_geojson(result: MapResult, levels: Any, *, metrics: Sequence[str] |
 
 def write_geojson(result: MapResult, path: str | os.PathLike[str], levels: Any, *,
                   metrics: Sequence[str] | None = None) -> Path:
-    """Write :func:`contours_geojson` to ``path`` (temporary file, then rename)."""
-    doc = contours_geojson(result, levels, metrics=metrics)
+    """Write :func:`contours_geojson` to ``path`` (temporary file, then rename).
+
+    The positions are written by :func:`geojson_text` from the coordinate arrays (the same
+    numbers as ``json.dumps`` of :func:`contours_geojson`, several times faster).
+    """
+    feats = _features(result, levels, metrics, arrays=True)
+    text = geojson_text(_collection(result, levels, metrics, feats))
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(json.dumps(doc, allow_nan=False, separators=(",", ":")), encoding="utf-8")
+    tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, p)
     return p
+
+
+_TOKEN = "\x00gisnoise-positions-"
+
+
+def geojson_text(doc: dict) -> str:
+    """Compact JSON text of a GeoJSON document whose positions may be numpy arrays of shape (n, 2).
+
+    Arrays are written by :func:`_positions_text` (fixed 8 decimals: positions lie on the
+    :data:`PRECISION_DEG` grid); everything else by ``json.dumps`` (``allow_nan=False``).
+
+    >>> geojson_text({"name": "a", "coordinates": np.array([[10.5, -52.25], [-170.125, 0.0]])})
+    '{"name":"a","coordinates":[[10.50000000,-52.25000000],[-170.12500000,0.00000000]]}'
+    """
+    arrays: list[np.ndarray] = []
+
+    def swap(o: Any) -> Any:
+        if isinstance(o, np.ndarray):
+            arrays.append(o)
+            return f"{_TOKEN}{len(arrays) - 1}"
+        if isinstance(o, dict):
+            return {k: swap(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [swap(v) for v in o]
+        return o
+
+    text = json.dumps(swap(doc), allow_nan=False, separators=(",", ":"))
+    if not arrays:
+        return text
+    bodies = _positions_texts(arrays)
+    quoted = json.dumps(_TOKEN)[:-1]  # as json.dumps writes the token: opening quote, escaped NUL, name
+    pieces = text.split(quoted)
+    out = [pieces[0]]
+    for piece in pieces[1:]:
+        end = piece.index('"')
+        out.append(bodies[int(piece[:end])])
+        out.append(piece[end + 1:])
+    return "".join(out)
+
+
+def _positions_text(a: np.ndarray) -> str:
+    """``[[x,y],...]`` of an (n, 2) array with |values| < 1000, 8 decimals (formed with blanks, then packed)."""
+    return _positions_texts([a])[0]
+
+
+def _positions_texts(arrays: list[np.ndarray]) -> list[str]:
+    """:func:`_positions_text` of many arrays, formatted together (one pass of NumPy for all positions)."""
+    flat = [np.asarray(a, dtype=float).reshape(-1, 2) for a in arrays]
+    sizes = [len(a) for a in flat]
+    a = np.concatenate(flat) if flat else np.zeros((0, 2))
+    if a.size and (not np.isfinite(a).all() or np.abs(a).max() >= 999.5):
+        raise ValueError("positions must be finite and below 1000 in magnitude")
+    k = np.rint(a * 1e8).astype(np.int64)
+    w = _WIDTH
+    row = np.empty((len(a), 2 * w + 4), np.uint8)  # [x,y],
+    row[:, 0] = ord("[")
+    row[:, 1:1 + w] = _numbers(k[:, 0])
+    row[:, 1 + w] = ord(",")
+    row[:, 2 + w:2 + 2 * w] = _numbers(k[:, 1])
+    row[:, 2 + 2 * w] = ord("]")
+    row[:, 3 + 2 * w] = ord(",")
+    raw = row.tobytes()
+    out: list[str] = []
+    start = 0
+    step = row.shape[1]
+    for n in sizes:
+        chunk = raw[start * step:(start + n) * step - 1]  # without the last comma
+        out.append("[" + chunk.replace(b" ", b"").decode("ascii") + "]")
+        start += n
+    return out
+
+
+_WIDTH = 13
+"""Characters of a number of :func:`_numbers`: sign, three digits, the point, eight decimals."""
+
+
+def _numbers(k: np.ndarray) -> np.ndarray:
+    """Fixed-point text of ``k / 1e8`` (|value| < 1000): (n, 13) ASCII, blanks and the sign before the digits."""
+    neg = k < 0
+    a = np.abs(k)
+    ip, fp = a // 10 ** 8, a % 10 ** 8
+    blank, minus, zero = ord(" "), ord("-"), ord("0")
+    out = np.empty((len(k), _WIDTH), np.uint8)
+    for j in range(8):
+        out[:, 12 - j] = zero + (fp // 10 ** j) % 10
+    out[:, 4] = ord(".")
+    out[:, 3] = zero + ip % 10
+    out[:, 2] = np.where(ip >= 10, zero + (ip // 10) % 10, np.where(neg, minus, blank))
+    out[:, 1] = np.where(ip >= 100, zero + ip // 100, np.where(neg & (ip >= 10), minus, blank))
+    out[:, 0] = np.where(neg & (ip >= 100), minus, blank)
+    return out

@@ -29,6 +29,7 @@ Two rules hold for every face:
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -78,6 +79,7 @@ def make_map(
     cancel: Callable[[], bool] | None = None,
     geoid_undulation_m: float | None = None,
     power_w: float | None = None,
+    outputs: Sequence[str] = ("levels", "contours"),
 ) -> dict[str, Any]:
     """Noise map of a trajectory: evaluate on a grid and write GeoTIFF, GeoJSON (and PNG).
 
@@ -127,16 +129,24 @@ def make_map(
         Called with the fraction done (0-1).
     cancel : callable, optional
         Polled; returning true raises :class:`~gisnoise.errors.Cancelled`.
+    outputs : sequence of str
+        The files to write: ``levels`` (levels.tif) and/or ``contours`` (contours.geojson);
+        a service answering with one of them writes only that one.
 
     Returns
     -------
     dict
-        ``levels`` (Path of levels.tif), ``contours`` (Path of contours.geojson),
+        ``levels`` (Path of levels.tif), ``contours`` (Path of contours.geojson) as ``outputs`` asks,
         ``map`` (Path of map.png, with ``plot``), ``result`` (:class:`MapResult`),
         ``trajectory`` (:class:`Trajectory`), ``warnings`` (list of str: extent cut by the cell
-        limit, clipped contours).
+        limit, clipped contours), ``timing_s`` (seconds: ``evaluate``, the evaluator; ``total``).
     """
+    t_start = time.perf_counter()
     lv = parse_levels(levels)
+    unknown = sorted(set(outputs) - {"levels", "contours"})
+    if unknown or not outputs:
+        raise InputError(f"outputs: give levels and/or contours, got {', '.join(map(str, outputs)) or 'none'}",
+                         field="outputs")
     if plot:
         from gisnoise.maps.plots import require_matplotlib
 
@@ -171,19 +181,23 @@ def make_map(
     kw: dict[str, Any] = dict(metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground_h,
                               dem_offset_m=dem_offset_m, threshold_db=threshold_db, background=background,
                               substeps=substeps, uncertainty=uncertainty, engine=engine, cancel=cancel)
+    t_eval = time.perf_counter()
     if bool(np.all(traj.flying)):
         result: MapResult = evaluate_grid(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t,
                                           progress=eval_progress, **kw)
     else:
         result = _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, eval_progress, kw)
+    t_eval = time.perf_counter() - t_eval
     _check_cells(result, traj.source)
     result.metadata["levels_db"] = lv
     warnings = warnings + clip_warnings(result, lv)
     result.metadata["warnings"] = warnings
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Any] = {}
-    paths["levels"] = write_geotiff(result, out / "levels.tif")
-    paths["contours"] = write_geojson(result, out / "contours.geojson", lv)
+    if "levels" in outputs:
+        paths["levels"] = write_geotiff(result, out / "levels.tif")
+    if "contours" in outputs:
+        paths["contours"] = write_geojson(result, out / "contours.geojson", lv)
     if progress is not None:
         progress(0.97)
     if plot:
@@ -193,6 +207,7 @@ def make_map(
     if progress is not None:
         progress(1.0)
     paths["result"] = result
+    paths["timing_s"] = {"evaluate": t_eval, "total": time.perf_counter() - t_start}
     paths["trajectory"] = traj
     paths["warnings"] = warnings
     return paths

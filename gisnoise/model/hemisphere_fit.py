@@ -22,7 +22,6 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from gisnoise.errors import CardError
 from gisnoise.model.ansatz import PAPER_OFFSET, REFERENCE_DISTANCE_M
@@ -76,6 +75,8 @@ def fit_hemisphere(hemi: HemisphereCard, *, distance_m: float = REFERENCE_DISTAN
 
     def jac(q: np.ndarray) -> np.ndarray:
         return PAPER_OFFSET.jacobian(full(q), x, background=False)[:, free]
+
+    from scipy.optimize import least_squares  # seconds to import: only when a fit runs, not for every map
 
     q0 = np.array([float(np.mean(target)), 0.0, 0.0, 0.0, 0.0])
     sol = least_squares(resid, q0, jac=jac, method="lm")

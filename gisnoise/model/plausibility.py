@@ -26,6 +26,9 @@ made (:func:`gisnoise.maps.make_map`, so the command line, the service and QGIS)
 
 from __future__ import annotations
 
+import pickle
+import threading
+from collections import OrderedDict
 from collections.abc import Sequence
 from typing import Any
 
@@ -161,9 +164,39 @@ def card_problems(card: Any) -> list[str]:
     return out
 
 
+_PLAUSIBLE: OrderedDict[bytes, None] = OrderedDict()
+"""Contents (pickled) of cards found plausible, most recent last: a card is checked once per process."""
+_PLAUSIBLE_MAX = 256
+_PLAUSIBLE_LOCK = threading.Lock()
+
+
+def _content_key(card: Any) -> bytes | None:
+    """The card's whole content as bytes (its pickle: every field, arrays included), or None."""
+    try:
+        return pickle.dumps(card, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:  # noqa: BLE001 - a card that cannot be pickled is simply checked every time
+        return None
+
+
 def check_card(card: Any, *, source: str | None = None) -> None:
-    """Raise :class:`ImplausibleCardError` naming the parameters when :func:`card_problems` finds any."""
+    """Raise :class:`ImplausibleCardError` naming the parameters when :func:`card_problems` finds any.
+
+    The verdict depends on the card's content only; plausible contents are remembered, so a
+    card mapped again (a service answering route planners, a map of many phases) is not
+    checked again.
+    """
+    key = _content_key(card)
+    if key is not None:
+        with _PLAUSIBLE_LOCK:
+            if key in _PLAUSIBLE:
+                _PLAUSIBLE.move_to_end(key)
+                return
     problems = card_problems(card)
+    if not problems and key is not None:
+        with _PLAUSIBLE_LOCK:
+            _PLAUSIBLE[key] = None
+            while len(_PLAUSIBLE) > _PLAUSIBLE_MAX:
+                _PLAUSIBLE.popitem(last=False)
     if problems:
         src = source or f"model card {card.id!r}"
         raise ImplausibleCardError(f"{src}: implausible card: {'; '.join(problems)}", field="parameters")

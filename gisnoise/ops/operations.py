@@ -48,6 +48,9 @@ from gisnoise.ops.tiles import DEFAULT_TILE_CELLS, make_plan, run_local, tile_wi
 
 __all__ = ["evaluate_operations"]
 
+_LOCAL_TILES_PER_THREAD = 8
+"""Tiles per thread at least, in one process: every thread busy, the progress in steps of a few per cent."""
+
 
 def evaluate_operations(
     schedule: Schedule,
@@ -55,7 +58,7 @@ def evaluate_operations(
     grid: GridSpec | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
-    tile_cells: int = DEFAULT_TILE_CELLS,
+    tile_cells: int | None = None,
     threads: int | None = None,
     memory_limit: str | None = None,
     progress: Callable[[float], Any] | None = None,
@@ -74,8 +77,10 @@ def evaluate_operations(
     workers : int, optional
         Without ``scheduler``: start a local Dask cluster of this many worker processes.
         Without either (and no ``GISNOISE_DASK_SCHEDULER``): one process, tiles on threads.
-    tile_cells : int
-        Cells per tile (whole segments): the memory of one task.
+    tile_cells : int, optional
+        Cells per tile (whole segments): the memory of one task.  Default ``DEFAULT_TILE_CELLS``
+        (2^18), in one process also small enough for eight tiles a thread, so that every thread
+        works and the progress moves (the bands are bitwise the same for any tiling).
     threads : int, optional
         Threads of the single-process path (default :func:`gisnoise.maps.default_threads`).
     memory_limit : str, optional
@@ -99,7 +104,15 @@ def evaluate_operations(
         raise InputError(f"schedule must be a Schedule, got {type(schedule).__name__}", field="schedule")
     grid = schedule.receiver_grid() if grid is None else grid
     plan = make_plan(schedule, grid)
-    windows = tile_windows(grid.shape, plan.rc.seg, tile_cells)
+    if single_process and (scheduler or workers):
+        raise InputError("single_process excludes scheduler and workers", field="single_process")
+    address = scheduler or (None if workers or single_process else os.environ.get(SCHEDULER_ENV) or None)
+    local = address is None and not workers
+    n = (default_threads() if threads is None else max(1, int(threads))) if local else 0
+    cells = DEFAULT_TILE_CELLS if tile_cells is None else int(tile_cells)
+    if local and tile_cells is None:  # tiles for every thread and a progress that moves: eight a thread at least
+        cells = min(cells, max(1, grid.width * grid.height // (_LOCAL_TILES_PER_THREAD * n)))
+    windows = tile_windows(grid.shape, plan.rc.seg, cells)
     acc = new_accumulators(grid.shape, len(plan.thresholds))
     done = 0
 
@@ -112,14 +125,10 @@ def evaluate_operations(
         if progress is not None:
             progress(done / len(windows))
 
-    if single_process and (scheduler or workers):
-        raise InputError("single_process excludes scheduler and workers", field="single_process")
-    address = scheduler or (None if workers or single_process else os.environ.get(SCHEDULER_ENV) or None)
-    if address is not None or workers:
+    if not local:
         how = run_on_dask(plan, windows, put, scheduler=address, workers=workers, memory_limit=memory_limit,
                           cancel=cancel)
     else:
-        n = default_threads() if threads is None else max(1, int(threads))
         run_local(plan, windows, put, n, cancel)
         how = {"executor": "threads", "threads": n}
     bands = bands_of(acc, plan.thresholds, plan.floor_db)

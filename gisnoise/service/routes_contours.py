@@ -186,10 +186,13 @@ def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
 
 def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path, *,
                    progress: Callable[..., None] | None = None,
-                   cancel: Callable[[], bool] | None = None) -> dict[str, Path]:
-    """Write levels.tif and contours.geojson for a request with the core's ``make_map``.
+                   cancel: Callable[[], bool] | None = None,
+                   files: tuple[str, ...] = ("levels.tif", "contours.geojson"),
+                   timing: dict[str, float] | None = None) -> dict[str, Path]:
+    """Write levels.tif and/or contours.geojson (``files``) for a request with the core's ``make_map``.
 
-    Returns the paths by file name.
+    Returns the paths by file name; ``timing`` (when given) receives ``make_map``'s seconds
+    (``evaluate``, ``total``).
     """
     from gisnoise.maps import make_map
 
@@ -208,8 +211,15 @@ def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest
                          receiver_height=req.receiver_height_m, ground_h=ground_h,
                          uncertainty=req.uncertainty, plot=False,
                          period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
-                         substeps=req.substeps, background=req.background, progress=progress, cancel=cancel)
-    return {"levels.tif": Path(paths["levels"]), "contours.geojson": Path(paths["contours"])}
+                         substeps=req.substeps, background=req.background, progress=progress, cancel=cancel,
+                         outputs=tuple(_OUTPUTS[f] for f in files))
+    if timing is not None:
+        timing.update(paths["timing_s"])
+    return {f: Path(paths[_OUTPUTS[f]]) for f in files}
+
+
+_OUTPUTS = {"levels.tif": "levels", "contours.geojson": "contours"}
+"""File names of a map -> ``make_map``'s outputs."""
 
 
 def _want_tiff(req: ContourRequest, accept: str) -> bool:
@@ -240,6 +250,10 @@ def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Traject
     s = state.settings
     with limits.override(max_samples=s.max_trajectory_samples):  # bounds routes before they are sampled
         traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
+    stated = traj.metadata.get("ground_h_m")
+    if req.ground_h_m is None and isinstance(req.trajectory, GeoJSONTrajectory) and stated is not None:
+        # the ground the waypoints route states, read with the trajectory (make_map_files would read the route again)
+        req = req.model_copy(update={"ground_h_m": float(stated)})
     cards = resolve_cards(req, state.cards)
     req = _auto_margin(traj, cards, req, s.max_cells)
     return req, traj, cards, _grid_cells(traj, req, s.max_cells)
@@ -263,17 +277,21 @@ async def contours(req: ContourRequest, request: Request, state: StateDep,
         require_key(request, request.headers.get("x-api-key"))  # a job is a write
         return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
     tiff = _want_tiff(req, request.headers.get("accept", ""))
-    data = await run_in_threadpool(_sync_map, traj, cards, req, tiff)
+    timing: dict[str, float] = {}
+    data = await run_in_threadpool(_sync_map, traj, cards, req, tiff, timing)
+    # where the time went (W3C Server-Timing, ms): the evaluator and the whole map (route planners tune with it)
+    headers = {"Server-Timing": f"evaluate;dur={1000 * timing['evaluate']:.1f}, map;dur={1000 * timing['total']:.1f}"}
     if tiff:
-        return Response(data, media_type=MediaType.geotiff.value,
-                        headers={"Content-Disposition": 'attachment; filename="levels.tif"'})
-    return Response(data, media_type=MediaType.geojson.value)
+        headers["Content-Disposition"] = 'attachment; filename="levels.tif"'
+        return Response(data, media_type=MediaType.geotiff.value, headers=headers)
+    return Response(data, media_type=MediaType.geojson.value, headers=headers)
 
 
-def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool) -> bytes:
+def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool,
+              timing: dict[str, float] | None = None) -> bytes:
     with _sync_slots, tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
-        paths = make_map_files(traj, cards, req, Path(tmp))
-        return paths["levels.tif" if tiff else "contours.geojson"].read_bytes()
+        name = "levels.tif" if tiff else "contours.geojson"  # only the file the answer carries
+        return make_map_files(traj, cards, req, Path(tmp), files=(name,), timing=timing)[name].read_bytes()
 
 
 @router.post("/jobs/contours", status_code=202, response_model=JobInfo, dependencies=WRITE,
