@@ -21,7 +21,16 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
-from gisnoise.flight._logkernels import POWER_WAY_OUT, _at_rest_low, _covering, _finish, _phase, _power, _time_base
+from gisnoise.flight._logkernels import (
+    POWER_WAY_OUT,
+    _at_rest_low,
+    _covering,
+    _finish,
+    _phase,
+    _power,
+    _time_base,
+    msl_to_ellipsoid_undulation,
+)
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
@@ -43,7 +52,10 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     start_utc : datetime, str or float, optional
         Instant of ``t = 0``; needs GPS UTC time in the log.
     geoid_undulation_m : float, optional
-        Used only when no ellipsoidal height is logged, m.
+        Geoid undulation, m, for logs with heights above mean sea level only; given, it
+        overrides the geoid model.  Ellipsoidal heights are taken as logged; MSL heights get
+        this N, else the GNSS receiver's (its ellipsoidal minus MSL height), else the geoid
+        grid's (:mod:`gisnoise.geo.geoid`).
     rate_hz : float, optional
         Uniform resampling rate, Hz.
     power_w : float, optional
@@ -75,6 +87,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         return None
 
     # position
+    geoid_meta: dict[str, Any] = {}
     gps = first("vehicle_gps_position", "sensor_gps")
     gps_cols = _px4_gps_columns(*gps) if gps else None
     glob = first("vehicle_global_position")
@@ -86,16 +99,22 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
             h = g["alt_ellipsoid"].astype(float)
             datum = "ellipsoid (vehicle_global_position.alt_ellipsoid)"
         else:
-            datum = "mean sea level (vehicle_global_position.alt) + geoid undulation"
-            n_und = _undulation(src, gps_cols, geoid_undulation_m, "vehicle_global_position.alt_ellipsoid")
+            n_und, geoid_meta = _undulation(src, gps_cols, geoid_undulation_m, lat, lon,
+                                            "vehicle_global_position.alt")
+            datum = f"mean sea level (vehicle_global_position.alt) + geoid undulation: {geoid_meta['geoid_model']}"
             h = g["alt"].astype(float) + n_und
         pos_name = "vehicle_global_position"
     elif gps_cols is not None:
         tb, lat, lon, h_ell, h_msl = (gps_cols[k] for k in ("t", "lat", "lon", "h_ell", "h_msl"))
-        h = h_ell if h_ell is not None else h_msl + _undulation(src, None, geoid_undulation_m,
-                                                               f"{gps[0]}.alt_ellipsoid")  # type: ignore[index]
-        datum = "ellipsoid" if h_ell is not None else "mean sea level + geoid undulation"
         pos_name = gps[0]  # type: ignore[index]
+        if h_ell is not None:
+            h, datum = h_ell, f"ellipsoid ({pos_name}.alt_ellipsoid)"
+        elif h_msl is None:
+            raise MissingColumnError(f"{src}: topic '{pos_name}' has no altitude", field=f"{pos_name}.alt")
+        else:
+            n_und, geoid_meta = _undulation(src, None, geoid_undulation_m, lat, lon, f"{pos_name}.alt")
+            h = h_msl + n_und
+            datum = f"mean sea level ({pos_name}.alt) + geoid undulation: {geoid_meta['geoid_model']}"
     else:
         raise MissingColumnError(f"{src}: topic 'vehicle_global_position' or 'vehicle_gps_position' missing "
                                  "(no position)", field="vehicle_global_position")
@@ -157,7 +176,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     utc_offset = None
     if gps_cols is not None and gps_cols["utc_offset"] is not None:
         utc_offset = gps_cols["utc_offset"]
-    meta = {"height_datum": datum, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
+    meta = {"height_datum": datum, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
     return _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
 
 
@@ -212,15 +231,15 @@ def _px4_gps_columns(name: str, g: Mapping[str, np.ndarray]) -> dict[str, Any]:
             "utc_offset": utc_offset}
 
 
-def _undulation(src: str, gps_cols: Mapping[str, Any] | None, given: float | None, what: str) -> float:
-    if given is not None:
-        return float(given)
-    if gps_cols is not None and gps_cols["h_ell"] is not None and gps_cols["h_msl"] is not None \
+def _undulation(src: str, gps_cols: Mapping[str, Any] | None, given: float | None, lat: np.ndarray,
+                lon: np.ndarray, what: str) -> tuple[np.ndarray | float, dict[str, Any]]:
+    """N (m) for heights above mean sea level: given, else the GNSS receiver's own (ellipsoidal minus MSL
+    height it logs), else the geoid grid (:func:`~gisnoise.flight._logkernels.msl_to_ellipsoid_undulation`)."""
+    if given is None and gps_cols is not None and gps_cols["h_ell"] is not None and gps_cols["h_msl"] is not None \
             and len(gps_cols["h_ell"]):
-        return float(np.median(gps_cols["h_ell"] - gps_cols["h_msl"]))
-    raise MissingColumnError(f"{src}: '{what}' missing (only heights above mean sea level); "
-                             "give the geoid undulation (--geoid-undulation, or geoid_undulation_m)",
-                             field="geoid_undulation_m")
+        n = float(np.median(gps_cols["h_ell"] - gps_cols["h_msl"]))
+        return n, {"geoid_model": "the GNSS receiver's (alt_ellipsoid - alt)", "geoid_undulation_m": n}
+    return msl_to_ellipsoid_undulation(lat, lon, given, f"{src}: '{what}' gives heights above mean sea level only")
 
 
 def _px4_rpm(topics: Mapping[str, list[dict[str, np.ndarray]]]) -> tuple[np.ndarray, np.ndarray] | None:

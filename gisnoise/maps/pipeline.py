@@ -177,6 +177,9 @@ def make_map(
     else:
         result = _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, eval_progress, kw)
     _check_cells(result, traj.source)
+    # the vertical datum of the track (flight logs: MSL + geoid undulation, and which)
+    result.metadata.setdefault("trajectory", {}).update(
+        {k: traj.metadata[k] for k in ("height_datum", "geoid_model", "geoid_undulation_m") if k in traj.metadata})
     result.metadata["levels_db"] = lv
     warnings = warnings + clip_warnings(result, lv)
     result.metadata["warnings"] = warnings
