@@ -71,7 +71,8 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         raise InputError("reading PX4 ULog needs pyulog (pip install 'gisnoise[logs]')", field="path") from None
     src = str(path)
     try:
-        ulog = ULog(src, list(_ULOG_TOPICS))
+        with open(src, "rb") as fh:   # closed here also when pyulog gives up on a corrupt file
+            ulog = ULog(fh, list(_ULOG_TOPICS))
     except FileNotFoundError:
         raise TrajectoryError(f"{src}: no such file", field="path") from None
     except Exception as exc:  # pyulog raises bare exceptions on corrupt files
