@@ -3,7 +3,9 @@
 Position from ``vehicle_global_position`` when logged, else from
 ``vehicle_gps_position`` / ``sensor_gps`` (3D fixes only); attitude from the
 ``vehicle_attitude`` quaternion (Hamilton, body FRD -> NED) as Z-Y-X Euler angles;
-electric power as the sum over ``battery_status`` instances of voltage x current;
+electric power as the sum over ``battery_status`` instances of voltage x current (the mean
+current over each log interval from the coulomb count ``discharged_mah`` where it is
+logged, see :func:`battery_power`);
 optional ``rpm`` (``rpm`` or ``esc_status``) and airspeed (``airspeed_validated`` or
 ``airspeed``).  Heights are ellipsoidal (``alt_ellipsoid``) where logged.  The GPS
 clock is ``time_utc_usec``.  A VTOL's state (``vtol_vehicle_status``, else
@@ -34,7 +36,7 @@ from gisnoise.flight._logkernels import (
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
-__all__ = ["read_ulog", "quaternion_to_euler"]
+__all__ = ["read_ulog", "quaternion_to_euler", "battery_power"]
 
 _ULOG_TOPICS = ("vehicle_global_position", "vehicle_gps_position", "sensor_gps", "vehicle_attitude",
                 "battery_status", "vtol_vehicle_status", "vehicle_status", "airspeed_validated", "airspeed",
@@ -141,7 +143,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
                 continue
             if "current_a" not in b or "voltage_v" not in b:
                 continue
-            batteries.append((b["timestamp"] / 1e6, b["voltage_v"].astype(float) * b["current_a"].astype(float)))
+            batteries.append(battery_power(b))
         if not batteries:
             raise MissingColumnError(f"{src}: topic 'battery_status' has no connected battery with voltage and "
                                      f"current; {POWER_WAY_OUT}", field="battery_status")
@@ -179,6 +181,39 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         utc_offset = gps_cols["utc_offset"]
     meta = {"height_datum": datum, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
     return _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
+
+
+def battery_power(b: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Electric power (W) of one ``battery_status`` instance: (times s, power W).
+
+    PX4 logs ``current_a`` as one instantaneous reading per logged sample (5 Hz by default),
+    which aliases the ripple of the motor currents: real logs show 0 A on samples between
+    12 A readings while the battery's coulomb count grows.  The battery driver integrates
+    every reading into ``discharged_mah``, so where that count is logged, finite and never
+    decreasing (no reset) and grows, the current is its mean over each log interval,
+    ``I = 3.6 dQ[mAh] / dt[s]``, placed at the interval's middle (the first and last
+    intervals' means also at the log's first and last sample, so the span stays the log's);
+    else ``current_a``.  The power is ``voltage_v`` x that current.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> b = {"timestamp": np.array([0, 1e6, 2e6]), "voltage_v": np.array([16.0, 16.0, 16.0]),
+    ...      "current_a": np.array([0.0, 0.0, 0.0]), "discharged_mah": np.array([0.0, 5.0, 5.0])}
+    >>> t, p = battery_power(b)         # 5 mAh in the first second: 18 A, then nothing
+    >>> [float(v) for v in t], [round(float(v), 6) for v in p]
+    ([0.0, 0.5, 1.5, 2.0], [288.0, 288.0, 0.0, 0.0])
+    """
+    t = b["timestamp"] / 1e6
+    v = b["voltage_v"].astype(float)
+    q = b["discharged_mah"].astype(float) if "discharged_mah" in b else None
+    if q is not None and len(q) >= 2 and np.all(np.isfinite(q)) and np.all(np.diff(t) > 0) \
+            and np.all(np.diff(q) >= 0) and q[-1] > q[0]:
+        c = 3.6 * np.diff(q) / np.diff(t)
+        tm = np.concatenate([t[:1], 0.5 * (t[1:] + t[:-1]), t[-1:]])   # the log's span, means at the middles
+        current = np.concatenate([c[:1], c, c[-1:]])
+        return tm, np.interp(tm, t, v) * current
+    return t, v * b["current_a"].astype(float)
 
 
 def quaternion_to_euler(q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
