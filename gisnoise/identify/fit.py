@@ -19,7 +19,7 @@ from gisnoise.errors import Cancelled, GisnoiseError, InputError, NotIdentifiabl
 from gisnoise.identify.estimate import fit_arrays
 from gisnoise.identify.result import FitResult
 from gisnoise.measure import Samples, read_campaign, series_key
-from gisnoise.model import PHASES, Ansatz, check_testable, get_ansatz, get_effect
+from gisnoise.model import PHASES, POWER_RANGE_DEX, Ansatz, check_testable, get_ansatz, get_effect
 
 __all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "P7_MAX_STD_DB"]
 
@@ -200,9 +200,10 @@ def fit_campaign(
     return res
 
 
-STEADY_POWER_DEX = 0.02
+STEADY_POWER_DEX = POWER_RANGE_DEX
 """Spread of log10(P_el) over the fitted rows below which the power term p1 cannot be identified
-(a power varying by less than about 5 %)."""
+(a power varying by less than about 5 %); maps accept a card without power term within as much
+of its power range (:mod:`gisnoise.model.power_range`)."""
 P7_MAX_STD_DB = 3.0
 """Standard deviation of a fitted background p7 above which the data do not support it, dB."""
 

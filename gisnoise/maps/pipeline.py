@@ -29,7 +29,10 @@ Two rules hold for every face:
   and the map is refused (``power_w``, naming ``--power-w``); when some have power, the
   unpowered ones are silent (motors stopped while the land detector, which lags a
   touchdown by about a second, still says airborne; or a sensor dropout) and a warning
-  names how many (``metadata["warnings"]``, printed by the command line).
+  names how many (``metadata["warnings"]``, printed by the command line);
+* powers against the cards' stated power ranges (:mod:`gisnoise.model.power_range`): a card
+  without power term used at other powers is refused (``power_w``); a card with one used
+  outside the powers it was fitted at gives a warning and ``metadata["power_outside_card_range"]``.
 """
 
 from __future__ import annotations
@@ -49,6 +52,7 @@ from gisnoise.maps.contours import clip_warnings, parse_levels, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map
+from gisnoise.maps.powers import check_power_ranges
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
@@ -158,10 +162,10 @@ def make_map(
     check_receivers(receiver_height, ground_h, traj.h[traj.flying] if traj.flying.any() else traj.h)
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
     unpowered = _airborne_without_power(traj)
+    power_warnings, outside_range = check_power_ranges(traj, cardset)
     grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
                                   background=background)
-    if unpowered is not None:
-        warnings = [unpowered] + warnings
+    warnings = ([unpowered] if unpowered is not None else []) + power_warnings + warnings
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
@@ -182,6 +186,8 @@ def make_map(
     # the vertical datum of the track (flight logs: MSL + geoid undulation, and which)
     result.metadata.setdefault("trajectory", {}).update(
         {k: traj.metadata[k] for k in ("height_datum", "geoid_model", "geoid_undulation_m") if k in traj.metadata})
+    if outside_range:
+        result.metadata["power_outside_card_range"] = outside_range
     result.metadata["levels_db"] = lv
     warnings = warnings + clip_warnings(result, lv)
     result.metadata["warnings"] = warnings
