@@ -171,7 +171,11 @@ def fit_campaign(
     n_bg_rows = background_dominated_rows(s)
     if bg is not None and bg not in fixed and n_bg_rows is not None and n_bg_rows < MIN_BACKGROUND_ROWS:
         weak_bg = True   # held before any fit: a p7 fitted to the tail of the UAV's level is biased
+        why = (f"{n_bg_rows} rows within {BACKGROUND_DOMINATED_DB:g} dB of their background (fewer than "
+               f"{MIN_BACKGROUND_ROWS})")
     else:
+        why = (f"too few background-dominated rows to fit it (on a bound, not identifiable or uncertain by more "
+               f"than {P7_MAX_STD_DB:g} dB)")
         try:
             res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed or None, **kw)
             weak_bg = bg is not None and bg not in fixed and (bg in res.at_bounds
@@ -187,10 +191,7 @@ def fit_campaign(
                              "campaign states none; give microphones[].background_db or --fix "
                              f"{bg}=LEVEL", field=str(bg))
         fixed[str(bg)] = level_bg
-        n_txt = f"{n_bg_rows} rows within {BACKGROUND_DOMINATED_DB:g} dB of the background" \
-            if n_bg_rows is not None else "too few background-dominated rows"
-        held[str(bg)] = (f"{n_txt} (fewer than {MIN_BACKGROUND_ROWS}, or p7 on a bound or uncertain by more than "
-                         f"{P7_MAX_STD_DB:g} dB); held at the campaign's background {level_bg:.1f} dB(A)")
+        held[str(bg)] = f"{why}; held at the campaign's background {level_bg:.1f} dB(A)"
         res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed, **kw)
     info: dict[str, Any] = {
         "data": {
