@@ -22,7 +22,7 @@ from gisnoise.measure import Samples, read_campaign, series_key
 from gisnoise.model import PHASES, POWER_RANGE_DEX, Ansatz, check_testable, get_ansatz, get_effect
 
 __all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "P7_MAX_STD_DB",
-           "BACKGROUND_DOMINATED_DB", "MIN_BACKGROUND_ROWS", "background_dominated_rows"]
+           "BACKGROUND_DOMINATED_DB", "background_dominated_rows"]
 
 
 def fit(
@@ -168,22 +168,15 @@ def fit_campaign(
     fixed, held = identifiable_form(s, ansatz, kw.pop("fixed", None))
     model = get_ansatz(ansatz) if isinstance(ansatz, str) else ansatz
     bg = model.background
-    n_bg_rows = background_dominated_rows(s)
-    if bg is not None and bg not in fixed and n_bg_rows is not None and n_bg_rows < MIN_BACKGROUND_ROWS:
-        weak_bg = True   # held before any fit: a p7 fitted to the tail of the UAV's level is biased
-        why = (f"{n_bg_rows} rows within {BACKGROUND_DOMINATED_DB:g} dB of their background (fewer than "
-               f"{MIN_BACKGROUND_ROWS})")
-    else:
-        why = (f"too few background-dominated rows to fit it (on a bound, not identifiable or uncertain by more "
-               f"than {P7_MAX_STD_DB:g} dB)")
-        try:
-            res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed or None, **kw)
-            weak_bg = bg is not None and bg not in fixed and (bg in res.at_bounds
-                                                              or res.std.get(bg, 0.0) > P7_MAX_STD_DB)
-        except NotIdentifiableError as exc:
-            if bg is None or bg in fixed or bg not in getattr(exc, "parameters", ()):
-                raise
-            weak_bg = True
+    try:
+        res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed or None, **kw)
+        weak_bg = bg is not None and bg not in fixed and (bg in res.at_bounds or res.std.get(bg, 0.0) > P7_MAX_STD_DB)
+        why = (f"{bg} = {res.params.get(bg, float('nan')):.1f} +- {res.std.get(bg, 0.0):.2g} dB(A) from the data"
+               + (" (on a bound)" if bg in res.at_bounds else "")) if bg is not None else ""
+    except NotIdentifiableError as exc:
+        if bg is None or bg in fixed or bg not in getattr(exc, "parameters", ()):
+            raise
+        weak_bg, why = True, f"{bg} not identifiable from the data"
     if weak_bg:   # too few background-dominated rows to fit p7: hold it at the campaign's background
         level_bg = _campaign_background(s)
         if level_bg is None:
@@ -191,7 +184,10 @@ def fit_campaign(
                              "campaign states none; give microphones[].background_db or --fix "
                              f"{bg}=LEVEL", field=str(bg))
         fixed[str(bg)] = level_bg
-        held[str(bg)] = f"{why}; held at the campaign's background {level_bg:.1f} dB(A)"
+        n_bg = background_dominated_rows(s)
+        rows = "" if n_bg is None else f", {n_bg} rows within {BACKGROUND_DOMINATED_DB:g} dB of their background"
+        held[str(bg)] = (f"too few background-dominated rows to fit it ({why}{rows}); held at the campaign's "
+                         f"background {level_bg:.1f} dB(A)")
         res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed, **kw)
     info: dict[str, Any] = {
         "data": {
@@ -218,9 +214,7 @@ of its power range (:mod:`gisnoise.model.power_range`)."""
 BACKGROUND_DOMINATED_DB = 3.0
 """A row is background-dominated when its level lies within this many dB of its microphone's background
 (the background holds at least half the sound energy)."""
-MIN_BACKGROUND_ROWS = 30
-"""Background-dominated rows below which the background ``p7`` is held at the campaign's background."""
-P7_MAX_STD_DB = 3.0
+P7_MAX_STD_DB = 1.0
 """Standard deviation of a fitted background p7 above which the data do not support it, dB."""
 
 
@@ -255,12 +249,12 @@ def identifiable_form(samples: Samples, ansatz: str | Ansatz,
       and ``p1`` free, or with an ansatz without ``p0`` (``paper``: ``p1`` would scale the whole
       level), ``p1`` is not identifiable as a power slope and
       :class:`~gisnoise.errors.NotIdentifiableError` names it and the way out.
-    The background ``p7`` is judged by :func:`fit_campaign`: with fewer than
-    :data:`MIN_BACKGROUND_ROWS` rows within :data:`BACKGROUND_DOMINATED_DB` of their background
-    (:func:`background_dominated_rows`), or when a first fit puts it on a bound, finds it not
-    identifiable or gives it a standard deviation above :data:`P7_MAX_STD_DB`, the data hold too
-    few background-dominated rows, and it is held at the campaign's background (stated, or
-    measured from the recordings).
+    The background ``p7`` is judged by :func:`fit_campaign` after a first fit: when it ends on
+    a bound, is not identifiable or has a standard deviation above :data:`P7_MAX_STD_DB` (then a
+    stated or measured background knows it better), the data hold too few background-dominated
+    rows, and it is held at the campaign's background (stated, or measured from the
+    recordings); the card's reason gives the fitted value and the count of rows within
+    :data:`BACKGROUND_DOMINATED_DB` of their background.
 
     Parameters the user fixed are left alone.  Returns the fixed values and, per held
     parameter, the reason (the card's provenance states it).
