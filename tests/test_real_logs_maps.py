@@ -38,6 +38,15 @@ def run(*args):
     return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
 
 
+def _coulomb_power(b):
+    """(t s, W): voltage x the mean current of each log interval from the battery's coulomb count (mAh), at the
+    intervals' middles, the first and last means held to the log's ends."""
+    t = b["timestamp"] / 1e6
+    c = 3.6 * np.diff(b["discharged_mah"].astype(float)) / np.diff(t)
+    tm = np.r_[t[0], (t[1:] + t[:-1]) / 2, t[-1]]
+    return tm, np.interp(tm, t, b["voltage_v"].astype(float)) * np.r_[c[0], c, c[-1]]
+
+
 def _ulog_expect(path):
     """Time base start, position, power and landed flag as pyulog reads them (boot time, s)."""
     u = pyulog.ULog(str(path))
@@ -53,7 +62,7 @@ def _ulog_expect(path):
         g = d["vehicle_gps_position"]
         ok = g["fix_type"] >= 3
         tp, lat = g["timestamp"][ok] / 1e6, g["lat"][ok] / 1e7
-    bats = [(b["timestamp"] / 1e6, b["voltage_v"] * b["current_a"]) for b in batteries]
+    bats = [_coulomb_power(b) for b in batteries]
     ta = d["vehicle_attitude"]["timestamp"] / 1e6
     ld = d["vehicle_land_detected"]
     t0 = max([tp[0], ta[0]] + [tb[0] for tb, _ in bats])
@@ -67,7 +76,7 @@ def test_ulog_through_the_one_reader_equals_pyulog(path):
     t_abs = t0 + tr.t
     assert np.allclose(np.diff(tr.t), 1.0 / LOG_MAP_RATE_HZ)
     np.testing.assert_allclose(tr.lat, np.interp(t_abs, tp, lat), atol=1e-9)
-    power = sum(np.interp(t_abs, tb, pw) for tb, pw in bats)   # every battery instance, V x I
+    power = sum(np.interp(t_abs, tb, pw) for tb, pw in bats)   # every battery instance, V x mean I
     np.testing.assert_allclose(tr.power_w, power, rtol=1e-6, atol=1e-6)
     expect_landed = landed[np.clip(np.searchsorted(tl, t_abs, side="right") - 1, 0, len(tl) - 1)]
     np.testing.assert_array_equal(tr.on_ground, expect_landed)
@@ -118,8 +127,7 @@ def test_dataflash_on_ground_until_not_landed_event_and_power_equal_pymavlink():
     assert tr.metadata["geoid_undulation_m"] == N_SITE and "mean sea level" in tr.metadata["height_datum"]
 
 
-@pytest.mark.parametrize("name,extra", [(VTOL, ()), (QUAD, ("--power-w", "150")),
-                                        (COPTER, ("--geoid-undulation", str(N_SITE)))])
+@pytest.mark.parametrize("name,extra", [(VTOL, ()), (QUAD, ()), (COPTER, ("--geoid-undulation", str(N_SITE)))])
 def test_every_log_makes_a_map_and_on_ground_samples_are_silent(tmp_path, card, name, extra):
     log = tmp_path / (name.stem + name.suffix.upper())        # .ULG / .BIN as some autopilots write them
     shutil.copy(name, log)
@@ -129,8 +137,7 @@ def test_every_log_makes_a_map_and_on_ground_samples_are_silent(tmp_path, card, 
     assert r.exit_code == 0, r.output
     with rasterio.open(out / "levels.tif") as ds:
         lamax = ds.read(list(ds.descriptions).index("LAmax") + 1)
-    tr = read_route(log, geoid_undulation_m=N_SITE, power_w=150.0 if extra and extra[0] == "--power-w" else None)
-    tr = tr.trajectory
+    tr = read_route(log, geoid_undulation_m=N_SITE).trajectory
     # the loudest cell: 65 dB + 10 log10(P/300 W) at 40 m scaled by distance; never above the closest approach
     # of the flying samples to a receiver 1.5 m above the take-off point
     fly = tr.flying
@@ -141,20 +148,46 @@ def test_every_log_makes_a_map_and_on_ground_samples_are_silent(tmp_path, card, 
     assert 30.0 < lamax.max() <= bound + 1e-6
 
 
-def test_quad_log_with_zero_power_in_the_air_names_power_w(tmp_path, card):
-    r = run("contour", str(QUAD), "--card", card, "--out", str(tmp_path / "m"))
+def test_quad_airborne_samples_without_current_are_silent_and_named(tmp_path, card):
+    """The quad's land detector says airborne for about a second after each 0.2 m hop while the battery's
+    coulomb count stands still (no current): those samples are silent, and the warning counts them."""
+    tr = read_route(QUAD).trajectory
+    t0, _, bats, (tl, landed) = _ulog_expect(QUAD)
+    t_abs = t0 + tr.t
+    airborne = ~landed[np.clip(np.searchsorted(tl, t_abs, side="right") - 1, 0, len(tl) - 1)]
+    unpowered = airborne & (sum(np.interp(t_abs, tb, pw) for tb, pw in bats) <= 0)
+    assert 0 < unpowered.sum() < airborne.sum()
+    r = CliRunner().invoke(cli, ["-q", "contour", str(QUAD), "--card", card, "--out", str(tmp_path / "m"),
+                                 "--resolution", "20", "--margin", "100"])
+    assert r.exit_code == 0, r.output
+    assert f"{int(unpowered.sum())} of {int(airborne.sum())} airborne samples draw no battery current" in r.stderr
+    np.testing.assert_array_equal(tr.flying, airborne & ~unpowered)
+
+
+def test_track_without_current_in_flight_names_power_w(tmp_path, card):
+    """A log that measures no current in flight (every airborne sample at 0 W): one line naming --power-w."""
+    tr = read_route(VTOL).trajectory
+    zero = tr.select(np.ones(len(tr), bool))
+    csv = tmp_path / "no_current.csv"
+    zero.to_csv(csv)
+    text = csv.read_text().splitlines()
+    col = text[0].split(",").index("power_w")
+    rows = [",".join("0" if k == col else v for k, v in enumerate(line.split(","))) for line in text[1:]]
+    csv.write_text("\n".join([text[0], *rows]) + "\n")
+    r = run("contour", str(csv), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", str(tr.h.min()))
     assert r.exit_code == 2
-    assert "--power-w" in r.output and len(r.output.strip().splitlines()) == 1
+    assert "--power-w" in r.output and "all" in r.output and len(r.output.strip().splitlines()) == 1
 
 
-def test_copter_log_without_undulation_names_the_option(tmp_path, card):
+def test_copter_log_without_undulation_or_geoid_grid_names_the_option(tmp_path, card, monkeypatch):
+    monkeypatch.delenv("GISNOISE_GEOID_GRID", raising=False)
+    monkeypatch.setattr("gisnoise.geo.geoid.geoid_search_dirs", lambda: [])   # no geoid grid here
     r = run("contour", str(COPTER), "--card", card, "--out", str(tmp_path / "m"))
     assert r.exit_code == 2 and "--geoid-undulation" in r.output
 
 
 @pytest.mark.parametrize("name", [VTOL, QUAD, COPTER])
 def test_campaign_check_reads_every_log(tmp_path, name):
-    # the quad logs 0 A while airborne too: its flight states a constant power (flights[].power_w)
     root = tmp_path / "camp"
     (root / "flights").mkdir(parents=True)
     (root / "mics" / "m1").mkdir(parents=True)
@@ -173,6 +206,8 @@ def test_campaign_check_reads_every_log(tmp_path, name):
                             "mount": "free_field"}],
            "flights": [{"id": "f1", "start_utc": start, "geoid_undulation_m": N_SITE}]}
     if name == QUAD:
+        # the quad's battery draws current for 0.2 s of the second its land detector calls airborne (the 0.2 m hops
+        # mostly happen while it still says landed): too little flight for levels; the flight states a constant power
         doc["flights"][0]["power_w"] = 150.0
     (root / "campaign.json").write_text(json.dumps(doc))
     t_r = np.arange(0.0, tr.duration_s + 2.0, 0.125)

@@ -22,13 +22,15 @@ POWER_W, REF_W, C = 2400.0, 3000.0, 340.0
 MICS = {"m1": (0.0, 0.0), "m2": (0.0, 60.0), "m3": (0.0, -130.0)}   # east, north of the origin (m), 1.2 m up
 
 
-def _campaign(root, seed=3):
-    """Three straight passes (60 m eastbound, 90 m westbound, 45 m eastbound) at one power."""
+def _campaign(root, seed=3, half_m=450.0):
+    """Three straight passes (60 m eastbound, 90 m westbound, 45 m eastbound, each from -half_m to half_m east)
+    at one power."""
     rng = np.random.default_rng(seed)
     (root / "flights").mkdir(parents=True)
-    # waypoints (t, east, north, up): passes of 60 s at 15 m/s joined by 10 s links
-    wp = np.array([(0, -450, 10, 60), (60, 450, 10, 60), (70, 450, -20, 90), (130, -450, -20, 90),
-                   (140, -450, 30, 45), (200, 450, 30, 45)], dtype=float)
+    # waypoints (t, east, north, up): passes of 60 s (at 15 m/s for 900 m) joined by 10 s links
+    a = half_m
+    wp = np.array([(0, -a, 10, 60), (60, a, 10, 60), (70, a, -20, 90), (130, -a, -20, 90),
+                   (140, -a, 30, 45), (200, a, 30, 45)], dtype=float)
     t = np.arange(0.0, 200.0 + 1e-9, 0.1)
     e, n, u = (np.interp(t, wp[:, 0], wp[:, k]) for k in (1, 2, 3))
     yw = np.degrees(np.arctan2(np.gradient(e, t), np.gradient(n, t)))
@@ -90,6 +92,37 @@ def test_fit_writes_the_identifiable_form_and_its_level_below_the_track(tmp_path
         assert float(card.level_uav(x)) == pytest.approx(float(_truth_level(d, 0.0, -np.pi / 2)), abs=0.3)
 
 
+def test_p7_is_held_at_the_stated_background_without_background_dominated_rows(tmp_path):
+    """Passes of +-120 m: the UAV stays more than 3 dB above the 40 dB(A) background at every microphone (no
+    background-dominated row); a free fit gives p7 = 41.5 +- 2.4 dB(A), no better than the stated background, so
+    p7 is held at the campaign's stated background and the card says so."""
+    from gisnoise.identify import background_dominated_rows
+    from gisnoise.measure import read_campaign
+
+    camp = _campaign(tmp_path / "short", half_m=120.0)
+    assert background_dominated_rows(read_campaign(camp).samples()) == 0
+    out = tmp_path / "card.json"
+    r = run("fit", str(camp), "--phase", "horizontal", "--out", str(out))
+    assert r.exit_code == 0, r.output
+    card = load(out)
+    assert card.parameters["p7"] == 40.0
+    reason = card.provenance["held_parameters"]["p7"]
+    assert "held at the campaign's background 40.0 dB(A)" in reason and "0 rows within 3 dB" in reason
+    x = card.inputs(60.0, 0.0, -np.pi / 2, POWER_W)
+    assert float(card.level_uav(x)) == pytest.approx(float(_truth_level(60.0, 0.0, -np.pi / 2)), abs=0.3)
+
+
+@pytest.mark.parametrize("args, names", [
+    (["--fix", "p0=64"], ("p1", "p0", "fix p1 too")),                       # p1 would absorb the offset
+    (["--ansatz", "paper"], ("p1", "--ansatz paper-offset")),             # p1 would scale the whole level
+    (["--fix", "p2=0", "--fix", "p4=0"], ("p3", "p5")),                    # no amplitude: the phases are free
+])
+def test_identifiability_is_checked_again_after_fix(tmp_path, campaign, args, names):
+    r = run("fit", str(campaign), "--phase", "horizontal", "--out", str(tmp_path / "c.json"), *args)
+    assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1, r.output
+    assert all(n in r.output for n in names) and not (tmp_path / "c.json").exists()
+
+
 def test_fix_p1_gives_a_sane_card_or_refuses(tmp_path, campaign):
     from gisnoise.model import card_problems
 
@@ -129,6 +162,13 @@ def test_implausible_card_is_refused_by_load_and_the_map_naming_p2(tmp_path):
     with pytest.raises(ImplausibleCardError, match="p2"):
         make_map(traj, [_bad_card()], tmp_path / "m", ground_h=80.0)
     assert not (tmp_path / "m").exists()
+    # and the evaluator given the card file, on any engine (cards built in code reach it only through make_map)
+    from gisnoise.maps import evaluate_grid, grid_for_trajectory
+
+    grid = grid_for_trajectory(traj, 20.0, 100.0)
+    for engine in ("numpy", "auto"):
+        with pytest.raises(ImplausibleCardError, match="p2 = -2958"):
+            evaluate_grid(traj, [path], grid, ground_h=80.0, engine=engine)
 
 
 def test_card_with_infinite_std_is_refused_naming_the_parameter():

@@ -91,7 +91,8 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
               help="Constant electric power, W, for a flight log (.ulg, .bin) without battery current.")
 @click.option("--geoid-undulation", "geoid_undulation", type=float, default=None,
               help="Geoid undulation N (ellipsoidal minus mean-sea-level height), m, for a flight log with "
-                   "heights above mean sea level (ArduPilot .bin).")
+                   "heights above mean sea level (ArduPilot .bin) [default: the EGM96 grid at each sample, "
+                   "from proj-data or GISNOISE_GEOID_GRID].")
 @click.option("--crs", "crs", default=None, help="Projected CRS of the grid, e.g. EPSG:25832 [default: local UTM].")
 @click.option("--metrics", "metrics", default="LAmax,LAeq,SEL", show_default=True, callback=_metrics,
               help="Metrics: any of LAmax, LAeq, SEL.")

@@ -14,7 +14,7 @@ from gisnoise.flight.clock import as_unix_time
 from gisnoise.flight.ground import GROUND_TOLERANCE_M, REST_SPEED_M_S
 from gisnoise.flight.phases import phase_by_speed
 from gisnoise.flight.trajectory import Trajectory
-from gisnoise.geo import LocalFrame
+from gisnoise.geo import LocalFrame, geoid_undulation
 
 log = logging.getLogger(__name__)
 
@@ -94,3 +94,22 @@ def _finish(src: str, t: np.ndarray, cols: dict[str, Any], start_utc: Any, utc_o
     else:
         t_rel = t - t[0]
     return Trajectory(t=t_rel, source=src, metadata=dict(metadata or {}), **cols)
+
+
+def msl_to_ellipsoid_undulation(lat: np.ndarray, lon: np.ndarray, given: float | None,
+                                what: str) -> tuple[np.ndarray | float, dict[str, Any]]:
+    """The geoid undulation N (m) that turns heights above mean sea level at ``lat``, ``lon`` (deg) into
+    ellipsoidal heights, and the metadata that states it (``geoid_model``, ``geoid_undulation_m``: the
+    mean over the samples, ``geoid_undulation_range_m``).
+
+    ``given`` (m) overrides the geoid model; without it the grid :func:`gisnoise.geo.geoid_undulation`
+    finds gives N per sample, and no grid raises an error naming ``--geoid-undulation``.
+    """
+    if given is not None:
+        if not np.isfinite(given) or abs(given) > 150.0:
+            raise InputError(f"geoid_undulation_m must be a finite number of metres within -150..150 (the geoid "
+                             f"departs less than 110 m from the ellipsoid), got {given!r}", field="geoid_undulation_m")
+        return float(given), {"geoid_model": "given by the user", "geoid_undulation_m": float(given)}
+    n, grid = geoid_undulation(lat, lon, what=what)
+    return n, {"geoid_model": grid.describe(), "geoid_undulation_m": float(np.mean(n)),
+               "geoid_undulation_range_m": [float(np.min(n)), float(np.max(n))]}

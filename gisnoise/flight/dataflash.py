@@ -6,7 +6,7 @@ Old logs store ``CURR`` voltage and current as integer hundredths of a volt and
 ampere; they are recognised by the integer format character of the field and
 scaled, newer float fields are taken as V and A.  The GPS clock is the GPS week and
 milliseconds minus the leap seconds.  ArduPilot logs heights above mean sea level
-only, and no VTOL state: the phase follows
+only (converted with the geoid model, :mod:`gisnoise.geo.geoid`), and no VTOL state: the phase follows
 :func:`~gisnoise.flight.phases.phase_by_speed`.  See :mod:`gisnoise.flight.logs` for
 the time base.
 """
@@ -21,7 +21,16 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
-from gisnoise.flight._logkernels import POWER_WAY_OUT, _at_rest_low, _covering, _finish, _phase, _power, _time_base
+from gisnoise.flight._logkernels import (
+    POWER_WAY_OUT,
+    _at_rest_low,
+    _covering,
+    _finish,
+    _phase,
+    _power,
+    _time_base,
+    msl_to_ellipsoid_undulation,
+)
 from gisnoise.flight.clock import gps_to_unix
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
@@ -35,8 +44,9 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
                    rate_hz: float | None = None, power_w: float | None = None) -> Trajectory:
     """Read an ArduPilot DataFlash ``.bin`` log as a trajectory (see the module docstring).
 
-    ArduPilot logs heights above mean sea level only, so ``geoid_undulation_m``
-    (ellipsoidal minus orthometric height at the site, m) is required.  ``power_w``
+    ArduPilot logs heights above mean sea level only: they become ellipsoidal heights with
+    the undulation of the geoid grid :mod:`gisnoise.geo.geoid` finds at each sample, or with
+    ``geoid_undulation_m`` (ellipsoidal minus orthometric height at the site, m) when given.  ``power_w``
     (W) replaces the logged battery power by a constant (for logs without current).
     Samples before arming, after disarming or landing (``EV`` events ARMED 10,
     DISARMED 11, LAND_COMPLETE 18, NOT_LANDED 28, timed by the message before them in
@@ -116,11 +126,10 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
                               field=pos_name)
     keep = np.concatenate([[True], np.diff(tb) > 0])  # duplicated stamps
     tb, lat, lon, h_msl = tb[keep], lat[keep], lon[keep], h_msl[keep]
-    if geoid_undulation_m is None:
-        raise MissingColumnError(f"{src}: message '{pos_name}' gives heights above mean sea level only; "
-                                 "give the geoid undulation (--geoid-undulation, or geoid_undulation_m)",
-                                 field="geoid_undulation_m")
-    h = h_msl + float(geoid_undulation_m)
+    n_und, geoid_meta = msl_to_ellipsoid_undulation(lat, lon, geoid_undulation_m,
+                                                    f"{src}: message '{pos_name}' gives heights above mean sea level "
+                                                    "only")
+    h = h_msl + n_und
 
     att = table("ATT")
     if att is None:
@@ -145,8 +154,8 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
     cols["phase"] = _phase(t, lat_i, lon_i, h_i, None)
     landed = _landed_from_events(t, events)
     cols["on_ground"] = landed if landed is not None else _at_rest_low(t, lat_i, lon_i, h_i)
-    meta = {"height_datum": f"mean sea level ({pos_name}.Alt) + geoid undulation",
-            "geoid_undulation_m": float(geoid_undulation_m),
+    meta = {"height_datum": f"mean sea level ({pos_name}.Alt) + geoid undulation: {geoid_meta['geoid_model']}",
+            **geoid_meta,
             "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}
     return _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)
 

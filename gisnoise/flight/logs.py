@@ -34,8 +34,12 @@ On the ground
 Heights
     Trajectories hold ellipsoidal heights.  PX4 logs give them (``alt_ellipsoid``);
     where only heights above mean sea level exist (ArduPilot, some PX4 topics), the
-    geoid undulation N (ellipsoidal minus orthometric height, m) must be given as
-    ``geoid_undulation_m``; it is never guessed.
+    geoid undulation N (ellipsoidal minus orthometric height, m) comes from
+    ``geoid_undulation_m`` when given (the override), else from the GNSS receiver's own
+    ellipsoidal and MSL heights (PX4), else from the EGM96 grid (:mod:`gisnoise.geo.geoid`,
+    per sample).  Without a grid the error names ``--geoid-undulation``; N is never guessed.
+    The trajectory's metadata states the datum (``height_datum``), the model
+    (``geoid_model``) and the mean undulation used (``geoid_undulation_m``).
 
 Phase (see :func:`~gisnoise.flight.phases.phase_by_speed`)
     A PX4 VTOL's state (``vtol_vehicle_status``, else ``vehicle_status``) gives
@@ -80,7 +84,7 @@ def read_flight(path: str | os.PathLike[str], *, start_utc: Any = None,
         ``start_utc``).  Ignored for ``.csv``, whose ``t`` is already relative to it.
     geoid_undulation_m : float, optional
         Ellipsoidal minus orthometric height, m, for logs that only give heights
-        above mean sea level.
+        above mean sea level (overrides the geoid model).
     rate_hz : float, optional
         Resample logs onto a uniform grid at this rate, Hz (default: the position
         samples).

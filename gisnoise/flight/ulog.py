@@ -3,7 +3,9 @@
 Position from ``vehicle_global_position`` when logged, else from
 ``vehicle_gps_position`` / ``sensor_gps`` (3D fixes only); attitude from the
 ``vehicle_attitude`` quaternion (Hamilton, body FRD -> NED) as Z-Y-X Euler angles;
-electric power as the sum over ``battery_status`` instances of voltage x current;
+electric power as the sum over ``battery_status`` instances of voltage x current (the mean
+current over each log interval from the coulomb count ``discharged_mah`` where it is
+logged, see :func:`battery_power`);
 optional ``rpm`` (``rpm`` or ``esc_status``) and airspeed (``airspeed_validated`` or
 ``airspeed``).  Heights are ellipsoidal (``alt_ellipsoid``) where logged.  The GPS
 clock is ``time_utc_usec``.  A VTOL's state (``vtol_vehicle_status``, else
@@ -21,11 +23,20 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
-from gisnoise.flight._logkernels import POWER_WAY_OUT, _at_rest_low, _covering, _finish, _phase, _power, _time_base
+from gisnoise.flight._logkernels import (
+    POWER_WAY_OUT,
+    _at_rest_low,
+    _covering,
+    _finish,
+    _phase,
+    _power,
+    _time_base,
+    msl_to_ellipsoid_undulation,
+)
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
-__all__ = ["read_ulog", "quaternion_to_euler"]
+__all__ = ["read_ulog", "quaternion_to_euler", "battery_power"]
 
 _ULOG_TOPICS = ("vehicle_global_position", "vehicle_gps_position", "sensor_gps", "vehicle_attitude",
                 "battery_status", "vtol_vehicle_status", "vehicle_status", "airspeed_validated", "airspeed",
@@ -43,7 +54,10 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     start_utc : datetime, str or float, optional
         Instant of ``t = 0``; needs GPS UTC time in the log.
     geoid_undulation_m : float, optional
-        Used only when no ellipsoidal height is logged, m.
+        Geoid undulation, m, for logs with heights above mean sea level only; given, it
+        overrides the geoid model.  Ellipsoidal heights are taken as logged; MSL heights get
+        this N, else the GNSS receiver's (its ellipsoidal minus MSL height), else the geoid
+        grid's (:mod:`gisnoise.geo.geoid`).
     rate_hz : float, optional
         Uniform resampling rate, Hz.
     power_w : float, optional
@@ -59,7 +73,8 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         raise InputError("reading PX4 ULog needs pyulog (pip install 'gisnoise[logs]')", field="path") from None
     src = str(path)
     try:
-        ulog = ULog(src, list(_ULOG_TOPICS))
+        with open(src, "rb") as fh:   # closed here also when pyulog gives up on a corrupt file
+            ulog = ULog(fh, list(_ULOG_TOPICS))
     except FileNotFoundError:
         raise TrajectoryError(f"{src}: no such file", field="path") from None
     except Exception as exc:  # pyulog raises bare exceptions on corrupt files
@@ -75,6 +90,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         return None
 
     # position
+    geoid_meta: dict[str, Any] = {}
     gps = first("vehicle_gps_position", "sensor_gps")
     gps_cols = _px4_gps_columns(*gps) if gps else None
     glob = first("vehicle_global_position")
@@ -86,16 +102,22 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
             h = g["alt_ellipsoid"].astype(float)
             datum = "ellipsoid (vehicle_global_position.alt_ellipsoid)"
         else:
-            datum = "mean sea level (vehicle_global_position.alt) + geoid undulation"
-            n_und = _undulation(src, gps_cols, geoid_undulation_m, "vehicle_global_position.alt_ellipsoid")
+            n_und, geoid_meta = _undulation(src, gps_cols, geoid_undulation_m, lat, lon,
+                                            "vehicle_global_position.alt")
+            datum = f"mean sea level (vehicle_global_position.alt) + geoid undulation: {geoid_meta['geoid_model']}"
             h = g["alt"].astype(float) + n_und
         pos_name = "vehicle_global_position"
     elif gps_cols is not None:
         tb, lat, lon, h_ell, h_msl = (gps_cols[k] for k in ("t", "lat", "lon", "h_ell", "h_msl"))
-        h = h_ell if h_ell is not None else h_msl + _undulation(src, None, geoid_undulation_m,
-                                                               f"{gps[0]}.alt_ellipsoid")  # type: ignore[index]
-        datum = "ellipsoid" if h_ell is not None else "mean sea level + geoid undulation"
         pos_name = gps[0]  # type: ignore[index]
+        if h_ell is not None:
+            h, datum = h_ell, f"ellipsoid ({pos_name}.alt_ellipsoid)"
+        elif h_msl is None:
+            raise MissingColumnError(f"{src}: topic '{pos_name}' has no altitude", field=f"{pos_name}.alt")
+        else:
+            n_und, geoid_meta = _undulation(src, None, geoid_undulation_m, lat, lon, f"{pos_name}.alt")
+            h = h_msl + n_und
+            datum = f"mean sea level ({pos_name}.alt) + geoid undulation: {geoid_meta['geoid_model']}"
     else:
         raise MissingColumnError(f"{src}: topic 'vehicle_global_position' or 'vehicle_gps_position' missing "
                                  "(no position)", field="vehicle_global_position")
@@ -121,7 +143,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
                 continue
             if "current_a" not in b or "voltage_v" not in b:
                 continue
-            batteries.append((b["timestamp"] / 1e6, b["voltage_v"].astype(float) * b["current_a"].astype(float)))
+            batteries.append(battery_power(b))
         if not batteries:
             raise MissingColumnError(f"{src}: topic 'battery_status' has no connected battery with voltage and "
                                      f"current; {POWER_WAY_OUT}", field="battery_status")
@@ -157,8 +179,41 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     utc_offset = None
     if gps_cols is not None and gps_cols["utc_offset"] is not None:
         utc_offset = gps_cols["utc_offset"]
-    meta = {"height_datum": datum, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
+    meta = {"height_datum": datum, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
     return _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
+
+
+def battery_power(b: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Electric power (W) of one ``battery_status`` instance: (times s, power W).
+
+    PX4 logs ``current_a`` as one instantaneous reading per logged sample (5 Hz by default),
+    which aliases the ripple of the motor currents: real logs show 0 A on samples between
+    12 A readings while the battery's coulomb count grows.  The battery driver integrates
+    every reading into ``discharged_mah``, so where that count is logged, finite and never
+    decreasing (no reset) and grows, the current is its mean over each log interval,
+    ``I = 3.6 dQ[mAh] / dt[s]``, placed at the interval's middle (the first and last
+    intervals' means also at the log's first and last sample, so the span stays the log's);
+    else ``current_a``.  The power is ``voltage_v`` x that current.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> b = {"timestamp": np.array([0, 1e6, 2e6]), "voltage_v": np.array([16.0, 16.0, 16.0]),
+    ...      "current_a": np.array([0.0, 0.0, 0.0]), "discharged_mah": np.array([0.0, 5.0, 5.0])}
+    >>> t, p = battery_power(b)         # 5 mAh in the first second: 18 A, then nothing
+    >>> [float(v) for v in t], [round(float(v), 6) for v in p]
+    ([0.0, 0.5, 1.5, 2.0], [288.0, 288.0, 0.0, 0.0])
+    """
+    t = b["timestamp"] / 1e6
+    v = b["voltage_v"].astype(float)
+    q = b["discharged_mah"].astype(float) if "discharged_mah" in b else None
+    if q is not None and len(q) >= 2 and np.all(np.isfinite(q)) and np.all(np.diff(t) > 0) \
+            and np.all(np.diff(q) >= 0) and q[-1] > q[0]:
+        c = 3.6 * np.diff(q) / np.diff(t)
+        tm = np.concatenate([t[:1], 0.5 * (t[1:] + t[:-1]), t[-1:]])   # the log's span, means at the middles
+        current = np.concatenate([c[:1], c, c[-1:]])
+        return tm, np.interp(tm, t, v) * current
+    return t, v * b["current_a"].astype(float)
 
 
 def quaternion_to_euler(q: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -212,15 +267,15 @@ def _px4_gps_columns(name: str, g: Mapping[str, np.ndarray]) -> dict[str, Any]:
             "utc_offset": utc_offset}
 
 
-def _undulation(src: str, gps_cols: Mapping[str, Any] | None, given: float | None, what: str) -> float:
-    if given is not None:
-        return float(given)
-    if gps_cols is not None and gps_cols["h_ell"] is not None and gps_cols["h_msl"] is not None \
+def _undulation(src: str, gps_cols: Mapping[str, Any] | None, given: float | None, lat: np.ndarray,
+                lon: np.ndarray, what: str) -> tuple[np.ndarray | float, dict[str, Any]]:
+    """N (m) for heights above mean sea level: given, else the GNSS receiver's own (ellipsoidal minus MSL
+    height it logs), else the geoid grid (:func:`~gisnoise.flight._logkernels.msl_to_ellipsoid_undulation`)."""
+    if given is None and gps_cols is not None and gps_cols["h_ell"] is not None and gps_cols["h_msl"] is not None \
             and len(gps_cols["h_ell"]):
-        return float(np.median(gps_cols["h_ell"] - gps_cols["h_msl"]))
-    raise MissingColumnError(f"{src}: '{what}' missing (only heights above mean sea level); "
-                             "give the geoid undulation (--geoid-undulation, or geoid_undulation_m)",
-                             field="geoid_undulation_m")
+        n = float(np.median(gps_cols["h_ell"] - gps_cols["h_msl"]))
+        return n, {"geoid_model": "the GNSS receiver's (alt_ellipsoid - alt)", "geoid_undulation_m": n}
+    return msl_to_ellipsoid_undulation(lat, lon, given, f"{src}: '{what}' gives heights above mean sea level only")
 
 
 def _px4_rpm(topics: Mapping[str, list[dict[str, np.ndarray]]]) -> tuple[np.ndarray, np.ndarray] | None:

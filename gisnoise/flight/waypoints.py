@@ -6,7 +6,7 @@ reads it from files) is either a JSON document::
     {"schema": "gisnoise/waypoints/1",
      "altitude_reference": "agl",        # agl (default) | msl | ellipsoid
      "ground_h_m": 0.0,                  # flat ground (ellipsoidal m) for agl without DEM
-     "geoid_undulation_m": 0.0,          # msl -> ellipsoidal: h = alt + N
+     "geoid_undulation_m": null,         # msl -> ellipsoidal: h = alt + N (null: the EGM96 grid, gisnoise.geo.geoid)
      "sample_dt_s": 0.5,
      "vehicle": {"mass_kg": 35, "cruise_speed_m_s": 25, ...},   # VehicleModel fields
      "waypoints": [{"lon": .., "lat": .., "alt": .., "speed": .., "phase": .., "hold_s": ..,
@@ -86,9 +86,12 @@ def _settings(doc: Mapping[str, Any], source: str, vehicle: VehicleModel | None)
     if ref not in _ALT_REFS:
         raise TrajectoryError(f"{source}: field 'altitude_reference' must be one of {', '.join(_ALT_REFS)}, "
                               f"got {ref!r}", field="altitude_reference")
-    out = {"altitude_reference": ref}
-    for k, default in (("ground_h_m", 0.0), ("geoid_undulation_m", 0.0), ("sample_dt_s", 0.5)):
+    out: dict[str, Any] = {"altitude_reference": ref}
+    out["geoid_undulation_m"] = None   # msl: None takes N from the geoid grid at each waypoint
+    for k, default in (("ground_h_m", 0.0), ("geoid_undulation_m", None), ("sample_dt_s", 0.5)):
         v = doc.get(k, default)
+        if v is None and default is None:
+            continue
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise TrajectoryError(f"{source}: field '{k}' must be a number, got {v!r}", field=k)
         out[k] = float(v)
@@ -106,7 +109,12 @@ def _heights(alt: np.ndarray, lon: np.ndarray, lat: np.ndarray, st: Mapping[str,
     if ref == "ellipsoid":
         return alt, None
     if ref == "msl":
-        return alt + st["geoid_undulation_m"], None
+        n = st.get("geoid_undulation_m")
+        if n is None:
+            from gisnoise.geo import geoid_undulation
+
+            n, _ = geoid_undulation(lat, lon, what=f"{source}: altitude_reference 'msl'")
+        return alt + n, None
     if dem is None:
         return alt + st["ground_h_m"], st["ground_h_m"]
     from gisnoise.geo import Dem, read_dem, sample_dem

@@ -6,14 +6,17 @@ from __future__ import annotations
 from gisnoise.identify.estimate import (
     DEFAULT_BOUNDS,
     DEFAULT_RCOND,
+    MIN_DIRECTIVITY_FACTOR,
     CancelFn,
     ProgressFn,
     fit_arrays,
     start_values,
 )
 from gisnoise.identify.fit import (
+    BACKGROUND_DOMINATED_DB,
     P7_MAX_STD_DB,
     STEADY_POWER_DEX,
+    background_dominated_rows,
     fit,
     fit_campaign,
     identifiable_form,
@@ -30,6 +33,6 @@ from gisnoise.identify.report import (
 )
 from gisnoise.identify.result import FitResult
 
-__all__ = ['P7_MAX_STD_DB', 'STEADY_POWER_DEX', 'identifiable_form', 'CORRELATION_VARIABLES', 'CancelFn', 'DEFAULT_BOUNDS', 'DEFAULT_RCOND', 'FitResult', 'ProgressFn',
+__all__ = ['BACKGROUND_DOMINATED_DB', 'background_dominated_rows', 'P7_MAX_STD_DB', 'STEADY_POWER_DEX', 'identifiable_form', 'CORRELATION_VARIABLES', 'CancelFn', 'DEFAULT_BOUNDS', 'DEFAULT_RCOND', 'MIN_DIRECTIVITY_FACTOR', 'FitResult', 'ProgressFn',
            'correlation_data', 'directivity_data', 'fit', 'fit_arrays', 'fit_campaign', 'parameter_table',
            'residual_data', 'start_values', 'timeseries_data', 'usable_rows', 'write_report']

@@ -60,13 +60,27 @@ from gisnoise.identify.result import FitResult
 from gisnoise.measure import Samples
 from gisnoise.model import Ansatz, ModelCard, get_ansatz
 
-__all__ = ["fit_arrays", "start_values", "DEFAULT_BOUNDS", "DEFAULT_RCOND", "ProgressFn", "CancelFn"]
+__all__ = ["fit_arrays", "start_values", "DEFAULT_BOUNDS", "DEFAULT_RCOND", "MIN_DIRECTIVITY_FACTOR", "ProgressFn",
+           "CancelFn"]
 
-DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {"p6": (0.5, 2.0), "p7": (0.0, 150.0)}
+MIN_DIRECTIVITY_FACTOR = 0.05
+"""Smallest value Eq. 9's directivity factors may take anywhere on the emission sphere."""
+
+DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {
+    "p2": (-(1.0 - MIN_DIRECTIVITY_FACTOR) / math.pi, (1.0 - MIN_DIRECTIVITY_FACTOR) / math.pi),
+    "p4": (-(1.0 - MIN_DIRECTIVITY_FACTOR), 1.0 - MIN_DIRECTIVITY_FACTOR),
+    "p6": (0.5, 2.0),
+    "p7": (0.0, 150.0),
+}
 """Bounds applied unless overridden (each a physical limit): the spreading exponent ``p6`` between
-cylindrical (0.5) and twice spherical (2) spreading, the background ``p7`` a plausible A-weighted level.
-Directivity factors that turn Eq. 9 negative somewhere on the sphere make an implausible card, which
-the plausibility guard (:mod:`gisnoise.model.plausibility`) refuses before it is written."""
+cylindrical (0.5) and twice spherical (2) spreading, the background ``p7`` a plausible A-weighted level,
+and the directivity amplitudes that keep Eq. 9's factors positive over the whole sphere, at least
+:data:`MIN_DIRECTIVITY_FACTOR`: ``1 + p2 sin(phi - p3)(theta + pi/2)`` reaches ``1 - |p2| pi`` (the
+product ``sin(.)(theta + pi/2)`` spans ``[-pi, pi]``), so ``|p2| <= 0.95 / pi``;
+``1 + p4 sin(theta - p5)`` reaches ``1 - |p4|`` for some ``p5``, so ``|p4| <= 0.95``.  The bounds are
+symmetric, so the sign convention of ``p3``, ``p5`` (:func:`_canonical`) still applies.  A card that
+still leaves the plausible level range is refused by the plausibility guard
+(:mod:`gisnoise.model.plausibility`) before it is written."""
 
 DEFAULT_RCOND = 1e-3
 """Smallest relative singular value of the column-scaled weighted Jacobian accepted as identifiable."""
@@ -138,10 +152,13 @@ def _resolve_vector(model: Ansatz, value: Any, what: str) -> dict[str, float]:
     return dict(zip(model.params, arr.tolist(), strict=True))
 
 
-def _resolve_bounds(model: Ansatz, bounds: Any) -> tuple[np.ndarray, np.ndarray]:
+def _resolve_bounds(model: Ansatz, bounds: Any, *, defaults: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bound per parameter: ``bounds`` merged over :data:`DEFAULT_BOUNDS` (without them when
+    ``defaults`` is false)."""
     lo = np.full(model.n_params, -np.inf)
     hi = np.full(model.n_params, np.inf)
-    merged: dict[str, tuple[float, float]] = {k: v for k, v in DEFAULT_BOUNDS.items() if k in model.params}
+    merged: dict[str, tuple[float, float]] = \
+        {k: v for k, v in DEFAULT_BOUNDS.items() if k in model.params} if defaults else {}
     if bounds is not None:
         if isinstance(bounds, Mapping):
             unknown = [k for k in bounds if k not in model.params]
@@ -435,8 +452,10 @@ def fit_arrays(
     start.update(_resolve_vector(model, p0, "p0"))
     start.update(fixed_d)
     p_start = np.array([start[k] for k in names], dtype=float)
-    # keep the user's sign convention when they fix or bound a directivity parameter
-    constrained = any(k in fixed_d or np.isfinite(lo[names.index(k)]) or np.isfinite(hi[names.index(k)])
+    # keep the user's sign convention when they fix or bound a directivity parameter (the default bounds of
+    # p2, p4 are symmetric: they hold whatever the sign convention)
+    user_lo, user_hi = _resolve_bounds(model, bounds, defaults=False)
+    constrained = any(k in fixed_d or np.isfinite(user_lo[names.index(k)]) or np.isfinite(user_hi[names.index(k)])
                       for k in ("p2", "p3", "p4", "p5") if k in names)
     skip = ("p2", "p3", "p4", "p5") if constrained else ()
     p_start, _ = _canonical(names, p_start, skip=skip)

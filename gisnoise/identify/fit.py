@@ -19,9 +19,10 @@ from gisnoise.errors import Cancelled, GisnoiseError, InputError, NotIdentifiabl
 from gisnoise.identify.estimate import fit_arrays
 from gisnoise.identify.result import FitResult
 from gisnoise.measure import Samples, read_campaign, series_key
-from gisnoise.model import PHASES, Ansatz, check_testable, get_ansatz, get_effect
+from gisnoise.model import PHASES, POWER_RANGE_DEX, Ansatz, check_testable, get_ansatz, get_effect
 
-__all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "P7_MAX_STD_DB"]
+__all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "P7_MAX_STD_DB",
+           "BACKGROUND_DOMINATED_DB", "background_dominated_rows"]
 
 
 def fit(
@@ -162,16 +163,20 @@ def fit_campaign(
         have = sorted(set(np.unique(usable_rows(all_samples, None, include_low_snr=include_low_snr).phase).tolist()))
         raise InputError(f"no usable samples of phase {phase!r} in the campaign (phases with usable samples: "
                          f"{', '.join(have) or 'none'})", field="phase")
+    if ref is not None and np.isfinite(float(ref)) and float(ref) > 0:   # effects the data cannot support, first
+        _check_effects(ansatz, {**s.inputs(float(ref)), "mic": s.mic})
     fixed, held = identifiable_form(s, ansatz, kw.pop("fixed", None))
     model = get_ansatz(ansatz) if isinstance(ansatz, str) else ansatz
     bg = model.background
     try:
         res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed or None, **kw)
         weak_bg = bg is not None and bg not in fixed and (bg in res.at_bounds or res.std.get(bg, 0.0) > P7_MAX_STD_DB)
+        why = (f"{bg} = {res.params.get(bg, float('nan')):.1f} +- {res.std.get(bg, 0.0):.2g} dB(A) from the data"
+               + (" (on a bound)" if bg in res.at_bounds else "")) if bg is not None else ""
     except NotIdentifiableError as exc:
         if bg is None or bg in fixed or bg not in getattr(exc, "parameters", ()):
             raise
-        weak_bg = True
+        weak_bg, why = True, f"{bg} not identifiable from the data"
     if weak_bg:   # too few background-dominated rows to fit p7: hold it at the campaign's background
         level_bg = _campaign_background(s)
         if level_bg is None:
@@ -179,8 +184,10 @@ def fit_campaign(
                              "campaign states none; give microphones[].background_db or --fix "
                              f"{bg}=LEVEL", field=str(bg))
         fixed[str(bg)] = level_bg
-        held[str(bg)] = (f"too few background-dominated rows to fit it; held at the campaign's background "
-                         f"{level_bg:.1f} dB(A)")
+        n_bg = background_dominated_rows(s)
+        rows = "" if n_bg is None else f", {n_bg} rows within {BACKGROUND_DOMINATED_DB:g} dB of their background"
+        held[str(bg)] = (f"too few background-dominated rows to fit it ({why}{rows}); held at the campaign's "
+                         f"background {level_bg:.1f} dB(A)")
         res = fit(s, ansatz, reference_power_w=float(ref), fixed=fixed, **kw)
     info: dict[str, Any] = {
         "data": {
@@ -200,11 +207,26 @@ def fit_campaign(
     return res
 
 
-STEADY_POWER_DEX = 0.02
+STEADY_POWER_DEX = POWER_RANGE_DEX
 """Spread of log10(P_el) over the fitted rows below which the power term p1 cannot be identified
-(a power varying by less than about 5 %)."""
-P7_MAX_STD_DB = 3.0
+(a power varying by less than about 5 %); maps accept a card without power term within as much
+of its power range (:mod:`gisnoise.model.power_range`)."""
+BACKGROUND_DOMINATED_DB = 3.0
+"""A row is background-dominated when its level lies within this many dB of its microphone's background
+(the background holds at least half the sound energy)."""
+P7_MAX_STD_DB = 1.0
 """Standard deviation of a fitted background p7 above which the data do not support it, dB."""
+
+
+def background_dominated_rows(samples: Samples) -> int | None:
+    """Rows whose level lies within :data:`BACKGROUND_DOMINATED_DB` of their background (None: no background known)."""
+    if samples.background_db is None:
+        return None
+    b = np.asarray(samples.background_db, dtype=float)
+    ok = np.isfinite(b)
+    if not ok.any():
+        return None
+    return int(np.sum(ok & (np.asarray(samples.level, dtype=float) - b <= BACKGROUND_DOMINATED_DB)))
 
 
 def _campaign_background(samples: Samples) -> float | None:
@@ -223,11 +245,16 @@ def identifiable_form(samples: Samples, ansatz: str | Ansatz,
     * Steady power (log10 P_el spreads less than :data:`STEADY_POWER_DEX`): with a level offset
       ``p0`` in the ansatz, ``p1 log10(P_el)`` is a constant the offset absorbs, so ``p1`` is held
       at 0: the card is a level offset without power term, valid at the power flown (the card's
-      ``statistics.power_range_w``).
+      ``statistics.power_range_w``).  Checked again after the user's ``fixed``: with ``p0`` fixed
+      and ``p1`` free, or with an ansatz without ``p0`` (``paper``: ``p1`` would scale the whole
+      level), ``p1`` is not identifiable as a power slope and
+      :class:`~gisnoise.errors.NotIdentifiableError` names it and the way out.
     The background ``p7`` is judged by :func:`fit_campaign` after a first fit: when it ends on
-    a bound, is not identifiable or has a standard deviation above :data:`P7_MAX_STD_DB`, the
-    data hold too few background-dominated rows, and it is held at the campaign's background
-    (stated, or measured from the recordings).
+    a bound, is not identifiable or has a standard deviation above :data:`P7_MAX_STD_DB` (then a
+    stated or measured background knows it better), the data hold too few background-dominated
+    rows, and it is held at the campaign's background (stated, or measured from the
+    recordings); the card's reason gives the fitted value and the count of rows within
+    :data:`BACKGROUND_DOMINATED_DB` of their background.
 
     Parameters the user fixed are left alone.  Returns the fixed values and, per held
     parameter, the reason (the card's provenance states it).
@@ -237,12 +264,30 @@ def identifiable_form(samples: Samples, ansatz: str | Ansatz,
     held: dict[str, str] = {}
     pw = np.asarray(samples.power_w, dtype=float)
     pw = pw[np.isfinite(pw) & (pw > 0)]
-    if {"p0", "p1"} <= set(model.params) and "p1" not in out and pw.size \
-            and np.log10(pw.max() / pw.min()) < STEADY_POWER_DEX:
-        out["p1"] = 0.0
-        held["p1"] = (f"steady power ({pw.min():.4g}-{pw.max():.4g} W): no power information; held at 0, the card "
-                      f"is a level offset p0 valid at the power flown")
+    steady = bool(pw.size) and float(np.log10(pw.max() / pw.min())) < STEADY_POWER_DEX
+    if not steady or "p1" not in model.params or "p1" in out:
+        return out, held
+    what = f"steady power ({pw.min():.4g}-{pw.max():.4g} W): the data hold no power information"
+    if "p0" not in model.params:
+        base = model.name.split("+", 1)[0]
+        offset = model.name.replace(base, f"{base}-offset", 1) if base == "paper" else "paper-offset"
+        _not_identifiable(f"{what}, and ansatz {model.name!r} makes p1 log10(P_el) its whole level, so p1 would "
+                          f"be a level scale, not a power slope; use --ansatz {offset} (a level offset valid at the "
+                          f"power flown) or fix p1", ("p1",))
+    if "p0" in out:
+        _not_identifiable(f"{what}: the level p0 + p1 log10(P_el) is one number; with p0 fixed, p1 would only "
+                          f"absorb the offset, not a power slope; fix p1 too, or leave p0 free (p1 is then held at 0)",
+                          ("p1", "p0"))
+    out["p1"] = 0.0
+    held["p1"] = (f"steady power ({pw.min():.4g}-{pw.max():.4g} W): no power information; held at 0, the card "
+                  f"is a level offset p0 valid at the power flown")
     return out, held
+
+
+def _not_identifiable(message: str, parameters: tuple[str, ...]) -> None:
+    err = NotIdentifiableError(message, field=parameters[0])
+    err.parameters = parameters  # type: ignore[attr-defined]
+    raise err
 
 
 def usable_rows(samples: Samples, phase: str | None, *, include_low_snr: bool = True) -> Samples:

@@ -23,7 +23,16 @@ Two rules hold for every face:
 * on-ground samples (:attr:`gisnoise.flight.Trajectory.flying`) make no sound: the
   metrics are evaluated over the flying stretches only (:func:`gisnoise.flight.flying_segments`)
   and summed in energy (LAmax the largest, SEL and LAeq as energy sums over the whole
-  trajectory's period, time above added).
+  trajectory's period, time above added);
+* airborne samples without electric power (zero battery current while no landed flag is
+  set): when no airborne sample has power, the log does not measure the current in flight
+  and the map is refused (``power_w``, naming ``--power-w``); when some have power, the
+  unpowered ones are silent (motors stopped while the land detector, which lags a
+  touchdown by about a second, still says airborne; or a sensor dropout) and a warning
+  names how many (``metadata["warnings"]``, printed by the command line);
+* powers against the cards' stated power ranges (:mod:`gisnoise.model.power_range`): a card
+  without power term used at other powers is refused (``power_w``); a card with one used
+  outside the powers it was fitted at gives a warning and ``metadata["power_outside_card_range"]``.
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ from gisnoise.maps.contours import clip_warnings, parse_levels, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map
+from gisnoise.maps.powers import check_power_ranges
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
@@ -161,15 +171,11 @@ def make_map(
     # track's own take-off or landing point is within the log's height noise of it by construction
     check_receivers(receiver_height, ground_h, traj.h[traj.flying] if traj.flying.any() else traj.h)
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
-    if traj.on_ground is not None:
-        silent = ~traj.on_ground & (traj.power_w <= 0)
-        if silent.any():
-            i = int(np.flatnonzero(silent)[0])
-            raise InputError(f"{traj.source}: electric power is zero on {int(silent.sum())} airborne samples (first "
-                             f"at t = {traj.t[i]:.2f} s: the battery current is not logged while flying); give a "
-                             f"constant power (--power-w W, field power_w)", field="power_w")
+    unpowered = _airborne_without_power(traj)
+    power_warnings, outside_range = check_power_ranges(traj, cardset)
     grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
                                   background=background, sel="SEL" in metrics)
+    warnings = ([unpowered] if unpowered is not None else []) + power_warnings + warnings
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
@@ -189,6 +195,11 @@ def make_map(
         result = _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, eval_progress, kw)
     t_eval = time.perf_counter() - t_eval
     _check_cells(result, traj.source)
+    # the vertical datum of the track (flight logs: MSL + geoid undulation, and which)
+    result.metadata.setdefault("trajectory", {}).update(
+        {k: traj.metadata[k] for k in ("height_datum", "geoid_model", "geoid_undulation_m") if k in traj.metadata})
+    if outside_range:
+        result.metadata["power_outside_card_range"] = outside_range
     result.metadata["levels_db"] = lv
     warnings = warnings + clip_warnings(result, lv)
     result.metadata["warnings"] = warnings
@@ -211,6 +222,28 @@ def make_map(
     paths["trajectory"] = traj
     paths["warnings"] = warnings
     return paths
+
+
+def _airborne_without_power(traj: Trajectory) -> str | None:
+    """The rule for airborne samples (not ``on_ground``) without electric power (see the module docstring).
+
+    None when there are none; an error when no airborne sample has power (the log does not measure the current
+    in flight: the way out is a constant power); else the warning that names them (they are silent).
+    """
+    if traj.on_ground is None:
+        return None
+    airborne = ~traj.on_ground
+    silent = airborne & (traj.power_w <= 0)
+    if not silent.any():
+        return None
+    i = int(np.flatnonzero(silent)[0])
+    if silent.sum() == airborne.sum():
+        raise InputError(f"{traj.source}: electric power is zero on all {int(silent.sum())} airborne samples (first "
+                         f"at t = {traj.t[i]:.2f} s: the battery current is not measured in flight); give a "
+                         f"constant power (--power-w W, field power_w)", field="power_w")
+    return (f"{traj.source}: {int(silent.sum())} of {int(airborne.sum())} airborne samples draw no battery current "
+            f"(first at t = {traj.t[i]:.2f} s; motors stopped while the land detector still says airborne, or a "
+            f"current sensor dropout): silent on the map; --power-w W maps the whole flight at a constant power")
 
 
 def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: float | None = None) -> float | None:

@@ -19,7 +19,7 @@ block of WAV input, default 0.125 s), per microphone ``full_scale_v`` (voltage o
 digital full scale of integer or float WAV samples, default 1 V) and
 ``background_db`` (the A-weighted background level, dB, replacing the estimate),
 per flight ``geoid_undulation_m`` (for logs that give heights above mean sea level
-only) and ``power_w`` (a constant electric power, W, for logs without battery current), and ``exclusions``: ``[{"flight": .., "t0": .., "t1": .., "mic": ..}]``
+only; default the EGM96 grid, :mod:`gisnoise.geo.geoid`) and ``power_w`` (a constant electric power, W, for logs without battery current), and ``exclusions``: ``[{"flight": .., "t0": .., "t1": .., "mic": ..}]``
 (reception times, s since the flight's start; ``mic`` optional).
 
 :meth:`Campaign.samples <gisnoise.measure.parts.Campaign.samples>` turns the levels into one

@@ -14,7 +14,7 @@ from gisnoise.model import PHASES
 __all__ = [
     "MediaType", "ErrorBody", "FieldError", "CardDocument", "CardInfo", "CardList", "CardVersions",
     "JobInfo", "JobList", "JobError", "GridRequest", "ContourRequest", "Health", "PhaseName",
-    "TrajectoryInput", "Metric", "OutputFormat", "SafeId", "CardRef", "FileName",
+    "TrajectoryInput", "LogTrajectory", "Metric", "OutputFormat", "SafeId", "CardRef", "FileName",
 ]
 
 
@@ -200,7 +200,27 @@ class GeoJSONTrajectory(BaseModel):
                                              "waypoint document, as read by gisnoise.flight.routes.read_trajectory")
 
 
-TrajectoryInput = Annotated[CsvTrajectory | ColumnsTrajectory | RowsTrajectory | GeoJSONTrajectory,
+class LogTrajectory(BaseModel):
+    """A flight log file, base64-encoded: PX4 ULog (``.ulg``) or ArduPilot DataFlash (``.bin``), any letter case.
+
+    Read by the same reader as the command line (``gisnoise.flight.read_route``): on-ground samples are
+    silent, heights above mean sea level get the EGM96 geoid undulation unless ``geoid_undulation_m`` is given,
+    a log without battery current needs ``power_w``.
+    """
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    format: Literal["log"]
+    name: str = Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,99}\.([uU][lL][gG]|[bB][iI][nN])$",
+                      description="File name; its suffix (.ulg or .bin, any case) selects the reader.")
+    data_base64: str = Field(min_length=4, description="The log file's bytes, base64 (RFC 4648).")
+    geoid_undulation_m: float | None = Field(
+        default=None, ge=-150, le=150, description="Geoid undulation, m, for heights above mean sea level "
+                                                   "(default: the EGM96 grid at each sample).")
+    power_w: float | None = Field(default=None, gt=0, le=1e7,
+                                  description="Constant electric power, W, for a log without battery current.")
+
+
+TrajectoryInput = Annotated[CsvTrajectory | ColumnsTrajectory | RowsTrajectory | GeoJSONTrajectory | LogTrajectory,
                             Field(discriminator="format")]
 
 

@@ -9,6 +9,8 @@ later change of the card store does not change a queued job's result.
 
 from __future__ import annotations
 
+import base64
+import binascii
 import csv
 import dataclasses
 import io
@@ -39,6 +41,7 @@ from gisnoise.service.models import (
     CsvTrajectory,
     GeoJSONTrajectory,
     JobInfo,
+    LogTrajectory,
     MediaType,
     OutputFormat,
     RowsTrajectory,
@@ -81,7 +84,7 @@ def _core_fields() -> Iterator[None]:
 
 
 def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
-    """The trajectory of a request (csv text, columns, rows, GeoJSON or waypoints)."""
+    """The trajectory of a request (csv text, columns, rows, GeoJSON, waypoints or a flight log)."""
     with _prefixed("trajectory"):
         if isinstance(spec, CsvTrajectory):
             # universal newlines, as reading the same file from disk (the CLI) would give
@@ -113,12 +116,33 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
             from gisnoise.flight import routes
 
             traj = routes.read_trajectory(spec.data)
+        elif isinstance(spec, LogTrajectory):
+            traj = _read_log(spec)
         else:  # pragma: no cover - the request model admits no other
             raise InputError("trajectory: unknown format", field="format")
     if len(traj) > max_samples:
         raise ApiError(413, f"trajectory: {len(traj)} samples exceed the limit of {max_samples}",
                        field="trajectory")
     return traj
+
+
+def _read_log(spec: LogTrajectory) -> Trajectory:
+    """A flight log upload through the one trajectory reader; messages name the upload, not the server's folder."""
+    from gisnoise.flight import read_route
+
+    try:
+        raw = base64.b64decode(spec.data_base64, validate=True)
+    except (binascii.Error, ValueError):
+        raise TrajectoryError("trajectory: data_base64 is not valid base64", field="data_base64") from None
+    with tempfile.TemporaryDirectory(prefix="gisnoise-log-") as tmp:
+        path = Path(tmp) / spec.name
+        path.write_bytes(raw)
+        try:
+            traj = read_route(path, geoid_undulation_m=spec.geoid_undulation_m, power_w=spec.power_w).trajectory
+        except GisnoiseError as exc:
+            msg = str(exc).replace(str(path), spec.name).replace(tmp, "")
+            raise type(exc)(msg, field=exc.field) from None
+    return dataclasses.replace(traj, source=spec.name)
 
 
 def _numeric_columns(cols: Mapping[str, list[Any]]) -> dict[str, Any]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import time
 import sqlite3
 from pathlib import Path
 
@@ -164,9 +165,15 @@ def test_the_page_draws_the_served_basemap(tmp_path):
         assert browser.evaluate("document.getElementById('tile-notice').hidden") is True
         assert CREDIT in browser.evaluate("document.querySelector('.leaflet-control-attribution').textContent")
         # the map shows the file's tiles (zoom 6 over Germany: the zoom-3 land colour, scaled)
-        img = Image.open(io.BytesIO(browser.screenshot())).convert("RGB")
-        w, h = img.size
-        px = img.getpixel((int(0.75 * w), h // 2))
+        # (tiles fade in: a screenshot during the fade shows the colour blended with the background)
+        deadline = time.monotonic() + 15.0
+        while True:
+            img = Image.open(io.BytesIO(browser.screenshot())).convert("RGB")
+            w, h = img.size
+            px = img.getpixel((int(0.75 * w), h // 2))
+            if all(abs(a - b) <= 3 for a, b in zip(px, LAND, strict=True)) or time.monotonic() > deadline:
+                break
+            time.sleep(0.25)
         assert all(abs(a - b) <= 3 for a, b in zip(px, LAND, strict=True)), px
     finally:
         browser.close()

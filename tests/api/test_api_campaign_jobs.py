@@ -60,8 +60,11 @@ def test_fit_job_failing_in_the_core_reports_the_field(client, campaign_zip):
                     data={"phase": "transition"})  # a few transition samples cannot identify the model
     info = wait_job(client, r.json()["id"], timeout=120)
     assert info["status"] == "failed" and info["error"]["status"] == 422, info
-    assert "cannot be told apart" in info["error"]["detail"]
-    assert info["error"]["field"] in ("p0", "p1", "p2", "p3", "p4", "p5", "p6", "p7")
+    # with p7 held at the background (too few background-dominated rows), the rest either cannot be told apart
+    # or fits with uncertainties the plausibility guard refuses: either way named, no card
+    detail = info["error"]["detail"]
+    assert "cannot be told apart" in detail or ("implausible card" in detail and "p0" in detail), detail
+    assert info["error"]["field"] in ("p0", "p1", "p2", "p3", "p4", "p5", "p6", "p7", "parameters")
     assert_names_field(client.get(f"/jobs/{info['id']}/result"), 409, "job_id")
 
 

@@ -75,3 +75,33 @@ def test_qgis_keeps_running_after_bad_input(plugin, tmp_path):
     buffered = processing.run("native:buffer", {"INPUT": _point_layer(with_time=True), "DISTANCE": 0.001,
                                                 "OUTPUT": "memory:"})["OUTPUT"]
     assert buffered.featureCount() == 3
+
+
+def _card_variant(tmp_path, name, parameters, **fields):
+    doc = json.loads((CARDS / "demo_horizontal.json").read_text(encoding="utf-8"))
+    doc.update(id=name, **fields)
+    doc["parameters"] = {**doc["parameters"], **parameters}
+    path = tmp_path / f"{name}.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    return str(path)
+
+
+def test_implausible_card_is_refused_naming_p2(plugin, tmp_path):
+    from qgis.core import QgsProcessingException
+
+    bad = _card_variant(tmp_path, "wild", {"p2": -2958.0, "p6": 2.01})
+    with pytest.raises(QgsProcessingException) as err:
+        _run(tmp_path, TRAJECTORY=_point_layer(with_time=True), CARDS=[bad])
+    assert "p2" in str(err.value) and not (tmp_path / "grid.tif").exists()
+
+
+def test_card_without_power_term_at_another_power_names_power_w(plugin, tmp_path):
+    """A card fitted at one steady power (p1 held at 0, 2400 W) meets a track flown at 3000 W."""
+    from qgis.core import QgsProcessingException
+
+    steady = _card_variant(tmp_path, "steady", {"p1": 0.0}, covariance=None,
+                           statistics={"power_range_w": [2400.0, 2400.0]},
+                           provenance={"held_parameters": {"p1": "steady power"}})
+    with pytest.raises(QgsProcessingException) as err:
+        _run(tmp_path, TRAJECTORY=_point_layer(with_time=True), CARDS=[steady])
+    assert "power_w" in str(err.value) and "2400" in str(err.value)

@@ -1,0 +1,46 @@
+"""The powers a map flies each card at, against the powers the card holds for (:mod:`gisnoise.model.power_range`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import InputError
+from gisnoise.flight import Trajectory
+from gisnoise.maps.cardset import CardSet
+from gisnoise.model import power_range_findings, stated_power_range_w
+
+__all__ = ["check_power_ranges"]
+
+
+def check_power_ranges(traj: Trajectory, cardset: CardSet) -> tuple[list[str], dict[str, Any]]:
+    """Refuse a card without power term used outside its power range; warn about extrapolating ones.
+
+    Returns the warnings and, per card used outside its range, ``{"range_w": [lo, hi], "used_w":
+    [min, max], "samples": n}`` for the map's metadata.
+
+    Raises
+    ------
+    InputError
+        (field ``power_w``) a card valid only at the power flown meets other powers.
+    """
+    fly = traj.flying
+    if not fly.any():
+        return [], {}
+    idx = cardset.assign(traj.phase[fly], traj.t[fly], source=traj.source)
+    pw = traj.power_w[fly]
+    warnings: list[str] = []
+    meta: dict[str, Any] = {}
+    for k, card in enumerate(cardset.cards):
+        used = pw[idx == k]
+        refuse, warn = power_range_findings(card, used)
+        if refuse is not None:
+            raise InputError(f"{traj.source}: {refuse}", field="power_w")
+        if warn is not None:
+            rng = stated_power_range_w(card)
+            assert rng is not None
+            warnings.append(f"{traj.source}: {warn}")
+            meta[card.id] = {"range_w": list(rng), "used_w": [float(np.min(used)), float(np.max(used))],
+                             "samples": int(used.size)}
+    return warnings, meta
