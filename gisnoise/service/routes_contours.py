@@ -241,7 +241,10 @@ def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Traject
         traj = build_trajectory(req.trajectory, max_samples=s.max_trajectory_samples)
     cards = resolve_cards(req, state.cards)
     req = _auto_margin(traj, cards, req, s.max_cells)
-    return req, traj, cards, _grid_cells(traj, req, s.max_cells)
+    cells = _grid_cells(traj, req, s.max_cells)
+    with limits.override(max_work=s.max_work):  # the work bound, before a job is queued or a map evaluated
+        limits.check_work(cells, len(traj) * req.substeps, field="grid.resolution_m")
+    return req, traj, cards, cells
 
 
 def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory, cards: list[ModelCard],
