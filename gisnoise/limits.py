@@ -25,6 +25,8 @@ samples of a trajectory    <= 1,000,000     ``max_samples`` (the service sets it
 work of one map            <= 5e11          ``max_work``: grid cells x time steps (samples
                                             x substeps), checked before evaluating
 receiver height            0 .. 1000 m      above ground, never below it
+sound level at a mic       -50 .. 200 dB    ``LEVEL_RANGE_DB``: below any microphone's self-noise,
+                                            above a jet engine at 1 m (bands may be -inf: silence)
 flights per day            <= 100,000       ``max_daily_count``
 =========================  ===============  ==============================================
 
@@ -56,7 +58,7 @@ from gisnoise.errors import InputError
 __all__ = ["Limits", "WorkLimitError", "DEFAULTS", "current", "override", "check_range", "check_array", "check_lonlat",
            "check_attitude", "check_power", "check_track", "check_heights", "check_times", "check_samples", "check_count",
            "check_receiver_height", "check_ground_below", "check_receivers", "GROUND_TOLERANCE_M", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id",
-           "MIN_SAMPLES", "check_work"]
+           "MIN_SAMPLES", "check_work", "LEVEL_RANGE_DB", "check_levels"]
 
 
 @dataclass(frozen=True)
@@ -266,6 +268,30 @@ def check_work(cells: float, steps: float, *, field: str = "resolution_m") -> fl
                              f"more than the limit of {_fmt(top)} (GISNOISE_MAX_WORK); use a coarser resolution, a "
                              f"smaller margin or fewer substeps", field=field)
     return work
+
+
+LEVEL_RANGE_DB = (-50.0, 200.0)
+"""Sound levels a microphone can record, dB: below the self-noise of any measurement microphone, above a jet
+engine at 1 m."""
+
+
+def check_levels(values: Any, *, field: str, source: str = "", error: type[InputError] = InputError,
+                 silence: bool = False) -> None:
+    """Measured levels within :data:`LEVEL_RANGE_DB` (``silence``: ``-inf``, digital silence of a band, allowed).
+
+    Examples
+    --------
+    >>> check_levels([40.0, 75.5], field="LA")
+    >>> check_levels([40.0, 1e300], field="LA", source="m1.csv")
+    Traceback (most recent call last):
+    ...
+    gisnoise.errors.InputError: m1.csv: LA: 1e+300 dB at sample 1 is outside [-50, 200] dB (no microphone records this level)
+    """
+    a = np.asarray(values, dtype=float)
+    if silence:
+        a = np.where(a == -np.inf, LEVEL_RANGE_DB[0], a)
+    check_array(field, a, *LEVEL_RANGE_DB, unit="dB", source=source, error=error,
+                why="no microphone records this level")
 
 
 def check_count(field: str, value: float, hi: float, *, source: str = "",
