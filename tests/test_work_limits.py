@@ -107,3 +107,14 @@ def _run_env(args, env):
     from gisnoise.cli.main import cli
 
     return CliRunner().invoke(cli, ["-q", *args], env=env)
+
+
+def test_waypoint_longitudes_are_never_wrapped():
+    """A waypoint at longitude 200 was flown at -160 (PROJ wraps); the shared rule refuses it, naming lon."""
+    wps = [{"lon": 10.5, "lat": 52.2, "alt": 60.0}, {"lon": 200.0, "lat": 52.2, "alt": 60.0}]
+    doc = {"schema": "gisnoise/waypoints/1", "altitude_reference": "agl", "waypoints": wps}
+    with pytest.raises(TrajectoryError, match=r"waypoint 1: lon: 200 deg is outside \[-180, 180\] deg") as e:
+        read_trajectory(doc)
+    assert e.value.field == "lon"
+    wps[1]["lon"] = 10.51
+    assert np.all(np.abs(read_trajectory(doc).lon - 10.505) <= 0.0051)  # flown between the two waypoints

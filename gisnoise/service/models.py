@@ -286,13 +286,40 @@ class RowsTrajectory(BaseModel):
                                   description="One object per log sample (the same fields in each).")
 
 
+_NUMBER = {"type": "number"}
+_WAYPOINT = {
+    "type": "object", "required": ["lon", "lat", "alt"],
+    "properties": {
+        "lon": {"type": "number", "minimum": -180, "maximum": 180, "description": "deg (never wrapped)"},
+        "lat": {"type": "number", "minimum": -90, "maximum": 90, "description": "deg"},
+        "alt": {"type": "number", "description": "m above the altitude_reference"},
+        "speed": {"type": ["number", "null"], "exclusiveMinimum": 0, "description": "m/s"},
+        "hold_s": {"type": "number", "minimum": 0, "maximum": _LIM.max_duration_s, "description": "s"},
+        "phase": {"enum": [*PHASES, None]},
+        "heading_deg": {"type": ["number", "null"], "description": "deg"}}}
+_ROUTE_SETTINGS = {
+    "altitude_reference": {"enum": ["agl", "msl", "ellipsoid"]},
+    "ground_h_m": _NUMBER, "geoid_undulation_m": _NUMBER,
+    "sample_dt_s": {"type": "number", "exclusiveMinimum": 0, "maximum": 10, "description": "s"}}
+_ROUTE_DATA_SCHEMA: dict[str, Any] = {"anyOf": [
+    {"title": "Waypoints document", "type": "object", "required": ["schema", "waypoints"],
+     "properties": {"schema": {"const": "gisnoise/waypoints/1"},
+                    "waypoints": {"type": "array", "minItems": 2, "items": _WAYPOINT}, **_ROUTE_SETTINGS}},
+    {"title": "GeoJSON", "type": "object", "required": ["type"],
+     "description": "A FeatureCollection of Point waypoints (properties as a waypoint's; route settings in a "
+                    "'route' member) or of one LineString, a Feature or a bare LineString with Z (and times in "
+                    "properties.times, or as a fourth coordinate)",
+     "properties": {"type": {"enum": ["FeatureCollection", "Feature", "LineString"]}}}]}
+
+
 class GeoJSONTrajectory(BaseModel):
     """A GeoJSON LineString with Z and times, or waypoints (SPEC section 7) as GeoJSON or JSON."""
 
     model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["geojson", "waypoints"]
-    data: dict[str, Any] = Field(description="GeoJSON object (Feature, FeatureCollection, LineString) or "
-                                             "waypoint document, as read by gisnoise.flight.routes.read_trajectory")
+    data: Annotated[dict[str, Any], WithJsonSchema(_ROUTE_DATA_SCHEMA)] = Field(
+        description="GeoJSON object (Feature, FeatureCollection, LineString) or waypoint document, as read by "
+                    "gisnoise.flight.routes.read_trajectory")
 
 
 TrajectoryInput = Annotated[CsvTrajectory | ColumnsTrajectory | RowsTrajectory | GeoJSONTrajectory,
