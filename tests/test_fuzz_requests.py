@@ -129,7 +129,9 @@ def _contour_property(raw: bytes) -> None:
     r = client().post("/contours", content=raw, headers={"content-type": "application/json", **HDR})
     _answer_ok(r)
     if r.status_code == 200 and r.headers["content-type"].startswith("application/geo+json"):
-        asked = json.loads(raw).get("levels")
+        from gisnoise.service.models import ContourRequest
+
+        asked = json.loads(raw).get("levels", ContourRequest.model_fields["levels"].default)  # default when left out
         for f in r.json()["features"]:
             lv = f["properties"]["level"]
             lv = lv if isinstance(lv, list) else [lv]
