@@ -26,7 +26,8 @@ work of one map            <= 5e11          ``max_work``: grid cells x time step
                                             x substeps), checked before evaluating
 receiver height            0 .. 1000 m      above ground, never below it
 sound level at a mic       -50 .. 200 dB    ``LEVEL_RANGE_DB``: below any microphone's self-noise,
-                                            above a jet engine at 1 m (bands may be -inf: silence)
+                                            above a jet engine at 1 m (a band may lie lower, down
+                                            to -inf: silence)
 flights per day            <= 100,000       ``max_daily_count``
 =========================  ===============  ==============================================
 
@@ -277,7 +278,10 @@ engine at 1 m."""
 
 def check_levels(values: Any, *, field: str, source: str = "", error: type[InputError] = InputError,
                  silence: bool = False) -> None:
-    """Measured levels within :data:`LEVEL_RANGE_DB` (``silence``: ``-inf``, digital silence of a band, allowed).
+    """Measured levels within :data:`LEVEL_RANGE_DB`.
+
+    ``silence``: a band's level may lie below the range, down to ``-inf`` (digital silence, or the leakage of
+    synthetic audio into a band it does not reach); only its top is checked.
 
     Examples
     --------
@@ -289,7 +293,7 @@ def check_levels(values: Any, *, field: str, source: str = "", error: type[Input
     """
     a = np.asarray(values, dtype=float)
     if silence:
-        a = np.where(a == -np.inf, LEVEL_RANGE_DB[0], a)
+        a = np.where(a < LEVEL_RANGE_DB[0], LEVEL_RANGE_DB[0], a)  # -inf and any quieter band: silence
     check_array(field, a, *LEVEL_RANGE_DB, unit="dB", source=source, error=error,
                 why="no microphone records this level")
 
