@@ -17,17 +17,28 @@ yaw                        -360 .. 360 deg  0..360 and -180..180 conventions; wr
 electric power             0 .. 100 kW      ``max_power_w``; override for larger vehicles
 ellipsoidal height         -500 .. 10 km    ``max_height_m``; below the lowest land, above
                                             any small-UAV ceiling
-time gap between samples   <= 600 s         ``max_gap_s``; a longer gap is two flights
+samples of a trajectory    >= 2             ``MIN_SAMPLES``: one sample has no duration
+time gap between samples   <= 600 s         ``max_gap_s``; a longer gap is refused (not split):
+                                            a log with a pause is two flights, cut it
 flight duration            <= 24 h          ``max_duration_s``
 samples of a trajectory    <= 1,000,000     ``max_samples`` (the service sets its own)
+work of one map            <= 5e11          ``max_work``: grid cells x time steps (samples
+                                            x substeps), checked before evaluating
 receiver height            0 .. 1000 m      above ground, never below it
+sound level at a mic       -50 .. 200 dB    ``LEVEL_RANGE_DB``: below any microphone's self-noise,
+                                            above a jet engine at 1 m (a band may lie lower, down
+                                            to -inf: silence)
 flights per day            <= 100,000       ``max_daily_count``
 =========================  ===============  ==============================================
 
 Override a limit for a block of code with :func:`override` (``with override(max_power_w=5e5):``)
 or for the process with the environment variable ``GISNOISE_MAX_POWER_W`` (and likewise
 ``GISNOISE_MAX_HEIGHT_M``, ``GISNOISE_MAX_GAP_S``, ``GISNOISE_MAX_DURATION_S``,
-``GISNOISE_MAX_SAMPLES``).
+``GISNOISE_MAX_SAMPLES``, ``GISNOISE_MAX_WORK``).
+
+Gaps: a trajectory whose samples are more than ``max_gap_s`` apart is refused with the gap's
+place named, never split silently into segments: the time between two flights is neither
+flown nor silent, and only the user knows which (cut the log, or raise ``GISNOISE_MAX_GAP_S``).
 """
 
 from __future__ import annotations
@@ -47,7 +58,8 @@ from gisnoise.errors import InputError
 
 __all__ = ["Limits", "WorkLimitError", "DEFAULTS", "current", "override", "check_range", "check_array", "check_lonlat",
            "check_attitude", "check_power", "check_track", "check_heights", "check_times", "check_samples", "check_count",
-           "check_receiver_height", "check_ground_below", "check_receivers", "GROUND_TOLERANCE_M", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id"]
+           "check_receiver_height", "check_ground_below", "check_receivers", "GROUND_TOLERANCE_M", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id",
+           "MIN_SAMPLES", "check_work", "LEVEL_RANGE_DB", "check_levels"]
 
 
 @dataclass(frozen=True)
@@ -64,12 +76,18 @@ class Limits:
     max_daily_count: float = 100_000.0
     dense_factor: int = 10
     """Internal samples (route integration at 0.1 s, 0.5 m) allowed per output sample."""
+    max_work: float = 5e11
+    """Grid cells x time steps of one map (a few minutes of the fast engine on one core)."""
+
+
+MIN_SAMPLES = 2
+"""Fewest samples of a trajectory: one sample has no duration, so no LAeq, SEL or time above."""
 
 
 DEFAULTS = Limits()
 _ENV = {"max_power_w": "GISNOISE_MAX_POWER_W", "max_height_m": "GISNOISE_MAX_HEIGHT_M",
         "max_gap_s": "GISNOISE_MAX_GAP_S", "max_duration_s": "GISNOISE_MAX_DURATION_S",
-        "max_samples": "GISNOISE_MAX_SAMPLES"}
+        "max_samples": "GISNOISE_MAX_SAMPLES", "max_work": "GISNOISE_MAX_WORK"}
 _current: ContextVar[Limits | None] = ContextVar("gisnoise_limits", default=None)
 
 
@@ -169,11 +187,26 @@ def check_heights(h: Any, *, field: str = "h", source: str = "", error: type[Inp
 
 
 def check_times(t: Any, *, field: str = "t", source: str = "", error: type[InputError] = InputError) -> None:
-    """No gap between samples longer than ``max_gap_s`` and a duration within ``max_duration_s``."""
+    """At least :data:`MIN_SAMPLES` samples, no gap between samples longer than ``max_gap_s`` and a duration
+    within ``max_duration_s``.
+
+    Examples
+    --------
+    >>> check_times([0.0, 1.0, 2.0])
+    >>> check_times([0.0])
+    Traceback (most recent call last):
+    ...
+    gisnoise.errors.InputError: t: 1 sample; a trajectory needs at least 2
+    >>> check_times([0.0, 1.0, 700.0])
+    Traceback (most recent call last):
+    ...
+    gisnoise.errors.InputError: t: gap of 699 s before sample 2 (t=700 s) is longer than 600 s; split the log into flights
+    """
     lim = current()
     a = np.asarray(t, dtype=float)
-    if a.size < 2:
-        return
+    if a.size < MIN_SAMPLES:
+        raise error(f"{source + ': ' if source else ''}{field}: {a.size} sample{'' if a.size == 1 else 's'}; a "
+                    f"trajectory needs at least {MIN_SAMPLES}", field=field)
     gaps = np.diff(a)
     if gaps.max() > lim.max_gap_s:
         i = int(np.argmax(gaps > lim.max_gap_s)) + 1
@@ -212,6 +245,57 @@ def check_samples(n: float, *, field: str, what: str = "trajectory", dense: bool
         raise WorkLimitError(f"{field}: the {what} would have {_fmt(n)} samples, more than the limit of {top}",
                     field=field)
     return int(n)
+
+
+def check_work(cells: float, steps: float, *, field: str = "resolution_m") -> float:
+    """Refuse a map of ``cells`` grid cells x ``steps`` time steps above ``max_work`` before evaluating it.
+
+    Raises :class:`WorkLimitError` naming ``field`` (413 in the service, exit 2 in the CLI).
+
+    Examples
+    --------
+    >>> check_work(1000, 500)
+    500000.0
+    >>> with override(max_work=1e6):
+    ...     check_work(10_000, 500, field="grid.resolution_m")
+    Traceback (most recent call last):
+    ...
+    gisnoise.limits.WorkLimitError: grid.resolution_m: the map needs 10000 cells x 500 time steps = 5e+06, more than the limit of 1e+06 (GISNOISE_MAX_WORK); use a coarser resolution, a smaller margin or fewer substeps
+    """
+    work = float(cells) * float(steps)
+    top = current().max_work
+    if not math.isfinite(work) or work > top:
+        raise WorkLimitError(f"{field}: the map needs {_fmt(cells)} cells x {_fmt(steps)} time steps = {_fmt(work)}, "
+                             f"more than the limit of {_fmt(top)} (GISNOISE_MAX_WORK); use a coarser resolution, a "
+                             f"smaller margin or fewer substeps", field=field)
+    return work
+
+
+LEVEL_RANGE_DB = (-50.0, 200.0)
+"""Sound levels a microphone can record, dB: below the self-noise of any measurement microphone, above a jet
+engine at 1 m."""
+
+
+def check_levels(values: Any, *, field: str, source: str = "", error: type[InputError] = InputError,
+                 silence: bool = False) -> None:
+    """Measured levels within :data:`LEVEL_RANGE_DB`.
+
+    ``silence``: a band's level may lie below the range, down to ``-inf`` (digital silence, or the leakage of
+    synthetic audio into a band it does not reach); only its top is checked.
+
+    Examples
+    --------
+    >>> check_levels([40.0, 75.5], field="LA")
+    >>> check_levels([40.0, 1e300], field="LA", source="m1.csv")
+    Traceback (most recent call last):
+    ...
+    gisnoise.errors.InputError: m1.csv: LA: 1e+300 dB at sample 1 is outside [-50, 200] dB (no microphone records this level)
+    """
+    a = np.asarray(values, dtype=float)
+    if silence:
+        a = np.where(a < LEVEL_RANGE_DB[0], LEVEL_RANGE_DB[0], a)  # -inf and any quieter band: silence
+    check_array(field, a, *LEVEL_RANGE_DB, unit="dB", source=source, error=error,
+                why="no microphone records this level")
 
 
 def check_count(field: str, value: float, hi: float, *, source: str = "",

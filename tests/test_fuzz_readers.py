@@ -146,7 +146,7 @@ def _check_trajectory(tr) -> None:
         a = np.asarray(getattr(tr, name), dtype=float)
         assert np.all(np.isfinite(a)), name
     assert np.all(np.abs(tr.lon) <= 180) and np.all(np.abs(tr.lat) <= 90)
-    assert np.all((tr.power_w > 0) & (tr.power_w <= lim.max_power_w))
+    assert np.all((tr.power_w >= 0) & (tr.power_w <= lim.max_power_w))  # 0 W: a sample on the ground
     assert np.all((tr.h >= lim.min_height_m) & (tr.h <= lim.max_height_m))
     if len(tr) > 1:
         assert np.diff(tr.t).max() <= lim.max_gap_s

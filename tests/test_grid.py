@@ -73,7 +73,7 @@ def test_cell_limit_from_environment(monkeypatch):
 @pytest.mark.parametrize("kw, field", [({"resolution_m": 0}, "resolution_m"), ({"resolution_m": float("nan")},
                                        "resolution_m"), ({"margin_m": -1}, "margin_m")])
 def test_bad_resolution_or_margin(kw, field):
-    traj = track([10.50], [52.26])
+    traj = track([10.50, 10.50], [52.26, 52.26])  # a hover: two samples, one place
     args = {"resolution_m": 10.0, "margin_m": 100.0, **kw}
     with pytest.raises(InvalidGridError) as exc:
         grid_for_trajectory(traj, **args)

@@ -217,9 +217,10 @@ def route_from_waypoints(waypoints: Sequence[Mapping[str, Any]], settings: Mappi
             if name not in wp:
                 raise TrajectoryError(f"{source}: waypoint {i} lacks field '{name}'", field=name)
             arr[i] = _num(wp[name], name, source, i)
-        if abs(lat[i]) > 90 or abs(lon[i]) > 360:
-            raise TrajectoryError(f"{source}: waypoint {i}: lon/lat out of range ({lon[i]}, {lat[i]})",
-                                  field="lat")
+        # the shared rule set: latitude within -90..90 deg, longitude within -180..180 deg, never wrapped
+        check_range("lat", lat[i], -90.0, 90.0, unit="deg", source=f"{source}: waypoint {i}", error=TrajectoryError)
+        check_range("lon", lon[i], -180.0, 180.0, unit="deg", source=f"{source}: waypoint {i}", error=TrajectoryError,
+                    why="longitudes are not wrapped")
         speed = wp.get("speed")
         if speed is not None:
             speed = _num(speed, "speed", source, i)

@@ -73,6 +73,8 @@ class LocalFrame:
                 raise InputError(f"origin {name} must be finite, got {v!r}", field=name)
         if not -90.0 <= self.lat0 <= 90.0:
             raise InputError(f"origin lat0 must be within [-90, 90] deg, got {self.lat0}", field="lat0")
+        if not -180.0 <= self.lon0 <= 180.0:  # the shared rule: longitudes are never wrapped
+            raise InputError(f"origin lon0 must be within [-180, 180] deg, got {self.lon0}", field="lon0")
         pipeline = (
             "+proj=pipeline +step +proj=axisswap +order=2,1 +step +proj=unitconvert +xy_in=deg +xy_out=rad "
             "+step +proj=cart +ellps=WGS84 "

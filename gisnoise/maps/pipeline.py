@@ -47,7 +47,7 @@ import numpy as np
 
 from gisnoise.errors import InputError, TrajectoryError
 from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
-from gisnoise.limits import check_receivers
+from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.contours import clip_warnings, parse_levels, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
@@ -176,6 +176,7 @@ def make_map(
     grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
                                   background=background, sel="SEL" in metrics)
     warnings = ([unpowered] if unpowered is not None else []) + power_warnings + warnings
+    check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")

@@ -14,6 +14,8 @@ from gisnoise import acoustics
 from gisnoise.errors import CampaignError, GisnoiseError
 from gisnoise.flight import FLIGHT_SUFFIXES, as_unix_time
 from gisnoise.geo import LocalFrame
+from gisnoise.limits import check_range
+from gisnoise.limits import current as current_limits
 from gisnoise.measure.parts import Exclusion, Flight, Microphone, Problem
 
 __all__ = ["SCHEMA"]
@@ -170,9 +172,17 @@ def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Micro
     out: list[Microphone] = []
     for where, m, mid in _named_entries(cjs, doc, "microphones", "microphone", col):
         good = True
-        for k in ("lat", "lon", "h"):
+        lim = current_limits()
+        for k, (lo, hi) in (("lat", (-90.0, 90.0)), ("lon", (-180.0, 180.0)),
+                            ("h", (lim.min_height_m, lim.max_height_m))):
             if not _is_number(m.get(k)):
                 col.add(cjs, f"{where}.{k}", f"{cjs}: field '{where}.{k}' must be a number, got {m.get(k)!r}")
+                good = False
+                continue
+            try:  # the shared rule set: coordinates in range (never wrapped), heights plausible
+                check_range(f"{where}.{k}", m[k], lo, hi, source=cjs)
+            except GisnoiseError as exc:
+                col.add(cjs, f"{where}.{k}", str(exc))
                 good = False
         mount = m.get("mount", "free_field")
         if not isinstance(mount, str) or mount not in acoustics.MOUNT_CORRECTIONS_DB:

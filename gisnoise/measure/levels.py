@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise import acoustics
+from gisnoise import acoustics, limits
 from gisnoise.errors import CampaignError
 from gisnoise.measure.document import _Collector, _is_number, _parse_mics, _read_document
 from gisnoise.measure.parts import LevelSeries, Microphone, ProgressFn
@@ -81,6 +81,9 @@ def read_level_csv(path: str | os.PathLike[str], *, mic: str = "", flight: str =
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise CampaignError(f"{src}: column '{header[j]}' line {i + 2}: NaN or infinite value", field=header[j])
+    limits.check_levels(data[:, header.index("LA")], field="LA", source=src, error=CampaignError)
+    for j, h, _ in band_cols:
+        limits.check_levels(data[:, j], field=h, source=src, error=CampaignError, silence=True)
     t = data[:, header.index("t")]
     if len(t) == 0:
         raise CampaignError(f"{src}: no rows", field="t")

@@ -185,7 +185,13 @@ _PATH_FIELDS = {"card_id": "id"}
 
 def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
     out = []
-    for e in exc.errors():
+    raw = list(exc.errors())
+    # a union member that does not fit the input's type (a card id string where an inline card object was sent)
+    # is noise beside the errors of the member that does fit: keep the deeper ones
+    flds = [_loc_field(tuple(e.get("loc", ()))) for e in raw]
+    raw = [e for e, f in zip(raw, flds, strict=True)
+           if not (str(e.get("type", "")).endswith("_type") and any(o.startswith(f + ".") for o in flds))]
+    for e in raw:
         loc = tuple(e.get("loc", ()))
         fld = _loc_field(loc)
         if e.get("type") == "json_invalid":
@@ -193,6 +199,9 @@ def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
         elif loc[:1] == ("path",):
             fld = _PATH_FIELDS.get(fld, fld)
         msg = str(e.get("msg", "invalid")).removeprefix("Value error, ")
+        got = e.get("input")
+        if e.get("type") != "missing" and isinstance(got, (int, float, str)) and len(repr(got)) <= 40:
+            msg += f", got {got!r}"  # the bad value, as every other refusal names it
         out.append({"field": fld, "message": msg, "type": str(e.get("type", ""))})
     return out
 

@@ -8,13 +8,15 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, WithJsonSchema
 
+from gisnoise import limits as _limits
 from gisnoise.limits import CARD_REF_PATTERN, SAFE_ID_PATTERN
-from gisnoise.model import PHASES
+from gisnoise.model import PHASES, ansatz_names
 
 __all__ = [
     "MediaType", "ErrorBody", "FieldError", "CardDocument", "CardInfo", "CardList", "CardVersions",
     "JobInfo", "JobList", "JobError", "GridRequest", "ContourRequest", "Health", "PhaseName",
-    "TrajectoryInput", "LogTrajectory", "Metric", "OutputFormat", "SafeId", "CardRef", "FileName",
+    "TrajectoryInput", "LogTrajectory", "Metric", "OutputFormat", "SafeId", "CardRef", "FileName", "AnsatzName", "CARD_SCHEMAS",
+    "TRAJECTORY_COLUMNS",
 ]
 
 
@@ -62,6 +64,39 @@ assert set(PhaseName.__args__) == set(PHASES)  # type: ignore[attr-defined]
 
 Metric = Literal["LAmax", "LAeq", "SEL"]
 
+CARD_SCHEMAS = ("gisnoise/model-card/1", "gisnoise/hemisphere-card/1")
+"""The card documents the store takes (an ansatz card, a measured hemisphere card)."""
+
+_ANSATZES = (*ansatz_names(), "hemisphere")
+
+
+def _one_of(values: tuple[str, ...], what: str) -> Any:
+    def check(value: str) -> str:
+        if value not in values:
+            raise ValueError(f"{value!r} is not a known {what}; known: {', '.join(values)}")
+        return value
+
+    return AfterValidator(check)
+
+
+def _length(lo: int, hi: int) -> Any:
+    """A string of ``lo``..``hi`` characters, checked after parsing (lone surrogates stay data, as JSON allows)."""
+
+    def check(value: str) -> str:
+        if not lo <= len(value) <= hi:
+            raise ValueError(f"must have {lo} to {hi} characters, has {len(value)}")
+        return value
+
+    return AfterValidator(check)
+
+
+_Vehicle = Annotated[str, _length(1, 200), WithJsonSchema({"type": "string", "minLength": 1, "maxLength": 200})]
+_Notes = Annotated[str, _length(0, 100_000), WithJsonSchema({"type": "string", "maxLength": 100_000})]
+
+
+AnsatzName = Annotated[str, _one_of(_ANSATZES, "ansatz"), WithJsonSchema({"type": "string", "enum": list(_ANSATZES)})]
+"""An ansatz of the registry (``paper``, ``paper-offset``, ``<base>+<effect>``) or ``hemisphere``."""
+
 
 # ---------------------------------------------------------------- errors
 class FieldError(BaseModel):
@@ -90,19 +125,23 @@ class CardDocument(BaseModel):
         "reference_power_w": 3000.0, "reference_distance_m": 40.0, "covariance": None, "notes": "",
         "phases": ["transition"]}})
 
-    schema_: str = Field(alias="schema", description="'gisnoise/model-card/1'")
+    schema_: Literal["gisnoise/model-card/1", "gisnoise/hemisphere-card/1"] = Field(
+        alias="schema", description="'gisnoise/model-card/1' (an ansatz card) or 'gisnoise/hemisphere-card/1'")
     id: SafeId
-    vehicle: str
-    phase: str
-    ansatz: str
-    parameters: dict[str, float]
-    reference_power_w: float
-    reference_distance_m: float = 40.0
-    covariance: list[list[float]] | None = None
+    vehicle: _Vehicle
+    phase: PhaseName
+    ansatz: AnsatzName
+    parameters: dict[Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")], float] = Field(
+        max_length=64, description="Parameter name -> value; exactly the parameters of the ansatz.")
+    reference_power_w: float = Field(gt=0, le=1e9, description="Reference electric power, W.")
+    reference_distance_m: float = Field(default=40.0, gt=0, le=1e6, description="Reference distance, m.")
+    covariance: list[Annotated[list[float], Field(max_length=64)]] | None = Field(
+        default=None, max_length=64, description="Covariance of the parameters (their order), or null.")
     statistics: dict[str, Any] = Field(default_factory=dict)
     provenance: dict[str, Any] = Field(default_factory=dict)
-    notes: str = ""
-    phases: list[str] = Field(default_factory=list)
+    notes: _Notes = ""
+    phases: list[PhaseName] = Field(default_factory=list, max_length=len(PHASES),
+                                    description="Further phases the card serves.")
 
 
 class CardInfo(BaseModel):
@@ -171,7 +210,63 @@ class CsvTrajectory(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["csv"]
-    text: str = Field(min_length=1, description="Flight CSV text: t, lat, lon, h, roll, pitch, yaw, power_w[, phase]")
+    text: str = Field(min_length=1, max_length=100_000_000,
+                      description="Flight CSV text: t, lat, lon, h, roll, pitch, yaw, power_w[, phase]")
+
+
+_LIM = _limits.current()  # the rule set's limits when the service starts (GISNOISE_MAX_POWER_W, ...)
+_N = Field(min_length=_limits.MIN_SAMPLES, max_length=_LIM.max_samples)
+
+
+_T = Annotated[float, Field(description="s")]
+_LAT = Annotated[float, Field(ge=-90, le=90, description="deg")]
+_LON = Annotated[float, Field(ge=-180, le=180, description="deg (never wrapped)")]
+_H = Annotated[float, Field(ge=_LIM.min_height_m, le=_LIM.max_height_m, description="ellipsoidal height, m")]
+_ANGLE = Annotated[float, Field(ge=-180, le=180, description="deg")]
+_YAW = Annotated[float, Field(ge=-360, le=360, description="deg (wrapped)")]
+_POWER = Annotated[float, Field(ge=0, le=_LIM.max_power_w, description="electric power, W")]
+
+TRAJECTORY_COLUMNS = ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w", "phase", "rpm", "airspeed_m_s",
+                      "on_ground")
+"""The columns of a flight (SPEC section 3), each with the range of :mod:`gisnoise.limits`."""
+
+
+class FlightColumns(BaseModel):
+    """Flight-CSV columns as arrays of equal length (at least two samples, times strictly increasing)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    t: list[_T] = _N
+    lat: list[_LAT] = _N
+    lon: list[_LON] = _N
+    h: list[_H] = _N
+    roll: list[_ANGLE] = _N
+    pitch: list[_ANGLE] = _N
+    yaw: list[_YAW] = _N
+    power_w: list[_POWER] = _N
+    phase: list[PhaseName] | None = Field(default=None, min_length=_limits.MIN_SAMPLES, max_length=_LIM.max_samples)
+    rpm: list[float] | None = Field(default=None, min_length=_limits.MIN_SAMPLES, max_length=_LIM.max_samples)
+    airspeed_m_s: list[float] | None = Field(default=None, min_length=_limits.MIN_SAMPLES,
+                                             max_length=_LIM.max_samples)
+    on_ground: list[Literal[0, 1]] | None = Field(default=None, min_length=_limits.MIN_SAMPLES,
+                                                  max_length=_LIM.max_samples)
+
+
+class FlightRow(BaseModel):
+    """One log sample (the flight-CSV columns of one row)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    t: _T
+    lat: _LAT
+    lon: _LON
+    h: _H
+    roll: _ANGLE
+    pitch: _ANGLE
+    yaw: _YAW
+    power_w: _POWER
+    phase: PhaseName | None = None
+    rpm: float | None = None
+    airspeed_m_s: float | None = None
+    on_ground: Literal[0, 1] | None = None
 
 
 class ColumnsTrajectory(BaseModel):
@@ -179,8 +274,7 @@ class ColumnsTrajectory(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["columns"]
-    columns: dict[str, list[float | str]] = Field(
-        description="Column name (t, lat, lon, h, roll, pitch, yaw, power_w, phase, rpm, airspeed_m_s) -> values")
+    columns: FlightColumns = Field(description="Column name -> values (" + ", ".join(TRAJECTORY_COLUMNS) + ")")
 
 
 class RowsTrajectory(BaseModel):
@@ -188,7 +282,34 @@ class RowsTrajectory(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["rows"]
-    rows: list[dict[str, float | str]] = Field(min_length=1, description="One object per log sample.")
+    rows: list[FlightRow] = Field(min_length=_limits.MIN_SAMPLES, max_length=_LIM.max_samples,
+                                  description="One object per log sample (the same fields in each).")
+
+
+_NUMBER = {"type": "number"}
+_WAYPOINT = {
+    "type": "object", "required": ["lon", "lat", "alt"],
+    "properties": {
+        "lon": {"type": "number", "minimum": -180, "maximum": 180, "description": "deg (never wrapped)"},
+        "lat": {"type": "number", "minimum": -90, "maximum": 90, "description": "deg"},
+        "alt": {"type": "number", "description": "m above the altitude_reference"},
+        "speed": {"type": ["number", "null"], "exclusiveMinimum": 0, "description": "m/s"},
+        "hold_s": {"type": "number", "minimum": 0, "maximum": _LIM.max_duration_s, "description": "s"},
+        "phase": {"enum": [*PHASES, None]},
+        "heading_deg": {"type": ["number", "null"], "description": "deg"}}}
+_ROUTE_SETTINGS = {
+    "altitude_reference": {"enum": ["agl", "msl", "ellipsoid"]},
+    "ground_h_m": _NUMBER, "geoid_undulation_m": _NUMBER,
+    "sample_dt_s": {"type": "number", "exclusiveMinimum": 0, "maximum": 10, "description": "s"}}
+_ROUTE_DATA_SCHEMA: dict[str, Any] = {"anyOf": [
+    {"title": "Waypoints document", "type": "object", "required": ["schema", "waypoints"],
+     "properties": {"schema": {"const": "gisnoise/waypoints/1"},
+                    "waypoints": {"type": "array", "minItems": 2, "items": _WAYPOINT}, **_ROUTE_SETTINGS}},
+    {"title": "GeoJSON", "type": "object", "required": ["type"],
+     "description": "A FeatureCollection of Point waypoints (properties as a waypoint's; route settings in a "
+                    "'route' member) or of one LineString, a Feature or a bare LineString with Z (and times in "
+                    "properties.times, or as a fourth coordinate)",
+     "properties": {"type": {"enum": ["FeatureCollection", "Feature", "LineString"]}}}]}
 
 
 class GeoJSONTrajectory(BaseModel):
@@ -196,8 +317,9 @@ class GeoJSONTrajectory(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True)
     format: Literal["geojson", "waypoints"]
-    data: dict[str, Any] = Field(description="GeoJSON object (Feature, FeatureCollection, LineString) or "
-                                             "waypoint document, as read by gisnoise.flight.routes.read_trajectory")
+    data: Annotated[dict[str, Any], WithJsonSchema(_ROUTE_DATA_SCHEMA)] = Field(
+        description="GeoJSON object (Feature, FeatureCollection, LineString) or waypoint document, as read by "
+                    "gisnoise.flight.routes.read_trajectory")
 
 
 class LogTrajectory(BaseModel):

@@ -94,7 +94,7 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
             except csv.Error as exc:
                 raise TrajectoryError(f"trajectory: not a readable CSV: {exc}", field="text") from None
         elif isinstance(spec, ColumnsTrajectory):
-            cols = spec.columns
+            cols = spec.columns.model_dump(exclude_none=True)
             lengths = {k: len(v) for k, v in cols.items()}
             ref = "t" if "t" in cols else next(iter(cols), None)
             bad = [k for k, n in lengths.items() if ref is not None and n != lengths[ref]]
@@ -104,13 +104,14 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
                                       f"'{ref}' has {lengths[ref]}", field=f"columns.{bad[0]}")
             traj = from_columns(_numeric_columns(cols), source="trajectory")
         elif isinstance(spec, RowsTrajectory):
-            keys = list(spec.rows[0])
-            for i, row in enumerate(spec.rows):
+            rows = [r.model_dump(exclude_none=True) for r in spec.rows]
+            keys = list(rows[0])
+            for i, row in enumerate(rows):
                 if set(row) != set(keys):
                     missing = sorted(set(keys) ^ set(row))
                     raise TrajectoryError(f"trajectory: rows[{i}] has different fields than rows[0] "
                                           f"({', '.join(missing)})", field=f"rows[{i}].{missing[0]}")
-            cols = {k: [r[k] for r in spec.rows] for k in keys}
+            cols = {k: [r[k] for r in rows] for k in keys}
             traj = from_columns(_numeric_columns(cols), source="trajectory")
         elif isinstance(spec, GeoJSONTrajectory):
             from gisnoise.flight import routes
@@ -280,7 +281,10 @@ def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Traject
         req = req.model_copy(update={"ground_h_m": float(stated)})
     cards = resolve_cards(req, state.cards)
     req = _auto_margin(traj, cards, req, s.max_cells)
-    return req, traj, cards, _grid_cells(traj, req, s.max_cells)
+    cells = _grid_cells(traj, req, s.max_cells)
+    with limits.override(max_work=s.max_work):  # the work bound, before a job is queued or a map evaluated
+        limits.check_work(cells, len(traj) * req.substeps, field="grid.resolution_m")
+    return req, traj, cards, cells
 
 
 def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory, cards: list[ModelCard],

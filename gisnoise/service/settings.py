@@ -17,6 +17,9 @@ variable                                meaning
 ``GISNOISE_SYNC_WORK_LIMIT``            cells x trajectory samples above which a
                                         contour request becomes a job (202)
 ``GISNOISE_MAX_TRAJECTORY_SAMPLES``     longest trajectory accepted, samples
+``GISNOISE_MAX_WORK``                   cells x time steps of one map, direct or queued
+                                        (413 before any work; also read by the core,
+                                        :mod:`gisnoise.limits`)
 ``GISNOISE_SEED_CARDS_DIR``             folder of card JSON files put in an empty store
 ``GISNOISE_TILE_URL``                   basemap tile URL template of the web page
                                         (empty: no basemap)
@@ -61,6 +64,7 @@ class Settings(BaseSettings):
     sync_work_limit: float = Field(default=2e8, ge=0,
                                    description="cells x samples above which a contour request becomes a job.")
     max_trajectory_samples: int = Field(default=200_000, ge=2, description="Longest trajectory, samples.")
+    max_work: float = Field(default=5e11, gt=0, description="Largest map, cells x time steps (direct or job).")
     seed_cards_dir: Path | None = Field(default_factory=default_seed_cards_dir,
                                         description="Cards copied into an empty store at start-up.")
     tile_url: str = Field(default="https://tile.openstreetmap.org/{z}/{x}/{y}.png",

@@ -199,7 +199,7 @@ def test_longitude_500_and_ground_above_the_track_are_422(client):
     cols = {"t": [0.0, 1, 2, 3, 4], "lat": [52.2] * n, "lon": [500.0] * n, "h": [150.0] * n, "roll": [0.0] * n,
             "pitch": [0.0] * n, "yaw": [0.0] * n, "power_w": [3000.0] * n}
     body = {"trajectory": {"format": "columns", "columns": cols}, "cards": ["demo-horizontal"]}
-    b = assert_names_field(client.post("/contours", json=body), 422, "trajectory.lon")
+    b = assert_names_field(client.post("/contours", json=body), 422, "trajectory.columns.lon.0")
     assert "500" in b["detail"]
     cols["lon"] = [10.5] * n
     body["ground_h_m"] = 9000.0

@@ -206,6 +206,9 @@ def _csv_with(edit) -> str:
     return "\n".join(edit(lines)) + "\n"
 
 
+_ROW = {"t": 0, "lat": 53.5, "lon": 9.99, "h": 100, "roll": 0, "pitch": 0, "yaw": 90, "power_w": 3000}
+
+
 @pytest.mark.parametrize("trajectory, status, field", [
     ({"format": "csv", "text": _csv_with(lambda ls: [ls[0].replace(",power_w", "")] +
                                          [ln.rsplit(",", 2)[0] + "," + ln.rsplit(",", 1)[1] for ln in ls[1:]])},
@@ -218,7 +221,10 @@ def _csv_with(edit) -> str:
     ({"format": "csv", "text": _csv_with(lambda ls: [ls[0]] + [ln.replace("horizontal", "cruise") for ln in ls[1:]])},
      422, "trajectory.phase"),
     ({"format": "columns", "columns": {"t": [0, 1], "lat": [53.5]}}, 422, "trajectory.columns.lat"),
-    ({"format": "rows", "rows": [{"t": 0}, {"t": 1, "lat": 2}]}, 422, "trajectory.rows[1].lat"),
+    ({"format": "rows", "rows": [dict(_ROW, phase="horizontal"), dict(_ROW, t=1)]}, 422, "trajectory.rows[1].phase"),
+    ({"format": "rows", "rows": [{"t": 0}, dict(_ROW, t=1)]}, 422, "trajectory.rows.0.lat"),
+    ({"format": "columns", "columns": {k: [v, v] for k, v in dict(_ROW, lon=500).items()}}, 422,
+     "trajectory.columns.lon.0"),
     ({"format": "geojson", "data": {"type": "Point", "coordinates": [0, 0]}}, 422, None),
     ({"format": "gpx", "text": "x"}, 422, "trajectory"),
 ])
@@ -236,7 +242,7 @@ def test_bad_trajectories_name_the_field(client, trajectory, status, field):
     ({"cards": []}, 422, "cards"),
     ({"cards": ["no-such-card"]}, 422, "cards[0]"),
     ({"cards": ["demo-climb"]}, 422, "cards"),
-    ({"cards": [dict(_omni_card(), phase="cruise")]}, 422, "cards[0].phase"),
+    ({"cards": [dict(_omni_card(), phase="cruise")]}, 422, "cards.0.phase"),
     ({"phase_cards": {"cruise": "demo-climb"}}, 422, "phase_cards.cruise"),
     ({"metrics": ["Lden"]}, 422, "metrics.0"),
     ({"levels": []}, 422, "levels"),
