@@ -75,7 +75,8 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
               help="Margin around the track, m [default: from the cards, so the lowest level's LAmax and LAeq "
                    "contours close]; contours the grid's edge cuts carry \"clipped\": true and a warning.")
 @click.option("--levels", "levels", default="45,50,55,60", show_default=True, callback=_levels,
-              help="Contour levels, dB(A), comma-separated.")
+              help="Contour levels, dB(A), comma-separated.  SEL is contoured 10 dB higher (a flyover's SEL "
+                   "exceeds its LAmax by about 10 dB): the default SEL contours are 55-70 dB(A).")
 @click.option("--dem", "dem", type=click.Path(dir_okay=False), default=None,
               help="DEM GeoTIFF: receivers stand on it (heights in the trajectory's vertical datum, "
                    "see --dem-offset).")
