@@ -184,7 +184,8 @@ def test_flyover_matches_numpy_with_thresholds_and_snapshot():
     traj = circle_flight(80, phases=("horizontal", "climb"))
     cards = [card(), card("climb", ansatz="paper", p1=80.0, p2=-0.1, p3=1.0)]
     g = grid_around(12.5, 61, 47)
-    kw = dict(ground_h=0.0, threshold_db=[55.0, 62.0], snapshot_t=33.3)
+    # the 'paper' climb card is synthetic (levels near 0 dB(A) at these powers): engines compared, guard off
+    kw = dict(ground_h=0.0, threshold_db=[55.0, 62.0], snapshot_t=33.3, check_cards=False)
     ref = evaluate_grid(traj, cards, g, engine="numpy", **kw)
     fast = evaluate_grid(traj, cards, g, engine="fast", **kw)
     assert list(fast.bands) == list(ref.bands)
@@ -313,6 +314,7 @@ def cases(draw):
 @given(cases())
 def test_fast_equals_numpy_on_random_trajectories_and_grids(case):
     traj, cards, grid, kw, floor_q = case
+    kw = dict(kw, check_cards=False)  # random synthetic cards: the engines are compared, not the cards judged
     ref = evaluate_grid(traj, cards, grid, engine="numpy", **kw)
     floor = None
     if floor_q is not None:  # a floor across the map's range: some cells may fall below it
@@ -351,6 +353,7 @@ def extension_cases(draw):
 @given(extension_cases())
 def test_fast_equals_numpy_for_effect_extensions(case):
     traj, cards, grid, kw, floor_q = case
+    kw = dict(kw, check_cards=False)  # random synthetic cards: the engines are compared, not the cards judged
     ref = evaluate_grid(traj, cards, grid, engine="numpy", snapshot_t=float(traj.t[len(traj) // 2]), **kw)
     fast = evaluate_grid(traj, cards, grid, snapshot_t=float(traj.t[len(traj) // 2]), **kw)
     assert fast.metadata["engine"] == "fast"

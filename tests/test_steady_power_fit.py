@@ -162,13 +162,14 @@ def test_implausible_card_is_refused_by_load_and_the_map_naming_p2(tmp_path):
     with pytest.raises(ImplausibleCardError, match="p2"):
         make_map(traj, [_bad_card()], tmp_path / "m", ground_h=80.0)
     assert not (tmp_path / "m").exists()
-    # and the evaluator given the card file, on any engine (cards built in code reach it only through make_map)
+    # and the evaluator, given the card file or the card object, on every engine
     from gisnoise.maps import evaluate_grid, grid_for_trajectory
 
     grid = grid_for_trajectory(traj, 20.0, 100.0)
-    for engine in ("numpy", "auto"):
-        with pytest.raises(ImplausibleCardError, match="p2 = -2958"):
-            evaluate_grid(traj, [path], grid, ground_h=80.0, engine=engine)
+    for engine in ("numpy", "fast", "auto"):
+        for c in (path, _bad_card()):
+            with pytest.raises(ImplausibleCardError, match="p2 = -2958"):
+                evaluate_grid(traj, [c], grid, ground_h=80.0, engine=engine)
 
 
 def test_card_with_infinite_std_is_refused_naming_the_parameter():

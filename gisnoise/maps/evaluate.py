@@ -60,7 +60,7 @@ from gisnoise.maps.fastkernel import evaluate_fast
 from gisnoise.maps.prepare import MapOptions
 from gisnoise.maps.reference import DEFAULT_BLOCK, evaluate_numpy
 from gisnoise.maps.result import METRICS, MapResult
-from gisnoise.model import HemisphereCard, ModelCard
+from gisnoise.model import HemisphereCard, ModelCard, check_card
 
 __all__ = ["DEFAULT_ENGINE", "ENGINES", "evaluate_grid", "evaluate_grid_fast", "fast_engine_serves"]
 
@@ -122,6 +122,7 @@ def evaluate_grid(
     engine: str = DEFAULT_ENGINE,
     floor_db: float | None = None,
     threads: int | None = None,
+    check_cards: bool = True,
 ) -> MapResult:
     """Noise metrics of a trajectory on a grid of receivers (see the module docstring).
 
@@ -192,6 +193,10 @@ def evaluate_grid(
     threads : int, optional
         With ``engine="fast"``: kernel threads (default
         :func:`~gisnoise.maps.threads.default_threads`).
+    check_cards : bool
+        Refuse a card the plausibility guard refuses (:func:`gisnoise.model.check_card`:
+        :class:`~gisnoise.model.ImplausibleCardError` naming the parameters).  Only engine
+        comparisons on synthetic cards turn it off.
 
     Returns
     -------
@@ -205,8 +210,10 @@ def evaluate_grid(
         substeps=substeps, uncertainty=uncertainty, chunk_cells=chunk_cells, block_size=block_size,
         min_distance_m=min_distance_m, temperature_c=temperature_c, kernel=kernel, progress=progress,
         cancel=cancel, floor_db=floor_db, threads=threads)
+    cards = as_cardset(cards)
+    for card in cards if check_cards else ():  # the plausibility guard (cached per card content): never a map of an implausible card
+        check_card(card)
     if engine == "auto":
-        cards = as_cardset(cards)
         why = fast_engine_serves(cards, uncertainty=uncertainty, kernel=kernel)
         if why is None:
             try:

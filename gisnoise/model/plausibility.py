@@ -21,7 +21,8 @@ The messages name the parameters that drive the level out of range (largest
 contribution ``|dL/dp_k| |p_k|`` at the worst direction) or carry the largest
 uncertainty.  The guard runs when a card is loaded (:func:`gisnoise.model.load`;
 ``force=True`` for inspection only), before ``fit`` writes a card, and when a map is
-made (:func:`gisnoise.maps.make_map`, so the command line, the service and QGIS).
+made (:func:`gisnoise.maps.make_map`, so the command line, the service and QGIS) and by the
+evaluator itself (:func:`gisnoise.maps.evaluate_grid`, given card files or card objects).
 """
 
 from __future__ import annotations
