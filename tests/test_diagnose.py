@@ -413,3 +413,19 @@ def test_evidence_that_contradicts_the_leader_gives_no_verdict():
     # a close runner-up whose evidence supports it takes the place (the tie-break)
     lead = _choose([cand("bank_angle", 0.05, False), cand("wind", 0.045, True)], 0.005)
     assert lead is not None and lead.name == "wind" and _gate(lead) is None
+
+
+def test_a_microphone_listed_30_m_off_is_placed_from_its_level_and_no_effect_is_named():
+    """m3 listed 30 m north-east of where it stood: its position is estimated (within 5 m), said so, nothing named."""
+    moved = study.move_mic(plates_control(), "m3", 30.0, 45.0)
+    r = run_diagnosis(moved, cards.load(CARD)).result
+    est = r["metadata"]["microphone_positions"]
+    # the level places m3 back where it stood: 30 m towards 225 deg from the listed position
+    back = np.array([-30.0 * math.sin(math.radians(45.0)), -30.0 * math.cos(math.radians(45.0))])
+    got = np.array([est["m3"]["relative_e_m"], est["m3"]["relative_n_m"]])
+    assert np.hypot(*(got - back)) < 5.0, got
+    assert est["m3"]["contradicts"] and 0 < est["m3"]["std_m"] < 5.0
+    assert not any(est[m]["contradicts"] for m in ("m1", "m2", "m4"))
+    sentence = next(t for t in r["metadata"]["contradictions"] if "m3" in t)
+    assert "from its listed position" in sentence and f"{est['m3']['relative_m']:.0f} m" in sentence
+    assert r["verdict"]["effect"] is None, r["verdict"]

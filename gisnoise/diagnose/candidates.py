@@ -140,7 +140,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
                     x_ev: dict[str, Any], base_fit: FitResult, oof_base: np.ndarray, fold: np.ndarray, *,
                     cancel: CancelFn | None, bias_z: float, tick: Callable[[str], None],
                     overrides: Mapping[str, tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]]
-                    | None = None, screen_alpha: float | None = None) -> list[_Candidate]:
+                    | None = None, screen_alpha: float | None = None,
+                    base_fixed: Mapping[str, float] | None = None) -> list[_Candidate]:
     """Each named candidate: untestable with its reason, or fitted on all data and in the folds.
 
     ``x_ev`` are the inputs with the event windows (``event_window``) for ``background_event``;
@@ -149,7 +150,9 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
     adds evidence computed with the estimate, e.g. the band-level held-out test);
     a candidate whose fit fails keeps the error; ``tick(name)`` follows each candidate.  With
     ``screen_alpha``, a candidate whose Wald test on all data does not reach it is not refitted in the
-    folds (it cannot qualify; forward selection uses this to save time).
+    folds (it cannot qualify; forward selection uses this to save time).  ``base_fixed`` are parameters of
+    the base model held at their values (those an earlier effect of forward selection held, e.g. a reference
+    rpm).
     """
     ev_list = ctx.event_windows
     cands: list[_Candidate] = []
@@ -180,7 +183,7 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
             tick(nme)
             continue
         try:
-            _attribute(cand, ctx, level, xe, base_fit, fold, cancel, bias_z, screen_alpha)
+            _attribute(cand, ctx, level, xe, base_fit, fold, cancel, bias_z, screen_alpha, base_fixed)
         except GisnoiseError as exc:
             if isinstance(exc, Cancelled):
                 raise
@@ -190,7 +193,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
 
 
 def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, Any], base_fit: FitResult,
-               fold: np.ndarray, cancel: CancelFn | None, bias_z: float, screen_alpha: float | None = None) -> None:
+               fold: np.ndarray, cancel: CancelFn | None, bias_z: float, screen_alpha: float | None = None,
+               base_fixed: Mapping[str, float] | None = None) -> None:
     """Fit one candidate on all data and in the two folds; fill its summary."""
     s = ctx.s
     n = len(s)
@@ -200,7 +204,7 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
     cand.model = model
     nb = ctx.base_model.n_params
     start = dict(zip(model.params, np.r_[base_fit.p, np.asarray(eff.start, dtype=float)], strict=True))
-    fixed = dict(eff.fixed(x)) if eff.fixed is not None else {}
+    fixed = {**dict(base_fixed or {}), **(dict(eff.fixed(x)) if eff.fixed is not None else {})}
     trials = 1
     if eff.initial is not None:
         init = dict(eff.initial(x, base_fit.residuals))

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise.diagnose.bandtests import absorption_band_holdout
 from gisnoise.diagnose.candidates import CancelFn, _Candidate, _Context, _fit_candidates
 from gisnoise.diagnose.metadata import (
     clocks_disagree,
@@ -41,7 +42,8 @@ Override = tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]
 
 def metadata_overrides(s: Samples, x: Mapping[str, Any], base: Ansatz, p_base: np.ndarray,
                        names: Sequence[str], fold: np.ndarray,
-                       block: np.ndarray) -> tuple[dict[str, Override], dict[str, Any]]:
+                       block: np.ndarray, *, background_db: float | None = None
+                       ) -> tuple[dict[str, Override], dict[str, Any]]:
     """Candidates to test with inputs estimated from the data, and the ``metadata`` section of the report.
 
     Returns
@@ -76,6 +78,12 @@ def metadata_overrides(s: Samples, x: Mapping[str, Any], base: Ansatz, p_base: n
             overrides["ground_reflection"] = (_effects.get_effect("ground_reflection"), {"mic_agl": agl}, notes,
                                               {"band_holdout": band})
             doc["contradictions"] += notes
+    if "atmospheric_absorption" in names:
+        band = absorption_band_holdout(s, x, fold, block, background_db=background_db)
+        if band is not None:
+            doc["absorption_bands"] = {k: band[k] for k in ("iso_multiple", "iso_multiple_std", "n_rows", "n_bands")}
+            overrides["atmospheric_absorption"] = (_effects.get_effect("atmospheric_absorption"), {}, [],
+                                                   {"band_holdout": band})
     if "emission_time" in names and "t_e" in x:
         clocks = estimate_clock_offsets(s, x, base, p_base)
         doc["clock_offsets"] = clocks
@@ -108,36 +116,61 @@ def _entry(c: _Candidate, oof_ref: np.ndarray, oof_base: np.ndarray) -> dict[str
     return e
 
 
+def _worth_trying(c: _Candidate) -> bool:
+    """Whether a candidate is tried on top of the effects chosen: significant, or its band-level test is."""
+    return bool(c.summary.get("significant") or c.summary.get("significant_bands"))
+
+
+def _step_score(c: _Candidate) -> dict[str, Any]:
+    """What forward selection saw of one candidate in one step."""
+    sm = c.summary
+    return {"effect": c.name, "p_value": sm.get("p_value"), "significant": sm.get("significant"),
+            "holdout_improvement_db2": sm.get("holdout_improvement_db2"), "p_holdout": sm.get("p_holdout"),
+            "p_bands": (sm.get("band_holdout") or {}).get("p_value"),
+            "evidence_supports": (sm.get("evidence") or {}).get("supports"),
+            "reason": (f"fit failed: {c.error}" if c.error else c.reason) or None}
+
+
 def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Context, level: np.ndarray,
                       ev_win: np.ndarray, oof_base: np.ndarray, fold: np.ndarray, block: np.ndarray,
                       noise: Mapping[str, float], *, level_alpha: float, min_improvement_db2: float,
                       overrides: Mapping[str, Override], cancel: CancelFn | None, bias_z: float,
-                      max_effects: int = MAX_EFFECTS) -> list[dict[str, Any]]:
+                      max_effects: int = MAX_EFFECTS,
+                      steps: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
     """The effects in the order forward selection adds them, each with its held-out shrinkage.
 
-    Candidates not significant alone are not tried again (an effect too weak to
-    show alone is not looked for under another).
+    Candidates neither significant alone nor in their band-level test are not tried
+    again (an effect too weak to show alone is not looked for under another).  ``steps``, when given, receives
+    one entry per step after the first: the candidates tried on top of the model so
+    far with their scores, and the one added (or None).
     """
     chosen = [_entry(first, oof_base, oof_base)]
-    names = [c.name for c in cands if c.name != first.name and c.fit is not None and c.summary.get("significant")]
+    names = [c.name for c in cands if c.name != first.name and c.fit is not None and _worth_trying(c)]
     cur = first
     noop: Callable[[str], None] = lambda _name: None  # noqa: E731
     while names and len(chosen) < max_effects:
         assert cur.model is not None and cur.fit is not None and cur.oof is not None and cur.x is not None
-        xcur = dict(cur.x)
-        xcur.pop("event_window", None)
+        xcur = dict(cur.x)  # with the event windows when the model so far has added sound
         ctx2 = replace(ctx, x=xcur, base_model=cur.model, p_base=cur.fit.p, resid_base=cur.fit.residuals)
         x_ev = dict(xcur, event_window=ev_win)
         step = _fit_candidates(names, ctx2, level, xcur, x_ev, cur.fit, cur.oof, fold, cancel=cancel,
-                               bias_z=bias_z, tick=noop, overrides=overrides, screen_alpha=level_alpha)
+                               bias_z=bias_z, tick=noop, overrides=overrides, screen_alpha=level_alpha,
+                               base_fixed=dict(cur.fit.fixed))
+        tried = step
         step = [c for c in step if c.oof is not None]
         _score(step, ctx2, cur.oof, block, noise, level_alpha)
         ranked = sorted([c for c in step if c.oof is not None and c.fit is not None],
                         key=lambda c: -c.summary.get("holdout_improvement_db2", -np.inf))
         nxt = _choose(ranked, min_improvement_db2)
-        if nxt is None or _gate(nxt) is not None:
+        gated = _gate(nxt) if nxt is not None else None
+        if steps is not None:
+            steps.append({"on_top_of": [e["effect"] for e in chosen],
+                          "added": None if nxt is None or gated else nxt.name,
+                          "reason": gated,
+                          "tried": [_step_score(c) for c in tried]})
+        if nxt is None or gated is not None:
             break
         chosen.append(_entry(nxt, cur.oof, oof_base))
-        names = [c.name for c in ranked if c.name != nxt.name and c.summary.get("significant")]
+        names = [c.name for c in ranked if c.name != nxt.name and _worth_trying(c)]
         cur = nxt
     return chosen
