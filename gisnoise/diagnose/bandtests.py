@@ -30,7 +30,8 @@ __all__ = ["absorption_band_holdout"]
 
 
 def absorption_band_holdout(s: Samples, x: Mapping[str, Any], fold: np.ndarray, block: np.ndarray, *,
-                            background_db: float | None = None, f_range: tuple[float, float] = (200.0, 10000.0),
+                            background_db: float | None = None, exclude: np.ndarray | None = None,
+                            f_range: tuple[float, float] = (200.0, 10000.0),
                             above_floor_db: float = 10.0) -> dict[str, Any] | None:
     """Held-out test of uncorrected atmospheric absorption in the band levels, or None when it cannot be made.
 
@@ -46,6 +47,8 @@ def absorption_band_holdout(s: Samples, x: Mapping[str, Any], fold: np.ndarray, 
         Block label per sample (paired test).
     background_db : float, optional
         The card's background level, dB(A): samples 15 dB above it are used (else each microphone's louder half).
+    exclude : ndarray of bool, optional
+        Samples not to use (windows of added sound: their spectrum is another source's).
     f_range : (float, float)
         Bands used, Hz.
     above_floor_db : float
@@ -78,6 +81,8 @@ def absorption_band_holdout(s: Samples, x: Mapping[str, Any], fold: np.ndarray, 
         for m in set(mics.tolist()):
             rows = mics == m
             loud |= rows & (level >= np.quantile(level[rows], 0.5))
+    if exclude is not None:
+        loud &= ~np.asarray(exclude, dtype=bool)
     # entries: a band well above its own quietest level (its background), on a loud sample
     floor = np.nanpercentile(bands, 5, axis=0)
     ok = loud[:, None] & np.isfinite(bands) & (bands > floor + above_floor_db)

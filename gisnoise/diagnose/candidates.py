@@ -141,7 +141,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
                     cancel: CancelFn | None, bias_z: float, tick: Callable[[str], None],
                     overrides: Mapping[str, tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]]
                     | None = None, screen_alpha: float | None = None,
-                    base_fixed: Mapping[str, float] | None = None) -> list[_Candidate]:
+                    base_fixed: Mapping[str, float] | None = None,
+                    screen_min_db2: float | None = None) -> list[_Candidate]:
     """Each named candidate: untestable with its reason, or fitted on all data and in the folds.
 
     ``x_ev`` are the inputs with the event windows (``event_window``) for ``background_event``;
@@ -152,7 +153,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
     ``screen_alpha``, a candidate whose Wald test on all data does not reach it is not refitted in the
     folds (it cannot qualify; forward selection uses this to save time).  ``base_fixed`` are parameters of
     the base model held at their values (those an earlier effect of forward selection held, e.g. a reference
-    rpm).
+    rpm).  With ``screen_min_db2``, a candidate whose in-sample improvement of the mean squared residual is
+    below half of it is not refitted in the folds either.
     """
     ev_list = ctx.event_windows
     cands: list[_Candidate] = []
@@ -183,7 +185,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
             tick(nme)
             continue
         try:
-            _attribute(cand, ctx, level, xe, base_fit, fold, cancel, bias_z, screen_alpha, base_fixed)
+            _attribute(cand, ctx, level, xe, base_fit, fold, cancel, bias_z, screen_alpha, base_fixed,
+                       screen_min_db2)
         except GisnoiseError as exc:
             if isinstance(exc, Cancelled):
                 raise
@@ -194,7 +197,7 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
 
 def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, Any], base_fit: FitResult,
                fold: np.ndarray, cancel: CancelFn | None, bias_z: float, screen_alpha: float | None = None,
-               base_fixed: Mapping[str, float] | None = None) -> None:
+               base_fixed: Mapping[str, float] | None = None, screen_min_db2: float | None = None) -> None:
     """Fit one candidate on all data and in the two folds; fill its summary."""
     s = ctx.s
     n = len(s)
@@ -237,6 +240,13 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
         w, dof = _wald(full, tested)
         if min(1.0, trials * float(stats.chi2.sf(w, dof))) >= screen_alpha:
             cand.reason = "not significant on all data: not refitted in the folds"
+            return
+    if screen_min_db2 is not None and "band_holdout" not in cand.summary:
+        # held-out improvement rarely beats the in-sample one: far below the minimum, the folds cannot reach it
+        gain = float(np.mean(base_fit.residuals ** 2) - np.mean(full.residuals ** 2))
+        if gain < 0.5 * screen_min_db2:
+            cand.reason = (f"in-sample improvement {gain:.4f} dB^2 is below half the smallest held-out improvement "
+                           "a verdict needs: not refitted in the folds")
             return
     oof = np.empty(n)
     for f in (0, 1):

@@ -274,7 +274,8 @@ def run_diagnosis(
 
     # ---------------------------------------------------------------- the metadata as a prior, candidates
     overrides, metadata = metadata_overrides(s, x, base, base_fit.p, names, fold, block,
-                                             background_db=card.background_db)
+                                             background_db=card.background_db,
+                                             exclude=(ev_win >= 0) | (s.mask_reason.astype(str) == "event"))
     if positions:
         metadata["microphone_positions"] = positions
         metadata["contradictions"] = position_notes + metadata["contradictions"]

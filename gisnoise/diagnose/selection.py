@@ -21,6 +21,7 @@ import numpy as np
 
 from gisnoise.diagnose.bandtests import absorption_band_holdout
 from gisnoise.diagnose.candidates import CancelFn, _Candidate, _Context, _fit_candidates
+from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.metadata import (
     clocks_disagree,
     estimate_clock_offsets,
@@ -42,8 +43,8 @@ Override = tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]
 
 def metadata_overrides(s: Samples, x: Mapping[str, Any], base: Ansatz, p_base: np.ndarray,
                        names: Sequence[str], fold: np.ndarray,
-                       block: np.ndarray, *, background_db: float | None = None
-                       ) -> tuple[dict[str, Override], dict[str, Any]]:
+                       block: np.ndarray, *, background_db: float | None = None,
+                       exclude: np.ndarray | None = None) -> tuple[dict[str, Override], dict[str, Any]]:
     """Candidates to test with inputs estimated from the data, and the ``metadata`` section of the report.
 
     Returns
@@ -79,11 +80,12 @@ def metadata_overrides(s: Samples, x: Mapping[str, Any], base: Ansatz, p_base: n
                                               {"band_holdout": band})
             doc["contradictions"] += notes
     if "atmospheric_absorption" in names:
-        band = absorption_band_holdout(s, x, fold, block, background_db=background_db)
-        if band is not None:
-            doc["absorption_bands"] = {k: band[k] for k in ("iso_multiple", "iso_multiple_std", "n_rows", "n_bands")}
+        abs_band = absorption_band_holdout(s, x, fold, block, background_db=background_db, exclude=exclude)
+        if abs_band is not None:
+            doc["absorption_bands"] = {k: abs_band[k] for k in ("iso_multiple", "iso_multiple_std", "n_rows",
+                                                                "n_bands")}
             overrides["atmospheric_absorption"] = (_effects.get_effect("atmospheric_absorption"), {}, [],
-                                                   {"band_holdout": band})
+                                                   {"band_holdout": abs_band})
     if "emission_time" in names and "t_e" in x:
         clocks = estimate_clock_offsets(s, x, base, p_base)
         doc["clock_offsets"] = clocks
@@ -117,8 +119,14 @@ def _entry(c: _Candidate, oof_ref: np.ndarray, oof_base: np.ndarray) -> dict[str
 
 
 def _worth_trying(c: _Candidate) -> bool:
-    """Whether a candidate is tried on top of the effects chosen: significant, or its band-level test is."""
-    return bool(c.summary.get("significant") or c.summary.get("significant_bands"))
+    """Whether a candidate is tried on top of the effects chosen.
+
+    When it was significant, or its band-level test was, or it improved held-out data significantly (a fit
+    that ends on a bound while another effect is unmodelled has no Wald test, yet it may hold an effect).
+    """
+    sm = c.summary
+    held_out = (sm.get("holdout_improvement_db2") or 0.0) > 0.0 and (sm.get("p_holdout") or 1.0) < 0.05
+    return bool(sm.get("significant") or sm.get("significant_bands") or held_out)
 
 
 def _step_score(c: _Candidate) -> dict[str, Any]:
@@ -128,6 +136,7 @@ def _step_score(c: _Candidate) -> dict[str, Any]:
             "holdout_improvement_db2": sm.get("holdout_improvement_db2"), "p_holdout": sm.get("p_holdout"),
             "p_bands": (sm.get("band_holdout") or {}).get("p_value"),
             "evidence_supports": (sm.get("evidence") or {}).get("supports"),
+            "evidence": (sm.get("evidence") or {}).get("summary"),
             "reason": (f"fit failed: {c.error}" if c.error else c.reason) or None}
 
 
@@ -139,8 +148,8 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
                       steps: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
     """The effects in the order forward selection adds them, each with its held-out shrinkage.
 
-    Candidates neither significant alone nor in their band-level test are not tried
-    again (an effect too weak to show alone is not looked for under another).  ``steps``, when given, receives
+    Candidates that showed nothing alone (no significant test, band-level test or held-out
+    improvement) are not tried again (an effect too weak to show alone is not looked for under another).  ``steps``, when given, receives
     one entry per step after the first: the candidates tried on top of the model so
     far with their scores, and the one added (or None).
     """
@@ -148,14 +157,29 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
     names = [c.name for c in cands if c.name != first.name and c.fit is not None and _worth_trying(c)]
     cur = first
     noop: Callable[[str], None] = lambda _name: None  # noqa: E731
+    # the levels of added sound are nuisance parameters, one per window: held at their values once chosen
+    held: dict[str, float] = {}
+
+    def hold_events(c: _Candidate, base_params: Sequence[str]) -> None:
+        if c.name == "background_event" and c.fit is not None:
+            held.update({k: float(c.fit.params[k]) for k in c.fit.param_names if k not in base_params})
+
+    hold_events(first, ctx.base_model.params)
     while names and len(chosen) < max_effects:
         assert cur.model is not None and cur.fit is not None and cur.oof is not None and cur.x is not None
         xcur = dict(cur.x)  # with the event windows when the model so far has added sound
         ctx2 = replace(ctx, x=xcur, base_model=cur.model, p_base=cur.fit.p, resid_base=cur.fit.residuals)
         x_ev = dict(xcur, event_window=ev_win)
+        if "background_event" in names:
+            # windows of added sound are looked for again in what the effects chosen so far leave unexplained
+            l_uav = np.broadcast_to(cur.model.level_uav(cur.fit.p, xcur), level.shape)
+            bg = np.full(len(level), ctx.background_db if ctx.background_db is not None else -np.inf)
+            win, wins = residual_events(ctx.s, cur.fit.residuals, noise, l_uav, bg)
+            ctx2 = replace(ctx2, event_windows=wins)
+            x_ev = dict(xcur, event_window=win)
         step = _fit_candidates(names, ctx2, level, xcur, x_ev, cur.fit, cur.oof, fold, cancel=cancel,
                                bias_z=bias_z, tick=noop, overrides=overrides, screen_alpha=level_alpha,
-                               base_fixed=dict(cur.fit.fixed))
+                               base_fixed={**dict(cur.fit.fixed), **held}, screen_min_db2=min_improvement_db2)
         tried = step
         step = [c for c in step if c.oof is not None]
         _score(step, ctx2, cur.oof, block, noise, level_alpha)
@@ -171,6 +195,7 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
         if nxt is None or gated is not None:
             break
         chosen.append(_entry(nxt, cur.oof, oof_base))
+        hold_events(nxt, cur.model.params)
         names = [c.name for c in ranked if c.name != nxt.name and _worth_trying(c)]
         cur = nxt
     return chosen
