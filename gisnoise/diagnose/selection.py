@@ -33,10 +33,12 @@ from gisnoise.measure import Samples
 from gisnoise.model import Ansatz, mic_height_agl
 from gisnoise.model import effects as _effects
 
-__all__ = ["MAX_EFFECTS", "forward_selection", "metadata_overrides"]
+__all__ = ["MAX_EFFECTS", "STEP_IMPROVEMENT_FACTOR", "forward_selection", "metadata_overrides"]
 
 MAX_EFFECTS = 4
 """Most effects forward selection adds."""
+STEP_IMPROVEMENT_FACTOR = 2.0
+"""An effect added after the first needs this multiple of the smallest held-out improvement of a verdict."""
 
 Override = tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]
 
@@ -185,7 +187,10 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
         _score(step, ctx2, cur.oof, block, noise, level_alpha)
         ranked = sorted([c for c in step if c.oof is not None and c.fit is not None],
                         key=lambda c: -c.summary.get("holdout_improvement_db2", -np.inf))
-        nxt = _choose(ranked, min_improvement_db2)
+        # after the first effect the residual holds what the imperfect forms of the chosen effects leave, and
+        # every candidate is tested again at each step: twice the smallest improvement, and the held-out test
+        # at the Bonferroni level of the Wald tests
+        nxt = _choose(ranked, STEP_IMPROVEMENT_FACTOR * min_improvement_db2, p_holdout_max=level_alpha)
         gated = _gate(nxt) if nxt is not None else None
         if steps is not None:
             steps.append({"on_top_of": [e["effect"] for e in chosen],
