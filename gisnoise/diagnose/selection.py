@@ -151,9 +151,9 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
     """The effects in the order forward selection adds them, each with its held-out shrinkage.
 
     Candidates that showed nothing alone (no significant test, band-level test or held-out
-    improvement) are not tried again (an effect too weak to show alone is not looked for under another).  ``steps``, when given, receives
-    one entry per step after the first: the candidates tried on top of the model so
-    far with their scores, and the one added (or None).
+    improvement) are not tried again (an effect too weak to show alone is not looked for under
+    another).  ``steps``, when given, receives one entry per step after the first: the candidates
+    tried on top of the model so far with their scores, and the one added (or None).
     """
     chosen = [_entry(first, oof_base, oof_base)]
     names = [c.name for c in cands if c.name != first.name and c.fit is not None and _worth_trying(c)]
