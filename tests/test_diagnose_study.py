@@ -378,7 +378,7 @@ def render_pairs(s: dict, seeds: list[int]) -> str:
     lines = [PAIR_BEGIN, "",
              f"Blind runs of the diagnosis base scenario: each effect alone and all 28 pairs at the simulator's "
              f"defaults, campaigns with wrong metadata (the independent study simulator, `tests/_study_sim.py`) and "
-             f"controls, {len(seeds)} seeds each ({s['n_all']} campaigns); median {s['seconds_median']:.1f} s per "
+             f"controls, {'up to ' if s['n_all'] < len(seeds) * len(pairs_and_metadata_jobs([0])) else ''}{len(seeds)} seeds each ({s['n_all']} campaigns); median {s['seconds_median']:.1f} s per "
              "diagnosis.", "",
              f"* Single effects named right (`verdict.effect`), wrong-metadata cases included: **{s['single_right']} "
              f"of {s['n_single']} ({pct(s['single_right'], s['n_single'])})**.",
@@ -445,8 +445,14 @@ if __name__ == "__main__":  # render the pairs section from the runs logged so f
     import sys
 
     if sys.argv[1:] == ["render-pairs"]:
-        done = [json.loads(line) for line in (ROOT / "out" / "diagnose_study_pairs.jsonl").read_text().splitlines()
-                if line.strip()]
+        # every log of runs of this study (a second runner may have taken the last seed from its end), each run once
+        seen: dict = {}
+        for path in sorted((ROOT / "out").glob("diagnose_study_pairs*.jsonl")):
+            for line in path.read_text().splitlines():
+                if line.strip():
+                    r = json.loads(line)
+                    seen[(r.get("kind") or "+".join(r["pair"]), r["seed"])] = r
+        done = list(seen.values())
         n_seeds = len({r["seed"] for r in done})
         summary = summarize_pairs(done)
         write_pairs_doc(render_pairs(summary, [r["seed"] for r in done][:n_seeds]))
