@@ -413,3 +413,52 @@ def test_evidence_that_contradicts_the_leader_gives_no_verdict():
     # a close runner-up whose evidence supports it takes the place (the tie-break)
     lead = _choose([cand("bank_angle", 0.05, False), cand("wind", 0.045, True)], 0.005)
     assert lead is not None and lead.name == "wind" and _gate(lead) is None
+
+
+def test_a_microphone_listed_30_m_off_is_placed_from_its_level_and_no_effect_is_named():
+    """m3 listed 30 m north-east of where it stood: its position is estimated (within 5 m), said so, nothing named."""
+    moved = study.move_mic(plates_control(), "m3", 30.0, 45.0)
+    r = run_diagnosis(moved, cards.load(CARD)).result
+    est = r["metadata"]["microphone_positions"]
+    # the level places m3 back where it stood: 30 m towards 225 deg from the listed position
+    back = np.array([-30.0 * math.sin(math.radians(45.0)), -30.0 * math.cos(math.radians(45.0))])
+    got = np.array([est["m3"]["relative_e_m"], est["m3"]["relative_n_m"]])
+    assert np.hypot(*(got - back)) < 5.0, got
+    assert est["m3"]["contradicts"] and 0 < est["m3"]["std_m"] < 5.0
+    assert not any(est[m]["contradicts"] for m in ("m1", "m2", "m4"))
+    sentence = next(t for t in r["metadata"]["contradictions"] if "m3" in t)
+    assert "from its listed position" in sentence and f"{est['m3']['relative_m']:.0f} m" in sentence
+    assert r["verdict"]["effect"] is None, r["verdict"]
+
+
+def test_absorption_in_the_band_levels_is_measured_as_a_multiple_of_iso_9613_1():
+    """Band levels losing 0.7 x ISO 9613-1 alpha d (15 C, 50 %): the multiple comes back and predicts held-out data."""
+    from dataclasses import replace
+
+    from gisnoise.acoustics import atmospheric_absorption, overall_a_level, third_octave_centres
+    from gisnoise.diagnose.bandtests import absorption_band_holdout
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    t = np.arange(n) * 0.25
+    base = table(t, np.where(np.arange(n) % 2, "m1", "m2"), np.zeros(n), flight=np.where(t < t[-1] / 2, "f1", "f2"),
+                 d=rng.uniform(30.0, 300.0, n))
+    f = third_octave_centres(100.0, 10000.0)
+    alpha = atmospheric_absorption(f, 15.0, 50.0, 101.325)
+    spectrum = 70.0 - 3.0 * np.log2(f / 1000.0) ** 2
+    meta = {"weather": {"temperature_c": 15.0, "humidity_pct": 50.0, "pressure_kpa": 101.325}}
+
+    def campaign(scale):
+        bands = (spectrum[None, :] - 20.0 * np.log10(base.d)[:, None] - scale * alpha[None, :] * base.d[:, None]
+                 + rng.normal(0.0, 0.5, (n, len(f))))
+        return replace(base, bands=bands, band_f=f, level=overall_a_level(bands, f), meta=meta)
+
+    fold, block, _ = fold_labels(base)
+    s = campaign(0.7)
+    band = absorption_band_holdout(s, s.inputs(1.0), fold, block)
+    assert band["iso_multiple"] == pytest.approx(0.7, abs=0.05)
+    assert band["p_value"] < 1e-6 and band["improvement_db2"] > 0.05
+    s = campaign(0.0)
+    band = absorption_band_holdout(s, s.inputs(1.0), fold, block)
+    assert band["iso_multiple"] == pytest.approx(0.0, abs=0.05)
+    assert band["p_value"] > 0.01

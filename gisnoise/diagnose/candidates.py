@@ -140,7 +140,9 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
                     x_ev: dict[str, Any], base_fit: FitResult, oof_base: np.ndarray, fold: np.ndarray, *,
                     cancel: CancelFn | None, bias_z: float, tick: Callable[[str], None],
                     overrides: Mapping[str, tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]]
-                    | None = None, screen_alpha: float | None = None) -> list[_Candidate]:
+                    | None = None, screen_alpha: float | None = None,
+                    base_fixed: Mapping[str, float] | None = None,
+                    screen_min_db2: float | None = None) -> list[_Candidate]:
     """Each named candidate: untestable with its reason, or fitted on all data and in the folds.
 
     ``x_ev`` are the inputs with the event windows (``event_window``) for ``background_event``;
@@ -149,7 +151,10 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
     adds evidence computed with the estimate, e.g. the band-level held-out test);
     a candidate whose fit fails keeps the error; ``tick(name)`` follows each candidate.  With
     ``screen_alpha``, a candidate whose Wald test on all data does not reach it is not refitted in the
-    folds (it cannot qualify; forward selection uses this to save time).
+    folds (it cannot qualify; forward selection uses this to save time).  ``base_fixed`` are parameters of
+    the base model held at their values (those an earlier effect of forward selection held, e.g. a reference
+    rpm).  With ``screen_min_db2``, a candidate whose in-sample improvement of the mean squared residual is
+    below half of it is not refitted in the folds either.
     """
     ev_list = ctx.event_windows
     cands: list[_Candidate] = []
@@ -180,7 +185,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
             tick(nme)
             continue
         try:
-            _attribute(cand, ctx, level, xe, base_fit, fold, cancel, bias_z, screen_alpha)
+            _attribute(cand, ctx, level, xe, base_fit, fold, cancel, bias_z, screen_alpha, base_fixed,
+                       screen_min_db2)
         except GisnoiseError as exc:
             if isinstance(exc, Cancelled):
                 raise
@@ -190,7 +196,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
 
 
 def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, Any], base_fit: FitResult,
-               fold: np.ndarray, cancel: CancelFn | None, bias_z: float, screen_alpha: float | None = None) -> None:
+               fold: np.ndarray, cancel: CancelFn | None, bias_z: float, screen_alpha: float | None = None,
+               base_fixed: Mapping[str, float] | None = None, screen_min_db2: float | None = None) -> None:
     """Fit one candidate on all data and in the two folds; fill its summary."""
     s = ctx.s
     n = len(s)
@@ -200,7 +207,7 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
     cand.model = model
     nb = ctx.base_model.n_params
     start = dict(zip(model.params, np.r_[base_fit.p, np.asarray(eff.start, dtype=float)], strict=True))
-    fixed = dict(eff.fixed(x)) if eff.fixed is not None else {}
+    fixed = {**dict(base_fixed or {}), **(dict(eff.fixed(x)) if eff.fixed is not None else {})}
     trials = 1
     if eff.initial is not None:
         init = dict(eff.initial(x, base_fit.residuals))
@@ -233,6 +240,13 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
         w, dof = _wald(full, tested)
         if min(1.0, trials * float(stats.chi2.sf(w, dof))) >= screen_alpha:
             cand.reason = "not significant on all data: not refitted in the folds"
+            return
+    if screen_min_db2 is not None and "band_holdout" not in cand.summary:
+        # held-out improvement rarely beats the in-sample one: far below the minimum, the folds cannot reach it
+        gain = float(np.mean(base_fit.residuals ** 2) - np.mean(full.residuals ** 2))
+        if gain < 0.5 * screen_min_db2:
+            cand.reason = (f"in-sample improvement {gain:.4f} dB^2 is below half the smallest held-out improvement "
+                           "a verdict needs: not refitted in the folds")
             return
     oof = np.empty(n)
     for f in (0, 1):

@@ -58,6 +58,7 @@ import numpy as np
 from gisnoise.diagnose.candidates import CancelFn, _Context, _fit, _fit_candidates, _predict, fold_labels
 from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.localization import _statistics, localize, measurement_noise, sample_regimes
+from gisnoise.diagnose.positions import POSITION_RADIUS_M, correct_positions
 from gisnoise.diagnose.samples import load_samples
 from gisnoise.diagnose.selection import forward_selection, metadata_overrides
 from gisnoise.diagnose.verdict import MIN_IMPROVEMENT_DB2, _judge, _rms
@@ -142,6 +143,7 @@ def run_diagnosis(
     bias_z: float = 3.0,
     include_events: bool = True,
     min_improvement_db2: float = MIN_IMPROVEMENT_DB2,
+    position_radius_m: float = POSITION_RADIUS_M,
     progress: ProgressFn | None = None,
     cancel: CancelFn | None = None,
 ) -> Diagnosis:
@@ -165,6 +167,9 @@ def run_diagnosis(
         part of the gap and the evidence for ``background_event``).
     min_improvement_db2 : float
         Smallest held-out improvement of the mean squared residual a verdict needs, dB^2.
+    position_radius_m : float
+        The stated radius around its listed position within which each microphone's position is
+        estimated from the data, m (:mod:`gisnoise.diagnose.positions`); 0 takes the positions as listed.
     """
     if not isinstance(card, ModelCard):
         raise InputError(f"card must be a ModelCard, got {type(card).__name__}", field="card")
@@ -174,6 +179,10 @@ def run_diagnosis(
                     ("min_improvement_db2", min_improvement_db2)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise InputError(f"{name} must be a positive number, got {v!r}", field=name)
+    if not (isinstance(position_radius_m, (int, float)) and math.isfinite(position_radius_m)
+            and 0 <= position_radius_m <= 500):
+        raise InputError(f"position_radius_m must be a number in [0, 500] m, got {position_radius_m!r}",
+                         field="position_radius_m")
     names = list(_effects.effect_names() if candidates is None else candidates)
     for nme in names:
         _effects.get_effect(nme)
@@ -202,12 +211,33 @@ def run_diagnosis(
                          f"found {len(s)} (phases with usable samples: {', '.join(have) or 'none'})", field="phase")
     n = len(s)
     ref = float(card.reference_power_w)
-    x: dict[str, Any] = dict(s.inputs(ref))
-    x["mic"] = s.mic.astype(str)
-    x["flight"] = s.flight.astype(str)
     base = card.model
     level = np.asarray(s.level, dtype=float)
     rows_all = np.arange(n)
+
+    def inputs(smp: Samples) -> dict[str, Any]:
+        xx: dict[str, Any] = dict(smp.inputs(ref))
+        xx["mic"] = smp.mic.astype(str)
+        xx["flight"] = smp.flight.astype(str)
+        return xx
+
+    def refit(xx: dict[str, Any], smp: Samples) -> Any:
+        try:
+            return _fit(level, xx, base, smp, rows_all, p0=card.p, cancel=cancel)
+        except FitError as exc:
+            raise FitError(f"diagnosis: the card's ansatz {base.name!r} cannot be refitted to these data: {exc}",
+                           field="card") from None
+
+    x = inputs(s)
+    # ---------------------------------------------------------------- microphone positions (metadata as a prior)
+    base_fit = refit(x, s)
+    positions: dict[str, Any] = {}
+    position_notes: list[str] = []
+    if position_radius_m > 0:
+        s, positions, position_notes = correct_positions(s, x, base, base_fit.p, radius_m=position_radius_m)
+        if position_notes:
+            x = inputs(s)
+            base_fit = refit(x, s)
 
     # ---------------------------------------------------------------- localization on the card's residual
     pred_card = np.broadcast_to(base.level(card.p, x, d_ref=card.reference_distance_m), (n,))
@@ -219,12 +249,7 @@ def run_diagnosis(
     statistics = _statistics(s, resid_card, flagged, reg)
     tick("localization")
 
-    # ---------------------------------------------------------------- baseline refit, folds
-    try:
-        base_fit = _fit(level, x, base, s, rows_all, p0=card.p, cancel=cancel)
-    except FitError as exc:
-        raise FitError(f"diagnosis: the card's ansatz {base.name!r} cannot be refitted to these data: {exc}",
-                       field="card") from None
+    # ---------------------------------------------------------------- baseline (refitted above), folds
     resid_base = base_fit.residuals
     fold, block, how = fold_labels(s, block_s=block_s)
     if len(np.unique(fold)) < 2:
@@ -248,7 +273,12 @@ def run_diagnosis(
                    background_db=bg, event_windows=ev_list)
 
     # ---------------------------------------------------------------- the metadata as a prior, candidates
-    overrides, metadata = metadata_overrides(s, x, base, base_fit.p, names, fold, block)
+    overrides, metadata = metadata_overrides(s, x, base, base_fit.p, names, fold, block,
+                                             background_db=card.background_db,
+                                             exclude=(ev_win >= 0) | (s.mask_reason.astype(str) == "event"))
+    if positions:
+        metadata["microphone_positions"] = positions
+        metadata["contradictions"] = position_notes + metadata["contradictions"]
     cands = _fit_candidates(names, ctx, level, x, x_ev, base_fit, oof_base, fold, cancel=cancel, bias_z=bias_z,
                             tick=tick, overrides=overrides)
 
@@ -256,9 +286,11 @@ def run_diagnosis(
     verdict, effects_out, level_alpha = _judge(cands, ctx, segments, oof_base, block, noise, base_fit, alpha=alpha,
                                                min_improvement_db2=min_improvement_db2)
     first = next((c for c in cands if c.name == verdict["effect"]), None)
+    steps: list[dict[str, Any]] = []
     verdict["effects"] = [] if first is None else forward_selection(
         first, cands, ctx, level, ev_win, oof_base, fold, block, noise, level_alpha=level_alpha,
-        min_improvement_db2=min_improvement_db2, overrides=overrides, cancel=cancel, bias_z=bias_z)
+        min_improvement_db2=min_improvement_db2, overrides=overrides, cancel=cancel, bias_z=bias_z, steps=steps)
+    verdict["selection_steps"] = steps
 
     result = {
         "schema": SCHEMA,

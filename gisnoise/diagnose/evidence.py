@@ -67,6 +67,14 @@ def _ev_bank(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
 
 
 def _ev_absorption(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
+    band = cand.summary.get("band_holdout")
+    if band is not None:  # the band-level test (windows of added sound left out) measured the tilt itself
+        beta, sd = band["iso_multiple"], band["iso_multiple_std"]
+        sup = True if beta > 0.1 and beta > 3.0 * sd else (False if beta <= 0.0 else None)
+        return {"supports": sup, "band_slope_vs_iso_alpha": -beta, "iso_multiple_std": sd,
+                "summary": f"the band levels tilt with distance as {beta:.2f} (+/- {sd:.2f}) x ISO 9613-1 alpha "
+                           f"(0: no uncorrected absorption, 1: all of it); the tilt predicts held-out band levels "
+                           f"{band['shrinkage_pct']:.0f} % better (RMS, p {band['p_value']:.1e})"}
     s = ctx.s
     if s.bands is None or s.band_f is None:
         return {"supports": None, "summary": "no band levels"}

@@ -19,7 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise.diagnose.bandtests import absorption_band_holdout
 from gisnoise.diagnose.candidates import CancelFn, _Candidate, _Context, _fit_candidates
+from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.metadata import (
     clocks_disagree,
     estimate_clock_offsets,
@@ -31,17 +33,20 @@ from gisnoise.measure import Samples
 from gisnoise.model import Ansatz, mic_height_agl
 from gisnoise.model import effects as _effects
 
-__all__ = ["MAX_EFFECTS", "forward_selection", "metadata_overrides"]
+__all__ = ["MAX_EFFECTS", "STEP_IMPROVEMENT_FACTOR", "forward_selection", "metadata_overrides"]
 
 MAX_EFFECTS = 4
 """Most effects forward selection adds."""
+STEP_IMPROVEMENT_FACTOR = 2.0
+"""An effect added after the first needs this multiple of the smallest held-out improvement of a verdict."""
 
 Override = tuple[_effects.Effect, dict[str, Any], list[str], dict[str, Any]]
 
 
 def metadata_overrides(s: Samples, x: Mapping[str, Any], base: Ansatz, p_base: np.ndarray,
                        names: Sequence[str], fold: np.ndarray,
-                       block: np.ndarray) -> tuple[dict[str, Override], dict[str, Any]]:
+                       block: np.ndarray, *, background_db: float | None = None,
+                       exclude: np.ndarray | None = None) -> tuple[dict[str, Override], dict[str, Any]]:
     """Candidates to test with inputs estimated from the data, and the ``metadata`` section of the report.
 
     Returns
@@ -76,6 +81,13 @@ def metadata_overrides(s: Samples, x: Mapping[str, Any], base: Ansatz, p_base: n
             overrides["ground_reflection"] = (_effects.get_effect("ground_reflection"), {"mic_agl": agl}, notes,
                                               {"band_holdout": band})
             doc["contradictions"] += notes
+    if "atmospheric_absorption" in names:
+        abs_band = absorption_band_holdout(s, x, fold, block, background_db=background_db, exclude=exclude)
+        if abs_band is not None:
+            doc["absorption_bands"] = {k: abs_band[k] for k in ("iso_multiple", "iso_multiple_std", "n_rows",
+                                                                "n_bands")}
+            overrides["atmospheric_absorption"] = (_effects.get_effect("atmospheric_absorption"), {}, [],
+                                                   {"band_holdout": abs_band})
     if "emission_time" in names and "t_e" in x:
         clocks = estimate_clock_offsets(s, x, base, p_base)
         doc["clock_offsets"] = clocks
@@ -108,36 +120,87 @@ def _entry(c: _Candidate, oof_ref: np.ndarray, oof_base: np.ndarray) -> dict[str
     return e
 
 
+def _worth_trying(c: _Candidate) -> bool:
+    """Whether a candidate is tried on top of the effects chosen.
+
+    When it was significant, or its band-level test was, or it improved held-out data significantly (a fit
+    that ends on a bound while another effect is unmodelled has no Wald test, yet it may hold an effect).
+    """
+    sm = c.summary
+    held_out = (sm.get("holdout_improvement_db2") or 0.0) > 0.0 and (sm.get("p_holdout") or 1.0) < 0.05
+    return bool(sm.get("significant") or sm.get("significant_bands") or held_out)
+
+
+def _step_score(c: _Candidate) -> dict[str, Any]:
+    """What forward selection saw of one candidate in one step."""
+    sm = c.summary
+    return {"effect": c.name, "p_value": sm.get("p_value"), "significant": sm.get("significant"),
+            "holdout_improvement_db2": sm.get("holdout_improvement_db2"), "p_holdout": sm.get("p_holdout"),
+            "p_bands": (sm.get("band_holdout") or {}).get("p_value"),
+            "evidence_supports": (sm.get("evidence") or {}).get("supports"),
+            "evidence": (sm.get("evidence") or {}).get("summary"),
+            "reason": (f"fit failed: {c.error}" if c.error else c.reason) or None}
+
+
 def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Context, level: np.ndarray,
                       ev_win: np.ndarray, oof_base: np.ndarray, fold: np.ndarray, block: np.ndarray,
                       noise: Mapping[str, float], *, level_alpha: float, min_improvement_db2: float,
                       overrides: Mapping[str, Override], cancel: CancelFn | None, bias_z: float,
-                      max_effects: int = MAX_EFFECTS) -> list[dict[str, Any]]:
+                      max_effects: int = MAX_EFFECTS,
+                      steps: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
     """The effects in the order forward selection adds them, each with its held-out shrinkage.
 
-    Candidates not significant alone are not tried again (an effect too weak to
-    show alone is not looked for under another).
+    Candidates that showed nothing alone (no significant test, band-level test or held-out
+    improvement) are not tried again (an effect too weak to show alone is not looked for under
+    another).  ``steps``, when given, receives one entry per step after the first: the candidates
+    tried on top of the model so far with their scores, and the one added (or None).
     """
     chosen = [_entry(first, oof_base, oof_base)]
-    names = [c.name for c in cands if c.name != first.name and c.fit is not None and c.summary.get("significant")]
+    names = [c.name for c in cands if c.name != first.name and c.fit is not None and _worth_trying(c)]
     cur = first
     noop: Callable[[str], None] = lambda _name: None  # noqa: E731
+    # the levels of added sound are nuisance parameters, one per window: held at their values once chosen
+    held: dict[str, float] = {}
+
+    def hold_events(c: _Candidate, base_params: Sequence[str]) -> None:
+        if c.name == "background_event" and c.fit is not None:
+            held.update({k: float(c.fit.params[k]) for k in c.fit.param_names if k not in base_params})
+
+    hold_events(first, ctx.base_model.params)
     while names and len(chosen) < max_effects:
         assert cur.model is not None and cur.fit is not None and cur.oof is not None and cur.x is not None
-        xcur = dict(cur.x)
-        xcur.pop("event_window", None)
+        xcur = dict(cur.x)  # with the event windows when the model so far has added sound
         ctx2 = replace(ctx, x=xcur, base_model=cur.model, p_base=cur.fit.p, resid_base=cur.fit.residuals)
         x_ev = dict(xcur, event_window=ev_win)
+        if "background_event" in names:
+            # windows of added sound are looked for again in what the effects chosen so far leave unexplained
+            l_uav = np.broadcast_to(cur.model.level_uav(cur.fit.p, xcur), level.shape)
+            bg = np.full(len(level), ctx.background_db if ctx.background_db is not None else -np.inf)
+            win, wins = residual_events(ctx.s, cur.fit.residuals, noise, l_uav, bg)
+            ctx2 = replace(ctx2, event_windows=wins)
+            x_ev = dict(xcur, event_window=win)
         step = _fit_candidates(names, ctx2, level, xcur, x_ev, cur.fit, cur.oof, fold, cancel=cancel,
-                               bias_z=bias_z, tick=noop, overrides=overrides, screen_alpha=level_alpha)
+                               bias_z=bias_z, tick=noop, overrides=overrides, screen_alpha=level_alpha,
+                               base_fixed={**dict(cur.fit.fixed), **held}, screen_min_db2=min_improvement_db2)
+        tried = step
         step = [c for c in step if c.oof is not None]
         _score(step, ctx2, cur.oof, block, noise, level_alpha)
         ranked = sorted([c for c in step if c.oof is not None and c.fit is not None],
                         key=lambda c: -c.summary.get("holdout_improvement_db2", -np.inf))
-        nxt = _choose(ranked, min_improvement_db2)
-        if nxt is None or _gate(nxt) is not None:
+        # after the first effect the residual holds what the imperfect forms of the chosen effects leave, and
+        # every candidate is tested again at each step: twice the smallest improvement, and the held-out test
+        # at the Bonferroni level of the Wald tests
+        nxt = _choose(ranked, STEP_IMPROVEMENT_FACTOR * min_improvement_db2, p_holdout_max=level_alpha)
+        gated = _gate(nxt) if nxt is not None else None
+        if steps is not None:
+            steps.append({"on_top_of": [e["effect"] for e in chosen],
+                          "added": None if nxt is None or gated else nxt.name,
+                          "reason": gated,
+                          "tried": [_step_score(c) for c in tried]})
+        if nxt is None or gated is not None:
             break
         chosen.append(_entry(nxt, cur.oof, oof_base))
-        names = [c.name for c in ranked if c.name != nxt.name and c.summary.get("significant")]
+        hold_events(nxt, cur.model.params)
+        names = [c.name for c in ranked if c.name != nxt.name and _worth_trying(c)]
         cur = nxt
     return chosen

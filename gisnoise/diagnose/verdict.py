@@ -132,15 +132,15 @@ def _score(cands: Sequence[_Candidate], ctx: _Context, oof_base: np.ndarray, blo
                 c.summary["evidence"] = {"supports": None, "summary": f"not computed: {exc}"}
 
 
-def _choose(ranked: Sequence[_Candidate], min_improvement_db2: float) -> _Candidate | None:
+def _choose(ranked: Sequence[_Candidate], min_improvement_db2: float, p_holdout_max: float = 0.05) -> _Candidate | None:
     """The verdict's candidate among the ranked ones, or None.
 
     The first significant candidate whose held-out improvement is large enough and
-    significant in the paired block test; a runner-up within 20 % of its improvement
-    takes its place when the evidence contradicts the leader and supports the runner-up.
+    significant in the paired block test (p below ``p_holdout_max``); a runner-up within 20 % of its
+    improvement takes its place when the evidence contradicts the leader and supports the runner-up.
     """
     eligible = [c for c in ranked if (c.summary["significant"] and c.summary["holdout_improvement_db2"] >= min_improvement_db2
-                and c.summary["p_holdout"] < 0.05) or _band_qualifies(c, min_improvement_db2)]
+                and c.summary["p_holdout"] < p_holdout_max) or _band_qualifies(c, min_improvement_db2)]
     if not eligible:
         return None
     verdict_c = eligible[0]
