@@ -40,9 +40,12 @@ from gisnoise.maps import _numba as _k
 numba = _k.numba
 
 #: Columns of the per-card rows ``hs`` (float64) the kernel reads.
-(H_TAB, H_NN, H_NJ, H_SI, H_SJ, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
- H_TA0, H_TINV, H_TNB, H_TBO, H_K0) = range(20)
-N_HS = 20
+(H_TAB, H_NN, H_NJ, H_SI, H_QB, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
+ H_TA0, H_TINV, H_TNB, H_TBO, H_K0, H_QS) = range(21)
+N_HS = 21
+
+#: Largest code of the table's 16-bit levels (``level = base + step * code``).
+Q_MAX = 65532
 
 _CSP = 10.0 / math.log2(10.0)
 """``20 lg d = _CSP log2(d^2)``, dB."""
@@ -55,7 +58,7 @@ if numba is not None:
     _K10 = _k._K10
     _DB_PER_LOG2 = _k._DB_PER_LOG2
     _FLUSH = _k._FLUSH
-    _LO = np.int64(0xFFFFFFFF)
+    _M16 = np.int64(0xFFFF)
 
     @_k._intrinsic
     def _vectorize_gathers(typingctx):
@@ -101,7 +104,8 @@ if numba is not None:
         nn = np.int32(hrow[H_NN])
         nj = np.int32(hrow[H_NJ])
         si = np.int32(hrow[H_SI])
-        sj = np.int32(hrow[H_SJ])
+        qb = np.float32(hrow[H_QB])
+        qs = np.float32(hrow[H_QS])
         imax = np.int32(hrow[H_IMAX])
         jmax = np.int32(hrow[H_JMAX])
         amin = np.float32(hrow[H_AMIN])
@@ -163,29 +167,27 @@ if numba is not None:
             fd = x - np.float32(kd)
             node = np.int32(ii * nj + jj)
             ro = np.int32(tb + node * nn + kd)
-            p00 = tab[ro]
-            p01 = tab[ro + sj]
-            p10 = tab[ro + si]
-            p11 = tab[ro + si + sj]
-            l00 = np.int32(p00 & _LO)
-            l01 = np.int32(p01 & _LO)
-            l10 = np.int32(p10 & _LO)
-            l11 = np.int32(p11 & _LO)
-            a00 = _k._i32_as_f32(l00)
-            a01 = _k._i32_as_f32(l01)
-            a10 = _k._i32_as_f32(l10)
-            a11 = _k._i32_as_f32(l11)
-            t00 = a00 + fd * (_k._i32_as_f32(np.int32(p00 >> 32)) - a00)
-            t01 = a01 + fd * (_k._i32_as_f32(np.int32(p01 >> 32)) - a01)
-            t10 = a10 + fd * (_k._i32_as_f32(np.int32(p10 >> 32)) - a10)
-            t11 = a11 + fd * (_k._i32_as_f32(np.int32(p11 >> 32)) - a11)
+            p0 = tab[ro]  # node (ii, jj) and (ii, jj + 1)
+            p1 = tab[ro + si]  # node (ii + 1, jj) and (ii + 1, jj + 1)
+            c00 = np.int32(p0 & _M16)
+            c01 = np.int32((p0 >> 32) & _M16)
+            c10 = np.int32(p1 & _M16)
+            c11 = np.int32((p1 >> 32) & _M16)
+            a00 = np.float32(c00)
+            a01 = np.float32(c01)
+            a10 = np.float32(c10)
+            a11 = np.float32(c11)
+            t00 = a00 + fd * (np.float32(np.int32((p0 >> 16) & _M16)) - a00)
+            t01 = a01 + fd * (np.float32(np.int32((p0 >> 48) & _M16)) - a01)
+            t10 = a10 + fd * (np.float32(np.int32((p1 >> 16) & _M16)) - a10)
+            t11 = a11 + fd * (np.float32(np.int32((p1 >> 48) & _M16)) - a11)
             w00 = (_F1 - wa) * (_F1 - wb)
             w01 = (_F1 - wa) * wb
             w10 = wa * (_F1 - wb)
             w11 = wa * wb
-            lv = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
-            fw = (w00 * np.float32(l00 & 1) + w01 * np.float32(l01 & 1) + w10 * np.float32(l10 & 1)
-                  + w11 * np.float32(l11 & 1))
+            lv = qb + qs * (w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11) - _F32_CSP * s + k0
+            fw = (w00 * np.float32(c00 & 1) + w01 * np.float32(c01 & 1) + w10 * np.float32(c10 & 1)
+                  + w11 * np.float32(c11 & 1))
             fw = max(fw, OUT[q])
             lev[q] = lv
             e = _k._exp2(lv * _K10)
