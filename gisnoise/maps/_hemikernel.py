@@ -14,9 +14,10 @@ and row segment, so that no per-cell call passes arrays):
   ``phi_t = atan2(-x_b, |z_b|)`` and ``theta_t = atan2(y_b, |z_b|)`` by its polynomial ``atan``
   (5e-7 rad).
 * **Fractional node indices without search.**  ``(a - g_0) / spacing`` on a uniform axis, else
-  ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals: piecewise linear
-  with its kinks at the nodes, so bilinear interpolation in ``u`` on the integers is bilinear
-  interpolation in the angles.
+  ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals, ``c_k`` the step of the slope
+  ``1 / (g_k+1 - g_k)`` at node ``k`` (``a`` is clamped to the axis): piecewise linear through
+  ``(g_k, k)``, so bilinear interpolation in ``u`` on the integers is bilinear interpolation in
+  the angles.
 * **One read per node.**  Per node, the A-weighted level without spherical spreading,
   ``T_q(d) = 10 lg sum_b 10^((L_b,q + A_b - alpha_b (d - r0)) / 10)``, is tabulated on a grid
   uniform in ``s``; each int64 entry holds the float32 levels at both ends of a step (node-major,
@@ -94,8 +95,8 @@ if numba is not None:
         """Level, energy and weight on filled nodes of ``m`` body vectors of one hemisphere card (row ``hrow``).
 
         Three vectorized passes over the cells: distance and table angles; fractional node
-        indices, ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals
-        (one product on a uniform axis); the table reads.  ``sc``: scratch ``(5, >= m)``.
+        indices, ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals (``c_k`` the steps of
+        the slope ``1 / (g_k+1 - g_k)``; one product on a uniform axis); the table reads.  ``sc``: scratch ``(5, >= m)``.
         With ``wt > 0`` the energies are added to the accumulators ``em`` (maximum), ``eacc``
         (``wt e``) and ``facc`` (``wt e fw``) instead of being written to ``ene`` and ``fwo``.
         """
@@ -151,9 +152,9 @@ if numba is not None:
                     Uo[q] = _F0
                 for kk in range(nint):
                     gk = axg[off + kk]
-                    ik = axinv[off + kk]
+                    ck = axinv[off + kk]
                     for q in range(m):
-                        Uo[q] += min(max((X[q] - gk) * ik, _F0), _F1)
+                        Uo[q] += max(X[q] - gk, _F0) * ck
         for q in range(m):
             u = lev[q]
             v = V[q]

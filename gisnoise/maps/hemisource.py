@@ -84,11 +84,13 @@ _PLACEHOLDER = ModelCard(id="hemisphere", vehicle="hemisphere", phase="horizonta
 
 
 def _axis(grid_deg: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
-    """A table axis as the kernel reads it: ``(g0, 1 / spacing or 0, nodes, 1 / interval widths)`` in radians.
+    """A table axis as the kernel reads it: ``(g0, 1 / spacing or 0, nodes, slope steps)`` in radians.
 
     On a uniform axis the fractional node index is ``(a - g0) / spacing``; otherwise the kernel
-    sums ``clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the intervals (piecewise linear, kinks
-    at the nodes: bilinear interpolation in it is bilinear interpolation in the angles).
+    sums ``c_k max(a - g_k, 0)`` over the intervals with ``c_k = 1 / w_k - 1 / w_k-1`` (``w_k``
+    the width of interval ``k``, ``1 / w_-1 = 0``): for ``g_0 <= a <= g_n`` the piecewise linear
+    function through ``(g_k, k)``, so bilinear interpolation in it is bilinear interpolation in
+    the angles.
     """
     g = np.radians(np.asarray(grid_deg, dtype=float))
     if g.size == 1:
@@ -96,7 +98,7 @@ def _axis(grid_deg: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
     sp = np.diff(g)
     uniform = np.ptp(sp) <= 1e-9 * sp.max()
     return float(g[0]), (1.0 / float(sp.mean()) if uniform else 0.0), g.astype(np.float32), \
-        np.append(1.0 / sp, 0.0).astype(np.float32)
+        np.append(np.diff(1.0 / sp, prepend=0.0), 0.0).astype(np.float32)
 
 
 def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, step: float = DIST_STEP
