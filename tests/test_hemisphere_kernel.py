@@ -101,6 +101,6 @@ def test_table_codes_hold_the_levels_within_one_step_and_the_filled_flags(m300):
     right = np.array([n if n % nt == nt - 1 else n + 1 for n in range(nn)])  # the last theta node pairs with itself
     want = [tab[:-1].T, tab[1:].T, tab[:-1, right].T, tab[1:, right].T]
     flags = [filled, filled, filled[right], filled[right]]
-    for f, w, fl in zip(fields, want, flags):
+    for f, w, fl in zip(fields, want, flags, strict=True):
         assert np.max(np.abs(base + step * f.astype(float) - w)) <= step * (1 + 1e-9)
         np.testing.assert_array_equal(f & np.uint64(1), np.broadcast_to(fl[:, None], f.shape).astype(np.uint64))

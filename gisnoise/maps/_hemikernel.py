@@ -18,13 +18,15 @@ and row segment, so that no per-cell call passes arrays):
   ``1 / (g_k+1 - g_k)`` at node ``k`` (``a`` is clamped to the axis): piecewise linear through
   ``(g_k, k)``, so bilinear interpolation in ``u`` on the integers is bilinear interpolation in
   the angles.
-* **One read per node.**  Per node, the A-weighted level without spherical spreading,
+* **Two reads per cell.**  Per node, the A-weighted level without spherical spreading,
   ``T_q(d) = 10 lg sum_b 10^((L_b,q + A_b - alpha_b (d - r0)) / 10)``, is tabulated on a grid
-  uniform in ``s``; each int64 entry holds the float32 levels at both ends of a step (node-major,
-  so neighbouring cells read neighbouring entries), the lowest bit of each the node's filled
-  flag.  The level is the trilinear interpolation (4 nodes x 2 distances) minus the spreading
-  ``-20 lg(d / r0)``, exact from ``s``; the filled flags weighted like the nodes give the weight
-  on filled nodes, whose energy is summed separately (``efill``) for the map's metadata.
+  uniform in ``s`` as 16-bit codes (``T = base + step * code``, ``step`` the card table's range
+  over :data:`Q_MAX`; the lowest bit of a code the node's filled flag).  Each int64 entry holds
+  the codes of two neighbouring theta nodes at both ends of a distance step (node-major, so
+  neighbouring cells read neighbouring entries).  The level is the trilinear interpolation
+  (4 nodes x 2 distances) minus the spreading ``-20 lg(d / r0)``, exact from ``s``; the filled
+  flags weighted like the nodes give the weight on filled nodes, whose energy is summed
+  separately (``efill``) for the map's metadata.
 
 The loops read tables at computed indices (gathers); LLVM vectorizes them only when the array
 arguments are known not to overlap (:func:`_vectorize_gathers`).

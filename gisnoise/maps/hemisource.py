@@ -195,11 +195,13 @@ def _quads(tab: np.ndarray, filled: np.ndarray, nj: int) -> tuple[np.ndarray, fl
     is its node's filled flag (1 filled, 0 measured), the code the nearest of that parity, so
     that a level is off by at most ``step`` (about 0.002 dB for a 130 dB range).
     """
+    if not np.isfinite(tab).all():
+        raise InputError("cards: a hemisphere card has node levels that are not finite numbers", field="cards")
     lo, hi = float(tab.min()), float(tab.max())
     step = max(hi - lo, 1e-6) / _hk.Q_MAX
     f = filled.astype(np.float64)[None, :]
-    code = 2.0 * np.floor(((tab - lo) / step - f) / 2.0 + 0.5) + f
-    code = np.clip(code, 0, _hk.Q_MAX + 1).astype(np.uint64)
+    near = 2.0 * np.floor(((tab - lo) / step - f) / 2.0 + 0.5) + f
+    code = np.clip(near, 0, _hk.Q_MAX + 1).astype(np.uint64)
     nn = code.shape[1]
     right = np.arange(nn) + 1
     right[nj - 1::nj] -= 1  # the last theta node pairs with itself
