@@ -82,3 +82,25 @@ def test_kernel_at_nodes_and_below(m300, sheets):
     v = body(50.0, 76.5, 75.0)  # a filled node
     _, fw = hemisphere_level_points(m300, v[0:1], v[1:2], v[2:3])
     assert float(fw[0]) == pytest.approx(1.0, abs=1e-4)
+
+
+def test_table_codes_hold_the_levels_within_one_step_and_the_filled_flags(m300):
+    """Four 16-bit codes per entry: both theta nodes at both distances, within one code step, flag in the lowest bit."""
+    from gisnoise.maps._hemikernel import Q_MAX
+    from gisnoise.maps.hemisource import _quads
+
+    tab, _, _ = distance_table(m300, 0.999, 5000.0)
+    filled = ~m300.measured.ravel()
+    nt = m300.theta_deg.size
+    q, base, step = _quads(tab, filled, nt)
+    assert step == pytest.approx((tab.max() - tab.min()) / Q_MAX)
+    assert step < 0.003  # the table spans less than 200 dB
+    nd, nn = tab.shape
+    codes = q.view(np.uint64).reshape(nn, nd - 1)
+    fields = [(codes >> np.uint64(16 * b)) & np.uint64(0xFFFF) for b in range(4)]
+    right = np.array([n if n % nt == nt - 1 else n + 1 for n in range(nn)])  # the last theta node pairs with itself
+    want = [tab[:-1].T, tab[1:].T, tab[:-1, right].T, tab[1:, right].T]
+    flags = [filled, filled, filled[right], filled[right]]
+    for f, w, fl in zip(fields, want, flags, strict=True):
+        assert np.max(np.abs(base + step * f.astype(float) - w)) <= step * (1 + 1e-9)
+        np.testing.assert_array_equal(f & np.uint64(1), np.broadcast_to(fl[:, None], f.shape).astype(np.uint64))

@@ -14,16 +14,19 @@ and row segment, so that no per-cell call passes arrays):
   ``phi_t = atan2(-x_b, |z_b|)`` and ``theta_t = atan2(y_b, |z_b|)`` by its polynomial ``atan``
   (5e-7 rad).
 * **Fractional node indices without search.**  ``(a - g_0) / spacing`` on a uniform axis, else
-  ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals: piecewise linear
-  with its kinks at the nodes, so bilinear interpolation in ``u`` on the integers is bilinear
-  interpolation in the angles.
-* **One read per node.**  Per node, the A-weighted level without spherical spreading,
+  ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals, ``c_k`` the step of the slope
+  ``1 / (g_k+1 - g_k)`` at node ``k`` (``a`` is clamped to the axis): piecewise linear through
+  ``(g_k, k)``, so bilinear interpolation in ``u`` on the integers is bilinear interpolation in
+  the angles.
+* **Two reads per cell.**  Per node, the A-weighted level without spherical spreading,
   ``T_q(d) = 10 lg sum_b 10^((L_b,q + A_b - alpha_b (d - r0)) / 10)``, is tabulated on a grid
-  uniform in ``s``; each int64 entry holds the float32 levels at both ends of a step (node-major,
-  so neighbouring cells read neighbouring entries), the lowest bit of each the node's filled
-  flag.  The level is the trilinear interpolation (4 nodes x 2 distances) minus the spreading
-  ``-20 lg(d / r0)``, exact from ``s``; the filled flags weighted like the nodes give the weight
-  on filled nodes, whose energy is summed separately (``efill``) for the map's metadata.
+  uniform in ``s`` as 16-bit codes (``T = base + step * code``, ``step`` the card table's range
+  over :data:`Q_MAX`; the lowest bit of a code the node's filled flag).  Each int64 entry holds
+  the codes of two neighbouring theta nodes at both ends of a distance step (node-major, so
+  neighbouring cells read neighbouring entries).  The level is the trilinear interpolation
+  (4 nodes x 2 distances) minus the spreading ``-20 lg(d / r0)``, exact from ``s``; the filled
+  flags weighted like the nodes give the weight on filled nodes, whose energy is summed
+  separately (``efill``) for the map's metadata.
 
 The loops read tables at computed indices (gathers); LLVM vectorizes them only when the array
 arguments are known not to overlap (:func:`_vectorize_gathers`).
@@ -40,9 +43,12 @@ from gisnoise.maps import _numba as _k
 numba = _k.numba
 
 #: Columns of the per-card rows ``hs`` (float64) the kernel reads.
-(H_TAB, H_NN, H_NJ, H_SI, H_SJ, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
- H_TA0, H_TINV, H_TNB, H_TBO, H_K0) = range(20)
-N_HS = 20
+(H_TAB, H_NN, H_NJ, H_SI, H_QB, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
+ H_TA0, H_TINV, H_TNB, H_TBO, H_K0, H_QS) = range(21)
+N_HS = 21
+
+#: Largest code of the table's 16-bit levels (``level = base + step * code``).
+Q_MAX = 65532
 
 _CSP = 10.0 / math.log2(10.0)
 """``20 lg d = _CSP log2(d^2)``, dB."""
@@ -55,7 +61,7 @@ if numba is not None:
     _K10 = _k._K10
     _DB_PER_LOG2 = _k._DB_PER_LOG2
     _FLUSH = _k._FLUSH
-    _LO = np.int64(0xFFFFFFFF)
+    _M16 = np.int64(0xFFFF)
 
     @_k._intrinsic
     def _vectorize_gathers(typingctx):
@@ -91,8 +97,8 @@ if numba is not None:
         """Level, energy and weight on filled nodes of ``m`` body vectors of one hemisphere card (row ``hrow``).
 
         Three vectorized passes over the cells: distance and table angles; fractional node
-        indices, ``u = sum_k clamp((a - g_k) / (g_k+1 - g_k), 0, 1)`` over the axis' intervals
-        (one product on a uniform axis); the table reads.  ``sc``: scratch ``(5, >= m)``.
+        indices, ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals (``c_k`` the steps of
+        the slope ``1 / (g_k+1 - g_k)``; one product on a uniform axis); the table reads.  ``sc``: scratch ``(5, >= m)``.
         With ``wt > 0`` the energies are added to the accumulators ``em`` (maximum), ``eacc``
         (``wt e``) and ``facc`` (``wt e fw``) instead of being written to ``ene`` and ``fwo``.
         """
@@ -101,7 +107,8 @@ if numba is not None:
         nn = np.int32(hrow[H_NN])
         nj = np.int32(hrow[H_NJ])
         si = np.int32(hrow[H_SI])
-        sj = np.int32(hrow[H_SJ])
+        qb = np.float32(hrow[H_QB])
+        qs = np.float32(hrow[H_QS])
         imax = np.int32(hrow[H_IMAX])
         jmax = np.int32(hrow[H_JMAX])
         amin = np.float32(hrow[H_AMIN])
@@ -147,9 +154,9 @@ if numba is not None:
                     Uo[q] = _F0
                 for kk in range(nint):
                     gk = axg[off + kk]
-                    ik = axinv[off + kk]
+                    ck = axinv[off + kk]
                     for q in range(m):
-                        Uo[q] += min(max((X[q] - gk) * ik, _F0), _F1)
+                        Uo[q] += max(X[q] - gk, _F0) * ck
         for q in range(m):
             u = lev[q]
             v = V[q]
@@ -163,29 +170,27 @@ if numba is not None:
             fd = x - np.float32(kd)
             node = np.int32(ii * nj + jj)
             ro = np.int32(tb + node * nn + kd)
-            p00 = tab[ro]
-            p01 = tab[ro + sj]
-            p10 = tab[ro + si]
-            p11 = tab[ro + si + sj]
-            l00 = np.int32(p00 & _LO)
-            l01 = np.int32(p01 & _LO)
-            l10 = np.int32(p10 & _LO)
-            l11 = np.int32(p11 & _LO)
-            a00 = _k._i32_as_f32(l00)
-            a01 = _k._i32_as_f32(l01)
-            a10 = _k._i32_as_f32(l10)
-            a11 = _k._i32_as_f32(l11)
-            t00 = a00 + fd * (_k._i32_as_f32(np.int32(p00 >> 32)) - a00)
-            t01 = a01 + fd * (_k._i32_as_f32(np.int32(p01 >> 32)) - a01)
-            t10 = a10 + fd * (_k._i32_as_f32(np.int32(p10 >> 32)) - a10)
-            t11 = a11 + fd * (_k._i32_as_f32(np.int32(p11 >> 32)) - a11)
+            p0 = tab[ro]  # node (ii, jj) and (ii, jj + 1)
+            p1 = tab[ro + si]  # node (ii + 1, jj) and (ii + 1, jj + 1)
+            c00 = np.int32(p0 & _M16)
+            c01 = np.int32((p0 >> 32) & _M16)
+            c10 = np.int32(p1 & _M16)
+            c11 = np.int32((p1 >> 32) & _M16)
+            a00 = np.float32(c00)
+            a01 = np.float32(c01)
+            a10 = np.float32(c10)
+            a11 = np.float32(c11)
+            t00 = a00 + fd * (np.float32(np.int32((p0 >> 16) & _M16)) - a00)
+            t01 = a01 + fd * (np.float32(np.int32((p0 >> 48) & _M16)) - a01)
+            t10 = a10 + fd * (np.float32(np.int32((p1 >> 16) & _M16)) - a10)
+            t11 = a11 + fd * (np.float32(np.int32((p1 >> 48) & _M16)) - a11)
             w00 = (_F1 - wa) * (_F1 - wb)
             w01 = (_F1 - wa) * wb
             w10 = wa * (_F1 - wb)
             w11 = wa * wb
-            lv = w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11 - _F32_CSP * s + k0
-            fw = (w00 * np.float32(l00 & 1) + w01 * np.float32(l01 & 1) + w10 * np.float32(l10 & 1)
-                  + w11 * np.float32(l11 & 1))
+            lv = qb + qs * (w00 * t00 + w01 * t01 + w10 * t10 + w11 * t11) - _F32_CSP * s + k0
+            fw = (w00 * np.float32(c00 & 1) + w01 * np.float32(c01 & 1) + w10 * np.float32(c10 & 1)
+                  + w11 * np.float32(c11 & 1))
             fw = max(fw, OUT[q])
             lev[q] = lv
             e = _k._exp2(lv * _K10)
