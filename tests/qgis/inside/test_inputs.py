@@ -154,18 +154,35 @@ def test_px4_log_file_gives_the_command_line_map(plugin, omni_card, cli, tmp_pat
     assert_same_raster(res["OUTPUT_RASTER"], tmp_path / "cli" / "levels.tif", atol=1e-4)
 
 
-def test_a_log_without_battery_current_needs_the_constant_power(plugin, omni_card, tmp_path):
-    from qgis.core import QgsProcessingException
-
+def test_quad_log_maps_from_its_battery_charge_and_power_w_overrides_it(plugin, omni_card, cli, tmp_path):
+    """The quad's power comes from the battery's charge count, as on the command line; POWER_W replaces it."""
     log = str(LOGS / "robologs_test_quad_fmuv5.ulg")
-    with pytest.raises(QgsProcessingException, match="power_w"):
-        _run(tmp_path, "nopower", TRAJECTORY_FILE=log, CARDS=[omni_card], RESOLUTION=20.0, MARGIN=100.0)
+    common = ["--card", omni_card, "--resolution", "20", "--margin", "100", "--levels", OPTIONS["LEVELS"],
+              "--engine", "numpy"]
+    res = _run(tmp_path, "own", TRAJECTORY_FILE=log, CARDS=[omni_card], RESOLUTION=20.0, MARGIN=100.0)
+    cli("contour", log, *common, "--out", tmp_path / "cli-own")
+    assert_same_raster(res["OUTPUT_RASTER"], tmp_path / "cli-own" / "levels.tif", atol=1e-4)
     res = _run(tmp_path, "power", TRAJECTORY_FILE=log, CARDS=[omni_card], RESOLUTION=20.0, MARGIN=100.0,
                POWER_W=150.0)
-    from conftest import read_raster
+    cli("contour", log, *common, "--power-w", "150", "--out", tmp_path / "cli-power")
+    assert_same_raster(res["OUTPUT_RASTER"], tmp_path / "cli-power" / "levels.tif", atol=1e-4)
 
-    bands, names, *_ = read_raster(res["OUTPUT_RASTER"])
-    assert names == ["LAmax", "LAeq", "SEL"] and bands[0].max() > 30.0
+
+def test_a_track_without_current_in_flight_needs_the_constant_power(plugin, omni_card, tmp_path):
+    from qgis.core import QgsProcessingException
+
+    from gisnoise.flight import read_route
+
+    tr = read_route(LOGS / "pyulog_sample_log_small_vtol.ulg").trajectory
+    csv = tmp_path / "no_current.csv"
+    tr.to_csv(csv)
+    text = csv.read_text().splitlines()
+    col = text[0].split(",").index("power_w")
+    rows = [",".join("0" if k == col else v for k, v in enumerate(line.split(","))) for line in text[1:]]
+    csv.write_text("\n".join([text[0], *rows]) + "\n")
+    with pytest.raises(QgsProcessingException, match="power[_-]w"):
+        _run(tmp_path, "nopower", TRAJECTORY_FILE=str(csv), CARDS=[omni_card], RESOLUTION=20.0, MARGIN=100.0,
+             GROUND_HEIGHT=float(tr.h.min()))
 
 
 def test_an_ardupilot_log_without_pymavlink_says_how_to_install_it(plugin, omni_card, tmp_path):
