@@ -317,20 +317,29 @@ def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory
              summary="Noise map of a trajectory (small at once, large as a job)")
 async def contours(req: ContourRequest, request: Request, state: StateDep,
                    job: bool = Query(False, description="Always answer with a job (202).")) -> Response:
-    req, traj, cards, cells = await run_in_threadpool(_prepare, req, state)
-    work = float(cells) * len(traj) * req.substeps
-    if job or work > state.settings.sync_work_limit:
+    timing: dict[str, float] = {}
+    # one worker-thread hop for a small map: prepare, and make it unless it becomes a job
+    req, traj, cards, cells, data = await run_in_threadpool(_prepare_and_map, req, state, job,
+                                                            request.headers.get("accept", ""), timing)
+    if data is None:
         require_key(request, request.headers.get("x-api-key"))  # a job is a write
         return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
     tiff = _want_tiff(req, request.headers.get("accept", ""))
-    timing: dict[str, float] = {}
-    data = await run_in_threadpool(_sync_map, traj, cards, req, tiff, timing)
     # where the time went (W3C Server-Timing, ms): the evaluator and the whole map (route planners tune with it)
     headers = {"Server-Timing": f"evaluate;dur={1000 * timing['evaluate']:.1f}, map;dur={1000 * timing['total']:.1f}"}
     if tiff:
         headers["Content-Disposition"] = 'attachment; filename="levels.tif"'
         return Response(data, media_type=MediaType.geotiff.value, headers=headers)
     return Response(data, media_type=MediaType.geojson.value, headers=headers)
+
+
+def _prepare_and_map(req: ContourRequest, state: State, job: bool, accept: str, timing: dict[str, float]
+                     ) -> tuple[ContourRequest, Trajectory, list[ModelCard], int, bytes | None]:
+    """:func:`_prepare`, then the map's bytes, or None when the request becomes a job (``job`` or large work)."""
+    req, traj, cards, cells = _prepare(req, state)
+    if job or float(cells) * len(traj) * req.substeps > state.settings.sync_work_limit:
+        return req, traj, cards, cells, None
+    return req, traj, cards, cells, _sync_map(traj, cards, req, _want_tiff(req, accept), timing)
 
 
 def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool,
