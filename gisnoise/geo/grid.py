@@ -138,7 +138,13 @@ def utm_crs(lon: float, lat: float) -> CRS:
         raise CRSError(f"no UTM zone for lon={lon!r}, lat={lat!r}", field="crs")
     zone = int(math.floor((((lon + 180.0) % 360.0)) / 6.0)) + 1
     zone = min(max(zone, 1), 60)
-    return CRS.from_epsg((32600 if lat >= 0 else 32700) + zone)
+    return _epsg_crs((32600 if lat >= 0 else 32700) + zone)
+
+
+@lru_cache(maxsize=128)
+def _epsg_crs(code: int) -> CRS:
+    """One CRS object per EPSG code, so the per-thread transformer cache (keyed by identity) hits."""
+    return CRS.from_epsg(code)
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,7 @@ from gisnoise.maps.sel import metric_levels
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.maps.result import MapResult
 
-__all__ = ["isobands", "isolines", "contour_features", "contours_geojson", "write_geojson", "geojson_text", "parse_levels",
+__all__ = ["isobands", "isolines", "contour_features", "contours_geojson", "write_geojson", "contours_text", "geojson_text", "parse_levels",
            "clipped_levels", "clip_warnings"]
 
 PRECISION_DEG = 1e-8
@@ -371,14 +371,19 @@ def write_geojson(result: MapResult, path: str | os.PathLike[str], levels: Any, 
     The positions are written by :func:`geojson_text` from the coordinate arrays (the same
     numbers as ``json.dumps`` of :func:`contours_geojson`, several times faster).
     """
-    feats = _features(result, levels, metrics, arrays=True)
-    text = geojson_text(_collection(result, levels, metrics, feats))
+    text = contours_text(result, levels, metrics=metrics)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(p.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, p)
     return p
+
+
+def contours_text(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> str:
+    """The text :func:`write_geojson` writes, in memory (a service answering without a file)."""
+    feats = _features(result, levels, metrics, arrays=True)
+    return geojson_text(_collection(result, levels, metrics, feats))
 
 
 _TOKEN = "\x00gisnoise-positions-"

@@ -49,7 +49,7 @@ from gisnoise.errors import InputError, TrajectoryError
 from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
 from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
-from gisnoise.maps.contours import clip_warnings, parse_levels, write_geojson
+from gisnoise.maps.contours import clip_warnings, contours_text, parse_levels, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map
@@ -65,7 +65,7 @@ DEFAULT_LEVELS = (45.0, 50.0, 55.0, 60.0)
 def make_map(
     trajectory: Trajectory | str | os.PathLike[str] | dict,
     cards: CardSet | Iterable[ModelCard | str | os.PathLike[str]] | ModelCard,
-    out_dir: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str] | None,
     *,
     resolution_m: float = 10.0,
     margin_m: float | None = None,
@@ -100,8 +100,9 @@ def make_map(
         (or its parsed JSON object, or a :class:`~gisnoise.flight.routes.Route`).
     cards : sequence of ModelCard or card paths, or CardSet
         One card per phase present in the trajectory.
-    out_dir : path
-        Output folder (created).
+    out_dir : path or None
+        Output folder (created); None: no files, the GeoJSON answered in memory as ``contours_text``
+        (``outputs`` must be ``("contours",)`` and ``plot`` false).
     resolution_m : float
         Cell size, m.
     margin_m : float, optional
@@ -146,7 +147,8 @@ def make_map(
     Returns
     -------
     dict
-        ``levels`` (Path of levels.tif), ``contours`` (Path of contours.geojson) as ``outputs`` asks,
+        ``levels`` (Path of levels.tif), ``contours`` (Path of contours.geojson) as ``outputs`` asks
+        (without ``out_dir``: ``contours_text``, the GeoJSON text),
         ``map`` (Path of map.png, with ``plot``), ``result`` (:class:`MapResult`),
         ``trajectory`` (:class:`Trajectory`), ``warnings`` (list of str: extent cut by the cell
         limit, clipped contours), ``timing_s`` (seconds: ``evaluate``, the evaluator; ``total``).
@@ -157,6 +159,9 @@ def make_map(
     if unknown or not outputs:
         raise InputError(f"outputs: give levels and/or contours, got {', '.join(map(str, outputs)) or 'none'}",
                          field="outputs")
+    if out_dir is None and (plot or set(outputs) != {"contours"}):
+        raise InputError("out: without an output folder only the contours are made, in memory (no GeoTIFF, "
+                         "no plot)", field="out")
     if plot:
         from gisnoise.maps.plots import require_matplotlib
 
@@ -177,8 +182,8 @@ def make_map(
                                   background=background, sel="SEL" in metrics)
     warnings = ([unpowered] if unpowered is not None else []) + power_warnings + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None and out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
 
     def eval_progress(f: float) -> None:
@@ -204,15 +209,18 @@ def make_map(
     result.metadata["levels_db"] = lv
     warnings = warnings + clip_warnings(result, lv)
     result.metadata["warnings"] = warnings
-    out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Any] = {}
-    if "levels" in outputs:
-        paths["levels"] = write_geotiff(result, out / "levels.tif")
-    if "contours" in outputs:
-        paths["contours"] = write_geojson(result, out / "contours.geojson", lv)
+    if out is None:  # levels and plot were refused above
+        paths["contours_text"] = contours_text(result, lv)
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        if "levels" in outputs:
+            paths["levels"] = write_geotiff(result, out / "levels.tif")
+        if "contours" in outputs:
+            paths["contours"] = write_geojson(result, out / "contours.geojson", lv)
     if progress is not None:
         progress(0.97)
-    if plot:
+    if plot and out is not None:
         from gisnoise.maps.plots import plot_map
 
         paths["map"] = plot_map(result, out / "map.png", levels=lv, trajectory=traj, metric=plot_metric)

@@ -48,12 +48,16 @@ from gisnoise.service.models import (
 )
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 from gisnoise.service.routes_jobs import JOB_LINKS, job_info
+from gisnoise.service.trajcache import TrajectoryCache, route_key
 
-__all__ = ["router", "run_contour_job", "build_trajectory", "resolve_cards", "make_map_files"]
+__all__ = ["router", "run_contour_job", "build_trajectory", "resolve_cards", "make_map_files", "map_geojson_text"]
 
 router = APIRouter(tags=["contours"])
 
 _sync_slots = threading.BoundedSemaphore(2)
+
+ROUTE_CACHE = TrajectoryCache(32)
+"""Trajectories of GeoJSON and waypoint routes, by the route's canonical JSON and the sample limit."""
 
 
 # ------------------------------------------------------------------ request -> core objects
@@ -116,7 +120,8 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
         elif isinstance(spec, GeoJSONTrajectory):
             from gisnoise.flight import routes
 
-            traj = routes.read_trajectory(spec.data)
+            traj = ROUTE_CACHE.get(route_key(spec.data, spec.format, max_samples, repr(limits.current())),
+                                   lambda: routes.read_trajectory(spec.data))
         elif isinstance(spec, LogTrajectory):
             traj = _read_log(spec)
         else:  # pragma: no cover - the request model admits no other
@@ -219,6 +224,19 @@ def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest
     Returns the paths by file name; ``timing`` (when given) receives ``make_map``'s seconds
     (``evaluate``, ``total``).
     """
+    paths = _make_map(traj, cards, req, out_dir, tuple(_OUTPUTS[f] for f in files), progress, cancel, timing)
+    return {f: Path(paths[_OUTPUTS[f]]) for f in files}
+
+
+def map_geojson_text(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, *,
+                     timing: dict[str, float] | None = None) -> str:
+    """The text of contours.geojson for a request, made in memory (no folder): the same text the file has."""
+    return str(_make_map(traj, cards, req, None, ("contours",), None, None, timing)["contours_text"])
+
+
+def _make_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path | None,
+              outputs: tuple[str, ...], progress: Callable[..., None] | None, cancel: Callable[[], bool] | None,
+              timing: dict[str, float] | None) -> dict[str, Any]:
     from gisnoise.maps import make_map
 
     ground_h = req.ground_h_m
@@ -237,10 +255,10 @@ def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest
                          uncertainty=req.uncertainty, plot=False,
                          period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
                          substeps=req.substeps, background=req.background, progress=progress, cancel=cancel,
-                         outputs=tuple(_OUTPUTS[f] for f in files))
+                         outputs=outputs)
     if timing is not None:
         timing.update(paths["timing_s"])
-    return {f: Path(paths[_OUTPUTS[f]]) for f in files}
+    return paths
 
 
 _OUTPUTS = {"levels.tif": "levels", "contours.geojson": "contours"}
@@ -299,14 +317,14 @@ def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory
              summary="Noise map of a trajectory (small at once, large as a job)")
 async def contours(req: ContourRequest, request: Request, state: StateDep,
                    job: bool = Query(False, description="Always answer with a job (202).")) -> Response:
-    req, traj, cards, cells = await run_in_threadpool(_prepare, req, state)
-    work = float(cells) * len(traj) * req.substeps
-    if job or work > state.settings.sync_work_limit:
+    timing: dict[str, float] = {}
+    # one worker-thread hop for a small map: prepare, and make it unless it becomes a job
+    req, traj, cards, cells, data = await run_in_threadpool(_prepare_and_map, req, state, job,
+                                                            request.headers.get("accept", ""), timing)
+    if data is None:
         require_key(request, request.headers.get("x-api-key"))  # a job is a write
         return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
     tiff = _want_tiff(req, request.headers.get("accept", ""))
-    timing: dict[str, float] = {}
-    data = await run_in_threadpool(_sync_map, traj, cards, req, tiff, timing)
     # where the time went (W3C Server-Timing, ms): the evaluator and the whole map (route planners tune with it)
     headers = {"Server-Timing": f"evaluate;dur={1000 * timing['evaluate']:.1f}, map;dur={1000 * timing['total']:.1f}"}
     if tiff:
@@ -315,11 +333,23 @@ async def contours(req: ContourRequest, request: Request, state: StateDep,
     return Response(data, media_type=MediaType.geojson.value, headers=headers)
 
 
+def _prepare_and_map(req: ContourRequest, state: State, job: bool, accept: str, timing: dict[str, float]
+                     ) -> tuple[ContourRequest, Trajectory, list[ModelCard], int, bytes | None]:
+    """:func:`_prepare`, then the map's bytes, or None when the request becomes a job (``job`` or large work)."""
+    req, traj, cards, cells = _prepare(req, state)
+    if job or float(cells) * len(traj) * req.substeps > state.settings.sync_work_limit:
+        return req, traj, cards, cells, None
+    return req, traj, cards, cells, _sync_map(traj, cards, req, _want_tiff(req, accept), timing)
+
+
 def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool,
               timing: dict[str, float] | None = None) -> bytes:
-    with _sync_slots, tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
-        name = "levels.tif" if tiff else "contours.geojson"  # only the file the answer carries
-        return make_map_files(traj, cards, req, Path(tmp), files=(name,), timing=timing)[name].read_bytes()
+    with _sync_slots:
+        if not tiff:  # only the file the answer carries, and no folder for it
+            return map_geojson_text(traj, cards, req, timing=timing).encode("utf-8")
+        with tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
+            return make_map_files(traj, cards, req, Path(tmp), files=("levels.tif",), timing=timing)[
+                "levels.tif"].read_bytes()
 
 
 @router.post("/jobs/contours", status_code=202, response_model=JobInfo, dependencies=WRITE,
