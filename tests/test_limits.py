@@ -235,3 +235,16 @@ def test_safe_identifier_pattern(value, ok):
         with pytest.raises(InputError):
             limits.check_id(value)
 
+
+
+@pytest.mark.parametrize("alts", [(1.7e308, -1.7e308), (0.0, 5e5)])
+def test_waypoint_altitudes_out_of_range_are_refused_before_the_path_is_flown(alts):
+    """Altitudes whose difference overflows (a path of infinite length) or above the height ceiling: field alt."""
+    from gisnoise.errors import TrajectoryError
+    from gisnoise.flight import routes
+
+    doc = {"schema": "gisnoise/waypoints/1", "ground_h_m": 80.0,
+           "waypoints": [{"lon": 10.0, "lat": 52.0, "alt": alts[0]}, {"lon": 10.001, "lat": 52.0, "alt": alts[1]}]}
+    with pytest.raises(TrajectoryError) as err:
+        routes.read_trajectory(doc)
+    assert err.value.field == "alt" and "\n" not in str(err.value)

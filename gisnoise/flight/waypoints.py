@@ -53,7 +53,7 @@ from gisnoise.flight.phases import MULTICOPTER_PHASES, PHASES
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.flight.vehicle import GRAVITY, VehicleModel
 from gisnoise.geo import LocalFrame, wrap_angle
-from gisnoise.limits import check_range, check_samples, current
+from gisnoise.limits import check_heights, check_range, check_samples, current
 
 __all__ = ["Route", "route_from_waypoints", "WAYPOINTS_SCHEMA"]
 
@@ -240,6 +240,7 @@ def route_from_waypoints(waypoints: Sequence[Mapping[str, Any]], settings: Mappi
         hd = None if hd is None else math.radians(_num(hd, "heading_deg", source, i))
         extra.append((speed, phase, hold, hd))
     h, ground = _heights(alt, lon, lat, st, dem, dem_offset_m, source)
+    check_heights(h, field="alt", source=f"{source}: waypoints", error=TrajectoryError)  # before any geometry
     frame = LocalFrame(float(lat[0]), float(lon[0]), float(h[0] - alt[0]) if st["altitude_reference"] == "agl"
                        else float(h.min()))
     e, n, u = frame.to_enu(lat, lon, h)
@@ -434,7 +435,8 @@ def _forward_section(dense: _Dense, wps: Sequence[_Wp], veh: VehicleModel, start
     s_wp[-1] = total
     if total <= 0:
         return float(course[-1]) if m else 0.0
-    ns = max(3, check_samples(math.ceil(total / 0.5) + 1, field="waypoints", what="path", dense=True))
+    check_samples(total / 0.5 + 1.0, field="waypoints", what="path", dense=True)  # a non-finite length too
+    ns = max(3, math.ceil(total / 0.5) + 1)
     sg = np.linspace(0.0, total, ns)
     ds = sg[1] - sg[0]
     vlim = np.full(ns, np.inf)
