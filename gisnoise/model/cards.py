@@ -134,16 +134,26 @@ def _fail(msg: str, fld: str) -> None:
     raise CardError(f"model card: {msg}", field=fld)
 
 
-def _validate(card: ModelCard) -> None:
-    for name in ("id", "vehicle", "phase", "ansatz"):
+def _check_card_identity(card: Any, kind: str = "model card") -> None:
+    """The fields every card kind shares: ``id``, ``vehicle``, ``phase`` (non-empty strings) and
+    ``phase``/``phases`` among the flight phases; :class:`CardError` naming the field, the message
+    starting with ``kind``."""
+    for name in ("id", "vehicle", "phase"):
         v = getattr(card, name)
         if not isinstance(v, str) or not v:
-            _fail(f"field '{name}' must be a non-empty string, got {v!r}", name)
+            raise CardError(f"{kind}: field '{name}' must be a non-empty string, got {v!r}", field=name)
     if card.phase not in PHASES:
-        _fail(f"field 'phase' must be one of {', '.join(PHASES)}, got {card.phase!r}", "phase")
+        raise CardError(f"{kind}: field 'phase' must be one of {', '.join(PHASES)}, got {card.phase!r}",
+                        field="phase")
     for ph in card.phases:
         if ph not in PHASES:
-            _fail(f"field 'phases' has unknown phase {ph!r}", "phases")
+            raise CardError(f"{kind}: field 'phases' has unknown phase {ph!r}", field="phases")
+
+
+def _validate(card: ModelCard) -> None:
+    _check_card_identity(card)
+    if not isinstance(card.ansatz, str) or not card.ansatz:
+        _fail(f"field 'ansatz' must be a non-empty string, got {card.ansatz!r}", "ansatz")
     try:
         model = get_ansatz(card.ansatz)
     except Exception as exc:  # noqa: BLE001 - re-raised with the field named

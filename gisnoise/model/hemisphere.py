@@ -46,9 +46,8 @@ import numpy as np
 
 from gisnoise.acoustics import a_weighting, atmospheric_absorption, exact_frequency
 from gisnoise.errors import CardError
-from gisnoise.flight import PHASES
 from gisnoise.model.ansatz import Ansatz
-from gisnoise.model.cards import ModelCard, register_card_schema
+from gisnoise.model.cards import ModelCard, _check_card_identity, register_card_schema
 
 __all__ = ["HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "HemisphereCard", "hemisphere_from_dict", "table_angles"]
 
@@ -152,15 +151,7 @@ class HemisphereCard(ModelCard):
 
     # ------------------------------------------------------------------ checks
     def _validate(self) -> None:
-        for name in ("id", "vehicle", "phase"):
-            v = getattr(self, name)
-            if not isinstance(v, str) or not v:
-                _fail(f"field '{name}' must be a non-empty string, got {v!r}", name)
-        if self.phase not in PHASES:
-            _fail(f"field 'phase' must be one of {', '.join(PHASES)}, got {self.phase!r}", "phase")
-        for ph in self.phases:
-            if ph not in PHASES:
-                _fail(f"field 'phases' has unknown phase {ph!r}", "phases")
+        _check_card_identity(self, "hemisphere card")
         if self.ansatz != HEMISPHERE_ANSATZ:
             _fail(f"field 'ansatz' must be {HEMISPHERE_ANSATZ!r}, got {self.ansatz!r}", "ansatz")
         if dict(self.parameters):
