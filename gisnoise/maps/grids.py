@@ -21,7 +21,7 @@ grid's edge (a fixed margin, or the cell limit) carry ``"clipped": true``
 
 Examples
 --------
->>> from gisnoise.model import ModelCard, get_ansatz
+>>> from gisnoise.model import HemisphereCard, ModelCard, get_ansatz
 >>> p = {"p0": 60.0, "p1": 0.0, "p2": 0.0, "p3": 0.0, "p4": 0.0, "p5": 0.0, "p6": 1.0, "p7": 30.0}
 >>> c = ModelCard(id="c", vehicle="v", phase="horizontal", ansatz="paper-offset", parameters=p,
 ...               reference_power_w=1000.0)
@@ -44,7 +44,7 @@ from gisnoise.flight import Trajectory
 from gisnoise.geo import GridSpec, grid_for_points, max_cells
 from gisnoise.maps.cardset import CardSet
 from gisnoise.maps.sel import SEL_OFFSET_DB, sel_margin
-from gisnoise.model import ModelCard, get_ansatz
+from gisnoise.model import HemisphereCard, ModelCard, get_ansatz
 
 __all__ = ["grid_for_trajectory", "grid_for_map", "auto_margin", "audible_distance", "level_table", "MAX_DISTANCE_M",
            "SIZED_METRICS"]
@@ -95,9 +95,16 @@ def level_table(cards: Sequence[ModelCard], powers_w: Sequence[float]) -> tuple[
     sphere at each of them at ``powers_w[i]`` (``-inf`` for a card without a positive power)."""
     phi, theta, d = np.meshgrid(_PHI, _THETA, _DISTANCES, indexing="ij")
     table = np.full((len(cards), _DISTANCES.size), -np.inf)
+    done: dict[tuple[int, float | None], int] = {}  # a row already computed for the same card (and power)
     for i, (card, pw) in enumerate(zip(cards, powers_w, strict=True)):
         if not math.isfinite(float(pw)) or float(pw) <= 0:
             continue
+        # a measured hemisphere's levels do not depend on the electric power: one row serves all its powers
+        key = (id(card), None if isinstance(card, HemisphereCard) else float(pw))
+        if key in done:
+            table[i] = table[done[key]]
+            continue
+        done[key] = i
         try:
             lv = card.level_uav(card.inputs(d, phi, theta, float(pw)))
         except InputError as exc:
