@@ -19,7 +19,7 @@ from gisnoise.geo import (  # noqa: E402
 )
 from gisnoise.maps import evaluate_grid  # noqa: E402
 from gisnoise.maps import fastkernel as fk  # noqa: E402
-from gisnoise.model import ModelCard  # noqa: E402
+from gisnoise.model import ModelCard, get_ansatz  # noqa: E402
 
 LAT0, LON0 = 52.27, 10.52
 TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
@@ -88,20 +88,25 @@ def test_kernel_level_equals_the_registry_ansatz(ansatz):
     assert np.max(np.abs(fast - ref)) < 1e-3
 
 
-def test_receiver_dependent_extension_is_refused():
-    ext = ModelCard(id="abs", vehicle="t", phase="horizontal", ansatz="paper-offset+atmospheric_absorption",
-                    parameters=dict(p0=66.0, p1=20.0, p2=0.1, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0, a_abs=3.0),
-                    reference_power_w=3000.0)
+def test_extensions_the_kernel_does_not_implement_are_refused():
+    # emission_time reads the receiver through bound covariates of a campaign: not a map's term
+    et = ModelCard(id="et", vehicle="t", phase="horizontal", ansatz="paper-offset+emission_time",
+                   parameters=dict(p0=66.0, p1=20.0, p2=0.1, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0,
+                                   **{k: 0.0 for k in get_ansatz("paper-offset+emission_time").params[8:]}),
+                   reference_power_w=3000.0)
     with pytest.raises(CardError, match="depends on the receiver") as err:
-        evaluate_grid(circle_flight(5), [ext], grid_around(50.0, 3, 3), ground_h=0.0, engine="fast")
+        evaluate_grid(circle_flight(5), [et], grid_around(50.0, 3, 3), ground_h=0.0, engine="fast")
     assert err.value.field == "ansatz"
-    dop = ModelCard(id="dop", vehicle="t", phase="horizontal", ansatz="paper-offset+doppler",
-                    parameters=dict(p0=66.0, p1=20.0, p2=0.1, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0,
-                                    q_doppler=1.0), reference_power_w=3000.0)
-    with pytest.raises(CardError, match="use engine='numpy'"):
-        evaluate_grid(circle_flight(5), [dop], grid_around(50.0, 3, 3), ground_h=0.0, engine="fast")
-    # the default engine maps both on the NumPy engine and says so
-    res = evaluate_grid(circle_flight(5), [ext], grid_around(50.0, 3, 3), ground_h=0.0)
+    from gisnoise.maps import fast_engine_serves
+
+    assert "emission_time" in fast_engine_serves([et])
+    # a ground reflection coefficient outside the effect's bounds [0, 1]: the NumPy engine maps it
+    gr = ModelCard(id="gr", vehicle="t", phase="horizontal", ansatz="paper-offset+ground_reflection",
+                   parameters=dict(p0=66.0, p1=20.0, p2=0.1, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0,
+                                   r_ground=1.5, f_ground=300.0), reference_power_w=3000.0)
+    with pytest.raises(CardError, match="r_ground"):
+        evaluate_grid(circle_flight(5), [gr], grid_around(50.0, 3, 3), ground_h=0.0, engine="fast")
+    res = evaluate_grid(circle_flight(5), [gr], grid_around(50.0, 3, 3), ground_h=0.0)
     assert res.metadata["engine"] == "numpy"
 
 

@@ -54,6 +54,8 @@ def test_warm_up_fills_the_cache_that_later_processes_load(tmp_path):
     assert first.stderr.strip() == ""
     files = sorted(p.name for p in tmp_path.rglob("*.nbi"))
     assert any(name.startswith("_numba._window_kernel") for name in files), files
+    # the kernel of receiver-dependent effect terms (+doppler, +ground_reflection, ...) too
+    assert any(name.startswith("_numba_receiver._receiver_window_kernel") for name in files), files
     stamps = {p: p.stat().st_mtime_ns for p in tmp_path.rglob("*.nbc")}
     second = run(env)
     assert second.returncode == 0 and second.stdout == first.stdout

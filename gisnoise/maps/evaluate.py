@@ -28,8 +28,8 @@ positions, power linearly, angles on the circle, phase from the earlier sample).
 
 ``engine="auto"`` (the default)
     the fast engine whenever it computes what is asked (:func:`fast_engine_serves`), else
-    the NumPy engine: for the uncertainty bands, a ``kernel=`` replacement, or cards whose
-    terms depend on the receiver.  ``metadata["engine"]`` names the engine that ran;
+    the NumPy engine: for the uncertainty bands, a ``kernel=`` replacement, or cards it does
+    not implement.  ``metadata["engine"]`` names the engine that ran;
 
 ``engine="numpy"``
     the reference (:mod:`gisnoise.maps.reference`): any ansatz, the uncertainty bands
@@ -37,7 +37,9 @@ positions, power linearly, angles on the circle, phase from the earlier sample).
 ``engine="fast"``
     the numba kernel in float32 (:mod:`gisnoise.maps.fastkernel`): the ansatzes ``paper``
     and ``paper-offset`` and their extensions by per-instant effects (``bank_angle``,
-    ``rpm``; :mod:`gisnoise.maps.fast_effects`) and measured hemisphere cards
+    ``rpm``; :mod:`gisnoise.maps.fast_effects`) and by receiver-dependent ones
+    (``atmospheric_absorption``, ``wind``, ``doppler``, ``ground_reflection``;
+    :mod:`gisnoise.maps.receiver_terms`), alone and in chains, and measured hemisphere cards
     (:mod:`gisnoise.maps.hemisource`), the same bands within 0.01 dB, an optional
     audibility floor.
 """
@@ -58,6 +60,7 @@ from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.fast_effects import NotOnFastEngine, base_card
 from gisnoise.maps.fastkernel import evaluate_fast
 from gisnoise.maps.prepare import MapOptions
+from gisnoise.maps.receiver_terms import receiver_terms
 from gisnoise.maps.reference import DEFAULT_BLOCK, evaluate_numpy
 from gisnoise.maps.result import METRICS, MapResult
 from gisnoise.model import HemisphereCard, ModelCard, check_card
@@ -78,7 +81,9 @@ def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, unce
 
     It cannot without numba, with the uncertainty bands or a ``kernel=`` replacement, or
     for a card whose ansatz is neither ``paper``/``paper-offset`` nor one of their
-    extensions by per-instant effects (hemisphere cards it computes).
+    extensions by per-instant effects and the receiver-dependent ones of
+    :mod:`gisnoise.maps.receiver_terms` (hemisphere cards it computes, but not in one
+    request with receiver-dependent terms).
     """
     if _numba.numba is None:
         return "numba is not installed"
@@ -86,11 +91,16 @@ def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, unce
         return "the uncertainty bands need the NumPy engine"
     if kernel is not None:
         return "a kernel replacement belongs to the NumPy engine"
-    for c in as_cardset(cards).cards:
+    cs = as_cardset(cards).cards
+    hemi = any(isinstance(c, HemisphereCard) for c in cs)
+    for c in cs:
         if isinstance(c, HemisphereCard):  # measured hemispheres: their kernel (maps/hemisource.py)
             continue
         try:
             base_card(c)
+            if receiver_terms(c) is not None and hemi:
+                return (f"card {c.id!r}: the receiver-dependent terms of {c.ansatz!r} are not combined with "
+                        "measured hemisphere cards on the fast engine")
         except CardError as exc:
             return str(exc)
     return None

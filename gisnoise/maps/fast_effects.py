@@ -1,9 +1,11 @@
 """Effect extensions on the fast engine: per-instant level terms from the model's own evaluation.
 
 A card ``"<base>+<effect>[+...]"`` whose base is one of the kernel's ansatzes
-(``paper``, ``paper-offset``) and whose extension terms depend on the instant only
-(``bank_angle``: the roll angle; ``rpm``: the propeller speed) maps on the fast engine:
-the kernel evaluates the base and adds, per instant, the extension's term ``dL``.
+(``paper``, ``paper-offset``) maps on the fast engine when each extension term depends
+on the instant only (``bank_angle``: the roll angle; ``rpm``: the propeller speed) or is
+one of the library's receiver-dependent terms (:data:`RECEIVER_EFFECTS`, computed per
+cell by the kernel: :mod:`gisnoise.maps.receiver_terms`).  The kernel evaluates the base
+and adds, per instant, the per-instant effects' term ``dL``.
 
 ``dL`` is not re-implemented here: it is the card's own ansatz
 (:mod:`gisnoise.model.effects`, the definition fitting and diagnosis use) minus its base,
@@ -25,7 +27,8 @@ from gisnoise.errors import CardError, InputError
 from gisnoise.maps.reference import _BASE_INPUTS, _SampleExtras
 from gisnoise.model import ModelCard, get_ansatz
 
-__all__ = ["INSTANT_TERM_TOL_DB", "KERNEL_BASES", "NotOnFastEngine", "base_card", "instant_offsets"]
+__all__ = ["INSTANT_TERM_TOL_DB", "KERNEL_BASES", "RECEIVER_EFFECTS", "NotOnFastEngine", "base_card", "instant_card",
+           "instant_offsets"]
 
 
 class NotOnFastEngine(CardError):
@@ -42,12 +45,31 @@ _PROBES = ((3.0, -2.6, -1.3), (40.0, 0.4, -0.2), (750.0, 2.1, 1.1))
 
 _RECEIVER_INPUTS = ("mic_enu",)
 
+RECEIVER_EFFECTS = ("atmospheric_absorption", "wind", "doppler", "ground_reflection")
+"""The library's effects whose term depends on the receiver; the kernel computes them per cell."""
+
+
+def instant_card(card: ModelCard) -> ModelCard | None:
+    """``card`` without its receiver-dependent effects (:data:`RECEIVER_EFFECTS`): its base and per-instant effects.
+
+    ``card`` itself when it has no receiver-dependent effect; None when it has no per-instant one.
+    """
+    base, *chain = card.ansatz.split("+")
+    inst = [e for e in chain if e not in RECEIVER_EFFECTS]
+    if len(inst) == len(chain):
+        return card
+    if not inst:
+        return None
+    name = "+".join([base, *inst])
+    params = {k: float(card.parameters[k]) for k in get_ansatz(name).params}
+    return dataclasses.replace(card, ansatz=name, parameters=params, covariance=None)
+
 
 def base_card(card: ModelCard) -> tuple[ModelCard, bool]:
     """The card of the kernel's base ansatz (the base's parameters) and whether ``card`` extends it.
 
     Raises :class:`NotOnFastEngine` (a :class:`CardError`) (field ``ansatz``) when the base is not a kernel ansatz or an
-    extension reads the receiver's position.
+    extension other than :data:`RECEIVER_EFFECTS` reads the receiver's position.
     """
     name = card.ansatz
     base_name = name.split("+", 1)[0]
@@ -57,11 +79,12 @@ def base_card(card: ModelCard) -> tuple[ModelCard, bool]:
                         field="ansatz")
     if base_name == name:
         return card, False
-    receiver = [k for k in card.model.inputs if k in _RECEIVER_INPUTS]
+    inst = instant_card(card)
+    receiver = [] if inst is None else [k for k in inst.model.inputs if k in _RECEIVER_INPUTS]
     if receiver:
         raise NotOnFastEngine(f"card {card.id!r}: ansatz {name!r} has a term that depends on the receiver "
-                        f"({receiver[0]}); engine 'fast' adds per-instant terms only; use engine='numpy'",
-                        field="ansatz")
+                        f"({receiver[0]}) beyond the effects {', '.join(RECEIVER_EFFECTS)}; engine 'fast' adds "
+                        "per-instant terms and those; use engine='numpy'", field="ansatz")
     base = get_ansatz(base_name)
     params = {k: float(card.parameters[k]) for k in base.params}
     return dataclasses.replace(card, ansatz=base_name, parameters=params, covariance=None), True

@@ -38,8 +38,10 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise.acoustics import speed_of_sound
 from gisnoise.errors import Cancelled, InputError
 from gisnoise.maps import _numba as _kernels
+from gisnoise.maps import _numba_receiver as _rx_kernels
 from gisnoise.maps._checks import as_float
 from gisnoise.maps._poly import _ATAN_C, _EXP2_C, _LOG2_C, _poly_eval  # noqa: F401  (the kernel's polynomials)
 from gisnoise.maps.hemifill import has_hemisphere
@@ -54,6 +56,7 @@ from gisnoise.maps.instants import (
     snapshot_instant,
 )
 from gisnoise.maps.prepare import MapOptions, band_order, check_request, map_metadata
+from gisnoise.maps.receiver_terms import kernel_flags
 from gisnoise.maps.receivers import SEGMENT_M, Receivers, receivers_for, segment_cells
 from gisnoise.maps.result import MapResult, snapshot_name, threshold_name
 from gisnoise.maps.threads import default_threads, map_threads
@@ -163,6 +166,12 @@ def run_window(fl: FlightInstants, rc: Receivers, r0: int, r1: int, c0: int, c1:
     energy = np.zeros((nr, ncw), np.float64)
     ta = np.zeros((thr.size, nr, ncw), np.float64)
     computed = np.zeros((nr, ncw), np.uint8)
+    if fl.rx is not None:  # receiver-dependent effect terms: their kernel (maps/_numba_receiver.py)
+        hr = rc.height_agl
+        _rx_kernels._receiver_window_kernel(P, U, dh, rc.dh is not None, k, m0, c0, ncw, fl.src, fl.C, fl.gain,
+                                            fl.cidx, fl.coef, fl.w, fl.dt, fl.radius, thr, fl.rx, float(hr),
+                                            kernel_flags(fl.rx, hr), emax, energy, ta, computed)
+        return WindowResult(emax, energy, ta, computed.astype(bool))
     _kernels._window_kernel(P, U, dh, rc.dh is not None, k, m0, c0, ncw, fl.src, fl.C, fl.gain, fl.cidx, fl.coef,
                             fl.w, fl.dt, fl.radius, thr, emax, energy, ta, computed)
     return WindowResult(emax, energy, ta, computed.astype(bool))
@@ -250,6 +259,11 @@ def warm_up() -> dict[str, Any]:
                       substeps=1, uncertainty=False, chunk_cells=None, block_size=1, min_distance_m=1.0,
                       temperature_c=15.0, kernel=None, progress=None, cancel=None, floor_db=None, threads=1)
     evaluate_fast(traj, card, grid, opts)
+    rx_card = ModelCard(id="warm-up-rx", vehicle="warm-up", phase="horizontal",
+                        ansatz="paper-offset+atmospheric_absorption+wind+doppler+ground_reflection",
+                        parameters=dict(card.parameters, a_abs=5.0, w_east=0.1, w_north=0.1, q_doppler=1.0,
+                                        r_ground=0.5, f_ground=500.0), reference_power_w=1000.0)
+    evaluate_fast(traj, rx_card, grid, opts)  # the kernel of receiver-dependent terms (maps/_numba_receiver.py)
     evaluate_fast(traj, sample_card(card), grid, opts)  # the hemisphere kernel (maps/_hemikernel.py)
     level_from_body(card, 1.0, 1.0, 1.0, 1000.0)
     return {"seconds": time.perf_counter() - t0, "cached": bool(_kernels.cache_used)}
@@ -262,9 +276,10 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
     """The numba engine behind :func:`~gisnoise.maps.evaluate.evaluate_grid` (``engine="fast"``).
 
     ``opts.chunk_cells`` is the number of cells per kernel call (whole rows, default
-    :data:`DEFAULT_CHUNK_CELLS`); ``block_size`` and ``temperature_c`` are not used (the
-    kernel keeps no cells x instants arrays; the ``paper`` ansatzes do not need the speed
-    of sound).  ``metadata["engine"] == "fast"``, ``metadata["cells_below_floor"]``.
+    :data:`DEFAULT_CHUNK_CELLS`); ``block_size`` is not used (the kernel keeps no cells x
+    instants arrays); ``temperature_c`` gives the speed of sound of the receiver-dependent
+    terms (Doppler, ground reflection) as in the NumPy engine.  ``metadata["engine"] ==
+    "fast"``, ``metadata["cells_below_floor"]``.
     """
     if opts.kernel is not None:
         raise InputError("kernel: a replacement block function belongs to engine='numpy'", field="kernel")
@@ -283,12 +298,13 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
     if chunk_cells is not None and (isinstance(chunk_cells, bool) or int(chunk_cells) < 1):
         raise InputError(f"chunk_cells must be >= 1, got {chunk_cells!r}", field="chunk_cells")
     chunk = DEFAULT_CHUNK_CELLS if chunk_cells is None else int(chunk_cells)
+    temp = as_float(opts.temperature_c, "temperature_c", minimum=-273.15, strict=True)
 
     rc = receivers_for(grid, [traj], receiver_height=opts.receiver_height, dem=opts.dem, ground_h=opts.ground_h,
                        dem_offset_m=opts.dem_offset_m)
     frame = rc.frame
     fl = prepare_flight(traj, req.cardset, frame, substeps=req.substeps, background=background,
-                        min_distance_m=req.min_distance_m, floor_db=floor)
+                        min_distance_m=req.min_distance_m, floor_db=floor, temperature_c=temp)
     share = 1.0 if snap is None else fl.n / (fl.n + 1.0)
 
     def prog(f: float) -> None:
@@ -317,7 +333,8 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
             bands[name][below] = np.nan
     if snap is not None:
         s_fl = snapshot_instant(traj, req.cardset, frame, snap, background=background,
-                                min_distance_m=req.min_distance_m, floor_db=floor)
+                                min_distance_m=req.min_distance_m, floor_db=floor, substeps=req.substeps,
+                                temperature_c=temp)
         s = run_grid(s_fl, rc, (), threads=threads, chunk_cells=chunk, cancel=cancel,
                      progress=None if progress is None else (lambda f: progress(share + (1 - share) * f)))
         a = db(s.emax.astype(np.float64))
@@ -329,4 +346,6 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
     used = sorted(set(fl.cidx.tolist()))
     meta = map_metadata(req, bands, fl.n, float(opts.receiver_height), rc.ground or {}, background, used)
     meta.update({"engine": "fast", "floor_db": floor, "cells_below_floor": int(below.sum())})
+    if fl.rx is not None:  # the speed of sound of the receiver-dependent terms, as the NumPy engine states it
+        meta["speed_of_sound_m_s"] = float(speed_of_sound(temp))
     return MapResult(bands=bands, grid=grid, metadata=meta)

@@ -53,6 +53,8 @@ class Receivers:
     dh_origin : tuple of int
         Grid row and column of ``dh[0, 0]`` and ``valid[0, 0]`` (a window's copy, see
         :meth:`for_window`).
+    receiver_height_m : float or None
+        Receiver height above the ground, m (None: ``h_ref`` minus the origin's height).
     """
 
     grid: GridSpec
@@ -63,6 +65,12 @@ class Receivers:
     seg: int = 1
     ground: dict | None = None
     dh_origin: tuple[int, int] = (0, 0)
+    receiver_height_m: float | None = None
+
+    @property
+    def height_agl(self) -> float:
+        """Receiver height above the ground, m."""
+        return float(self.h_ref - self.origin[2]) if self.receiver_height_m is None else self.receiver_height_m
 
     def for_window(self, r0: int, r1: int, c0: int, c1: int) -> Receivers:
         """The same receivers holding only the DEM heights of rows ``r0:r1``, columns ``c0:c1``
@@ -124,5 +132,5 @@ def receivers_for(grid: GridSpec, trajectories: Iterable[Trajectory] = (), *, re
     if ground.heights is not None:
         valid = np.isfinite(ground.heights)
         dh = np.where(valid, ground.heights - h0, 0.0).astype(np.float32)
-        return Receivers(grid, (lat_c, lon_c, h0), h0 + hr, dh, valid, seg, ground.description)
-    return Receivers(grid, (lat_c, lon_c, h0), h0 + hr, None, None, seg, ground.description)
+        return Receivers(grid, (lat_c, lon_c, h0), h0 + hr, dh, valid, seg, ground.description, receiver_height_m=hr)
+    return Receivers(grid, (lat_c, lon_c, h0), h0 + hr, None, None, seg, ground.description, receiver_height_m=hr)

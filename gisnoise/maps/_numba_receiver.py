@@ -1,0 +1,313 @@
+"""The fast engine's kernel for cards with receiver-dependent effect terms (float32, numba).
+
+:func:`_receiver_window_kernel` is :func:`gisnoise.maps._numba._window_kernel` (same
+arguments, lattice, audibility skipping, accumulation; its level helpers) plus, per cell
+and instant, the terms of :mod:`gisnoise.maps.receiver_terms` in ``log2`` of the energy:
+absorption, wind, Doppler and the ground reflection.  It needs the receiver-minus-UAV
+vector in ENU (not only in body axes): the same incremental lattice, unrotated.  It is a
+separate compiled function so that the plain kernel's code does not change.
+
+Per instant ``i`` the coefficients ``rx[i]`` (:data:`~gisnoise.maps.receiver_terms.RX_COLUMNS`)
+and, for the whole call, the receiver height above ground ``hr`` and ``flags`` (bit 0
+absorption, 1 wind, 2 Doppler, 3 ground reflection; :func:`~gisnoise.maps.receiver_terms.kernel_flags`).
+
+The ground reflection's band-averaged cosine ``C(u) = (sin(a2 u) - sin(a1 u)) / ((a2 - a1) u)``
+(``a1, a2`` the one-third-octave's relative edges, :data:`gisnoise.model.THIRD_OCTAVE`) is
+evaluated as ``cos(m u) sin(h u) / (h u)`` with ``m = (a1 + a2) / 2``, ``h = (a2 - a1) / 2``
+(the same function, no cancellation at small ``u``), with polynomial ``sin``/``cos`` (minimax
+on ``[-pi/4, pi/4]``, quadrant by ``pi/2`` in two parts) that LLVM vectorizes.  The delay
+is ``tau = 4 h_s h_r / ((l_direct + l_reflected) c)``, the difference of the two path lengths
+without cancellation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gisnoise.maps import _numba as _k
+from gisnoise.model import THIRD_OCTAVE
+
+numba = _k.numba
+
+if numba is not None:
+    _cell_log2 = _k._cell_log2
+    _exp2 = _k._exp2
+    _log2 = _k._log2
+    _prefer = _k._prefer_512bit_vectors
+    _ONE = np.float32(1.0)
+    _HALF = np.float32(0.5)
+    _ZERO = np.float32(0.0)
+    _TINY = np.float32(1e-30)
+    _K10_64 = _k._K10_64
+    _DB_PER_LOG2 = _k._DB_PER_LOG2
+    _FLUSH = _k._FLUSH
+    _FOUR = np.float32(4.0)
+    _TWO_OVER_PI = np.float32(2.0 / math.pi)
+    _PIO2_HI = np.float32(1.5703125)  # pi/2 in two parts: n * _PIO2_HI is exact for n < 2^15
+    _PIO2_LO = np.float32(math.pi / 2.0 - 1.5703125)
+    _S1, _S2, _S3 = np.float32(-1.6666654611e-1), np.float32(8.3321608736e-3), np.float32(-1.9515295891e-4)
+    _C1, _C2, _C3 = np.float32(4.166664568298827e-2), np.float32(-1.388731625493765e-3), np.float32(2.443315711809948e-5)
+    _BAND_MID = np.float32(0.5 * (THIRD_OCTAVE[0] + THIRD_OCTAVE[1]))
+    _BAND_HALF = np.float32(0.5 * (THIRD_OCTAVE[1] - THIRD_OCTAVE[0]))
+    _SMALL = np.float32(1e-4)
+    _SIXTH = np.float32(1.0 / 6.0)
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", inline="always")
+    def _sin_cos_reduced(x):
+        """``sin(r), cos(r)`` and the quadrant ``q`` of ``x = q pi/2 + r`` (float32, |r| <= pi/4)."""
+        n = np.floor(x * _TWO_OVER_PI + _HALF)
+        r = (x - n * _PIO2_HI) - n * _PIO2_LO
+        z = r * r
+        s = r + r * z * (_S1 + z * (_S2 + z * _S3))
+        c = _ONE - _HALF * z + z * z * (_C1 + z * (_C2 + z * _C3))
+        return s, c, np.int32(n) & np.int32(3)
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", inline="always")
+    def _band_cos(u):
+        """``C(u)``: ``cos(u)`` averaged over a one-third-octave band about ``u`` (even in ``u``)."""
+        u = abs(u)
+        s1, c1, q1 = _sin_cos_reduced(_BAND_MID * u)
+        cm = s1 if (q1 & 1) != 0 else c1
+        cm = -cm if ((q1 + 1) & 2) != 0 else cm  # cos(m u)
+        x = _BAND_HALF * u
+        s2, c2, q2 = _sin_cos_reduced(x)
+        sh = c2 if (q2 & 1) != 0 else s2
+        sh = -sh if (q2 & 2) != 0 else sh  # sin(h u)
+        sinc = sh / max(x, _TINY) if x > _SMALL else _ONE - x * x * _SIXTH
+        return cm * sinc
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", inline="always")
+    def _terms(re, rn, ru, dmin2, flags, kab, kwe, kwn, q, me, mn, mu, g0, g1, uk, hr):
+        """The receiver terms at ENU vector ``(re, rn, ru)`` (receiver - UAV), in ``log2`` of the energy."""
+        rh2 = re * re + rn * rn
+        d2 = rh2 + ru * ru
+        y = _ZERO
+        if (flags & 3) != 0:
+            dc = np.sqrt(max(d2, dmin2))
+            if (flags & 1) != 0:
+                y += kab * dc
+            if (flags & 2) != 0:
+                y += dc * (kwe * re + kwn * rn) / max(np.sqrt(rh2), _ONE)
+        if (flags & 4) != 0:
+            mr = (me * re + mn * rn + mu * ru) / np.sqrt(max(d2, _TINY))
+            y -= q * _log2(_ONE - mr)
+        if (flags & 8) != 0:
+            hs = max(hr - ru, _ZERO)
+            lm = hs - hr
+            lp = hs + hr
+            u = uk * hs / (np.sqrt(rh2 + lm * lm) + np.sqrt(rh2 + lp * lp))
+            y += _log2(g0 + g1 * _band_cos(u))
+        return y
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", nogil=True)
+    def _receiver_window_kernel(P, U, dh, has_dem, k, m0, c0, ncw, src, C, gain, cidx, coef, w, dt, radius, thr,
+                                rx, hr, flags, emax, energy, ta, computed):
+        """:func:`gisnoise.maps._numba._window_kernel` with the receiver terms ``rx`` (see the module)."""
+        _prefer()
+        nr = P.shape[0]
+        ns = (P.shape[1] - 1) // 2
+        n = src.shape[0]
+        nt = thr.shape[0]
+        thr32 = np.empty(nt, np.float32)
+        for t in range(nt):
+            thr32[t] = np.float32(thr[t])
+        lcur = np.empty(k, np.float32)
+        lprev = np.empty(k, np.float32)
+        eacc = np.zeros(k, np.float32)
+        tacc = np.zeros((nt, k), np.float32)
+        e0 = np.empty(3)
+        e1 = np.empty(3)
+        e2 = np.empty(3)
+        n0 = np.empty(3)
+        n1 = np.empty(3)
+        lo_b = np.empty(3)
+        hi_b = np.empty(3)
+        inv_k = 1.0 / k
+        half_k = 0.5 * k
+        half_k32 = np.float32(half_k)
+        hr32 = np.float32(hr)
+        fl = np.int64(flags)
+        for r in range(nr):
+            for s in range(ns):
+                a = (m0 + s) * k
+                lo = max(a, c0)
+                hi = min(a + k, c0 + ncw)
+                if hi <= lo:
+                    continue
+                m = hi - lo
+                q0 = lo - a
+                jl = lo - c0
+                for c in range(3):
+                    pa = P[r, 2 * s, c]
+                    pm = P[r, 2 * s + 1, c]
+                    pb = P[r, 2 * s + 2, c]
+                    e0[c] = pm
+                    e1[c] = (pb - pa) * inv_k
+                    e2[c] = 2.0 * (pa - 2.0 * pm + pb) * inv_k * inv_k
+                    n0[c] = 0.5 * (U[r, 2 * s, c] + U[r, 2 * s + 2, c]) if has_dem else 0.0
+                    n1[c] = (U[r, 2 * s + 2, c] - U[r, 2 * s, c]) * inv_k if has_dem else 0.0
+                    lo_b[c] = np.inf
+                    hi_b[c] = -np.inf
+                for q in range(q0, q0 + m):
+                    u = q - half_k
+                    for c in range(3):
+                        v = e0[c] + u * (e1[c] + u * e2[c])
+                        if has_dem:
+                            v += dh[r, jl + q - q0] * (n0[c] + u * n1[c])
+                        lo_b[c] = min(lo_b[c], v)
+                        hi_b[c] = max(hi_b[c], v)
+                cx = 0.5 * (lo_b[0] + hi_b[0])
+                cy = 0.5 * (lo_b[1] + hi_b[1])
+                cz = 0.5 * (lo_b[2] + hi_b[2])
+                rad = 0.5 * math.sqrt((hi_b[0] - lo_b[0]) ** 2 + (hi_b[1] - lo_b[1]) ** 2
+                                      + (hi_b[2] - lo_b[2]) ** 2) + 0.01
+                audible = False
+                for i in range(n):
+                    if radius[i] < 0.0:
+                        continue
+                    dist = math.sqrt((src[i, 0] - cx) ** 2 + (src[i, 1] - cy) ** 2 + (src[i, 2] - cz) ** 2)
+                    if dist - rad <= radius[i]:
+                        audible = True
+                        break
+                if not audible:
+                    continue
+                em = emax[r, jl:jl + m]
+                en = energy[r, jl:jl + m]
+                dhr = dh[r, jl:jl + m] if has_dem else dh[0, 0:1]
+                for q in range(m):
+                    computed[r, jl + q] = 1
+                f1e = np.float32(e1[0])
+                f1n = np.float32(e1[1])
+                f1u = np.float32(e1[2])
+                f2e = np.float32(e2[0])
+                f2n = np.float32(e2[1])
+                f2u = np.float32(e2[2])
+                g0e = np.float32(n0[0])
+                g0n = np.float32(n0[1])
+                g0u = np.float32(n0[2])
+                g1e = np.float32(n1[0])
+                g1n = np.float32(n1[1])
+                g1u = np.float32(n1[2])
+                for i in range(n):
+                    ci = cidx[i]
+                    v0 = e0[0] - src[i, 0]
+                    v1 = e0[1] - src[i, 1]
+                    v2 = e0[2] - src[i, 2]
+                    ax = np.float32(C[i, 0, 0] * v0 + C[i, 0, 1] * v1 + C[i, 0, 2] * v2)
+                    ay = np.float32(C[i, 1, 0] * v0 + C[i, 1, 1] * v1 + C[i, 1, 2] * v2)
+                    az = np.float32(C[i, 2, 0] * v0 + C[i, 2, 1] * v1 + C[i, 2, 2] * v2)
+                    bx = np.float32(C[i, 0, 0] * e1[0] + C[i, 0, 1] * e1[1] + C[i, 0, 2] * e1[2])
+                    by = np.float32(C[i, 1, 0] * e1[0] + C[i, 1, 1] * e1[1] + C[i, 1, 2] * e1[2])
+                    bz = np.float32(C[i, 2, 0] * e1[0] + C[i, 2, 1] * e1[1] + C[i, 2, 2] * e1[2])
+                    dx = np.float32(C[i, 0, 0] * e2[0] + C[i, 0, 1] * e2[1] + C[i, 0, 2] * e2[2])
+                    dy = np.float32(C[i, 1, 0] * e2[0] + C[i, 1, 1] * e2[1] + C[i, 1, 2] * e2[2])
+                    dz = np.float32(C[i, 2, 0] * e2[0] + C[i, 2, 1] * e2[1] + C[i, 2, 2] * e2[2])
+                    ve = np.float32(v0)
+                    vn = np.float32(v1)
+                    vu = np.float32(v2)
+                    gk = np.float32(gain[i] * _K10_64)
+                    a3 = np.float32(coef[ci, 0] * coef[ci, 1])
+                    b3 = np.float32(coef[ci, 0] * coef[ci, 2])
+                    a5 = np.float32(coef[ci, 3] * coef[ci, 4])
+                    b5 = np.float32(coef[ci, 3] * coef[ci, 5])
+                    c6k = np.float32(coef[ci, 6] * _K10_64)
+                    kkk = np.float32(coef[ci, 7] * _K10_64)
+                    e7 = np.float32(coef[ci, 8])
+                    dmin2 = np.float32(coef[ci, 9])
+                    wi = np.float32(w[i])
+                    kab = np.float32(rx[i, 0])
+                    kwe = np.float32(rx[i, 1])
+                    kwn = np.float32(rx[i, 2])
+                    qd = np.float32(rx[i, 3])
+                    me = np.float32(rx[i, 4])
+                    mn = np.float32(rx[i, 5])
+                    mu = np.float32(rx[i, 6])
+                    rg = rx[i, 7]
+                    g0 = np.float32(1.0 + rg * rg)
+                    g1 = np.float32(2.0 * rg)
+                    uk = np.float32(rx[i, 8] * 4.0 * hr)
+                    if has_dem:
+                        nx = np.float32(C[i, 0, 0] * n0[0] + C[i, 0, 1] * n0[1] + C[i, 0, 2] * n0[2])
+                        ny = np.float32(C[i, 1, 0] * n0[0] + C[i, 1, 1] * n0[1] + C[i, 1, 2] * n0[2])
+                        nz = np.float32(C[i, 2, 0] * n0[0] + C[i, 2, 1] * n0[1] + C[i, 2, 2] * n0[2])
+                        tx = np.float32(C[i, 0, 0] * n1[0] + C[i, 0, 1] * n1[1] + C[i, 0, 2] * n1[2])
+                        ty = np.float32(C[i, 1, 0] * n1[0] + C[i, 1, 1] * n1[1] + C[i, 1, 2] * n1[2])
+                        tz = np.float32(C[i, 2, 0] * n1[0] + C[i, 2, 1] * n1[1] + C[i, 2, 2] * n1[2])
+                        for q in range(m):
+                            qf = np.float32(q0 + q) - half_k32
+                            hh = dhr[q]
+                            xb = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
+                            yb = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
+                            zb = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
+                            re = ve + qf * (f1e + qf * f2e) + hh * (g0e + qf * g1e)
+                            rn = vn + qf * (f1n + qf * f2n) + hh * (g0n + qf * g1n)
+                            ru = vu + qf * (f1u + qf * f2u) + hh * (g0u + qf * g1u)
+                            y = _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2)
+                            y += _terms(re, rn, ru, dmin2, fl, kab, kwe, kwn, qd, me, mn, mu, g0, g1, uk, hr32)
+                            e = _exp2(y) + e7
+                            em[q] = max(em[q], e)
+                            eacc[q] += wi * e
+                            if nt > 0:
+                                lcur[q] = y
+                    else:
+                        for q in range(m):
+                            qf = np.float32(q0 + q) - half_k32
+                            xb = ax + qf * (bx + qf * dx)
+                            yb = ay + qf * (by + qf * dy)
+                            zb = az + qf * (bz + qf * dz)
+                            re = ve + qf * (f1e + qf * f2e)
+                            rn = vn + qf * (f1n + qf * f2n)
+                            ru = vu + qf * (f1u + qf * f2u)
+                            y = _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2)
+                            y += _terms(re, rn, ru, dmin2, fl, kab, kwe, kwn, qd, me, mn, mu, g0, g1, uk, hr32)
+                            e = _exp2(y) + e7
+                            em[q] = max(em[q], e)
+                            eacc[q] += wi * e
+                            if nt > 0:
+                                lcur[q] = y
+                    if nt > 0:  # lcur: log2 of the UAV's energy -> level with the background, dB
+                        if e7 != _ZERO:
+                            for q in range(m):
+                                lcur[q] = _log2(_exp2(lcur[q]) + e7) * _DB_PER_LOG2
+                        else:
+                            for q in range(m):
+                                lcur[q] = lcur[q] * _DB_PER_LOG2
+                        if i > 0:
+                            dti = np.float32(dt[i])
+                            for t in range(nt):
+                                tv = thr32[t]
+                                tac = tacc[t]
+                                for q in range(m):
+                                    x0 = lprev[q] - tv
+                                    x1 = lcur[q] - tv
+                                    up0 = x0 >= _ZERO
+                                    up1 = x1 >= _ZERO
+                                    fr = _ZERO
+                                    if up0 and up1:
+                                        fr = _ONE
+                                    elif up0 != up1:
+                                        fr = max(x0, x1) / abs(x0 - x1)
+                                    tac[q] += dti * fr
+                        for q in range(m):
+                            lprev[q] = lcur[q]
+                    if (i + 1) % _FLUSH == 0 or i == n - 1:
+                        for q in range(m):
+                            en[q] += eacc[q]
+                            eacc[q] = _ZERO
+                        for t in range(nt):
+                            tat = ta[t, r, jl:jl + m]
+                            tac = tacc[t]
+                            for q in range(m):
+                                tat[q] += tac[q]
+                                tac[q] = _ZERO
+        return 0
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", nogil=True)
+    def _band_cos_points(u):
+        """The kernel's ``C(u)`` for an array (for the tests against :func:`gisnoise.model.band_cos`)."""
+        out = np.empty(u.size, np.float32)
+        for i in range(u.size):
+            out[i] = _band_cos(np.float32(u[i]))
+        return out
