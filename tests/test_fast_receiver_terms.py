@@ -312,3 +312,43 @@ def test_fast_equals_numpy_for_receiver_dependent_terms(case):
     if floor is not None:
         assert np.all(a[np.isnan(b) & np.isfinite(a)] < floor)
     assert np.max(np.abs(a[both] - b[both]), initial=0.0) <= TOL_DB, name
+
+
+# --------------------------------------------------------------------------- the command
+
+
+def test_contour_default_engine_is_fast_for_a_chain_and_equals_numpy(tmp_path):
+    import json
+    from pathlib import Path
+
+    import rasterio
+    from click.testing import CliRunner
+
+    from gisnoise.cli.main import cli
+    from gisnoise.model import load, save
+
+    root = Path(__file__).resolve().parents[1]
+    chain = "+bank_angle+ground_reflection+doppler"
+    paths = []
+    for ph in ("horizontal", "climb", "sink"):
+        c = load(root / f"gisnoise/data/cards/demo_{ph}.json")
+        p = dict(c.parameters, k_bank=3.0, r_ground=0.7, f_ground=400.0, q_doppler=2.0)
+        c = ModelCard(id=c.id + "-ext", vehicle=c.vehicle, phase=c.phase, phases=c.phases, ansatz=c.ansatz + chain,
+                      parameters=p, reference_power_w=c.reference_power_w)
+        paths.append(save(c, tmp_path / f"{ph}.json"))
+    bands = {}
+    for engine in ("auto", "numpy"):
+        out = tmp_path / engine
+        args = ["contour", str(root / "gisnoise/data/routes/delivery_route.geojson"), "--out", str(out),
+                "--resolution", "50", "--margin", "300", "--receiver-height", "4", "--engine", engine]
+        for pth in paths:
+            args += ["--card", str(pth)]
+        res = CliRunner().invoke(cli, args)
+        assert res.exit_code == 0, res.output
+        with rasterio.open(out / "levels.tif") as ds:
+            meta = json.loads(ds.tags()["gisnoise"])
+            bands[engine] = {d: ds.read(i + 1) for i, d in enumerate(ds.descriptions)}
+        assert meta["engine"] == ("fast" if engine == "auto" else "numpy")
+        assert f"engine {meta['engine']}" in res.output
+    for name in ("LAmax", "LAeq", "SEL"):
+        np.testing.assert_allclose(bands["auto"][name], bands["numpy"][name], atol=TOL_DB, err_msg=name)

@@ -112,12 +112,12 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
                    "takes it; several times slower than the fast engine).")
 @click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png.")
 @click.option("--engine", "engine", type=click.Choice(["auto", "numpy", "fast"]), default="auto", show_default=True,
-              help="Evaluator.  'fast': the numba float32 kernel (paper ansatzes, their per-instant effect "
-                   "extensions such as +bank_angle, +rpm, and hemisphere cards), equal to 'numpy' within 0.01 dB "
-                   "and tens of times faster.  'numpy': the reference (any ansatz, the --uncertainty bands).  "
-                   "'auto': 'fast' unless --uncertainty or a card with a receiver-dependent term (+doppler, "
-                   "+wind, +ground_reflection, +atmospheric_absorption) needs 'numpy'; the engine that ran is "
-                   "printed.")
+              help="Evaluator.  'fast': the numba float32 kernel (paper ansatzes and their effect extensions "
+                   "alone and chained: +bank_angle, +rpm, +doppler, +wind, +ground_reflection, "
+                   "+atmospheric_absorption; hemisphere cards), equal to 'numpy' within 0.01 dB and tens of "
+                   "times faster.  'numpy': the reference (any ansatz, the --uncertainty bands).  'auto': 'fast' "
+                   "unless --uncertainty, a card it does not implement, or hemisphere cards together with "
+                   "receiver-dependent extensions need 'numpy'; the engine that ran is printed.")
 @click.option("--atmosphere", "atmosphere", default=None, callback=_atmosphere, metavar="T,RH[,P]",
               help="Atmosphere of the hemisphere cards' absorption on the map: temperature (C), relative humidity "
                    "(%) and optionally pressure (kPa, default 101.325) [default: each card's map atmosphere, "

@@ -4,8 +4,11 @@
 runs :func:`evaluate_fast`: the same bands as the NumPy engine
 (:mod:`gisnoise.maps.reference`) within 0.01 dB, much faster.  It evaluates the ansatzes
 ``paper`` and ``paper-offset`` of :mod:`gisnoise.model.ansatz` (Eq. 8-11; the tests
-check the kernel against the registry's definition) and refuses every other ansatz, the
-uncertainty bands and a ``kernel=`` replacement.
+check the kernel against the registry's definition) and their effect extensions: per-instant
+terms (:mod:`gisnoise.maps.fast_effects`) in this kernel, receiver-dependent ones
+(:mod:`gisnoise.maps.receiver_terms`) in its sibling :mod:`gisnoise.maps._numba_receiver`,
+which :func:`run_window` picks for a flight with such terms.  It refuses every other ansatz,
+the uncertainty bands and a ``kernel=`` replacement.
 
 The engine's steps, each usable alone (the operations of :mod:`gisnoise.ops` run them
 per tile):
