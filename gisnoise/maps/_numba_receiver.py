@@ -79,27 +79,30 @@ if numba is not None:
         return cm * sinc
 
     @_k.jit(fastmath=_k._FM, error_model="numpy", inline="always")
-    def _terms(re, rn, ru, dmin2, flags, kab, kwe, kwn, q, me, mn, mu, g0, g1, uk, hr):
-        """The receiver terms at ENU vector ``(re, rn, ru)`` (receiver - UAV), in ``log2`` of the energy."""
+    def _dist_c(re, rn, ru, dmin2):
+        """``max(d, d_min)`` of the ENU vector ``(re, rn, ru)`` (receiver - UAV)."""
+        return np.sqrt(max(re * re + rn * rn + ru * ru, dmin2))
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", inline="always")
+    def _wind(re, rn, ru, dmin2, kwe, kwn):
+        """Wind term (``log2`` of the energy): ``d_c (kwe r_E + kwn r_N) / max(|r_h|, 1)``."""
+        return _dist_c(re, rn, ru, dmin2) * (kwe * re + kwn * rn) / max(np.sqrt(re * re + rn * rn), _ONE)
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", inline="always")
+    def _doppler(re, rn, ru, q, me, mn, mu):
+        """Doppler term (``log2`` of the energy): ``-q log2(1 - M_r)``, ``(me, mn, mu)`` the velocity over ``c``."""
+        mr = (me * re + mn * rn + mu * ru) / np.sqrt(max(re * re + rn * rn + ru * ru, _TINY))
+        return -q * _log2(_ONE - mr)
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", inline="always")
+    def _ground(re, rn, ru, g0, g1, uk, hr):
+        """Ground reflection term (``log2`` of the energy): ``log2(g0 + g1 C(u))``, ``u = uk h_s / (l_d + l_r)``."""
         rh2 = re * re + rn * rn
-        d2 = rh2 + ru * ru
-        y = _ZERO
-        if (flags & 3) != 0:
-            dc = np.sqrt(max(d2, dmin2))
-            if (flags & 1) != 0:
-                y += kab * dc
-            if (flags & 2) != 0:
-                y += dc * (kwe * re + kwn * rn) / max(np.sqrt(rh2), _ONE)
-        if (flags & 4) != 0:
-            mr = (me * re + mn * rn + mu * ru) / np.sqrt(max(d2, _TINY))
-            y -= q * _log2(_ONE - mr)
-        if (flags & 8) != 0:
-            hs = max(hr - ru, _ZERO)
-            lm = hs - hr
-            lp = hs + hr
-            u = uk * hs / (np.sqrt(rh2 + lm * lm) + np.sqrt(rh2 + lp * lp))
-            y += _log2(g0 + g1 * _band_cos(u))
-        return y
+        hs = max(hr - ru, _ZERO)
+        lm = hs - hr
+        lp = hs + hr
+        u = uk * hs / (np.sqrt(rh2 + lm * lm) + np.sqrt(rh2 + lp * lp))
+        return _log2(g0 + g1 * _band_cos(u))
 
     @_k.jit(fastmath=_k._FM, error_model="numpy", nogil=True)
     def _receiver_window_kernel(P, U, dh, has_dem, k, m0, c0, ncw, src, C, gain, cidx, coef, w, dt, radius, thr,
@@ -117,6 +120,10 @@ if numba is not None:
         lprev = np.empty(k, np.float32)
         eacc = np.zeros(k, np.float32)
         tacc = np.zeros((nt, k), np.float32)
+        ybuf = np.empty(k, np.float32)
+        rbe = np.empty(k, np.float32)
+        rbn = np.empty(k, np.float32)
+        rbu = np.empty(k, np.float32)
         e0 = np.empty(3)
         e1 = np.empty(3)
         e2 = np.empty(3)
@@ -228,6 +235,8 @@ if numba is not None:
                     g0 = np.float32(1.0 + rg * rg)
                     g1 = np.float32(2.0 * rg)
                     uk = np.float32(rx[i, 8] * 4.0 * hr)
+                    # the base level and the ENU vector per cell, then each term in its own loop (a flag
+                    # tested outside a loop costs nothing; inside one LLVM would compute every term)
                     if has_dem:
                         nx = np.float32(C[i, 0, 0] * n0[0] + C[i, 0, 1] * n0[1] + C[i, 0, 2] * n0[2])
                         ny = np.float32(C[i, 1, 0] * n0[0] + C[i, 1, 1] * n0[1] + C[i, 1, 2] * n0[2])
@@ -241,32 +250,39 @@ if numba is not None:
                             xb = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
                             yb = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
                             zb = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
-                            re = ve + qf * (f1e + qf * f2e) + hh * (g0e + qf * g1e)
-                            rn = vn + qf * (f1n + qf * f2n) + hh * (g0n + qf * g1n)
-                            ru = vu + qf * (f1u + qf * f2u) + hh * (g0u + qf * g1u)
-                            y = _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2)
-                            y += _terms(re, rn, ru, dmin2, fl, kab, kwe, kwn, qd, me, mn, mu, g0, g1, uk, hr32)
-                            e = _exp2(y) + e7
-                            em[q] = max(em[q], e)
-                            eacc[q] += wi * e
-                            if nt > 0:
-                                lcur[q] = y
+                            ybuf[q] = _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2)
+                            rbe[q] = ve + qf * (f1e + qf * f2e) + hh * (g0e + qf * g1e)
+                            rbn[q] = vn + qf * (f1n + qf * f2n) + hh * (g0n + qf * g1n)
+                            rbu[q] = vu + qf * (f1u + qf * f2u) + hh * (g0u + qf * g1u)
                     else:
                         for q in range(m):
                             qf = np.float32(q0 + q) - half_k32
                             xb = ax + qf * (bx + qf * dx)
                             yb = ay + qf * (by + qf * dy)
                             zb = az + qf * (bz + qf * dz)
-                            re = ve + qf * (f1e + qf * f2e)
-                            rn = vn + qf * (f1n + qf * f2n)
-                            ru = vu + qf * (f1u + qf * f2u)
-                            y = _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2)
-                            y += _terms(re, rn, ru, dmin2, fl, kab, kwe, kwn, qd, me, mn, mu, g0, g1, uk, hr32)
-                            e = _exp2(y) + e7
-                            em[q] = max(em[q], e)
-                            eacc[q] += wi * e
-                            if nt > 0:
-                                lcur[q] = y
+                            ybuf[q] = _cell_log2(xb, yb, zb, gk, a3, b3, a5, b5, c6k, kkk, dmin2)
+                            rbe[q] = ve + qf * (f1e + qf * f2e)
+                            rbn[q] = vn + qf * (f1n + qf * f2n)
+                            rbu[q] = vu + qf * (f1u + qf * f2u)
+                    if (fl & 1) != 0:
+                        for q in range(m):
+                            ybuf[q] += kab * _dist_c(rbe[q], rbn[q], rbu[q], dmin2)
+                    if (fl & 2) != 0:
+                        for q in range(m):
+                            ybuf[q] += _wind(rbe[q], rbn[q], rbu[q], dmin2, kwe, kwn)
+                    if (fl & 4) != 0:
+                        for q in range(m):
+                            ybuf[q] += _doppler(rbe[q], rbn[q], rbu[q], qd, me, mn, mu)
+                    if (fl & 8) != 0:
+                        for q in range(m):
+                            ybuf[q] += _ground(rbe[q], rbn[q], rbu[q], g0, g1, uk, hr32)
+                    for q in range(m):
+                        y = ybuf[q]
+                        e = _exp2(y) + e7
+                        em[q] = max(em[q], e)
+                        eacc[q] += wi * e
+                        if nt > 0:
+                            lcur[q] = y
                     if nt > 0:  # lcur: log2 of the UAV's energy -> level with the background, dB
                         if e7 != _ZERO:
                             for q in range(m):
