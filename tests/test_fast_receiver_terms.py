@@ -352,3 +352,30 @@ def test_contour_default_engine_is_fast_for_a_chain_and_equals_numpy(tmp_path):
         assert f"engine {meta['engine']}" in res.output
     for name in ("LAmax", "LAeq", "SEL"):
         np.testing.assert_allclose(bands["auto"][name], bands["numpy"][name], atol=TOL_DB, err_msg=name)
+
+
+def test_a_day_of_operations_with_receiver_terms_equals_the_map_of_its_flight():
+    from affine import Affine
+    from test_fastkernel import TMERC
+
+    from gisnoise.geo import GridSpec
+    from gisnoise.ops import Flight, Schedule, evaluate_operations
+
+    n = 40
+    t = np.arange(n) * 1.0
+    lat, lon, h = FRAME.to_wgs84(-400.0 + 20.0 * t, np.full(n, 30.0), np.full(n, 60.0))
+    traj = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=np.full(n, 10.0), pitch=np.zeros(n), yaw=np.full(n, 90.0),
+                      power_w=np.full(n, 3000.0), phase=np.full(n, "horizontal"), source="line")
+    c = ext("+bank_angle+ground_reflection+doppler+atmospheric_absorption")
+    grid = GridSpec(TMERC, Affine(10.0, 0.0, -600.0, 0.0, -10.0, 300.0), 120, 60)
+    sched = Schedule(flights=(Flight("a", traj, {"day": 1}),), cards=[c], grid=grid, ground_h_m=0.0,
+                     receiver_height_m=4.0, floor_db=30.0)
+    tiles = evaluate_operations(sched, threads=2, single_process=True, tile_cells=1500)
+    whole = evaluate_operations(sched, threads=1, single_process=True, tile_cells=10**6)
+    assert tiles.metadata["tiles"] > 1
+    for name, band in whole.bands.items():  # tiles on the kernel's segments: the same bits
+        assert np.array_equal(tiles.bands[name], band, equal_nan=True), name
+    ref = evaluate_grid(traj, [c], grid, ground_h=0.0, receiver_height=4.0, engine="numpy", metrics=("LAmax",))
+    ok = np.isfinite(whole.bands["LAmax"])
+    assert ok.mean() > 0.5
+    assert np.max(np.abs(whole.bands["LAmax"][ok] - ref.bands["LAmax"][ok])) <= TOL_DB
