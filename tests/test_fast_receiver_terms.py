@@ -17,7 +17,7 @@ pytest.importorskip("numba")
 from test_fastkernel import FRAME, card, cases, circle_flight, grid_around  # noqa: E402
 
 from gisnoise.acoustics import speed_of_sound  # noqa: E402
-from gisnoise.errors import InputError  # noqa: E402
+from gisnoise.errors import CardError, InputError  # noqa: E402
 from gisnoise.flight import Trajectory  # noqa: E402
 from gisnoise.geo import WGS84, LocalFrame, transformer  # noqa: E402
 from gisnoise.maps import evaluate_grid, fast_engine_serves  # noqa: E402
@@ -199,6 +199,10 @@ def test_what_stays_refused_is_refused_in_one_line():
     hemi = sample_card(card("climb"))
     why = fast_engine_serves([ext("+ground_reflection"), hemi])
     assert why is not None and "hemisphere" in why
+    with pytest.raises(CardError, match="hemisphere") as cerr:
+        evaluate_grid(circle_flight(6, phases=("horizontal", "climb")), [ext("+ground_reflection"), hemi],
+                      grid_around(50.0, 5, 5), ground_h=0.0, engine="fast")
+    assert cerr.value.field == "ansatz"
 
 
 # --------------------------------------------------------------------------- the audibility floor

@@ -191,8 +191,8 @@ def evaluate_grid(
         Polled between blocks; returning true raises :class:`~gisnoise.errors.Cancelled`.
     engine : {"auto", "numpy", "fast"}
         ``"fast"``: the numba kernel of :mod:`gisnoise.maps.fastkernel` (same bands within
-        0.01 dB; ansatzes ``paper``, ``paper-offset`` and their per-instant extensions; no
-        uncertainty).  ``"auto"`` (default): the fast engine when
+        0.01 dB; ansatzes ``paper``, ``paper-offset`` and their effect extensions, per-instant
+        and receiver-dependent, alone and chained; hemisphere cards; no uncertainty).  ``"auto"`` (default): the fast engine when
         :func:`fast_engine_serves` finds nothing against it, else the NumPy engine (logged;
         ``metadata["engine"]`` names the engine that ran).
     floor_db : float, optional
