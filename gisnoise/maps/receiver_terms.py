@@ -56,7 +56,9 @@ _LIBRARY = {e.name: e for e in (ATMOSPHERIC_ABSORPTION, WIND, DOPPLER, GROUND_RE
 assert tuple(_LIBRARY) == RECEIVER_EFFECTS
 
 RX_COLUMNS = ("k_abs", "k_east", "k_north", "q_doppler", "mach_e", "mach_n", "mach_u", "r_ground", "k_ground")
-"""Columns of the kernel's per-instant coefficients (:func:`instant_receiver_terms`)."""
+"""Columns of the kernel's per-instant coefficients (:func:`instant_receiver_terms`): ``-K a_abs / 1000``,
+``K w_east / 100``, ``K w_north / 100`` (``K = log2(10) / 10``: dB to ``log2`` of the energy), ``q_doppler``,
+the UAV velocity over the speed of sound (east, north, up), ``r_ground`` and ``2 pi f_g / c``."""
 
 _K = math.log2(10.0) / 10.0  # dB -> log2 of the energy
 
