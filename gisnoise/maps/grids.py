@@ -43,6 +43,7 @@ from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import GridSpec, grid_for_points, max_cells
 from gisnoise.maps.cardset import CardSet
+from gisnoise.maps.effect_bounds import effect_bound_db
 from gisnoise.maps.sel import SEL_OFFSET_DB, sel_margin
 from gisnoise.model import HemisphereCard, ModelCard, get_ansatz
 
@@ -168,14 +169,27 @@ def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolut
         return 500.0, warnings
     res = float(resolution_m)
     ext_cards = cards
+    added: np.ndarray | None = None  # the effect terms' bounds added to the base ansatzes' levels
     try:
         distances, table = level_table(cards, powers)
-    except InputError:  # a model extension needs inputs of the flight: bound its base ansatz, and say so
+    except InputError:  # a model extension needs inputs of the flight: its base ansatz plus a bound of its terms
         ext_cards = [_base_card(c) for c in cards]
         distances, table = level_table(ext_cards, powers)
-        ext = ", ".join(sorted({c.ansatz for c in cards if "+" in c.ansatz}))
-        warnings.append(f"the extent is bounded by the base ansatz of {ext}, without its effects; check the "
-                        "contours' clipped flags")
+        added = np.zeros_like(table)
+        unbounded = set()
+        for i_all, k in enumerate(row):
+            if k < 0:
+                continue
+            card = cards[k]
+            bound = effect_bound_db(card, traj, idx == i_all, distances)
+            if bound is None:
+                unbounded.add(card.ansatz)
+            else:
+                added[k] = bound
+        table = table + added
+        if unbounded:
+            warnings.append(f"the extent is bounded by the base ansatz of {', '.join(sorted(unbounded))}, without "
+                            "its effects; check the contours' clipped flags")
     far = 0.0
     for loud in table:
         above = np.flatnonzero(loud >= target)
@@ -192,7 +206,9 @@ def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolut
     if sel:
         sel_db = lowest_db + SEL_OFFSET_DB
         bgs = [c.background_db for c in cards if c.background_db is not None] if background else []
-        rows, sel_table = _power_rows(traj, idx, cardset.cards, row, cards, ext_cards)
+        rows, sel_table, sel_card = _power_rows(traj, idx, cardset.cards, row, cards, ext_cards)
+        if added is not None and sel_card.size:
+            sel_table = sel_table + added[sel_card]
         x0, y0, x1, y1 = base.bounds
         m_sel = sel_margin(traj, rows, distances, sel_table, sel_db, (x0, y0, x1, y1), base.crs,
                            start_m=margin, resolution_m=res, max_margin_m=max(fit, margin) + res,
@@ -214,9 +230,9 @@ _POWER_STEP = 10.0 ** (1.0 / 40.0)
 
 
 def _power_rows(traj: Trajectory, idx: np.ndarray, all_cards: Sequence[ModelCard], row: np.ndarray,
-                cards: Sequence[ModelCard], bounded: Sequence[ModelCard]) -> tuple[np.ndarray, np.ndarray]:
-    """Each sample's row of a level table of (card, power), and that table; with more than 64 pairs the powers
-    are rounded up to multiples of :data:`_POWER_STEP`.
+                cards: Sequence[ModelCard], bounded: Sequence[ModelCard]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each sample's row of a level table of (card, power), that table and each row's card (index into
+    ``cards``); with more than 64 pairs the powers are rounded up to multiples of :data:`_POWER_STEP`.
 
     The SEL bound sums every sample's level: each at its own power (rounded up; levels grow with
     power as in :func:`audible_distance`), not the card's loudest.
@@ -242,9 +258,9 @@ def _power_rows(traj: Trajectory, idx: np.ndarray, all_cards: Sequence[ModelCard
             tab_powers.append(float(step[i]) if exact else float(_POWER_STEP ** step[i]))
         rows[i] = keys[key]
     if not tab_cards:
-        return rows, np.full((0, 1), -np.inf)
+        return rows, np.full((0, 1), -np.inf), np.zeros(0, int)
     _d, table = level_table(tab_cards, tab_powers)
-    return rows, table
+    return rows, table, np.array([k for k, _ in keys], dtype=int)
 
 
 def grid_for_map(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolution_m: float = 10.0,
