@@ -271,7 +271,8 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
 
 def _snapped(pts: np.ndarray) -> np.ndarray:
     """Positions on the :data:`PRECISION_DEG` grid, consecutive repeats dropped (as GEOS's snapping does)."""
-    return _snapped_pieces(np.asarray(pts, dtype=float), np.array([len(pts)], np.intp))[0]
+    a = np.asarray(pts, dtype=float)
+    return _snapped_pieces(a, np.array([len(a)], np.intp))[0] if len(a) else a
 
 
 def _snapped_pieces(pts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
