@@ -189,24 +189,34 @@ def isolines(x: Any, y: Any, z: Any, level: float) -> list[LineString]:
     return [LineString(seg) for seg in _generator(x, y, z).lines(float(level)) if len(seg) >= 2]
 
 
-def _bulk_wgs84(arrays: list[np.ndarray], tr: Any) -> list[np.ndarray]:
-    """The (n, 2) point arrays in WGS84 longitude/latitude, in one call of the transformer."""
+def _bulk_wgs84(arrays: list[np.ndarray], tr: Any) -> np.ndarray:
+    """The (n, 2) point arrays, concatenated, in WGS84 longitude/latitude, in one call of the transformer.
+
+    Each distinct point is transformed once (an isoline's points are also the edges of the two
+    isobands beside it); a point is transformed by itself, so this gives the same numbers as
+    transforming every point.
+    """
     if not arrays:
-        return []
-    allpts = np.concatenate(arrays)
+        return np.zeros((0, 2))
+    allpts = np.ascontiguousarray(np.concatenate(arrays), dtype=float)
+    if allpts.size and not (allpts == 0.0).any():  # as complex numbers -0.0 == 0.0: no zeros, no merging
+        uniq, inverse = np.unique(allpts.view(np.complex128).ravel(), return_inverse=True)
+        lon, lat = tr.transform(uniq.real.copy(), uniq.imag.copy())
+        return np.column_stack([lon, lat])[inverse.ravel()]
     lon, lat = tr.transform(allpts[:, 0], allpts[:, 1])
-    out = np.column_stack([lon, lat])
-    ends = np.cumsum([len(a) for a in arrays])
-    return np.split(out, ends[:-1])
+    return np.column_stack([lon, lat])
 
 
 def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[tuple[float, float | None]],
-                     lv: list[float], tr: Any) -> tuple[list[MultiPolygon | None], list[MultiLineString | None]]:
-    """Isobands (one per bound) and isolines (one per level) of one band, in WGS84, finished.
+                     lv: list[float], tr: Any) -> tuple[list[MultiPolygon | None], list[list[np.ndarray] | None]]:
+    """Isobands (one per bound) and isolines (one per level, as their lines' position arrays) of one band,
+    in WGS84, finished.
 
     One contour generator serves every level; the points of all levels are transformed to
-    WGS84 in one call; snapping to :data:`PRECISION_DEG`, repair and orientation as
-    :func:`isobands` and :func:`isolines` define them (exterior rings counter-clockwise, holes clockwise).
+    WGS84 in one call and snapped to :data:`PRECISION_DEG` together (:func:`_snapped_pieces`);
+    repair and orientation as :func:`isobands` and :func:`isolines` define them (exterior rings
+    counter-clockwise, holes clockwise).  An isoline's line is the array of its snapped positions
+    (what a LineString of them holds).
     """
     nb, nl = len(bounds), len(lv)
     if z.ndim != 2 or z.shape[0] < 2 or z.shape[1] < 2 or not np.isfinite(z).any():
@@ -233,46 +243,49 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
             if len(seg) >= 2:
                 segs.append(seg)
                 seg_level.append(j)
-    wgs = _bulk_wgs84(rings + segs, tr)
-    wrings, wsegs = wgs[:len(rings)], wgs[len(rings):]
+    pieces = rings + segs
+    wgs = _bulk_wgs84(pieces, tr)
+    ends = np.cumsum([len(p) for p in pieces], dtype=np.intp)
+    snapped = _snapped_pieces(wgs, ends)
+    wrings = np.split(wgs, ends[:len(rings)])[:len(rings)] if rings else []
+    srings = snapped[:len(rings)]
+    closed = [len(q) >= 4 and not np.any(q[0] != q[-1]) for q in srings]  # a ring that collapses: GEOS repairs
     bands: list[list[Polygon]] = [[] for _ in range(nb)]
-    if polys:
-        for b, i0, n in polys:
-            geom = Polygon(wrings[i0], wrings[i0 + 1:i0 + n])
-            if geom.is_empty or geom.area == 0:
-                continue
-            # snapped to the grid in NumPy; GEOS's precision reduction (which also repairs) only where that is invalid
-            g = _snapped_polygon(wrings[i0:i0 + n])
-            if g is None or not g.is_valid:
-                g = shapely.set_precision(shapely.make_valid(geom), PRECISION_DEG)
-            for part in _valid_polygons(g):
-                if part.area > 0:
-                    bands[b].append(orient(part, sign=1.0))
-    lines: list[list[LineString]] = [[] for _ in range(nl)]
-    for j, seg in zip(seg_level, wsegs, strict=True):
-        pts = _snapped(seg)
+    for b, i0, n in polys:
+        geom = Polygon(wrings[i0], wrings[i0 + 1:i0 + n])
+        if geom.is_empty or geom.area == 0:
+            continue
+        # snapped to the grid in NumPy; GEOS's precision reduction (which also repairs) only where that is invalid
+        g = Polygon(srings[i0], srings[i0 + 1:i0 + n]) if all(closed[i0:i0 + n]) else None
+        if g is None or not g.is_valid:
+            g = shapely.set_precision(shapely.make_valid(geom), PRECISION_DEG)
+        for part in _valid_polygons(g):
+            if part.area > 0:
+                bands[b].append(orient(part, sign=1.0))
+    lines: list[list[np.ndarray]] = [[] for _ in range(nl)]
+    for j, pts in zip(seg_level, snapped[len(rings):], strict=True):
         if len(pts) >= 2:
-            lines[j].append(LineString(pts))
-    return ([MultiPolygon(p) if p else None for p in bands], [MultiLineString(ln) if ln else None for ln in lines])
+            lines[j].append(pts)
+    return [MultiPolygon(p) if p else None for p in bands], [ln if ln else None for ln in lines]
 
 
 def _snapped(pts: np.ndarray) -> np.ndarray:
     """Positions on the :data:`PRECISION_DEG` grid, consecutive repeats dropped (as GEOS's snapping does)."""
+    a = np.asarray(pts, dtype=float)
+    return _snapped_pieces(a, np.array([len(a)], np.intp))[0] if len(a) else a
+
+
+def _snapped_pieces(pts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
+    """:func:`_snapped` of each piece ``pts[ends[i - 1]:ends[i]]`` (rings and lines), in one pass of NumPy."""
+    if not len(ends):
+        return []
     q = np.rint(pts / PRECISION_DEG) * PRECISION_DEG
+    keep = np.ones(len(q), bool)
     if len(q) > 1:
-        q = q[np.r_[True, np.any(q[1:] != q[:-1], axis=1)]]
-    return q
-
-
-def _snapped_polygon(rings: list[np.ndarray]) -> Polygon | None:
-    """The polygon of ``rings`` snapped by :func:`_snapped`; None when a ring collapses (GEOS then repairs)."""
-    out = []
-    for r in rings:
-        q = _snapped(r)
-        if len(q) < 4 or np.any(q[0] != q[-1]):
-            return None
-        out.append(q)
-    return Polygon(out[0], out[1:])
+        np.any(q[1:] != q[:-1], axis=1, out=keep[1:])
+    keep[ends[:-1]] = True  # the first position of every piece
+    kept = np.cumsum(keep)[ends - 1]  # positions kept up to the end of each piece (pieces are not empty)
+    return np.split(q[keep], kept[:-1])
 
 
 def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[dict]:
@@ -318,7 +331,7 @@ def _features(result: MapResult, levels: Any, metrics: Sequence[str] | None, *, 
         for lo, ml in zip(mlv, lines, strict=True):
             if ml is None:
                 continue
-            features.append(_feature(ml, arrays, {
+            features.append(_line_feature(ml, arrays, {
                 "metric": name, "level": lo, "level_max": None, "kind": "isoline", "unit": unit,
                 "name": f"{name} {lo:g} {unit}", "clipped": bool(top >= lo)}))
     return features
@@ -326,8 +339,18 @@ def _features(result: MapResult, levels: Any, metrics: Sequence[str] | None, *, 
 
 def _coords(ring: Any, arrays: bool) -> Any:
     """A ring's or line's positions rounded to 9 decimals (as :func:`round` does): lists, or an array."""
-    a = np.rint(np.asarray(ring.coords, dtype=float)[:, :2] * 1e9) / 1e9
+    return _rounded(np.asarray(ring.coords, dtype=float)[:, :2], arrays)
+
+
+def _rounded(a: np.ndarray, arrays: bool) -> Any:
+    a = np.rint(a * 1e9) / 1e9
     return a if arrays else a.tolist()
+
+
+def _line_feature(lines: list[np.ndarray], arrays: bool, props: dict) -> dict:
+    """An isoline feature from its lines' position arrays (the coordinates a MultiLineString of them has)."""
+    return {"type": "Feature", "geometry": {"type": "MultiLineString",
+                                            "coordinates": [_rounded(a, arrays) for a in lines]}, "properties": props}
 
 
 def _feature(geom: Any, arrays: bool, props: dict) -> dict:
@@ -430,48 +453,49 @@ def _positions_text(a: np.ndarray) -> str:
 
 
 def _positions_texts(arrays: list[np.ndarray]) -> list[str]:
-    """:func:`_positions_text` of many arrays, formatted together (one pass of NumPy for all positions)."""
+    """:func:`_positions_text` of many arrays, formatted together (one pass of NumPy for all positions).
+
+    A position is a row of eleven 4-byte words (``"   ["``, the integer part of x right-aligned with
+    its sign, ``".   "``, two words of four decimals, ``"   ,"``, the same for y, ``"],  "``), each
+    word taken from a table; the blanks of all rows are dropped in one step and each array's text is
+    a slice of the packed text, without its last comma.
+    """
     flat = [np.asarray(a, dtype=float).reshape(-1, 2) for a in arrays]
     sizes = [len(a) for a in flat]
     a = np.concatenate(flat) if flat else np.zeros((0, 2))
     if a.size and (not np.isfinite(a).all() or np.abs(a).max() >= 999.5):
         raise ValueError("positions must be finite and below 1000 in magnitude")
     k = np.rint(a * 1e8).astype(np.int64)
-    w = _WIDTH
-    row = np.empty((len(a), 2 * w + 4), np.uint8)  # [x,y],
-    row[:, 0] = ord("[")
-    row[:, 1:1 + w] = _numbers(k[:, 0])
-    row[:, 1 + w] = ord(",")
-    row[:, 2 + w:2 + 2 * w] = _numbers(k[:, 1])
-    row[:, 2 + 2 * w] = ord("]")
-    row[:, 3 + 2 * w] = ord(",")
-    raw = row.tobytes()
-    out: list[str] = []
-    start = 0
-    step = row.shape[1]
-    for n in sizes:
-        chunk = raw[start * step:(start + n) * step - 1]  # without the last comma
-        out.append("[" + chunk.replace(b" ", b"").decode("ascii") + "]")
-        start += n
-    return out
+    n = len(k)
+    words = np.empty((n, 11), np.uint32)
+    words[:, 0], words[:, 5], words[:, 10] = _WORDS["   ["], _WORDS["   ,"], _WORDS["],  "]
+    length = np.full(n, 4, np.intp)  # "[", "," and "]," of the row, then its numbers' characters
+    for j, col in ((0, 1), (1, 6)):
+        m = np.abs(k[:, j])
+        ip = (m // 10 ** 8 + 1000 * (k[:, j] < 0)).astype(np.intp)  # integer part, negatives after 999
+        fp = m % 10 ** 8
+        words[:, col] = _INTEGERS[ip]
+        words[:, col + 1] = _WORDS[".   "]
+        words[:, col + 2] = _DIGITS4[fp // 10 ** 4]
+        words[:, col + 3] = _DIGITS4[fp % 10 ** 4]
+        length += _INTEGER_CHARS[ip] + 9  # the point and eight decimals
+    text = words.tobytes().translate(None, b" ").decode("ascii")
+    ends = np.zeros(n + 1, np.intp)  # where each row's packed text ends
+    np.cumsum(length, out=ends[1:])
+    first = np.zeros(len(sizes) + 1, np.intp)  # each array's first row
+    np.cumsum(sizes, out=first[1:])
+    bounds = ends[first].tolist()
+    return ["[" + text[bounds[i]:bounds[i + 1] - 1] + "]" for i in range(len(sizes))]
 
 
-_WIDTH = 13
-"""Characters of a number of :func:`_numbers`: sign, three digits, the point, eight decimals."""
+def _as_words(texts: list[str]) -> np.ndarray:
+    """Texts of four ASCII characters as 4-byte words (in the machine's byte order, as the rows are read)."""
+    return np.frombuffer("".join(texts).encode("ascii"), np.uint32).copy()
 
 
-def _numbers(k: np.ndarray) -> np.ndarray:
-    """Fixed-point text of ``k / 1e8`` (|value| < 1000): (n, 13) ASCII, blanks and the sign before the digits."""
-    neg = k < 0
-    a = np.abs(k)
-    ip, fp = a // 10 ** 8, a % 10 ** 8
-    blank, minus, zero = ord(" "), ord("-"), ord("0")
-    out = np.empty((len(k), _WIDTH), np.uint8)
-    for j in range(8):
-        out[:, 12 - j] = zero + (fp // 10 ** j) % 10
-    out[:, 4] = ord(".")
-    out[:, 3] = zero + ip % 10
-    out[:, 2] = np.where(ip >= 10, zero + (ip // 10) % 10, np.where(neg, minus, blank))
-    out[:, 1] = np.where(ip >= 100, zero + ip // 100, np.where(neg & (ip >= 10), minus, blank))
-    out[:, 0] = np.where(neg & (ip >= 100), minus, blank)
-    return out
+_WORDS = {t: _as_words([t])[0] for t in ("   [", "   ,", "],  ", ".   ")}
+_DIGITS4 = _as_words([f"{i:04d}" for i in range(10 ** 4)])
+"""Four decimals ``0000 .. 9999`` as words."""
+_INTEGERS = _as_words([f"{i:>4d}" for i in range(1000)] + [f"{-i:>4d}" if i else "  -0" for i in range(1000)])
+"""Integer parts with their sign, right-aligned in four characters: ``0 .. 999``, then ``-0 .. -999``."""
+_INTEGER_CHARS = np.array([len(str(i)) for i in range(1000)] + [len(str(i)) + 1 for i in range(1000)], np.intp)

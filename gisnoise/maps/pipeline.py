@@ -47,6 +47,7 @@ import numpy as np
 
 from gisnoise.errors import InputError, TrajectoryError
 from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
+from gisnoise.geo import GridSpec
 from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.contours import clip_warnings, contours_text, parse_levels, write_geojson
@@ -90,6 +91,7 @@ def make_map(
     geoid_undulation_m: float | None = None,
     power_w: float | None = None,
     outputs: Sequence[str] = ("levels", "contours"),
+    grid: GridSpec | None = None,
 ) -> dict[str, Any]:
     """Noise map of a trajectory: evaluate on a grid and write GeoTIFF, GeoJSON (and PNG).
 
@@ -143,6 +145,9 @@ def make_map(
     outputs : sequence of str
         The files to write: ``levels`` (levels.tif) and/or ``contours`` (contours.geojson);
         a service answering with one of them writes only that one.
+    grid : GridSpec, optional
+        The receiver grid when the caller has chosen it already (the service checks its size before
+        a map is made): ``resolution_m``, ``margin_m`` and ``crs`` are then not used.
 
     Returns
     -------
@@ -178,8 +183,11 @@ def make_map(
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
     unpowered = _airborne_without_power(traj)
     power_warnings, outside_range = check_power_ranges(traj, cardset)
-    grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
-                                  background=background, sel="SEL" in metrics)
+    if grid is None:
+        grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
+                                      background=background, sel="SEL" in metrics)
+    else:
+        warnings = []
     warnings = ([unpowered] if unpowered is not None else []) + power_warnings + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir) if out_dir is not None else None

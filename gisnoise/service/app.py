@@ -39,8 +39,11 @@ ERROR_RESPONSES: dict[int | str, dict] = {
 }
 
 
-def single_query_values(request: Request) -> None:
-    """Every query parameter of this API takes one value: a repeated one is refused (422), not half-read."""
+async def single_query_values(request: Request) -> None:
+    """Every query parameter of this API takes one value: a repeated one is refused (422), not half-read.
+
+    ``async``: FastAPI runs a plain function dependency in a worker thread, a hop on every request.
+    """
     seen: set[str] = set()
     for k, _ in request.query_params.multi_items():
         if k in seen:

@@ -33,7 +33,12 @@ def get_state(request: Request) -> State:
     return request.app.state.gisnoise
 
 
-StateDep = Annotated[State, Depends(get_state)]
+async def _state(request: Request) -> State:
+    """:func:`get_state` as a dependency: ``async``, so FastAPI does not hop to a worker thread for it."""
+    return get_state(request)
+
+
+StateDep = Annotated[State, Depends(_state)]
 
 
 def require_key(request: Request, key: str | None = Security(_key_header)) -> None:

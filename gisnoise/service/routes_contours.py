@@ -28,6 +28,7 @@ from fastapi.concurrency import run_in_threadpool
 from gisnoise import limits
 from gisnoise.errors import GisnoiseError, GridTooLargeError, InputError, TrajectoryError
 from gisnoise.flight import Trajectory, from_columns, read_flight_csv
+from gisnoise.geo import GridSpec
 from gisnoise.model import ModelCard
 from gisnoise.model import cards as gcards
 from gisnoise.service.cardstore import CardStore
@@ -197,7 +198,8 @@ def _auto_margin(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, 
     return req.model_copy(update={"grid": req.grid.model_copy(update={"margin_m": margin})})
 
 
-def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
+def _checked_grid(traj: Trajectory, req: ContourRequest, max_cells: int) -> GridSpec:
+    """The request's receiver grid, refused (413 on ``grid.resolution_m``) above ``max_cells`` cells."""
     from gisnoise.maps import grid_for_trajectory
 
     with _prefixed("grid"):
@@ -211,32 +213,33 @@ def _grid_cells(traj: Trajectory, req: ContourRequest, max_cells: int) -> int:
         raise GridTooLargeError(f"grid.resolution_m: the grid has {cells} cells ({grid.width} x {grid.height}), "
                                 f"more than the limit of {max_cells}; use a coarser resolution_m or a smaller "
                                 f"margin_m", field="grid.resolution_m")
-    return cells
+    return grid
 
 
 def make_map_files(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path, *,
                    progress: Callable[..., None] | None = None,
                    cancel: Callable[[], bool] | None = None,
                    files: tuple[str, ...] = ("levels.tif", "contours.geojson"),
-                   timing: dict[str, float] | None = None) -> dict[str, Path]:
+                   timing: dict[str, float] | None = None, grid: GridSpec | None = None) -> dict[str, Path]:
     """Write levels.tif and/or contours.geojson (``files``) for a request with the core's ``make_map``.
 
     Returns the paths by file name; ``timing`` (when given) receives ``make_map``'s seconds
-    (``evaluate``, ``total``).
+    (``evaluate``, ``total``); ``grid``: the request's grid when it was built already.
     """
-    paths = _make_map(traj, cards, req, out_dir, tuple(_OUTPUTS[f] for f in files), progress, cancel, timing)
+    paths = _make_map(traj, cards, req, out_dir, tuple(_OUTPUTS[f] for f in files), progress, cancel, timing,
+                      grid)
     return {f: Path(paths[_OUTPUTS[f]]) for f in files}
 
 
 def map_geojson_text(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, *,
-                     timing: dict[str, float] | None = None) -> str:
+                     timing: dict[str, float] | None = None, grid: GridSpec | None = None) -> str:
     """The text of contours.geojson for a request, made in memory (no folder): the same text the file has."""
-    return str(_make_map(traj, cards, req, None, ("contours",), None, None, timing)["contours_text"])
+    return str(_make_map(traj, cards, req, None, ("contours",), None, None, timing, grid)["contours_text"])
 
 
 def _make_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out_dir: Path | None,
               outputs: tuple[str, ...], progress: Callable[..., None] | None, cancel: Callable[[], bool] | None,
-              timing: dict[str, float] | None) -> dict[str, Any]:
+              timing: dict[str, float] | None, grid: GridSpec | None = None) -> dict[str, Any]:
     from gisnoise.maps import make_map
 
     ground_h = req.ground_h_m
@@ -255,7 +258,7 @@ def _make_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out
                          uncertainty=req.uncertainty, plot=False,
                          period_s=req.period_s, threshold_db=req.threshold_db, snapshot_t=req.snapshot_t,
                          substeps=req.substeps, background=req.background, progress=progress, cancel=cancel,
-                         outputs=outputs)
+                         outputs=outputs, grid=grid)
     if timing is not None:
         timing.update(paths["timing_s"])
     return paths
@@ -287,8 +290,8 @@ _CONTOUR_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 
 
-def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Trajectory, list[ModelCard], int]:
-    """The request with its margin set, trajectory, cards and grid size (in a worker thread: routes and grids
+def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Trajectory, list[ModelCard], GridSpec]:
+    """The request with its margin set, trajectory, cards and receiver grid (in a worker thread: routes and grids
     take CPU)."""
     s = state.settings
     with limits.override(max_samples=s.max_trajectory_samples):  # bounds routes before they are sampled
@@ -299,15 +302,19 @@ def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Traject
         req = req.model_copy(update={"ground_h_m": float(stated)})
     cards = resolve_cards(req, state.cards)
     req = _auto_margin(traj, cards, req, s.max_cells)
-    cells = _grid_cells(traj, req, s.max_cells)
+    grid = _checked_grid(traj, req, s.max_cells)
     with limits.override(max_work=s.max_work):  # the work bound, before a job is queued or a map evaluated
-        limits.check_work(cells, len(traj) * req.substeps, field="grid.resolution_m")
-    return req, traj, cards, cells
+        limits.check_work(_cells(grid), len(traj) * req.substeps, field="grid.resolution_m")
+    return req, traj, cards, grid
+
+
+def _cells(grid: GridSpec) -> int:
+    return int(grid.width) * int(grid.height)
 
 
 def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory, cards: list[ModelCard],
-           cells: int) -> JSONResponse:
-    j = state.jobs.submit("contours", {"cells": cells, "samples": len(traj)},
+           grid: GridSpec) -> JSONResponse:
+    j = state.jobs.submit("contours", {"cells": _cells(grid), "samples": len(traj)},
                           {"request.json": json.dumps(_job_request(req, cards)).encode()})
     info = job_info(request, j)
     return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
@@ -319,11 +326,11 @@ async def contours(req: ContourRequest, request: Request, state: StateDep,
                    job: bool = Query(False, description="Always answer with a job (202).")) -> Response:
     timing: dict[str, float] = {}
     # one worker-thread hop for a small map: prepare, and make it unless it becomes a job
-    req, traj, cards, cells, data = await run_in_threadpool(_prepare_and_map, req, state, job,
-                                                            request.headers.get("accept", ""), timing)
+    req, traj, cards, grid, data = await run_in_threadpool(_prepare_and_map, req, state, job,
+                                                           request.headers.get("accept", ""), timing)
     if data is None:
         require_key(request, request.headers.get("x-api-key"))  # a job is a write
-        return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
+        return await run_in_threadpool(_queue, request, state, req, traj, cards, grid)
     tiff = _want_tiff(req, request.headers.get("accept", ""))
     # where the time went (W3C Server-Timing, ms): the evaluator and the whole map (route planners tune with it)
     headers = {"Server-Timing": f"evaluate;dur={1000 * timing['evaluate']:.1f}, map;dur={1000 * timing['total']:.1f}"}
@@ -334,21 +341,22 @@ async def contours(req: ContourRequest, request: Request, state: StateDep,
 
 
 def _prepare_and_map(req: ContourRequest, state: State, job: bool, accept: str, timing: dict[str, float]
-                     ) -> tuple[ContourRequest, Trajectory, list[ModelCard], int, bytes | None]:
+                     ) -> tuple[ContourRequest, Trajectory, list[ModelCard], GridSpec, bytes | None]:
     """:func:`_prepare`, then the map's bytes, or None when the request becomes a job (``job`` or large work)."""
-    req, traj, cards, cells = _prepare(req, state)
-    if job or float(cells) * len(traj) * req.substeps > state.settings.sync_work_limit:
-        return req, traj, cards, cells, None
-    return req, traj, cards, cells, _sync_map(traj, cards, req, _want_tiff(req, accept), timing)
+    req, traj, cards, grid = _prepare(req, state)
+    if job or float(_cells(grid)) * len(traj) * req.substeps > state.settings.sync_work_limit:
+        return req, traj, cards, grid, None
+    return req, traj, cards, grid, _sync_map(traj, cards, req, _want_tiff(req, accept), timing, grid)
 
 
 def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tiff: bool,
-              timing: dict[str, float] | None = None) -> bytes:
+              timing: dict[str, float] | None = None, grid: GridSpec | None = None) -> bytes:
+    """The map's bytes (GeoJSON text or GeoTIFF) on ``grid``, the grid :func:`_prepare` checked."""
     with _sync_slots:
         if not tiff:  # only the file the answer carries, and no folder for it
-            return map_geojson_text(traj, cards, req, timing=timing).encode("utf-8")
+            return map_geojson_text(traj, cards, req, timing=timing, grid=grid).encode("utf-8")
         with tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
-            return make_map_files(traj, cards, req, Path(tmp), files=("levels.tif",), timing=timing)[
+            return make_map_files(traj, cards, req, Path(tmp), files=("levels.tif",), timing=timing, grid=grid)[
                 "levels.tif"].read_bytes()
 
 
@@ -356,8 +364,8 @@ def _sync_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, tif
              responses={202: {"links": JOB_LINKS}},
              summary="Queue a noise map as a job")
 async def contour_job(req: ContourRequest, request: Request, state: StateDep) -> JSONResponse:
-    req, traj, cards, cells = await run_in_threadpool(_prepare, req, state)
-    return await run_in_threadpool(_queue, request, state, req, traj, cards, cells)
+    req, traj, cards, grid = await run_in_threadpool(_prepare, req, state)
+    return await run_in_threadpool(_queue, request, state, req, traj, cards, grid)
 
 
 # ------------------------------------------------------------------ job handler

@@ -15,7 +15,7 @@ import json
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import fields, replace
+from dataclasses import fields
 from typing import Any
 
 import numpy as np
@@ -31,9 +31,19 @@ def route_key(data: Any, *options: Any) -> str:
 
 
 def _copy(traj: Trajectory) -> Trajectory:
-    arrays: dict[str, Any] = {f.name: np.array(getattr(traj, f.name), copy=True) for f in fields(traj)
-              if f.name not in ("source", "metadata") and getattr(traj, f.name) is not None}
-    return replace(traj, metadata=copy.deepcopy(traj.metadata), **arrays)
+    """A copy with its own arrays and metadata.
+
+    Not re-checked: the trajectory was checked when it was built and a kept one is never changed
+    (``dataclasses.replace`` would run every check of the trajectory again on each hit).
+    """
+    out = copy.copy(traj)
+    for f in fields(traj):
+        v = getattr(traj, f.name)
+        if f.name == "metadata":
+            object.__setattr__(out, f.name, copy.deepcopy(v))
+        elif f.name != "source" and v is not None:
+            object.__setattr__(out, f.name, np.array(v, copy=True))
+    return out
 
 
 class TrajectoryCache:
