@@ -44,11 +44,11 @@ numba = _k.numba
 
 #: Columns of the per-card rows ``hs`` (float64) the kernel reads.
 (H_TAB, H_NN, H_NJ, H_SI, H_QB, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
- H_TA0, H_TINV, H_TNB, H_TBO, H_K0, H_QS) = range(21)
-N_HS = 21
+ H_TA0, H_TINV, H_TNB, H_TBO, H_K0, H_QS, H_PK, H_TK) = range(23)
+N_HS = 23
 
-#: Intervals of a non-uniform axis the kernel sums at a time (the axes are padded to a multiple).
-HINGES = 8
+#: A non-uniform axis' intervals are padded to a multiple of this (the kernel sums 8, then 4 at a time).
+HINGES = 4
 
 #: Largest code of the table's 16-bit levels (``level = base + step * code``).
 Q_MAX = 65532
@@ -100,8 +100,7 @@ if numba is not None:
 
         Four vectorized passes over the cells (short loops keep the table reads' latency
         hidden): distance and table angles; fractional node indices (one product on a uniform
-        axis, else ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals, :data:`HINGES` at
-        a time); table entries, weights and distance fraction; the table reads, the level and
+        axis, else ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals, eight at a time); table entries, weights and distance fraction; the table reads, the level and
         the energies.  ``sc``: scratch ``(6, >= m)``.  Writes the level to ``lev`` and the weight
         on filled nodes to ``fwo``, and adds the energies to the accumulators ``em``
         (maximum), ``eacc`` (``wt e``) and ``facc`` (``wt e fw``).
@@ -153,20 +152,27 @@ if numba is not None:
             if uinv > _F0 or nint == 0:
                 for q in range(m):
                     Uo[q] = (X[q] - g0) * uinv
-            else:
+            else:  # u = K + sum_k c_k max(a, g_k), K = -sum_k c_k g_k; the axes are padded with c_k = 0
+                kc = np.float32(hrow[H_PK if ax == 0 else H_TK])
                 for q in range(m):
-                    Uo[q] = _F0
-                for kk in range(off, off + nint, HINGES):  # the axes are padded with c_k = 0
+                    Uo[q] = kc
+                kk = off
+                while kk + 8 <= off + nint:
                     g_0, g_1, g_2, g_3 = axg[kk], axg[kk + 1], axg[kk + 2], axg[kk + 3]
                     g_4, g_5, g_6, g_7 = axg[kk + 4], axg[kk + 5], axg[kk + 6], axg[kk + 7]
                     c_0, c_1, c_2, c_3 = axinv[kk], axinv[kk + 1], axinv[kk + 2], axinv[kk + 3]
                     c_4, c_5, c_6, c_7 = axinv[kk + 4], axinv[kk + 5], axinv[kk + 6], axinv[kk + 7]
                     for q in range(m):
                         a = X[q]
-                        Uo[q] += (((max(a - g_0, _F0) * c_0 + max(a - g_1, _F0) * c_1)
-                                   + (max(a - g_2, _F0) * c_2 + max(a - g_3, _F0) * c_3))
-                                  + ((max(a - g_4, _F0) * c_4 + max(a - g_5, _F0) * c_5)
-                                     + (max(a - g_6, _F0) * c_6 + max(a - g_7, _F0) * c_7)))
+                        Uo[q] += (((max(a, g_0) * c_0 + max(a, g_1) * c_1) + (max(a, g_2) * c_2 + max(a, g_3) * c_3))
+                                  + ((max(a, g_4) * c_4 + max(a, g_5) * c_5) + (max(a, g_6) * c_6 + max(a, g_7) * c_7)))
+                    kk += 8
+                if kk < off + nint:
+                    g_0, g_1, g_2, g_3 = axg[kk], axg[kk + 1], axg[kk + 2], axg[kk + 3]
+                    c_0, c_1, c_2, c_3 = axinv[kk], axinv[kk + 1], axinv[kk + 2], axinv[kk + 3]
+                    for q in range(m):
+                        a = X[q]
+                        Uo[q] += (max(a, g_0) * c_0 + max(a, g_1) * c_1) + (max(a, g_2) * c_2 + max(a, g_3) * c_3)
         for q in range(m):  # entries (unsigned: no negative-index wraparound), weights, distance fraction
             u = lev[q]
             v = V[q]
