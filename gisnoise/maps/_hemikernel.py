@@ -7,17 +7,23 @@ evaluates the card's stated scheme (:class:`~gisnoise.model.HemisphereCard`: bil
 table angles of the nodes' A-weighted levels at the receiver's distance) from tables prepared
 in NumPy by :mod:`gisnoise.maps.hemisource`.
 
-Three vectorized passes over the cells of a run (:func:`_hemi_cells`, called once per instant
-and row segment, so that no per-cell call passes arrays):
+Four vectorized passes over the cells of a run (:func:`_hemi_cells`, called once per instant
+and row segment, so that no per-cell call passes arrays); short loops measured faster than one
+fused loop, whose long chains (angles, index, reads) leave the table reads' latency exposed:
 
 * **Distance and angles without libm.**  ``s = log2(d^2)`` (the kernel's polynomial ``log2``),
   ``phi_t = atan2(-x_b, |z_b|)`` and ``theta_t = atan2(y_b, |z_b|)`` by its polynomial ``atan``
   (5e-7 rad).
 * **Fractional node indices without search.**  ``(a - g_0) / spacing`` on a uniform axis, else
-  ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals, ``c_k`` the step of the slope
-  ``1 / (g_k+1 - g_k)`` at node ``k`` (``a`` is clamped to the axis): piecewise linear through
-  ``(g_k, k)``, so bilinear interpolation in ``u`` on the integers is bilinear interpolation in
-  the angles.
+  ``u = K + sum_k c_k max(a, g_k)`` over the axis' intervals, ``c_k`` the step of the slope
+  ``1 / (g_k+1 - g_k)`` at node ``k`` and ``K = -sum_k c_k g_k`` (``a`` is clamped to the
+  axis): piecewise linear through ``(g_k, k)``, so bilinear interpolation in ``u`` on the
+  integers is bilinear interpolation in the angles.  Two operations per interval, eight
+  intervals per sweep over the cells (the axes are padded to a multiple of :data:`HINGES`).
+  A bin table (one read per cell from uniform bins with every node on a bin edge) measured
+  slower than these sums on the M300's 20 intervals.
+* **Entries and weights.**  The table entry of each cell (unsigned, so that no negative-index
+  code is generated), the two angle weights and the distance fraction.
 * **Two reads per cell.**  Per node, the A-weighted level without spherical spreading,
   ``T_q(d) = 10 lg sum_b 10^((L_b,q + A_b - alpha_b (d - r0)) / 10)``, is tabulated on a grid
   uniform in ``s`` as 16-bit codes (``T = base + step * code``, ``step`` the card table's range
@@ -29,7 +35,8 @@ and row segment, so that no per-cell call passes arrays):
   separately (``efill``) for the map's metadata.
 
 The loops read tables at computed indices (gathers); LLVM vectorizes them only when the array
-arguments are known not to overlap (:func:`_vectorize_gathers`).
+arguments are known not to overlap (:func:`_vectorize_gathers`).  The two reads are most of
+what separates this kernel's speed from the parametric one's (``docs/performance.md``).
 """
 
 from __future__ import annotations
