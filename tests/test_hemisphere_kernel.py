@@ -104,3 +104,40 @@ def test_table_codes_hold_the_levels_within_one_step_and_the_filled_flags(m300):
     for f, w, fl in zip(fields, want, flags, strict=True):
         assert np.max(np.abs(base + step * f.astype(float) - w)) <= step * (1 + 1e-9)
         np.testing.assert_array_equal(f & np.uint64(1), np.broadcast_to(fl[:, None], f.shape).astype(np.uint64))
+
+
+@pytest.mark.parametrize("phi, theta", [
+    ([-80.0, -61.0, -30.5, -12.0, 0.0, 7.5, 21.0, 40.0, 55.5, 80.0], [-70.0, -20.0, 0.0, 33.0, 70.0]),
+    ([-75.0, -40.0, -5.0, 30.0, 65.0], [-60.0, -52.0, -31.0, -10.0, -2.0, 4.0, 18.0, 35.0, 47.0, 60.0]),
+    ([-45.0, 0.0, 10.0, 45.0], [0.0]),
+])
+def test_kernel_on_uneven_axes_equals_the_cards_definition(phi, theta):
+    """Uneven axes of several lengths (the kernel sums their intervals eight, then four at a time, padded).
+
+    At every node direction and at random directions between them, the kernel's level is the
+    card's ``level_direction`` (the NumPy engine's definition; at a node the node's per-band
+    sum) within 0.01 dB, and its filled weight the card's bilinear weight on filled nodes
+    (off the table's edges).
+    """
+    from gisnoise.model import HemisphereCard
+
+    rng = np.random.default_rng(7)
+    bands = np.array([100.0, 250.0, 630.0, 1600.0, 4000.0, 10000.0])
+    ni, nj = len(phi), len(theta)
+    levels = 50.0 + 20.0 * rng.random((bands.size, ni, nj))
+    card = HemisphereCard(id="uneven", vehicle="test", phase="horizontal", ansatz="hemisphere", parameters={},
+                          reference_power_w=1.0, reference_distance_m=1.0, phi_deg=phi, theta_deg=theta,
+                          bands_hz=bands, levels_db=levels, measured=rng.random((ni, nj)) < 0.6)
+    a, b = np.meshgrid(phi, theta, indexing="ij")
+    a = np.concatenate([a.ravel(), rng.uniform(phi[0], phi[-1], 200)])
+    b = np.concatenate([b.ravel(), rng.uniform(theta[0], theta[-1], 200)])
+    d = np.where(np.arange(a.size) % 2 == 0, 30.0, 700.0)
+    v = np.array([body(dk, ak, bk) for dk, ak, bk in zip(d, a, b, strict=True)])
+    lev, fw = hemisphere_level_points(card, v[:, 0], v[:, 1], v[:, 2])
+    phis, thetas = zip(*(product_angles(x) for x in v), strict=True)
+    ref = card.level_direction(d, np.array(phis), np.array(thetas))
+    np.testing.assert_allclose(lev, ref, atol=0.01)
+    _, fw_ref, _ = card.interpolation(np.array(phis), np.array(thetas))
+    # on the table's edge a direction is inside or outside (filled weight 1) by rounding: compare inside it
+    inside = (a > phi[0] + 1e-6) & (a < phi[-1] - 1e-6) & (b > theta[0] + 1e-6) & (b < theta[-1] - 1e-6)
+    np.testing.assert_allclose(fw[inside], fw_ref[inside], atol=1e-3)

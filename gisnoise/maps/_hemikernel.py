@@ -7,17 +7,23 @@ evaluates the card's stated scheme (:class:`~gisnoise.model.HemisphereCard`: bil
 table angles of the nodes' A-weighted levels at the receiver's distance) from tables prepared
 in NumPy by :mod:`gisnoise.maps.hemisource`.
 
-Three vectorized passes over the cells of a run (:func:`_hemi_cells`, called once per instant
-and row segment, so that no per-cell call passes arrays):
+Four vectorized passes over the cells of a run (:func:`_hemi_cells`, called once per instant
+and row segment, so that no per-cell call passes arrays); short loops measured faster than one
+fused loop, whose long chains (angles, index, reads) leave the table reads' latency exposed:
 
 * **Distance and angles without libm.**  ``s = log2(d^2)`` (the kernel's polynomial ``log2``),
   ``phi_t = atan2(-x_b, |z_b|)`` and ``theta_t = atan2(y_b, |z_b|)`` by its polynomial ``atan``
   (5e-7 rad).
 * **Fractional node indices without search.**  ``(a - g_0) / spacing`` on a uniform axis, else
-  ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals, ``c_k`` the step of the slope
-  ``1 / (g_k+1 - g_k)`` at node ``k`` (``a`` is clamped to the axis): piecewise linear through
-  ``(g_k, k)``, so bilinear interpolation in ``u`` on the integers is bilinear interpolation in
-  the angles.
+  ``u = K + sum_k c_k max(a, g_k)`` over the axis' intervals, ``c_k`` the step of the slope
+  ``1 / (g_k+1 - g_k)`` at node ``k`` and ``K = -sum_k c_k g_k`` (``a`` is clamped to the
+  axis): piecewise linear through ``(g_k, k)``, so bilinear interpolation in ``u`` on the
+  integers is bilinear interpolation in the angles.  Two operations per interval, eight
+  intervals per sweep over the cells (the axes are padded to a multiple of :data:`HINGES`).
+  A bin table (one read per cell from uniform bins with every node on a bin edge) measured
+  slower than these sums on the M300's 20 intervals.
+* **Entries and weights.**  The table entry of each cell (unsigned, so that no negative-index
+  code is generated), the two angle weights and the distance fraction.
 * **Two reads per cell.**  Per node, the A-weighted level without spherical spreading,
   ``T_q(d) = 10 lg sum_b 10^((L_b,q + A_b - alpha_b (d - r0)) / 10)``, is tabulated on a grid
   uniform in ``s`` as 16-bit codes (``T = base + step * code``, ``step`` the card table's range
@@ -29,7 +35,8 @@ and row segment, so that no per-cell call passes arrays):
   separately (``efill``) for the map's metadata.
 
 The loops read tables at computed indices (gathers); LLVM vectorizes them only when the array
-arguments are known not to overlap (:func:`_vectorize_gathers`).
+arguments are known not to overlap (:func:`_vectorize_gathers`).  The two reads are most of
+what separates this kernel's speed from the parametric one's (``docs/performance.md``).
 """
 
 from __future__ import annotations
@@ -44,8 +51,11 @@ numba = _k.numba
 
 #: Columns of the per-card rows ``hs`` (float64) the kernel reads.
 (H_TAB, H_NN, H_NJ, H_SI, H_QB, H_IMAX, H_JMAX, H_AMIN, H_AMAX, H_BMIN, H_BMAX, H_PA0, H_PINV, H_PNB, H_PBO,
- H_TA0, H_TINV, H_TNB, H_TBO, H_K0, H_QS) = range(21)
-N_HS = 21
+ H_TA0, H_TINV, H_TNB, H_TBO, H_K0, H_QS, H_PK, H_TK) = range(23)
+N_HS = 23
+
+#: A non-uniform axis' intervals are padded to a multiple of this (the kernel sums 8, then 4 at a time).
+HINGES = 4
 
 #: Largest code of the table's 16-bit levels (``level = base + step * code``).
 Q_MAX = 65532
@@ -92,21 +102,21 @@ if numba is not None:
         return -r if y < _F0 else r
 
     @_k.jit(fastmath=True, error_model="numpy", nogil=True)
-    def _hemi_cells(xb, yb, zb, m, dmin2, hrow, tab, axg, axinv, s0, inv_hs, nd, sc, lev, ene, fwo, wt, em, eacc,
-                    facc):
-        """Level, energy and weight on filled nodes of ``m`` body vectors of one hemisphere card (row ``hrow``).
+    def _hemi_cells(xb, yb, zb, m, dmin2, hrow, tab, axg, axinv, s0, inv_hs, nd, sc, lev, fwo, wt, em, eacc, facc):
+        """Level and weight on filled nodes of ``m`` body vectors of one hemisphere card (row ``hrow``).
 
-        Three vectorized passes over the cells: distance and table angles; fractional node
-        indices, ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals (``c_k`` the steps of
-        the slope ``1 / (g_k+1 - g_k)``; one product on a uniform axis); the table reads.  ``sc``: scratch ``(5, >= m)``.
-        With ``wt > 0`` the energies are added to the accumulators ``em`` (maximum), ``eacc``
-        (``wt e``) and ``facc`` (``wt e fw``) instead of being written to ``ene`` and ``fwo``.
+        Four vectorized passes over the cells (short loops keep the table reads' latency
+        hidden): distance and table angles; fractional node indices (one product on a uniform
+        axis, else ``u = sum_k c_k max(a - g_k, 0)`` over the axis' intervals, eight at a time); table entries, weights and distance fraction; the table reads, the level and
+        the energies.  ``sc``: scratch ``(6, >= m)``.  Writes the level to ``lev`` and the weight
+        on filled nodes to ``fwo``, and adds the energies to the accumulators ``em``
+        (maximum), ``eacc`` (``wt e``) and ``facc`` (``wt e fw``).
         """
         _vectorize_gathers()
         tb = np.int32(hrow[H_TAB])
         nn = np.int32(hrow[H_NN])
         nj = np.int32(hrow[H_NJ])
-        si = np.int32(hrow[H_SI])
+        si = np.uint32(hrow[H_SI])
         qb = np.float32(hrow[H_QB])
         qs = np.float32(hrow[H_QS])
         imax = np.int32(hrow[H_IMAX])
@@ -121,12 +131,12 @@ if numba is not None:
         ihs = np.float32(inv_hs)
         ndm2 = np.int32(nd - 2)
         w32 = np.float32(wt)
-        acc = w32 > _F0
         S = sc[0]
         A = sc[1]
         B = sc[2]
         OUT = sc[3]
         V = sc[4]
+        RO = sc[5].view(np.uint32)
         for q in range(m):
             x = xb[q]
             y = yb[q]
@@ -149,27 +159,44 @@ if numba is not None:
             if uinv > _F0 or nint == 0:
                 for q in range(m):
                     Uo[q] = (X[q] - g0) * uinv
-            else:
+            else:  # u = K + sum_k c_k max(a, g_k), K = -sum_k c_k g_k; the axes are padded with c_k = 0
+                kc = np.float32(hrow[H_PK if ax == 0 else H_TK])
                 for q in range(m):
-                    Uo[q] = _F0
-                for kk in range(nint):
-                    gk = axg[off + kk]
-                    ck = axinv[off + kk]
+                    Uo[q] = kc
+                kk = off
+                while kk + 8 <= off + nint:
+                    g_0, g_1, g_2, g_3 = axg[kk], axg[kk + 1], axg[kk + 2], axg[kk + 3]
+                    g_4, g_5, g_6, g_7 = axg[kk + 4], axg[kk + 5], axg[kk + 6], axg[kk + 7]
+                    c_0, c_1, c_2, c_3 = axinv[kk], axinv[kk + 1], axinv[kk + 2], axinv[kk + 3]
+                    c_4, c_5, c_6, c_7 = axinv[kk + 4], axinv[kk + 5], axinv[kk + 6], axinv[kk + 7]
                     for q in range(m):
-                        Uo[q] += max(X[q] - gk, _F0) * ck
-        for q in range(m):
+                        a = X[q]
+                        Uo[q] += (((max(a, g_0) * c_0 + max(a, g_1) * c_1) + (max(a, g_2) * c_2 + max(a, g_3) * c_3))
+                                  + ((max(a, g_4) * c_4 + max(a, g_5) * c_5) + (max(a, g_6) * c_6 + max(a, g_7) * c_7)))
+                    kk += 8
+                if kk < off + nint:
+                    g_0, g_1, g_2, g_3 = axg[kk], axg[kk + 1], axg[kk + 2], axg[kk + 3]
+                    c_0, c_1, c_2, c_3 = axinv[kk], axinv[kk + 1], axinv[kk + 2], axinv[kk + 3]
+                    for q in range(m):
+                        a = X[q]
+                        Uo[q] += (max(a, g_0) * c_0 + max(a, g_1) * c_1) + (max(a, g_2) * c_2 + max(a, g_3) * c_3)
+        for q in range(m):  # entries (unsigned: no negative-index wraparound), weights, distance fraction
             u = lev[q]
             v = V[q]
             ii = min(max(np.int32(u), np.int32(0)), imax)
             jj = min(max(np.int32(v), np.int32(0)), jmax)
-            wa = min(max(u - np.float32(ii), _F0), _F1)
-            wb = min(max(v - np.float32(jj), _F0), _F1)
-            s = S[q]
-            x = (s - s032) * ihs
+            A[q] = min(max(u - np.float32(ii), _F0), _F1)
+            B[q] = min(max(v - np.float32(jj), _F0), _F1)
+            x = (S[q] - s032) * ihs
             kd = min(max(np.int32(x), np.int32(0)), ndm2)
-            fd = x - np.float32(kd)
-            node = np.int32(ii * nj + jj)
-            ro = np.int32(tb + node * nn + kd)
+            V[q] = x - np.float32(kd)
+            RO[q] = np.uint32(tb + (ii * nj + jj) * nn + kd)
+        for q in range(m):
+            wa = A[q]
+            wb = B[q]
+            fd = V[q]
+            s = S[q]
+            ro = RO[q]
             p0 = tab[ro]  # node (ii, jj) and (ii, jj + 1)
             p1 = tab[ro + si]  # node (ii + 1, jj) and (ii + 1, jj + 1)
             c00 = np.int32(p0 & _M16)
@@ -193,14 +220,11 @@ if numba is not None:
                   + w11 * np.float32(c11 & 1))
             fw = max(fw, OUT[q])
             lev[q] = lv
+            fwo[q] = fw
             e = _k._exp2(lv * _K10)
-            if acc:
-                em[q] = max(em[q], e)
-                eacc[q] += w32 * e
-                facc[q] += w32 * e * fw
-            else:
-                ene[q] = e
-                fwo[q] = fw
+            em[q] = max(em[q], e)
+            eacc[q] += w32 * e
+            facc[q] += w32 * e * fw
         return 0
 
     @_k.jit(fastmath=True, error_model="numpy", nogil=True)
@@ -208,11 +232,11 @@ if numba is not None:
         """The kernel's level and filled weight for arrays of body vectors, hemisphere card ``h`` (tests)."""
         n = xq.size
         levo = np.empty(n, np.float32)
-        ene = np.empty(n, np.float32)
         fwo = np.empty(n, np.float32)
-        sc = np.empty((5, n), np.float32)
+        acc = np.zeros((3, n), np.float32)
+        sc = np.empty((6, n), np.float32)
         _hemi_cells(xq.astype(np.float32), yq.astype(np.float32), zq.astype(np.float32), n, dmin2, hs[h], tab, axg,
-                    axinv, s0, inv_hs, nd, sc, levo, ene, fwo, 0.0, ene, ene, ene)
+                    axinv, s0, inv_hs, nd, sc, levo, fwo, 1.0, acc[0], acc[1], acc[2])
         return levo, fwo
 
     @_k.jit(fastmath=True, error_model="numpy", nogil=True)
@@ -239,9 +263,8 @@ if numba is not None:
         xs = np.empty(k, np.float32)
         ys = np.empty(k, np.float32)
         zs = np.empty(k, np.float32)
-        ecur = np.empty(k, np.float32)
         fcur = np.empty(k, np.float32)
-        sc = np.empty((5, k), np.float32)
+        sc = np.empty((6, k), np.float32)
         e0 = np.empty(3)
         e1 = np.empty(3)
         e2 = np.empty(3)
@@ -333,14 +356,8 @@ if numba is not None:
                             xs[q] = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
                             ys[q] = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
                             zs[q] = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
-                        if wt > _F0:
-                            _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc,
-                                        lcur, ecur, fcur, wt, em, eacc, facc)
-                        else:  # a zero weight (repeated instant): the maximum still counts
-                            _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc,
-                                        lcur, ecur, fcur, 0.0, em, eacc, facc)
-                            for q in range(m):
-                                em[q] = max(em[q], ecur[q])
+                        _hemi_cells(xs, ys, zs, m, coef[ci, 9], hs[hk], tab, axg, axinv, s0, inv_hs, nd, sc, lcur,
+                                    fcur, wt, em, eacc, facc)
                     else:
                         g = np.float32(gain[i])
                         p2 = np.float32(coef[ci, 0])

@@ -83,22 +83,28 @@ _PLACEHOLDER = ModelCard(id="hemisphere", vehicle="hemisphere", phase="horizonta
 # --------------------------------------------------------------------------- tables
 
 
-def _axis(grid_deg: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
-    """A table axis as the kernel reads it: ``(g0, 1 / spacing or 0, nodes, slope steps)`` in radians.
+def _axis(grid_deg: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray, float]:
+    """A table axis as the kernel reads it: ``(g0, 1 / spacing or 0, nodes, slope steps, K)`` in radians.
 
-    On a uniform axis the fractional node index is ``(a - g0) / spacing``; otherwise the kernel
-    sums ``c_k max(a - g_k, 0)`` over the intervals with ``c_k = 1 / w_k - 1 / w_k-1`` (``w_k``
-    the width of interval ``k``, ``1 / w_-1 = 0``): for ``g_0 <= a <= g_n`` the piecewise linear
-    function through ``(g_k, k)``, so bilinear interpolation in it is bilinear interpolation in
-    the angles.
+    On a uniform axis the fractional node index is ``(a - g0) / spacing`` (no nodes, no steps);
+    otherwise the kernel sums ``K + sum_k c_k max(a, g_k)`` over the intervals ``k`` with
+    ``c_k = 1 / w_k - 1 / w_k-1`` (``w_k`` the width of interval ``k``, ``1 / w_-1 = 0``) and
+    ``K = -sum_k c_k g_k``, that is ``sum_k c_k max(a - g_k, 0)``: for ``g_0 <= a <= g_n`` the
+    piecewise linear function through ``(g_k, k)``, so bilinear interpolation in it is
+    bilinear interpolation in the angles.  Nodes and steps are padded with ``c_k = 0`` to a
+    multiple of :data:`~gisnoise.maps._hemikernel.HINGES`.
     """
     g = np.radians(np.asarray(grid_deg, dtype=float))
+    none = np.zeros(0, np.float32)
     if g.size == 1:
-        return float(g[0]), 0.0, g.astype(np.float32), np.zeros(1, np.float32)
+        return float(g[0]), 0.0, none, none, 0.0
     sp = np.diff(g)
-    uniform = np.ptp(sp) <= 1e-9 * sp.max()
-    return float(g[0]), (1.0 / float(sp.mean()) if uniform else 0.0), g.astype(np.float32), \
-        np.append(np.diff(1.0 / sp, prepend=0.0), 0.0).astype(np.float32)
+    if np.ptp(sp) <= 1e-9 * sp.max():
+        return float(g[0]), 1.0 / float(sp.mean()), none, none, 0.0
+    pad = -(g.size - 1) % _hk.HINGES
+    gk = np.pad(g[:-1], (0, pad)).astype(np.float32)
+    ck = np.pad(np.diff(1.0 / sp, prepend=0.0), (0, pad)).astype(np.float32)
+    return float(g[0]), 0.0, gk, ck, -float(np.dot(ck.astype(float), gk.astype(float)))
 
 
 def distance_table(card: HemisphereCard, d_lo: float, d_hi: float, step: float = DIST_STEP
@@ -155,8 +161,8 @@ def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> He
         nd = tab.shape[0]
         ni, nj = card.phi_deg.size, card.theta_deg.size
         si = nj if ni > 1 else 0
-        pa0, pinv, pg, pi_ = _axis(card.phi_deg)
-        ta0, tinv, tg, ti_ = _axis(card.theta_deg)
+        pa0, pinv, pg, pi_, pk = _axis(card.phi_deg)
+        ta0, tinv, tg, ti_, tk = _axis(card.theta_deg)
         r0 = float(card.reference_distance_m)
         row = np.zeros(_hk.N_HS)
         codes, base, step = _quads(tab, ~card.measured.ravel(), nj)
@@ -164,8 +170,9 @@ def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> He
             off_t, nd - 1, nj, si * (nd - 1), max(ni - 2, 0), max(nj - 2, 0), base, step)
         gp, gt = np.radians(card.phi_deg), np.radians(card.theta_deg)
         row[[_hk.H_AMIN, _hk.H_AMAX, _hk.H_BMIN, _hk.H_BMAX]] = gp[0], gp[-1], gt[0], gt[-1]
-        row[[_hk.H_PA0, _hk.H_PINV, _hk.H_PNB, _hk.H_PBO]] = pa0, pinv, ni - 1, off_a
-        row[[_hk.H_TA0, _hk.H_TINV, _hk.H_TNB, _hk.H_TBO]] = ta0, tinv, nj - 1, off_a + ni
+        row[[_hk.H_PA0, _hk.H_PINV, _hk.H_PNB, _hk.H_PBO]] = pa0, pinv, pg.size, off_a
+        row[[_hk.H_TA0, _hk.H_TINV, _hk.H_TNB, _hk.H_TBO]] = ta0, tinv, tg.size, off_a + pg.size
+        row[[_hk.H_PK, _hk.H_TK]] = pk, tk
         row[_hk.H_K0] = 20.0 * math.log10(r0)
         rows.append(row)
         tabs.append(codes)
@@ -174,7 +181,7 @@ def _tables(cards: Sequence[HemisphereCard], d_min: float, reach_m: float) -> He
         s = s0 + hs * np.arange(nd)
         bounds.append(tab.max(axis=1) - _hk._CSP * s + 20.0 * math.log10(r0))
         off_t += (nd - 1) * ni * nj
-        off_a += ni + nj
+        off_a += pg.size + tg.size
     return HemiTables(kind=np.zeros(0, np.int64), hs=np.array(rows), tab=np.concatenate(tabs),
                       axg=np.concatenate(axg), axinv=np.concatenate(axinv),
                       s0=float(s0), hs_step=float(hs), nd=nd, reach_m=float(reach_m), bound=np.array(bounds))
