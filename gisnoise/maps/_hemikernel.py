@@ -252,27 +252,13 @@ if numba is not None:
         ns = (P.shape[1] - 1) // 2
         n = src.shape[0]
         nt = thr.shape[0]
-        thr32 = np.empty(nt, np.float32)
-        for t in range(nt):
-            thr32[t] = np.float32(thr[t])
-        lcur = np.empty(k, np.float32)
-        lprev = np.empty(k, np.float32)
-        eacc = np.zeros(k, np.float32)
+        thr32, lcur, lprev, eacc, tacc, e0, e1, e2, n0, n1, lo_b, hi_b = _k._window_buffers(k, thr)
         facc = np.zeros(k, np.float32)
-        tacc = np.zeros((nt, k), np.float32)
         xs = np.empty(k, np.float32)
         ys = np.empty(k, np.float32)
         zs = np.empty(k, np.float32)
         fcur = np.empty(k, np.float32)
         sc = np.empty((6, k), np.float32)
-        e0 = np.empty(3)
-        e1 = np.empty(3)
-        e2 = np.empty(3)
-        n0 = np.empty(3)
-        n1 = np.empty(3)
-        lo_b = np.empty(3)
-        hi_b = np.empty(3)
-        inv_k = 1.0 / k
         half_k = 0.5 * k
         half_k32 = np.float32(half_k)
         for r in range(nr):
@@ -285,39 +271,7 @@ if numba is not None:
                 m = hi - lo
                 q0 = lo - a
                 jl = lo - c0
-                for c in range(3):
-                    pa = P[r, 2 * sg, c]
-                    pm = P[r, 2 * sg + 1, c]
-                    pb = P[r, 2 * sg + 2, c]
-                    e0[c] = pm
-                    e1[c] = (pb - pa) * inv_k
-                    e2[c] = 2.0 * (pa - 2.0 * pm + pb) * inv_k * inv_k
-                    n0[c] = 0.5 * (U[r, 2 * sg, c] + U[r, 2 * sg + 2, c]) if has_dem else 0.0
-                    n1[c] = (U[r, 2 * sg + 2, c] - U[r, 2 * sg, c]) * inv_k if has_dem else 0.0
-                    lo_b[c] = np.inf
-                    hi_b[c] = -np.inf
-                for q in range(q0, q0 + m):
-                    u = q - half_k
-                    for c in range(3):
-                        v = e0[c] + u * (e1[c] + u * e2[c])
-                        if has_dem:
-                            v += dh[r, jl + q - q0] * (n0[c] + u * n1[c])
-                        lo_b[c] = min(lo_b[c], v)
-                        hi_b[c] = max(hi_b[c], v)
-                cx = 0.5 * (lo_b[0] + hi_b[0])
-                cy = 0.5 * (lo_b[1] + hi_b[1])
-                cz = 0.5 * (lo_b[2] + hi_b[2])
-                rad = 0.5 * math.sqrt((hi_b[0] - lo_b[0]) ** 2 + (hi_b[1] - lo_b[1]) ** 2
-                                      + (hi_b[2] - lo_b[2]) ** 2) + 0.01
-                audible = False
-                for i in range(n):
-                    if radius[i] < 0.0:
-                        continue
-                    dist = math.sqrt((src[i, 0] - cx) ** 2 + (src[i, 1] - cy) ** 2 + (src[i, 2] - cz) ** 2)
-                    if dist - rad <= radius[i]:
-                        audible = True
-                        break
-                if not audible:
+                if not _k._segment(P, U, dh, has_dem, r, sg, k, q0, m, jl, src, radius, e0, e1, e2, n0, n1, lo_b, hi_b):
                     continue
                 em = emax[r, jl:jl + m]
                 en = energy[r, jl:jl + m]
@@ -330,23 +284,13 @@ if numba is not None:
                     v0 = e0[0] - src[i, 0]
                     v1 = e0[1] - src[i, 1]
                     v2 = e0[2] - src[i, 2]
-                    ax = np.float32(C[i, 0, 0] * v0 + C[i, 0, 1] * v1 + C[i, 0, 2] * v2)
-                    ay = np.float32(C[i, 1, 0] * v0 + C[i, 1, 1] * v1 + C[i, 1, 2] * v2)
-                    az = np.float32(C[i, 2, 0] * v0 + C[i, 2, 1] * v1 + C[i, 2, 2] * v2)
-                    bx = np.float32(C[i, 0, 0] * e1[0] + C[i, 0, 1] * e1[1] + C[i, 0, 2] * e1[2])
-                    by = np.float32(C[i, 1, 0] * e1[0] + C[i, 1, 1] * e1[1] + C[i, 1, 2] * e1[2])
-                    bz = np.float32(C[i, 2, 0] * e1[0] + C[i, 2, 1] * e1[1] + C[i, 2, 2] * e1[2])
-                    dx = np.float32(C[i, 0, 0] * e2[0] + C[i, 0, 1] * e2[1] + C[i, 0, 2] * e2[2])
-                    dy = np.float32(C[i, 1, 0] * e2[0] + C[i, 1, 1] * e2[1] + C[i, 1, 2] * e2[2])
-                    dz = np.float32(C[i, 2, 0] * e2[0] + C[i, 2, 1] * e2[1] + C[i, 2, 2] * e2[2])
+                    ax, ay, az = _k._rot32(C, i, v0, v1, v2)
+                    bx, by, bz = _k._rot32(C, i, e1[0], e1[1], e1[2])
+                    dx, dy, dz = _k._rot32(C, i, e2[0], e2[1], e2[2])
                     nx = ny = nz = tx = ty = tz = _F0
                     if has_dem:
-                        nx = np.float32(C[i, 0, 0] * n0[0] + C[i, 0, 1] * n0[1] + C[i, 0, 2] * n0[2])
-                        ny = np.float32(C[i, 1, 0] * n0[0] + C[i, 1, 1] * n0[1] + C[i, 1, 2] * n0[2])
-                        nz = np.float32(C[i, 2, 0] * n0[0] + C[i, 2, 1] * n0[1] + C[i, 2, 2] * n0[2])
-                        tx = np.float32(C[i, 0, 0] * n1[0] + C[i, 0, 1] * n1[1] + C[i, 0, 2] * n1[2])
-                        ty = np.float32(C[i, 1, 0] * n1[0] + C[i, 1, 1] * n1[1] + C[i, 1, 2] * n1[2])
-                        tz = np.float32(C[i, 2, 0] * n1[0] + C[i, 2, 1] * n1[1] + C[i, 2, 2] * n1[2])
+                        nx, ny, nz = _k._rot32(C, i, n0[0], n0[1], n0[2])
+                        tx, ty, tz = _k._rot32(C, i, n1[0], n1[1], n1[2])
                     wt = np.float32(w[i])
                     hk = kind[i]
                     if hk >= 0:
@@ -385,33 +329,12 @@ if numba is not None:
                                 lcur[q] = _k._log2(_k._exp2(lcur[q] * _K10) + e7) * _DB_PER_LOG2
                     if nt > 0:
                         if i > 0:
-                            dti = np.float32(dt[i])
-                            for t in range(nt):
-                                tv = thr32[t]
-                                tac = tacc[t]
-                                for q in range(m):
-                                    x0 = lprev[q] - tv
-                                    x1 = lcur[q] - tv
-                                    up0 = x0 >= _F0
-                                    up1 = x1 >= _F0
-                                    fr = _F0
-                                    if up0 and up1:
-                                        fr = _F1
-                                    elif up0 != up1:
-                                        fr = max(x0, x1) / abs(x0 - x1)
-                                    tac[q] += dti * fr
+                            _k._time_above(lprev, lcur, thr32, tacc, np.float32(dt[i]), m)
                         for q in range(m):
                             lprev[q] = lcur[q]
                     if (i + 1) % _FLUSH == 0 or i == n - 1:
+                        _k._flush(en, eacc, ta, tacc, r, jl, m)
                         for q in range(m):
-                            en[q] += eacc[q]
-                            eacc[q] = _F0
                             ef[q] += facc[q]
                             facc[q] = _F0
-                        for t in range(nt):
-                            tat = ta[t, r, jl:jl + m]
-                            tac = tacc[t]
-                            for q in range(m):
-                                tat[q] += tac[q]
-                                tac[q] = _F0
         return 0

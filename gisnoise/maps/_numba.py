@@ -231,6 +231,123 @@ if numba is not None:
             out[i] = lev
         return out
 
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
+    def _segment(P, U, dh, has_dem, r, s, k, q0, m, jl, src, radius, e0, e1, e2, n0, n1, lo_b, hi_b):
+        """The lattice of segment ``s`` of window row ``r`` of :func:`_window_kernel` (every window kernel's), and
+        whether any instant can reach its cells ``q0 .. q0 + m`` (window columns from ``jl``).
+
+        The position of the cell ``u = q - k/2`` columns from the segment's middle is
+        ``e0 + u e1 + u^2 e2`` (``+ dh (n0 + u n1)`` with a DEM); counting from the middle halves
+        the float32 rounding of the body vector.  False when every instant's distance to the
+        cells' bounding sphere lies beyond its audibility radius.
+        """
+        inv_k = 1.0 / k
+        half_k = 0.5 * k
+        for c in range(3):
+            pa = P[r, 2 * s, c]
+            pm = P[r, 2 * s + 1, c]
+            pb = P[r, 2 * s + 2, c]
+            e0[c] = pm
+            e1[c] = (pb - pa) * inv_k
+            e2[c] = 2.0 * (pa - 2.0 * pm + pb) * inv_k * inv_k
+            n0[c] = 0.5 * (U[r, 2 * s, c] + U[r, 2 * s + 2, c]) if has_dem else 0.0
+            n1[c] = (U[r, 2 * s + 2, c] - U[r, 2 * s, c]) * inv_k if has_dem else 0.0
+            lo_b[c] = np.inf
+            hi_b[c] = -np.inf
+        for q in range(q0, q0 + m):
+            u = q - half_k
+            for c in range(3):
+                v = e0[c] + u * (e1[c] + u * e2[c])
+                if has_dem:
+                    v += dh[r, jl + q - q0] * (n0[c] + u * n1[c])
+                lo_b[c] = min(lo_b[c], v)
+                hi_b[c] = max(hi_b[c], v)
+        cx = 0.5 * (lo_b[0] + hi_b[0])
+        cy = 0.5 * (lo_b[1] + hi_b[1])
+        cz = 0.5 * (lo_b[2] + hi_b[2])
+        rad = 0.5 * math.sqrt((hi_b[0] - lo_b[0]) ** 2 + (hi_b[1] - lo_b[1]) ** 2
+                              + (hi_b[2] - lo_b[2]) ** 2) + 0.01
+        audible = False
+        for i in range(src.shape[0]):
+            if radius[i] < 0.0:
+                continue
+            dist = math.sqrt((src[i, 0] - cx) ** 2 + (src[i, 1] - cy) ** 2 + (src[i, 2] - cz) ** 2)
+            if dist - rad <= radius[i]:
+                audible = True
+                break
+        return audible
+
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
+    def _rot32(C, i, v0, v1, v2):
+        """The ENU vector ``(v0, v1, v2)`` in body axes, ``C[i] v``, in float32."""
+        return (np.float32(C[i, 0, 0] * v0 + C[i, 0, 1] * v1 + C[i, 0, 2] * v2),
+                np.float32(C[i, 1, 0] * v0 + C[i, 1, 1] * v1 + C[i, 1, 2] * v2),
+                np.float32(C[i, 2, 0] * v0 + C[i, 2, 1] * v1 + C[i, 2, 2] * v2))
+
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
+    def _time_above(lprev, lcur, thr32, tacc, dti, m):
+        """Add to ``tacc[t, q]`` the time (s) of an interval ``dti`` the level of cell ``q`` spends at or above
+        ``thr32[t]``, the level linear from ``lprev`` to ``lcur`` (dB) within the interval."""
+        for t in range(thr32.shape[0]):
+            tv = thr32[t]
+            tac = tacc[t]
+            for q in range(m):
+                x0 = lprev[q] - tv
+                x1 = lcur[q] - tv
+                up0 = x0 >= _ZERO
+                up1 = x1 >= _ZERO
+                fr = _ZERO
+                if up0 and up1:
+                    fr = _ONE
+                elif up0 != up1:
+                    fr = max(x0, x1) / abs(x0 - x1)
+                tac[q] += dti * fr
+        return 0
+
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
+    def _window_buffers(k, thr):
+        """The work arrays of a window kernel: thresholds in float32, per-cell levels now and at the previous
+        instant, float32 partial sums of energy and time above (zero), and the segment lattice's seven 3-vectors."""
+        nt = thr.shape[0]
+        thr32 = np.empty(nt, np.float32)
+        for t in range(nt):
+            thr32[t] = np.float32(thr[t])
+        return (thr32, np.empty(k, np.float32), np.empty(k, np.float32), np.zeros(k, np.float32),
+                np.zeros((nt, k), np.float32), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3),
+                np.empty(3), np.empty(3))
+
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
+    def _level_step(lprev, lcur, thr32, tacc, e7, dti, m):
+        """Time above after an instant: ``lcur`` (``log2`` of the UAV's energy) becomes the level with the
+        background ``e7`` in dB; with ``dti > 0`` the interval from the previous instant adds to ``tacc``
+        (:func:`_time_above`); ``lprev`` takes ``lcur``."""
+        if e7 != _ZERO:
+            for q in range(m):
+                lcur[q] = _log2(_exp2(lcur[q]) + e7) * _DB_PER_LOG2
+        else:
+            for q in range(m):
+                lcur[q] = lcur[q] * _DB_PER_LOG2
+        if dti > _ZERO:
+            _time_above(lprev, lcur, thr32, tacc, dti, m)
+        for q in range(m):
+            lprev[q] = lcur[q]
+        return 0
+
+    @_jit(fastmath=_FM, error_model="numpy", inline="always")
+    def _flush(en, eacc, ta, tacc, r, jl, m):
+        """Add the float32 partial sums ``eacc`` and ``tacc`` to the outputs (window row ``r``, columns from ``jl``)
+        and zero them."""
+        for q in range(m):
+            en[q] += eacc[q]
+            eacc[q] = _ZERO
+        for t in range(tacc.shape[0]):
+            tat = ta[t, r, jl:jl + m]
+            tac = tacc[t]
+            for q in range(m):
+                tat[q] += tac[q]
+                tac[q] = _ZERO
+        return 0
+
     @_jit(fastmath=_FM, error_model="numpy", nogil=True)
     def _window_kernel(P, U, dh, has_dem, k, m0, c0, ncw, src, C, gain, cidx, coef, w, dt, radius, thr,
                        emax, energy, ta, computed):
@@ -251,23 +368,9 @@ if numba is not None:
         ns = (P.shape[1] - 1) // 2
         n = src.shape[0]
         nt = thr.shape[0]
-        thr32 = np.empty(nt, np.float32)
-        for t in range(nt):
-            thr32[t] = np.float32(thr[t])
-        lcur = np.empty(k, np.float32)
-        lprev = np.empty(k, np.float32)
         # float32 partial sums over at most _FLUSH instants, added to the float64 outputs
         # (a float64 accumulator in the cell loop stops LLVM from vectorizing it)
-        eacc = np.zeros(k, np.float32)
-        tacc = np.zeros((nt, k), np.float32)
-        e0 = np.empty(3)
-        e1 = np.empty(3)
-        e2 = np.empty(3)
-        n0 = np.empty(3)
-        n1 = np.empty(3)
-        lo_b = np.empty(3)
-        hi_b = np.empty(3)
-        inv_k = 1.0 / k
+        thr32, lcur, lprev, eacc, tacc, e0, e1, e2, n0, n1, lo_b, hi_b = _window_buffers(k, thr)
         half_k = 0.5 * k
         half_k32 = np.float32(half_k)
         for r in range(nr):
@@ -280,41 +383,7 @@ if numba is not None:
                 m = hi - lo
                 q0 = lo - a
                 jl = lo - c0
-                # position of the cell u = q - k/2 from the middle: e0 + u e1 + u^2 e2 (+ dh (n0 + u n1));
-                # counting from the middle halves the float32 rounding of the body vector
-                for c in range(3):
-                    pa = P[r, 2 * s, c]
-                    pm = P[r, 2 * s + 1, c]
-                    pb = P[r, 2 * s + 2, c]
-                    e0[c] = pm
-                    e1[c] = (pb - pa) * inv_k
-                    e2[c] = 2.0 * (pa - 2.0 * pm + pb) * inv_k * inv_k
-                    n0[c] = 0.5 * (U[r, 2 * s, c] + U[r, 2 * s + 2, c]) if has_dem else 0.0
-                    n1[c] = (U[r, 2 * s + 2, c] - U[r, 2 * s, c]) * inv_k if has_dem else 0.0
-                    lo_b[c] = np.inf
-                    hi_b[c] = -np.inf
-                for q in range(q0, q0 + m):
-                    u = q - half_k
-                    for c in range(3):
-                        v = e0[c] + u * (e1[c] + u * e2[c])
-                        if has_dem:
-                            v += dh[r, jl + q - q0] * (n0[c] + u * n1[c])
-                        lo_b[c] = min(lo_b[c], v)
-                        hi_b[c] = max(hi_b[c], v)
-                cx = 0.5 * (lo_b[0] + hi_b[0])
-                cy = 0.5 * (lo_b[1] + hi_b[1])
-                cz = 0.5 * (lo_b[2] + hi_b[2])
-                rad = 0.5 * math.sqrt((hi_b[0] - lo_b[0]) ** 2 + (hi_b[1] - lo_b[1]) ** 2
-                                      + (hi_b[2] - lo_b[2]) ** 2) + 0.01
-                audible = False
-                for i in range(n):
-                    if radius[i] < 0.0:
-                        continue
-                    dist = math.sqrt((src[i, 0] - cx) ** 2 + (src[i, 1] - cy) ** 2 + (src[i, 2] - cz) ** 2)
-                    if dist - rad <= radius[i]:
-                        audible = True
-                        break
-                if not audible:
+                if not _segment(P, U, dh, has_dem, r, s, k, q0, m, jl, src, radius, e0, e1, e2, n0, n1, lo_b, hi_b):
                     continue
                 # 1-D views indexed from 0: LLVM then sees consecutive addresses and vectorizes
                 em = emax[r, jl:jl + m]
@@ -328,15 +397,9 @@ if numba is not None:
                     v1 = e0[1] - src[i, 1]
                     v2 = e0[2] - src[i, 2]
                     # body frame: A + u (B + u D) (+ dh (N + u T)), u = q - k/2
-                    ax = np.float32(C[i, 0, 0] * v0 + C[i, 0, 1] * v1 + C[i, 0, 2] * v2)
-                    ay = np.float32(C[i, 1, 0] * v0 + C[i, 1, 1] * v1 + C[i, 1, 2] * v2)
-                    az = np.float32(C[i, 2, 0] * v0 + C[i, 2, 1] * v1 + C[i, 2, 2] * v2)
-                    bx = np.float32(C[i, 0, 0] * e1[0] + C[i, 0, 1] * e1[1] + C[i, 0, 2] * e1[2])
-                    by = np.float32(C[i, 1, 0] * e1[0] + C[i, 1, 1] * e1[1] + C[i, 1, 2] * e1[2])
-                    bz = np.float32(C[i, 2, 0] * e1[0] + C[i, 2, 1] * e1[1] + C[i, 2, 2] * e1[2])
-                    dx = np.float32(C[i, 0, 0] * e2[0] + C[i, 0, 1] * e2[1] + C[i, 0, 2] * e2[2])
-                    dy = np.float32(C[i, 1, 0] * e2[0] + C[i, 1, 1] * e2[1] + C[i, 1, 2] * e2[2])
-                    dz = np.float32(C[i, 2, 0] * e2[0] + C[i, 2, 1] * e2[1] + C[i, 2, 2] * e2[2])
+                    ax, ay, az = _rot32(C, i, v0, v1, v2)
+                    bx, by, bz = _rot32(C, i, e1[0], e1[1], e1[2])
+                    dx, dy, dz = _rot32(C, i, e2[0], e2[1], e2[2])
                     # the card's row folded per instant (see _cell_log2)
                     gk = np.float32(gain[i] * _K10_64)
                     a3 = np.float32(coef[ci, 0] * coef[ci, 1])
@@ -349,12 +412,8 @@ if numba is not None:
                     dmin2 = np.float32(coef[ci, 9])
                     wi = np.float32(w[i])
                     if has_dem:
-                        nx = np.float32(C[i, 0, 0] * n0[0] + C[i, 0, 1] * n0[1] + C[i, 0, 2] * n0[2])
-                        ny = np.float32(C[i, 1, 0] * n0[0] + C[i, 1, 1] * n0[1] + C[i, 1, 2] * n0[2])
-                        nz = np.float32(C[i, 2, 0] * n0[0] + C[i, 2, 1] * n0[1] + C[i, 2, 2] * n0[2])
-                        tx = np.float32(C[i, 0, 0] * n1[0] + C[i, 0, 1] * n1[1] + C[i, 0, 2] * n1[2])
-                        ty = np.float32(C[i, 1, 0] * n1[0] + C[i, 1, 1] * n1[1] + C[i, 1, 2] * n1[2])
-                        tz = np.float32(C[i, 2, 0] * n1[0] + C[i, 2, 1] * n1[1] + C[i, 2, 2] * n1[2])
+                        nx, ny, nz = _rot32(C, i, n0[0], n0[1], n0[2])
+                        tx, ty, tz = _rot32(C, i, n1[0], n1[1], n1[2])
                         for q in range(m):
                             qf = np.float32(q0 + q) - half_k32
                             hh = dhr[q]
@@ -379,39 +438,8 @@ if numba is not None:
                             eacc[q] += wi * e
                             if nt > 0:
                                 lcur[q] = y
-                    if nt > 0:  # lcur: log2 of the UAV's energy -> level with the background, dB
-                        if e7 != _ZERO:
-                            for q in range(m):
-                                lcur[q] = _log2(_exp2(lcur[q]) + e7) * _DB_PER_LOG2
-                        else:
-                            for q in range(m):
-                                lcur[q] = lcur[q] * _DB_PER_LOG2
-                        if i > 0:
-                            dti = np.float32(dt[i])
-                            for t in range(nt):
-                                tv = thr32[t]
-                                tac = tacc[t]
-                                for q in range(m):
-                                    x0 = lprev[q] - tv
-                                    x1 = lcur[q] - tv
-                                    up0 = x0 >= _ZERO
-                                    up1 = x1 >= _ZERO
-                                    fr = _ZERO
-                                    if up0 and up1:
-                                        fr = _ONE
-                                    elif up0 != up1:
-                                        fr = max(x0, x1) / abs(x0 - x1)
-                                    tac[q] += dti * fr
-                        for q in range(m):
-                            lprev[q] = lcur[q]
+                    if nt > 0:  # lcur: log2 of the UAV's energy -> level with the background, dB; time above
+                        _level_step(lprev, lcur, thr32, tacc, e7, np.float32(dt[i]) if i > 0 else _ZERO, m)
                     if (i + 1) % _FLUSH == 0 or i == n - 1:
-                        for q in range(m):
-                            en[q] += eacc[q]
-                            eacc[q] = _ZERO
-                        for t in range(nt):
-                            tat = ta[t, r, jl:jl + m]
-                            tac = tacc[t]
-                            for q in range(m):
-                                tat[q] += tac[q]
-                                tac[q] = _ZERO
+                        _flush(en, eacc, ta, tacc, r, jl, m)
         return 0
