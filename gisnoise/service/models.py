@@ -9,8 +9,9 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, WithJsonSchema
 
 from gisnoise import limits as _limits
+from gisnoise.errors import GisnoiseError
 from gisnoise.limits import CARD_REF_PATTERN, SAFE_ID_PATTERN
-from gisnoise.model import PHASES, ansatz_names
+from gisnoise.model import EFFECT_NAMES, PHASES, ansatz_names, get_ansatz
 
 __all__ = [
     "MediaType", "ErrorBody", "FieldError", "CardDocument", "CardInfo", "CardList", "CardVersions",
@@ -67,7 +68,23 @@ Metric = Literal["LAmax", "LAeq", "SEL"]
 CARD_SCHEMAS = ("gisnoise/model-card/1", "gisnoise/hemisphere-card/1")
 """The card documents the store takes (an ansatz card, a measured hemisphere card)."""
 
-_ANSATZES = (*ansatz_names(), "hemisphere")
+_BASES = tuple(n for n in ansatz_names() if "+" not in n)
+_ANSATZ_PATTERN = (rf"^(hemisphere|({'|'.join(re.escape(b) for b in _BASES)})"
+                   rf"(\+({'|'.join(re.escape(e) for e in EFFECT_NAMES)}))*)$")
+"""An ansatz name: ``hemisphere``, or a base of the registry with effects of the library joined by ``+``."""
+
+
+def _known_ansatz(value: str) -> str:
+    """``value`` when it names the hemisphere or an ansatz the registry has or builds (a chain ``base+e1+e2``)."""
+    if value != "hemisphere" and re.fullmatch(_ANSATZ_PATTERN, value) is None:
+        raise ValueError(f"{value!r} is not a known ansatz: 'hemisphere', or one of {', '.join(_BASES)} with effects "
+                         f"of {', '.join(EFFECT_NAMES)} joined by '+' (e.g. 'paper-offset+bank_angle+rpm')")
+    if value != "hemisphere":
+        try:
+            get_ansatz(value)
+        except GisnoiseError as exc:
+            raise ValueError(str(exc)) from None
+    return value
 
 
 def _one_of(values: tuple[str, ...], what: str) -> Any:
@@ -94,7 +111,8 @@ _Vehicle = Annotated[str, _length(1, 200), WithJsonSchema({"type": "string", "mi
 _Notes = Annotated[str, _length(0, 100_000), WithJsonSchema({"type": "string", "maxLength": 100_000})]
 
 
-AnsatzName = Annotated[str, _one_of(_ANSATZES, "ansatz"), WithJsonSchema({"type": "string", "enum": list(_ANSATZES)})]
+AnsatzName = Annotated[str, AfterValidator(_known_ansatz), WithJsonSchema({"type": "string", "maxLength": 200,
+                                                                          "pattern": _ANSATZ_PATTERN})]
 """An ansatz of the registry (``paper``, ``paper-offset``, ``<base>+<effect>``) or ``hemisphere``."""
 
 

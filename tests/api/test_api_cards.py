@@ -71,6 +71,23 @@ def test_invalid_uploads_name_the_field(client):
     assert client.get("/cards/evil").status_code == 404
 
 
+def test_cards_with_chained_effects_are_stored(client):
+    """A card of a chain ``base+e1+e2`` (the names the model builds on demand) is stored like any card;
+    a chain with an unknown or repeated effect is refused naming ``ansatz``."""
+    doc = _doc()
+    doc.pop("covariance")
+    doc.update(id="chain", ansatz="paper-offset+bank_angle+ground_reflection+doppler")
+    doc["parameters"].update(k_bank=3.0, r_ground=0.8, f_ground=300.0, q_doppler=1.0)
+    r = client.post("/cards", json=doc)
+    assert r.status_code == 201, r.text
+    assert client.get("/cards/chain").json()["ansatz"] == doc["ansatz"]
+    assert_names_field(client.post("/cards", json=dict(doc, id="c2", ansatz="paper-offset+bank_angle+nope")), 422,
+                       "ansatz")
+    assert_names_field(client.post("/cards", json=dict(doc, id="c3", ansatz="paper-offset+bank_angle+bank_angle")),
+                       422, "ansatz")
+    assert_names_field(client.post("/cards", json=dict(doc, id="c4", ansatz="hemisphere+wind")), 422, "ansatz")
+
+
 def test_get_and_delete_errors(client):
     assert_names_field(client.get("/cards/nope"), 404, "id")
     assert_names_field(client.get("/cards/demo-sink", params={"version": 7}), 404, "version")
