@@ -15,6 +15,16 @@ data folder, then
    process tree) sampled while they run, against its idle RSS and the peak with
    one such job alone; the jobs are cancelled after ``--job-seconds``.
 
+The share outside the evaluator is given two ways: client-side (``1 - evaluate / latency``,
+the latency this bench's HTTP client measures: what a route planner sees, the issue's
+number) and server-side (``1 - evaluate / total``, ``total`` the service's own
+``Server-Timing`` entry from the request's arrival in the app to its answer's head:
+without the client's HTTP stack, the connection and the server's HTTP parser).
+
+``--compare-stacks`` runs uvicorn's plain stack (``--loop asyncio --http h11``) and its fast
+one (``uvloop``, ``httptools``; what ``gisnoise serve`` picks when they are installed) side by
+side in one run, single-client rounds interleaved, and prints both and their ratio.
+
 Bounded in count and time; talks to 127.0.0.1 only.  Exits non-zero when any
 request failed.  Usage: ``python bench/bench_api_load.py [--requests 40] [--clients 4]``.
 """
@@ -22,6 +32,7 @@ request failed.  Usage: ``python bench/bench_api_load.py [--requests 40] [--clie
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import socket
 import statistics
@@ -66,13 +77,16 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_server(data: Path) -> tuple[subprocess.Popen, str]:
+def start_server(data: Path, stack: tuple[str, str] | None = None) -> tuple[subprocess.Popen, str]:
+    """uvicorn on the app factory; ``stack``: its ``(--loop, --http)`` (default: uvicorn's choice, as ``gisnoise
+    serve``)."""
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("GISNOISE_")}
     env.update(GISNOISE_DATA_DIR=str(data), GISNOISE_TILE_URL="", GISNOISE_WORKERS="1",
                GISNOISE_SEED_CARDS_DIR=str(REPO / "gisnoise" / "data" / "cards"))
     proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "gisnoise.service.app:create_app", "--factory", "--host",
-                             "127.0.0.1", "--port", str(port), "--log-level", "warning"], env=env, cwd=str(REPO))
+                             "127.0.0.1", "--port", str(port), "--log-level", "warning",
+                             *(("--loop", stack[0], "--http", stack[1]) if stack else ())], env=env, cwd=str(REPO))
     url = f"http://127.0.0.1:{port}"
     end = time.monotonic() + 60
     while time.monotonic() < end:
@@ -97,8 +111,9 @@ def pct(v: list[float], q: float) -> float:
 
 def load(url: str, method: str, path: str, body: dict | None, n: int, clients: int, max_s: float) -> dict:
     lat: list[float] = []
-    evals: list[float] = []  # the evaluator's and the map's time of each request (its Server-Timing header)
+    evals: list[float] = []  # the evaluator's, the map's and the app's time of each request (its Server-Timing)
     maps: list[float] = []
+    totals: list[float] = []
     errors: list[str] = []
     lock = threading.Lock()
     t_end = time.monotonic() + max_s
@@ -122,14 +137,22 @@ def load(url: str, method: str, path: str, body: dict | None, n: int, clients: i
                 if "evaluate" in timing:
                     evals.append(float(timing["evaluate"]) / 1000)
                     maps.append(float(timing["map"]) / 1000)
+                    totals.append(float(timing["total"]) / 1000)
 
     t0 = time.perf_counter()
     with ThreadPoolExecutor(clients) as ex:
         list(ex.map(one, range(n)))
     wall = time.perf_counter() - t0
     share = [1 - e / t for e, t in zip(evals, lat, strict=False)] if len(evals) == len(lat) else []
+    share_server = [1 - e / t for e, t in zip(evals, totals, strict=False)] if len(evals) == len(lat) else []
+    nan = float("nan")
     return {"n": len(lat), "errors": errors, "rps": len(lat) / wall, "p50": pct(lat, 50), "p90": pct(lat, 90),
-            "outside": statistics.median(share) if share else float("nan"),
+            "outside": statistics.median(share) if share else nan,
+            "outside_server": statistics.median(share_server) if share_server else nan,
+            "outside_ms": statistics.median([t - e for e, t in zip(evals, lat, strict=False)]) if share else nan,
+            "outside_server_ms": statistics.median([t - e for e, t in zip(evals, totals, strict=False)])
+            if share_server else nan,
+            "total_p50": statistics.median(totals) if totals else nan,
             "eval_p50": statistics.median(evals) if evals else float("nan"),
             "map_p50": statistics.median(maps) if maps else float("nan"),
             "p95": pct(lat, 95),
@@ -193,12 +216,58 @@ def memory_with_queued_jobs(url: str, proc: subprocess.Popen, n_jobs: int, job_s
             "alone_s": (alone["finished"] or 0) - (alone["started"] or 0), "states": states}
 
 
+STACKS = {"asyncio+h11": ("asyncio", "h11"), "uvloop+httptools": ("uvloop", "httptools")}
+
+
+def compare_stacks(requests: int, max_s: float) -> int:
+    """POST /contours from one client to two servers, uvicorn's plain and fast stack, in interleaved rounds."""
+    missing = [m for m in ("uvloop", "httptools") if importlib.util.find_spec(m) is None]
+    if missing:
+        print(f"--compare-stacks needs {' and '.join(missing)} installed")
+        return 2
+    rounds = max(1, requests // 5)
+    out: dict[str, list[dict]] = {name: [] for name in STACKS}
+    with tempfile.TemporaryDirectory(prefix="gisnoise-bench-") as tmp:
+        servers = {name: start_server(Path(tmp) / name, stack) for name, stack in STACKS.items()}
+        try:
+            for _, url in servers.values():
+                load(url, "POST", "/contours", typical_request(), 5, 1, max_s)  # warm-up
+            for i in range(rounds):  # the order alternates, so neither stack always follows the other
+                for name, (_, url) in (list(servers.items()) if i % 2 == 0 else list(servers.items())[::-1]):
+                    out[name].append(load(url, "POST", "/contours", typical_request(), 5, 1, max_s))
+        finally:
+            for proc, _ in servers.values():
+                proc.terminate()
+                proc.wait(30)
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print(f"POST /contours, one client, {rounds} interleaved rounds of 5 per stack (medians over rounds):")
+    med: dict[str, dict[str, float]] = {}
+    for name, rs in out.items():
+        med[name] = {k: statistics.median(r[k] for r in rs) for k in ("p50", "eval_p50", "total_p50", "outside",
+                                                                       "outside_ms", "outside_server",
+                                                                       "outside_server_ms")}
+        m = med[name]
+        print(f"  {name}: p50 {m['p50'] * 1000:.1f} ms, evaluator {m['eval_p50'] * 1000:.1f} ms, app total "
+              f"{m['total_p50'] * 1000:.1f} ms; outside the evaluator client-side {m['outside_ms'] * 1000:.1f} ms "
+              f"({100 * m['outside']:.0f} %), server-side {m['outside_server_ms'] * 1000:.1f} ms "
+              f"({100 * m['outside_server']:.0f} %)")
+    a, b = med["asyncio+h11"], med["uvloop+httptools"]
+    print(f"ratio uvloop+httptools / asyncio+h11: p50 {b['p50'] / a['p50']:.3f}, client-side time outside the "
+          f"evaluator {b['outside_ms'] / a['outside_ms']:.3f}, server-side {b['outside_server_ms'] / a['outside_server_ms']:.3f}")
+    errors = [e for rs in out.values() for r in rs for e in r["errors"]]
+    for e in errors[:5]:
+        print("error:", e)
+    return 1 if errors else 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--requests", type=int, default=40, help="typical contour requests (default 40)")
     ap.add_argument("--clients", type=int, default=4, help="concurrent clients (default 4)")
     ap.add_argument("--resolution", type=float, default=20.0, help="cell size of the typical request, m (default 20)")
     ap.add_argument("--skip-jobs", action="store_true", help="skip the queued large jobs (part 3)")
+    ap.add_argument("--compare-stacks", action="store_true",
+                    help="only POST /contours, one client: uvicorn's asyncio+h11 against uvloop+httptools, interleaved")
     ap.add_argument("--max-seconds", type=float, default=120, help="time bound of each load phase, s")
     ap.add_argument("--jobs", type=int, default=8, help="large jobs queued at once (default 8)")
     ap.add_argument("--job-seconds", type=float, default=60, help="watch the queued jobs this long, s")
@@ -207,6 +276,8 @@ def main() -> int:
     RESOLUTION_M = args.resolution
 
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    if args.compare_stacks:
+        return compare_stacks(args.requests, args.max_seconds)
     direct_baseline(1)  # imports, kernels loaded
     base, t_eval = direct_baseline(5)
     with tempfile.TemporaryDirectory(prefix="gisnoise-bench-") as tmp:
@@ -225,11 +296,13 @@ def main() -> int:
     print("gisnoise service load test (loopback, uvicorn, 1 job worker)")
     print(f"baseline: the same map in-process via make_map: {base * 1000:.0f} ms, of which the evaluator "
           f"{t_eval * 1000:.0f} ms ({100 * (1 - t_eval / base):.0f} % outside it)")
-    print(f"POST /contours, one client: p50 {single['p50'] * 1000:.0f} ms, p95 {single['p95'] * 1000:.0f} ms; "
+    print(f"POST /contours, one client: p50 {single['p50'] * 1000:.1f} ms, p95 {single['p95'] * 1000:.1f} ms; "
           f"share outside the evaluator {100 * (1 - t_eval / single['p50']):.0f} % against the in-process "
-          f"evaluator; per request (its Server-Timing: evaluator p50 {single['eval_p50'] * 1000:.0f} ms, map "
-          f"{single['map_p50'] * 1000:.0f} ms): median share outside the evaluator {100 * single['outside']:.0f} % "
-          "(goal < 30 %)")
+          f"evaluator; per request (its Server-Timing: evaluator p50 {single['eval_p50'] * 1000:.1f} ms, map "
+          f"{single['map_p50'] * 1000:.1f} ms, app total {single['total_p50'] * 1000:.1f} ms):")
+    print(f"  median share outside the evaluator, client-side (what a planner sees): {100 * single['outside']:.0f} % "
+          f"({single['outside_ms'] * 1000:.1f} ms); server-side (app total): {100 * single['outside_server']:.0f} % "
+          f"({single['outside_server_ms'] * 1000:.1f} ms) (goal < 30 %)")
     for name, r in ((f"POST /contours (2 km route, {RESOLUTION_M:g} m cells, GeoJSON)", contours),
                     ("GET /cards", cards)):
         print(f"{name}: {r['n']} ok, {len(r['errors'])} errors, {r['rps']:.1f} req/s with {args.clients} clients; "

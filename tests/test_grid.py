@@ -151,3 +151,18 @@ def test_geotiff_bands_crs_transform_nodata(tmp_path):
 
 def test_parse_crs_accepts_projected_metre_crs():
     assert parse_crs("EPSG:3035").to_epsg() == 3035
+
+
+def test_crs_label_is_the_authority_code_else_the_wkt_cached_by_identity():
+    from pyproj import CRS
+
+    from gisnoise.geo import crs_label
+
+    utm = CRS.from_epsg(32632)
+    assert crs_label(utm) == "EPSG:32632" and crs_label(utm) == "EPSG:32632"  # the second call: the cache
+    assert crs_label(CRS.from_epsg(32632)) == "EPSG:32632"  # an equal CRS, another object
+    local = CRS.from_proj4("+proj=tmerc +lat_0=52 +lon_0=10.5 +k=1 +x_0=0 +y_0=0 +ellps=GRS80 +units=m")
+    assert local.to_authority() is None
+    assert crs_label(local) == local.to_wkt()
+    for _ in range(70):  # more objects than the cache holds: each still gets its own label
+        assert crs_label(CRS.from_epsg(32633)) == "EPSG:32633"

