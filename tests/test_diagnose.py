@@ -19,6 +19,7 @@ import pytest
 from click.testing import CliRunner
 
 from gisnoise import simulate
+from gisnoise.cli.diagnose import command as diagnose_command
 from gisnoise.cli.main import cli
 from gisnoise.diagnose import (
     DIAGNOSIS_FILE,
@@ -324,6 +325,30 @@ TRIPOD_HEIGHTS = {"m1": 1.0, "m2": 1.2, "m3": 1.5, "m4": 1.3}
 def plates_control(seed: int = 5):
     """Samples of the base scenario with every microphone listed (and simulated) on a ground plate."""
     return study.control(seed, all_plates=True)
+
+
+def test_position_radius_option_searches_or_takes_the_listed_positions(tmp_path):
+    """m1 listed 30 m north of where it stood: by default (radius POSITION_RADIUS_M) the diagnosis places it back
+    (within 5 m) and says so; with --position-radius 0 it takes the listed positions (no estimate)."""
+    from gisnoise.diagnose.positions import POSITION_RADIUS_M
+
+    camp = simulate.simulate(wav_scenario(), tmp_path / "camp", base_dir=SCENARIO.parent)
+    meta = json.loads((camp / "campaign.json").read_text())
+    m1 = next(m for m in meta["microphones"] if m["id"] == "m1")
+    m1["lat"] += 30.0 / 111_200.0  # about 30 m north (a degree of latitude is 111.2 km here)
+    (camp / "campaign.json").write_text(json.dumps(meta))
+    default = next(p for p in diagnose_command.params if p.name == "position_radius").default
+    assert default == POSITION_RADIUS_M
+    docs = {}
+    for radius in (None, "0"):
+        out = tmp_path / f"diag{radius}"
+        args = ["-q", "diagnose", str(camp), "--card", str(CARD), "--out", str(out), "--effect", "rpm", "--no-report"]
+        run = CliRunner().invoke(cli, args + ([] if radius is None else ["--position-radius", radius]))
+        assert run.exit_code == 0, run.output
+        docs[radius] = json.loads((out / "diagnosis.json").read_text())
+    est = docs[None]["metadata"]["microphone_positions"]["m1"]
+    assert est["contradicts"] and abs(est["relative_n_m"] + 30.0) < 5.0 and abs(est["relative_e_m"]) < 5.0
+    assert "microphone_positions" not in docs["0"]["metadata"]
 
 
 def test_two_ray_physics_of_the_study_simulator():

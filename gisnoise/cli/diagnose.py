@@ -21,10 +21,13 @@ from gisnoise.model import load
 @click.option("--alpha", default=0.01, show_default=True, type=click.FloatRange(0.0, 1.0, min_open=True, max_open=True),
               help="Family-wise significance level of the extension tests.")
 @click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading.")
+@click.option("--position-radius", "position_radius", default=50.0, show_default=True, type=click.FloatRange(0.0, 500.0),
+              help="Search each microphone's position within this horizontal radius, m, of where the campaign puts "
+                   "it (a wrong position is reported, not believed); 0: take the stated positions as they are.")
 @click.option("--no-report", is_flag=True, help="Write diagnosis.json only.")
 @click.pass_context
 def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects: tuple[str, ...], alpha: float,
-            absorption: bool, no_report: bool) -> None:
+            absorption: bool, position_radius: float, no_report: bool) -> None:
     """Diagnose the gap between a model card and a measurement campaign.
 
     CAMPAIGN is a campaign folder (campaign.json, flights/, mics/ with WAV or level
@@ -42,7 +45,7 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     names = list(effects) or None
     n_steps = 3 + (len(names) if names else 8)
     with progress(ctx, "diagnosing", float(n_steps)) as update:
-        diag = run_diagnosis(samples, card, candidates=names, alpha=alpha,
+        diag = run_diagnosis(samples, card, candidates=names, alpha=alpha, position_radius_m=position_radius,
                              progress=lambda done, total, what: update(float(done)))
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
