@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _jsonedit import put
 from hypothesis import given
 from hypothesis import strategies as st
 from test_campaign import MICS, make_campaign, straight_track
@@ -53,30 +54,12 @@ _VALUE = st.one_of(_NUM, st.text(max_size=6), st.none(), st.booleans(), st.lists
                    st.dictionaries(st.text(max_size=3), _NUM, max_size=2))
 
 
-def _set(doc: dict, dotted: str, value, remove: bool) -> None:
-    *path, last = dotted.split(".")
-    node = doc
-    for k in path:
-        node = node[int(k)] if isinstance(node, list) and k.isdigit() else node.get(k) if isinstance(node, dict) \
-            else None
-        if node is None:
-            return
-    if isinstance(node, list) and last.isdigit():
-        if int(last) < len(node):
-            node[int(last)] = value
-    elif isinstance(node, dict):
-        if remove:
-            node.pop(last, None)
-        else:
-            node[last] = value
-
-
 @st.composite
 def campaign_files(draw) -> dict[str, bytes]:
     files = dict(_template())
     doc = json.loads(files["campaign.json"])
     for _ in range(draw(st.integers(0, 2))):
-        _set(doc, draw(st.sampled_from(_JSON_KEYS)), draw(_VALUE), draw(st.booleans()))
+        put(doc, draw(st.sampled_from(_JSON_KEYS)).split("."), draw(_VALUE), draw(st.booleans()))
     text = json.dumps(doc, allow_nan=True)
     if draw(st.integers(0, 9)) == 0:  # broken JSON text
         k = draw(st.integers(0, len(text)))

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _jsonedit import put
 from hypothesis import given
 from hypothesis import strategies as st
 from test_fuzz_campaigns import campaign_files
@@ -72,35 +73,16 @@ _REQ_KEYS = ["trajectory.format", "trajectory.rows", "cards", "cards.0", "grid.r
 _ROW_KEYS = ["t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w", "phase"]
 
 
-def _put(doc, path: list[str], value, remove: bool) -> None:
-    node = doc
-    for k in path[:-1]:
-        if isinstance(node, list) and k.isdigit() and int(k) < len(node):
-            node = node[int(k)]
-        elif isinstance(node, dict) and k in node:
-            node = node[k]
-        else:
-            return
-    last = path[-1]
-    if isinstance(node, list) and last.isdigit() and int(last) < len(node):
-        node[int(last)] = value
-    elif isinstance(node, dict):
-        if remove:
-            node.pop(last, None)
-        else:
-            node[last] = value
-
-
 @st.composite
 def contour_request(draw) -> bytes:
     doc = _valid_contour_request()
     for _ in range(draw(st.integers(0, 3))):
         if draw(st.booleans()):
             i = draw(st.integers(0, 30))
-            _put(doc, ["trajectory", "rows", str(i), draw(st.sampled_from(_ROW_KEYS))],
+            put(doc, ["trajectory", "rows", str(i), draw(st.sampled_from(_ROW_KEYS))],
                  draw(st.one_of(_VALUE, st.floats(-1e4, 1e4))), draw(st.integers(0, 5)) == 0)
         else:
-            _put(doc, draw(st.sampled_from(_REQ_KEYS)).split("."), draw(_VALUE), draw(st.booleans()))
+            put(doc, draw(st.sampled_from(_REQ_KEYS)).split("."), draw(_VALUE), draw(st.booleans()))
     if draw(st.integers(0, 4)) == 0:  # an inline card, possibly broken
         try:
             inline = json.loads(draw(card_doc()).decode("utf-8", errors="replace"))

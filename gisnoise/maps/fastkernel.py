@@ -58,10 +58,11 @@ from gisnoise.maps.instants import (
     prepare_flight,
     snapshot_instant,
 )
-from gisnoise.maps.prepare import MapOptions, band_order, check_request, map_metadata
+from gisnoise.maps.kernelbands import chunk_cells_of, kernel_bands
+from gisnoise.maps.prepare import MapOptions, check_request, map_metadata
 from gisnoise.maps.receiver_terms import kernel_flags
 from gisnoise.maps.receivers import SEGMENT_M, Receivers, receivers_for, segment_cells
-from gisnoise.maps.result import MapResult, snapshot_name, threshold_name
+from gisnoise.maps.result import MapResult
 from gisnoise.maps.threads import default_threads, map_threads
 from gisnoise.model import ModelCard
 
@@ -218,12 +219,6 @@ def run_grid(fl: FlightInstants, rc: Receivers, thresholds: Sequence[float] = ()
     return WindowResult(emax, energy, ta, computed)
 
 
-def db(x: np.ndarray) -> np.ndarray:
-    """``10 log10(x)`` with 0 -> -inf and no warning."""
-    with np.errstate(divide="ignore"):
-        return 10.0 * np.log10(x)
-
-
 # --------------------------------------------------------------------------- compiling ahead
 
 
@@ -297,10 +292,7 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
     period, snap = req.period, req.snap
     progress, cancel, threads, background = opts.progress, opts.cancel, opts.threads, opts.background
     floor = None if opts.floor_db is None else as_float(opts.floor_db, "floor_db")
-    chunk_cells = opts.chunk_cells
-    if chunk_cells is not None and (isinstance(chunk_cells, bool) or int(chunk_cells) < 1):
-        raise InputError(f"chunk_cells must be >= 1, got {chunk_cells!r}", field="chunk_cells")
-    chunk = DEFAULT_CHUNK_CELLS if chunk_cells is None else int(chunk_cells)
+    chunk = chunk_cells_of(opts.chunk_cells, DEFAULT_CHUNK_CELLS)
     temp = as_float(opts.temperature_c, "temperature_c", minimum=-273.15, strict=True)
 
     rc = receivers_for(grid, [traj], receiver_height=opts.receiver_height, dem=opts.dem, ground_h=opts.ground_h,
@@ -315,37 +307,14 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
             progress(share * f)
 
     res = run_grid(fl, rc, thresholds, threads=threads, chunk_cells=chunk, progress=prog, cancel=cancel)
-    bands: dict[str, np.ndarray] = {}
-    below = ~res.computed
-    for name in band_order(metrics, thresholds, snap, False):
-        bands[name] = np.full(grid.shape, np.nan)
-    if "LAmax" in metrics:
-        bands["LAmax"] = db(res.emax.astype(np.float64))
-    if "SEL" in metrics:
-        bands["SEL"] = db(res.energy)
-    if "LAeq" in metrics:
-        assert period is not None
-        bands["LAeq"] = db(res.energy / period)
-    for i, thr in enumerate(thresholds):
-        a = res.ta[i].copy()
-        if floor is None or thr < floor:
-            a[below] = np.nan
-        bands[threshold_name(thr)] = a
-    for name in ("LAmax", "SEL", "LAeq"):
-        if name in bands:
-            bands[name][below] = np.nan
+    s = None
     if snap is not None:
         s_fl = snapshot_instant(traj, req.cardset, frame, snap, background=background,
                                 min_distance_m=req.min_distance_m, floor_db=floor, substeps=req.substeps,
                                 temperature_c=temp)
         s = run_grid(s_fl, rc, (), threads=threads, chunk_cells=chunk, cancel=cancel,
                      progress=None if progress is None else (lambda f: progress(share + (1 - share) * f)))
-        a = db(s.emax.astype(np.float64))
-        a[~s.computed] = np.nan
-        bands[snapshot_name(snap)] = a
-    if rc.valid is not None and not rc.valid.all():
-        for a in bands.values():
-            a[~rc.valid] = np.nan
+    bands, below = kernel_bands(res, grid.shape, metrics, thresholds, snap, period, floor, s, rc.valid)
     used = sorted(set(fl.cidx.tolist()))
     meta = map_metadata(req, bands, fl.n, float(opts.receiver_height), rc.ground or {}, background, used)
     meta.update({"engine": "fast", "floor_db": floor, "cells_below_floor": int(below.sum())})

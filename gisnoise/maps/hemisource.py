@@ -42,16 +42,16 @@ from gisnoise.maps.hemifill import hemisphere_atmospheres
 from gisnoise.maps.instants import FlightInstants, _instants
 from gisnoise.maps.instants import prepare_flight as _prepare_parametric
 from gisnoise.maps.instants import snapshot_instant as _snapshot_parametric
+from gisnoise.maps.kernelbands import chunk_cells_of, kernel_bands
 from gisnoise.maps.prepare import (
     MapOptions,
     MapRequest,
-    band_order,
     eval_states,
     map_metadata,
     snapshot_state,
 )
 from gisnoise.maps.receivers import Receivers, receivers_for
-from gisnoise.maps.result import MapResult, snapshot_name, threshold_name
+from gisnoise.maps.result import MapResult
 from gisnoise.maps.threads import default_threads, map_threads
 from gisnoise.model import HemisphereCard, ModelCard
 
@@ -392,21 +392,13 @@ def _farthest(rc: Receivers, src: np.ndarray, r0: int, r1: int, c0: int, c1: int
     return float(np.sqrt(np.sum(np.maximum(np.abs(src - lo_b), np.abs(src - hi_b)) ** 2, axis=1)).max())
 
 
-def _db(x: np.ndarray) -> np.ndarray:
-    with np.errstate(divide="ignore"):
-        return 10.0 * np.log10(x)
-
-
 def evaluate_hemisphere_fast(req: MapRequest, opts: MapOptions) -> MapResult:
     """The fast engine for card sets with hemisphere cards (module docstring); ``req`` from ``check_request``."""
     if _hk.numba is None:
         raise InputError("engine 'fast' needs numba (pip install 'gisnoise[fast]')", field="engine")
     traj, grid, metrics, thresholds, period, snap = req.traj, req.grid, req.metrics, req.thresholds, req.period, req.snap
     floor = None if opts.floor_db is None else as_float(opts.floor_db, "floor_db")
-    chunk = opts.chunk_cells
-    if chunk is not None and (isinstance(chunk, bool) or int(chunk) < 1):
-        raise InputError(f"chunk_cells must be >= 1, got {chunk!r}", field="chunk_cells")
-    chunk = (1 << 17) if chunk is None else int(chunk)
+    chunk = chunk_cells_of(opts.chunk_cells, 1 << 17)
     rc = receivers_for(grid, [traj], receiver_height=opts.receiver_height, dem=opts.dem, ground_h=opts.ground_h,
                        dem_offset_m=opts.dem_offset_m)
     frame = rc.frame
@@ -422,36 +414,14 @@ def evaluate_hemisphere_fast(req: MapRequest, opts: MapOptions) -> MapResult:
             progress(share * f)
 
     res = _run_grid(fl, rc, thresholds, opts.threads, chunk, prog, opts.cancel)  # type: ignore[arg-type]
-    below = ~res.computed
-    bands: dict[str, np.ndarray] = {name: np.full(grid.shape, np.nan)
-                                    for name in band_order(metrics, thresholds, snap, False)}
-    if "LAmax" in metrics:
-        bands["LAmax"] = _db(res.emax.astype(np.float64))
-    if "SEL" in metrics:
-        bands["SEL"] = _db(res.energy)
-    if "LAeq" in metrics:
-        assert period is not None
-        bands["LAeq"] = _db(res.energy / period)
-    for i, thr in enumerate(thresholds):
-        a = res.ta[i].copy()
-        if floor is None or thr < floor:
-            a[below] = np.nan
-        bands[threshold_name(thr)] = a
-    for name in ("LAmax", "SEL", "LAeq"):
-        if name in bands:
-            bands[name][below] = np.nan
+    s = None
     if snap is not None:
         s_state, s_idx = snapshot_state(traj, req.cardset, snap)
         s_fl = _with_hemispheres(np.array([float(snap)]), s_state, s_idx, req.cardset.cards, frame,
                                  source=traj.source, **kw)  # type: ignore[arg-type]
         s = _run_grid(s_fl, rc, (), opts.threads, chunk, None if progress is None else
                       (lambda f: progress(share + (1 - share) * f)), opts.cancel)
-        a = _db(s.emax.astype(np.float64))
-        a[~s.computed] = np.nan
-        bands[snapshot_name(snap)] = a
-    if rc.valid is not None and not rc.valid.all():
-        for a in bands.values():
-            a[~rc.valid] = np.nan
+    bands, below = kernel_bands(res, grid.shape, metrics, thresholds, snap, period, floor, s, rc.valid)
     used = sorted(set(req.cardset.assign(traj.phase, traj.t, source=traj.source).tolist()))
     meta = map_metadata(req, bands, fl.n, float(opts.receiver_height), rc.ground or {}, opts.background, used)
     ok = np.ones(grid.shape, bool) if rc.valid is None else rc.valid
