@@ -26,8 +26,8 @@ from gisnoise.model import ModelCard
 LAT0, LON0 = 48.137, 11.575  # lat and lon far apart: a swapped order cannot pass
 
 
-@pytest.fixture(scope="module")
-def hover_map():
+def hover_result(metrics=("LAmax", "LAeq")):
+    """A 30 s hover of an omnidirectional card 40 m above flat ground at 500 m: levels of spherical spreading."""
     f = LocalFrame(LAT0, LON0, 500.0)
     lat, lon, h = f.to_wgs84(np.zeros(2), np.zeros(2), np.full(2, 40.0))
     traj = Trajectory(t=np.array([0.0, 30.0]), lat=lat, lon=lon, h=h, roll=np.zeros(2), pitch=np.zeros(2),
@@ -36,7 +36,12 @@ def hover_map():
                      parameters=dict(p0=70.0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
                      reference_power_w=3000.0)
     grid = grid_for_trajectory(traj, 10.0, 400.0)
-    return evaluate_grid(traj, [card], grid, ground_h=500.0, metrics=("LAmax", "LAeq"))
+    return evaluate_grid(traj, [card], grid, ground_h=500.0, metrics=metrics)
+
+
+@pytest.fixture(scope="module")
+def hover_map():
+    return hover_result()
 
 
 def test_geojson_is_rfc7946(hover_map, tmp_path):

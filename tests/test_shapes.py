@@ -69,20 +69,12 @@ def test_set_precision_snaps_and_drops_collapsed_parts(path):
 
 def test_contours_of_a_hover_are_the_same_on_both_paths(monkeypatch):
     """The map's isobands through the 1.8 path: the disc areas of spherical spreading, as on shapely 2."""
-    from gisnoise.flight import Trajectory
-    from gisnoise.maps import contours_geojson, evaluate_grid, grid_for_trajectory
-    from gisnoise.model import ModelCard
+    from test_contours import LAT0, LON0, hover_result
 
-    lat0, lon0 = 48.137, 11.575
-    f = LocalFrame(lat0, lon0, 500.0)
-    lat, lon, h = f.to_wgs84(np.zeros(2), np.zeros(2), np.full(2, 40.0))
-    traj = Trajectory(t=np.array([0.0, 30.0]), lat=lat, lon=lon, h=h, roll=np.zeros(2), pitch=np.zeros(2),
-                      yaw=np.zeros(2), power_w=np.full(2, 3000.0), phase=np.full(2, "hover"))
-    card = ModelCard(id="omni", vehicle="t", phase="hover", ansatz="paper-offset",
-                     parameters=dict(p0=70.0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
-                     reference_power_w=3000.0)
-    result = evaluate_grid(traj, [card], grid_for_trajectory(traj, 10.0, 400.0), ground_h=500.0,
-                           metrics=("LAmax",))
+    from gisnoise.maps import contours_geojson
+
+    result = hover_result(metrics=("LAmax",))
+    f = LocalFrame(LAT0, LON0, 500.0)
 
     def areas():
         doc = contours_geojson(result, "50,55,60", metrics=["LAmax"])
