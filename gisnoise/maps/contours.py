@@ -269,14 +269,9 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     return [MultiPolygon(p) if p else None for p in bands], [ln if ln else None for ln in lines]
 
 
-def _snapped(pts: np.ndarray) -> np.ndarray:
-    """Positions on the :data:`PRECISION_DEG` grid, consecutive repeats dropped (as GEOS's snapping does)."""
-    a = np.asarray(pts, dtype=float)
-    return _snapped_pieces(a, np.array([len(a)], np.intp))[0] if len(a) else a
-
-
 def _snapped_pieces(pts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
-    """:func:`_snapped` of each piece ``pts[ends[i - 1]:ends[i]]`` (rings and lines), in one pass of NumPy."""
+    """Each piece ``pts[ends[i - 1]:ends[i]]`` (rings and lines) on the :data:`PRECISION_DEG` grid, consecutive
+    repeats within a piece dropped (as GEOS's snapping does), in one pass of NumPy."""
     if not len(ends):
         return []
     q = np.rint(pts / PRECISION_DEG) * PRECISION_DEG
@@ -415,7 +410,7 @@ _TOKEN = "\x00gisnoise-positions-"
 def geojson_text(doc: dict) -> str:
     """Compact JSON text of a GeoJSON document whose positions may be numpy arrays of shape (n, 2).
 
-    Arrays are written by :func:`_positions_text` (fixed 8 decimals: positions lie on the
+    Arrays are written by :func:`_positions_texts` (fixed 8 decimals: positions lie on the
     :data:`PRECISION_DEG` grid); everything else by ``json.dumps`` (``allow_nan=False``).
 
     >>> geojson_text({"name": "a", "coordinates": np.array([[10.5, -52.25], [-170.125, 0.0]])})
@@ -447,13 +442,8 @@ def geojson_text(doc: dict) -> str:
     return "".join(out)
 
 
-def _positions_text(a: np.ndarray) -> str:
-    """``[[x,y],...]`` of an (n, 2) array with |values| < 1000, 8 decimals (formed with blanks, then packed)."""
-    return _positions_texts([a])[0]
-
-
 def _positions_texts(arrays: list[np.ndarray]) -> list[str]:
-    """:func:`_positions_text` of many arrays, formatted together (one pass of NumPy for all positions).
+    """``[[x,y],...]`` of each (n, 2) array (|values| < 1000, 8 decimals), all formatted together (one pass of NumPy).
 
     A position is a row of eleven 4-byte words (``"   ["``, the integer part of x right-aligned with
     its sign, ``".   "``, two words of four decimals, ``"   ,"``, the same for y, ``"],  "``), each

@@ -30,7 +30,7 @@ from gisnoise.flight import Trajectory
 from gisnoise.geo import LocalFrame
 from gisnoise.maps.fast_effects import base_card, instant_card, instant_offsets
 from gisnoise.maps.prepare import eval_states
-from gisnoise.maps.receiver_terms import receiver_terms
+from gisnoise.maps.receiver_terms import doppler_bound_db, ground_bound_db, receiver_terms
 from gisnoise.model import ModelCard
 
 __all__ = ["COLDEST_C", "effect_bound_db"]
@@ -53,9 +53,9 @@ def effect_bound_db(card: ModelCard, traj: Trajectory, serves: np.ndarray, dista
         base, _ = base_card(card)
         terms = receiver_terms(card)
         inst = instant_card(card)
+        frame = LocalFrame(float(traj.lat[0]), float(traj.lon[0]), float(traj.h[0]))
         if inst is not None and inst is not base and "+" in inst.ansatz:
             t, state, src_sample = eval_states(traj, 1)
-            frame = LocalFrame(float(traj.lat[0]), float(traj.lon[0]), float(traj.h[0]))
             src = np.stack(frame.to_enu(state["lat"], state["lon"], state["h"]), axis=-1)
             sel = np.asarray(serves, bool)[src_sample]
             out += float(np.max(instant_offsets(inst, base, t, state, src, sel)[sel]))
@@ -68,14 +68,12 @@ def effect_bound_db(card: ModelCard, traj: Trajectory, serves: np.ndarray, dista
     if "wind" in terms.effects:
         out += math.hypot(terms.w_east, terms.w_north) * d / 100.0
     if terms.doppler and terms.q_doppler != 0.0:
-        frame = LocalFrame(float(traj.lat[0]), float(traj.lon[0]), float(traj.h[0]))
         enu = np.stack(frame.to_enu(traj.lat, traj.lon, traj.h), axis=-1)
         vel = np.gradient(enu, traj.t, axis=0) if len(traj) > 1 else np.zeros_like(enu)
         mach = float(np.max(np.linalg.norm(vel[np.asarray(serves, bool)], axis=1))) / float(speed_of_sound(COLDEST_C))
         if not mach < 1.0:
             return None
-        q = terms.q_doppler
-        out += max(-10.0 * q * math.log10(1.0 - mach), -10.0 * q * math.log10(1.0 + mach))
+        out += float(doppler_bound_db(terms.q_doppler, mach))
     if terms.ground:
-        out += 20.0 * math.log10(1.0 + abs(terms.r_ground))
+        out += ground_bound_db(terms.r_ground)
     return out

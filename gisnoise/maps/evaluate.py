@@ -59,6 +59,7 @@ from gisnoise.maps import _numba
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.fast_effects import NotOnFastEngine, base_card
 from gisnoise.maps.fastkernel import evaluate_fast
+from gisnoise.maps.hemifill import has_hemisphere
 from gisnoise.maps.prepare import MapOptions
 from gisnoise.maps.receiver_terms import receiver_terms
 from gisnoise.maps.reference import DEFAULT_BLOCK, evaluate_numpy
@@ -92,7 +93,7 @@ def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, unce
     if kernel is not None:
         return "a kernel replacement belongs to the NumPy engine"
     cs = as_cardset(cards).cards
-    hemi = any(isinstance(c, HemisphereCard) for c in cs)
+    hemi = has_hemisphere(cs)
     for c in cs:
         if isinstance(c, HemisphereCard):  # measured hemispheres: their kernel (maps/hemisource.py)
             continue

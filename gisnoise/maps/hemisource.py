@@ -38,7 +38,7 @@ from gisnoise.flight import Trajectory
 from gisnoise.maps import _hemikernel as _hk
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.cardset import as_cardset
-from gisnoise.maps.hemifill import hemisphere_atmospheres
+from gisnoise.maps.hemifill import has_hemisphere, hemisphere_atmospheres
 from gisnoise.maps.instants import FlightInstants, _instants
 from gisnoise.maps.instants import prepare_flight as _prepare_parametric
 from gisnoise.maps.instants import snapshot_instant as _snapshot_parametric
@@ -265,16 +265,17 @@ def _with_hemispheres(t: np.ndarray, state: dict[str, np.ndarray], idx: np.ndarr
 
 def prepare_flight(traj: Trajectory, cards: Any, frame: Any, *, substeps: int = 1, background: bool = False,
                    min_distance_m: float = 1.0, floor_db: float | None = None,
-                   reach_m: float | None = None) -> FlightInstants:
+                   reach_m: float | None = None, temperature_c: float = 15.0) -> FlightInstants:
     """:func:`gisnoise.maps.instants.prepare_flight` for card sets that may hold hemisphere cards.
 
-    Without a hemisphere card it is the parametric preparation; with one, a :class:`HemiFlight`
-    whose tables reach ``reach_m`` from the UAV (default :data:`DEFAULT_REACH_M`).
+    Without a hemisphere card it is the parametric preparation (``temperature_c``: the speed of
+    sound of receiver-dependent terms); with one, a :class:`HemiFlight` whose tables reach
+    ``reach_m`` from the UAV (default :data:`DEFAULT_REACH_M`).
     """
     cardset = as_cardset(cards)
-    if not any(isinstance(c, HemisphereCard) for c in cardset.cards):
+    if not has_hemisphere(cardset.cards):
         return _prepare_parametric(traj, cardset, frame, substeps=substeps, background=background,
-                                   min_distance_m=min_distance_m, floor_db=floor_db)
+                                   min_distance_m=min_distance_m, floor_db=floor_db, temperature_c=temperature_c)
     idx_samples = cardset.assign(traj.phase, traj.t, source=traj.source)
     t_eval, state, src_sample = eval_states(traj, int(substeps))
     return _with_hemispheres(t_eval, state, idx_samples[src_sample], cardset.cards, frame, background=background,
@@ -284,12 +285,12 @@ def prepare_flight(traj: Trajectory, cards: Any, frame: Any, *, substeps: int = 
 
 def snapshot_instant(traj: Trajectory, cards: Any, frame: Any, t_s: float, *, background: bool = False,
                      min_distance_m: float = 1.0, floor_db: float | None = None,
-                     reach_m: float | None = None) -> FlightInstants:
+                     reach_m: float | None = None, temperature_c: float = 15.0) -> FlightInstants:
     """:func:`gisnoise.maps.instants.snapshot_instant` for card sets that may hold hemisphere cards."""
     cardset = as_cardset(cards)
-    if not any(isinstance(c, HemisphereCard) for c in cardset.cards):
+    if not has_hemisphere(cardset.cards):
         return _snapshot_parametric(traj, cardset, frame, t_s, background=background,
-                                    min_distance_m=min_distance_m, floor_db=floor_db)
+                                    min_distance_m=min_distance_m, floor_db=floor_db, temperature_c=temperature_c)
     state, idx = snapshot_state(traj, cardset, t_s)
     return _with_hemispheres(np.array([float(t_s)]), state, idx, cardset.cards, frame, background=background,
                              min_distance_m=min_distance_m, floor_db=floor_db, source=traj.source,
@@ -416,9 +417,8 @@ def evaluate_hemisphere_fast(req: MapRequest, opts: MapOptions) -> MapResult:
     res = _run_grid(fl, rc, thresholds, opts.threads, chunk, prog, opts.cancel)  # type: ignore[arg-type]
     s = None
     if snap is not None:
-        s_state, s_idx = snapshot_state(traj, req.cardset, snap)
-        s_fl = _with_hemispheres(np.array([float(snap)]), s_state, s_idx, req.cardset.cards, frame,
-                                 source=traj.source, **kw)  # type: ignore[arg-type]
+        s_fl = snapshot_instant(traj, req.cardset, frame, snap, **kw)  # type: ignore[arg-type]
+        assert isinstance(s_fl, HemiFlight)  # the card set holds a hemisphere card
         s = _run_grid(s_fl, rc, (), opts.threads, chunk, None if progress is None else
                       (lambda f: progress(share + (1 - share) * f)), opts.cancel)
     bands, below = kernel_bands(res, grid.shape, metrics, thresholds, snap, period, floor, s, rc.valid)

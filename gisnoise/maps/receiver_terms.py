@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,7 @@ from gisnoise.model import (
 )
 
 __all__ = ["RECEIVER_EFFECTS", "RX_COLUMNS", "InstantTerms", "ReceiverTerms", "instant_receiver_terms",
-           "kernel_flags", "receiver_terms", "split_effects"]
+           "doppler_bound_db", "ground_bound_db", "kernel_flags", "receiver_terms"]
 
 _LIBRARY = {e.name: e for e in (ATMOSPHERIC_ABSORPTION, WIND, DOPPLER, GROUND_REFLECTION)}
 assert tuple(_LIBRARY) == RECEIVER_EFFECTS
@@ -84,10 +85,15 @@ class ReceiverTerms:
         return "ground_reflection" in self.effects
 
 
-def split_effects(ansatz: str) -> tuple[str, list[str], list[str]]:
-    """``"base+e1+e2"`` -> the base, the per-instant effects and the receiver effects (each in order)."""
-    base, *chain = ansatz.split("+")
-    return base, [e for e in chain if e not in _LIBRARY], [e for e in chain if e in _LIBRARY]
+def doppler_bound_db(q_doppler: float, mach: Any) -> Any:
+    """The largest Doppler term ``-q 10 lg(1 - M_r)`` over every direction at the speed ``mach`` (|v| / c < 1)."""
+    with np.errstate(divide="ignore"):
+        return np.maximum(-10.0 * q_doppler * np.log10(1.0 - mach), -10.0 * q_doppler * np.log10(1.0 + mach))
+
+
+def ground_bound_db(r_ground: float) -> float:
+    """The largest ground reflection term ``10 lg(1 + R^2 + 2 R C)`` over every delay (``|C| <= 1``): ``20 lg(1 + |R|)``."""
+    return 20.0 * math.log10(1.0 + abs(r_ground))
 
 
 def receiver_terms(card: ModelCard) -> ReceiverTerms | None:
@@ -97,7 +103,7 @@ def receiver_terms(card: ModelCard) -> ReceiverTerms | None:
     effect of that name is not the library's own (re-registered) or a ground reflection
     coefficient lies outside the effect's bounds [0, 1] (the NumPy engine maps both).
     """
-    _, _, names = split_effects(card.ansatz)
+    names = [e for e in card.ansatz.split("+")[1:] if e in _LIBRARY]
     if not names:
         return None
     p = {k: float(v) for k, v in card.parameters.items()}
@@ -181,12 +187,11 @@ def instant_receiver_terms(terms: Sequence[ReceiverTerms | None], ci: np.ndarray
             q = tm.q_doppler
             rx[sel, 3] = q
             rx[sel, 4:7] = m
-            with np.errstate(divide="ignore"):
-                bound[sel] += np.maximum(-10.0 * q * np.log10(1.0 - speed), -10.0 * q * np.log10(1.0 + speed))
+            bound[sel] += doppler_bound_db(q, speed)
         if tm.ground:
             rx[sel, 7] = tm.r_ground
             rx[sel, 8] = 2.0 * math.pi * tm.f_ground / c_sound
-            bound[sel] += 20.0 * math.log10(1.0 + tm.r_ground)
+            bound[sel] += ground_bound_db(tm.r_ground)
     return InstantTerms(rx, offset, bound, absorb, unbounded)
 
 

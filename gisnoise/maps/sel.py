@@ -34,6 +34,7 @@ import numpy as np
 
 from gisnoise.flight import Trajectory
 from gisnoise.geo import WGS84, transformer
+from gisnoise.maps.prepare import trapezoid_weights
 
 __all__ = ["SEL_OFFSET_DB", "metric_levels", "sel_margin", "sel_edge_bound"]
 
@@ -46,15 +47,6 @@ def metric_levels(metric: str, levels: Sequence[float]) -> list[float]:
     :data:`SEL_OFFSET_DB` higher; every other metric uses ``levels``."""
     off = SEL_OFFSET_DB if metric == "SEL" or metric.startswith("SEL_p") else 0.0
     return [float(v) + off for v in levels]
-
-
-def _trapezoid_weights(t: np.ndarray) -> np.ndarray:
-    w = np.zeros(t.size)
-    if t.size > 1:
-        dt = np.diff(t)
-        w[:-1] += 0.5 * dt
-        w[1:] += 0.5 * dt
-    return w
 
 
 def _envelope(table: np.ndarray) -> np.ndarray:
@@ -74,7 +66,7 @@ def sel_edge_bound(traj: Trajectory, card_index: np.ndarray, distances: np.ndarr
     """
     d_tab, env = np.asarray(distances, dtype=float), _envelope(table)
     t = np.asarray(traj.t, dtype=float)
-    w = _trapezoid_weights(t)
+    w = trapezoid_weights(t)
     flying = np.asarray(traj.flying, dtype=bool) & (np.asarray(traj.power_w, dtype=float) > 0)
     tr = transformer(WGS84, crs)
     flying &= np.asarray(card_index) >= 0
