@@ -90,3 +90,18 @@ def test_card_with_power_term_outside_its_range_warns_and_states_it(tmp_path):
         meta = json.loads(ds.tags()["gisnoise"])
     assert meta["power_outside_card_range"] == {"fitted": {"range_w": [2000.0, 2600.0], "used_w": [3000.0, 3000.0],
                                                            "samples": 81}}
+
+
+def test_a_track_partly_outside_the_range_counts_the_samples_outside():
+    """40 samples at 2400 W (inside 2000-2600 W) and 41 at 3000 W: the warning and the metadata both count 41."""
+    from gisnoise.maps import CardSet, check_power_ranges
+
+    card = ModelCard(id="fitted", vehicle="v", phase="horizontal", ansatz="paper-offset", parameters=PARAMS,
+                     reference_power_w=3000.0, statistics={"power_range_w": [2000.0, 2600.0]})
+    t = np.arange(0.0, 40.0 + 1e-9, 0.5)
+    lat, lon, h = FRAME.to_wgs84(15.0 * t - 300.0, 0 * t, 0 * t + 60.0)
+    tr = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t + 90.0,
+                    power_w=np.where(t < 20.0, 2400.0, 3000.0), phase=np.full(t.size, "horizontal"))
+    warnings, meta = check_power_ranges(tr, CardSet([card]))
+    assert len(warnings) == 1 and "used at 2400-3000 W: 41 flying sample(s) outside" in warnings[0]
+    assert meta == {"fitted": {"range_w": [2000.0, 2600.0], "used_w": [2400.0, 3000.0], "samples": 41}}

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
 from gisnoise.maps.cardset import CardSet
-from gisnoise.model import power_range_findings, stated_power_range_w
+from gisnoise.model import power_range_finding
 
 __all__ = ["check_power_ranges"]
 
@@ -33,14 +31,11 @@ def check_power_ranges(traj: Trajectory, cardset: CardSet) -> tuple[list[str], d
     warnings: list[str] = []
     meta: dict[str, Any] = {}
     for k, card in enumerate(cardset.cards):
-        used = pw[idx == k]
-        refuse, warn = power_range_findings(card, used)
-        if refuse is not None:
-            raise InputError(f"{traj.source}: {refuse}", field="power_w")
-        if warn is not None:
-            rng = stated_power_range_w(card)
-            assert rng is not None
-            warnings.append(f"{traj.source}: {warn}")
-            meta[card.id] = {"range_w": list(rng), "used_w": [float(np.min(used)), float(np.max(used))],
-                             "samples": int(used.size)}
+        f = power_range_finding(card, pw[idx == k])
+        if f is None:
+            continue
+        if f.refusal is not None:
+            raise InputError(f"{traj.source}: {f.refusal}", field="power_w")
+        warnings.append(f"{traj.source}: {f.warning}")
+        meta[card.id] = {"range_w": list(f.range_w), "used_w": list(f.used_w), "samples": f.samples}
     return warnings, meta

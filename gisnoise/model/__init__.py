@@ -82,14 +82,16 @@ from gisnoise.model.plausibility import (
 )
 from gisnoise.model.power_range import (
     POWER_RANGE_DEX,
+    PowerRangeFinding,
     holds_at_power_flown,
+    power_range_finding,
     power_range_findings,
     stated_power_range_w,
 )
 
 __all__ = [
     "LEVEL_RANGE_DB", "MAX_LEVEL_STD_DB", "ImplausibleCardError", "card_level_range", "card_problems", "check_card",
-    "power_range_w", "POWER_RANGE_DEX", "holds_at_power_flown", "power_range_findings", "stated_power_range_w",
+    "power_range_w", "POWER_RANGE_DEX", "holds_at_power_flown", "power_range_finding", "power_range_findings", "PowerRangeFinding", "stated_power_range_w",
     "ATMOSPHERIC_ABSORPTION", "Ansatz", "BACKGROUND_EVENT", "BANK_ANGLE", "DOPPLER", "EFFECT_NAMES", "EMISSION_TIME",
     "Effect", "GROUND_REFLECTION", "HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "HemisphereCard", "MIN_REFLECTION_HEIGHT_M", "ModelCard", "PAPER", "PAPER_OFFSET", "PHASES",
     "REFERENCE_DISTANCE_M", "RPM", "SALFORD_ATMOSPHERE", "SCHEMA", "THIRD_OCTAVE", "WIND", "add_background", "additive", "ansatz_names",

@@ -30,13 +30,13 @@ from __future__ import annotations
 import pickle
 import threading
 from collections import OrderedDict
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from gisnoise.errors import CardError
 from gisnoise.model.effects import get_ansatz
+from gisnoise.model.power_range import stated_power_range_w
 
 __all__ = ["LEVEL_RANGE_DB", "MAX_LEVEL_STD_DB", "ImplausibleCardError", "card_problems", "check_card",
            "card_level_range", "power_range_w"]
@@ -58,11 +58,9 @@ class ImplausibleCardError(CardError):
 
 def power_range_w(card: Any) -> tuple[float, float]:
     """The electric power range (W) a card holds for: ``statistics.power_range_w`` or 0.5-2 x reference."""
-    rng = (card.statistics or {}).get("power_range_w") if hasattr(card, "statistics") else None
-    if isinstance(rng, Sequence) and len(rng) == 2:
-        lo, hi = (float(v) for v in rng)
-        if 0 < lo <= hi and np.isfinite(hi):
-            return lo, hi
+    rng = stated_power_range_w(card)
+    if rng is not None:
+        return rng
     ref = float(card.reference_power_w)
     return ref * DEFAULT_POWER_FACTORS[0], ref * DEFAULT_POWER_FACTORS[1]
 

@@ -22,11 +22,13 @@ the range are the power the card was fitted at.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-__all__ = ["POWER_RANGE_DEX", "stated_power_range_w", "holds_at_power_flown", "power_range_findings"]
+__all__ = ["POWER_RANGE_DEX", "PowerRangeFinding", "stated_power_range_w", "holds_at_power_flown", "power_range_finding",
+           "power_range_findings"]
 
 POWER_RANGE_DEX = 0.02
 """Tolerance of a stated power range, in log10 of the power (0.02: about 4.7 %)."""
@@ -56,11 +58,48 @@ def holds_at_power_flown(card: Any) -> bool:
     return float(params["p1"]) == 0.0 and stated_power_range_w(card) is not None
 
 
-def power_range_findings(card: Any, power_w: Any) -> tuple[str | None, str | None]:
-    """(refusal, warning) for a card used at electric powers ``power_w`` (W, array_like; see the module docstring).
+@dataclass(frozen=True)
+class PowerRangeFinding:
+    """A card used outside its stated power range: the range (W), the powers used (W, the finite positive ones),
+    how many of them lie outside, and the refusal (a card without power term) or else the warning."""
 
-    Both None when the powers lie within the stated range (widened by :data:`POWER_RANGE_DEX`)
-    or the card states no range.
+    range_w: tuple[float, float]
+    used_w: tuple[float, float]
+    samples: int
+    refusal: str | None
+    warning: str | None
+
+
+def power_range_finding(card: Any, power_w: Any) -> PowerRangeFinding | None:
+    """What using ``card`` at electric powers ``power_w`` (W, array_like) means (see the module docstring).
+
+    None when the powers lie within the stated range (widened by :data:`POWER_RANGE_DEX`) or the
+    card states no range.
+    """
+    rng = stated_power_range_w(card)
+    pw = np.asarray(power_w, dtype=float)
+    pw = pw[np.isfinite(pw) & (pw > 0)]
+    if rng is None or pw.size == 0:
+        return None
+    lo, hi = rng
+    f = 10.0 ** POWER_RANGE_DEX
+    out = (pw < lo / f) | (pw > hi * f)
+    if not out.any():
+        return None
+    n, p_lo, p_hi = int(out.sum()), float(pw.min()), float(pw.max())
+    if holds_at_power_flown(card):
+        refusal = (f"card {card.id!r} holds only at the power flown in its campaign ({lo:.4g}-{hi:.4g} W; no power "
+                   f"term, p1 held at 0), but the track uses it at {p_lo:.4g}-{p_hi:.4g} W ({n} flying sample(s) "
+                   f"outside); give the power it holds for (a log: --power-w W, field power_w) or fit a card over "
+                   f"several powers")
+        return PowerRangeFinding(rng, (p_lo, p_hi), n, refusal, None)
+    return PowerRangeFinding(rng, (p_lo, p_hi), n, None,
+                             f"card {card.id!r} is used at {p_lo:.4g}-{p_hi:.4g} W: {n} flying sample(s) outside "
+                             f"the {lo:.4g}-{hi:.4g} W it was fitted at, where its power term extrapolates")
+
+
+def power_range_findings(card: Any, power_w: Any) -> tuple[str | None, str | None]:
+    """(refusal, warning) of :func:`power_range_finding`: both None when the powers lie within the range.
 
     Examples
     --------
@@ -74,21 +113,5 @@ def power_range_findings(card: Any, power_w: Any) -> tuple[str | None, str | Non
     >>> refuse.split(";")[0]
     "card 'steady' holds only at the power flown in its campaign (2400-2400 W"
     """
-    rng = stated_power_range_w(card)
-    pw = np.asarray(power_w, dtype=float)
-    pw = pw[np.isfinite(pw) & (pw > 0)]
-    if rng is None or pw.size == 0:
-        return None, None
-    lo, hi = rng
-    f = 10.0 ** POWER_RANGE_DEX
-    out = (pw < lo / f) | (pw > hi * f)
-    if not out.any():
-        return None, None
-    n, p_lo, p_hi = int(out.sum()), float(pw.min()), float(pw.max())
-    if holds_at_power_flown(card):
-        return (f"card {card.id!r} holds only at the power flown in its campaign ({lo:.4g}-{hi:.4g} W; no power "
-                f"term, p1 held at 0), but the track uses it at {p_lo:.4g}-{p_hi:.4g} W ({n} flying sample(s) "
-                f"outside); give the power it holds for (a log: --power-w W, field power_w) or fit a card over "
-                f"several powers"), None
-    return None, (f"card {card.id!r} is used at {p_lo:.4g}-{p_hi:.4g} W: {n} flying sample(s) outside the "
-                  f"{lo:.4g}-{hi:.4g} W it was fitted at, where its power term extrapolates")
+    f = power_range_finding(card, power_w)
+    return (None, None) if f is None else (f.refusal, f.warning)
