@@ -168,3 +168,10 @@ def test_msl_waypoints_take_the_undulation_from_the_grid(grid):
     tr = read_route(doc).trajectory
     # N changes by centimetres over the 1.1 km route: within the tolerance of the test point's value
     np.testing.assert_allclose(tr.h, 300.0 - 31.628, atol=TOL_M + 0.05)
+    assert tr.metadata["geoid_model"].startswith("EGM96") or "egm96" in tr.metadata["geoid_model"].lower()
+    assert tr.metadata["geoid_undulation_m"] == pytest.approx(-31.628, abs=TOL_M + 0.05)
+    # a given undulation is checked as for logs: the geoid departs less than 110 m from the ellipsoid
+    with pytest.raises(InputError) as e:
+        read_route(dict(doc, geoid_undulation_m=1000.0))
+    assert e.value.field == "geoid_undulation_m"
+    assert read_route(dict(doc, geoid_undulation_m=-30.0)).trajectory.metadata["geoid_model"] == "given by the user"

@@ -210,7 +210,7 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
         raise TrajectoryError(f"{source}: LineString coordinates and times must be numbers",
                               field="coordinates") from None
     lon, lat, alt = arr[:, 0], arr[:, 1], arr[:, 2]
-    h, ground = _heights(alt, lon, lat, st, dem, dem_offset_m, source)
+    h, ground, datum = _heights(alt, lon, lat, st, dem, dem_offset_m, source)
     given: dict[str, Any] = {}
     for k in ("power_w", "phase", "roll", "pitch", "yaw", "rpm", "airspeed_m_s"):
         v = props.get(k)
@@ -221,6 +221,7 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
                                   field=k)
         given[k] = np.asarray(v, dtype=str if k == "phase" else float)
     traj = trajectory_from_path(t, lat, lon, h, vehicle=st["vehicle"], source=source, **given)
+    traj.metadata.update(datum)
     return Route(traj, ground)
 
 

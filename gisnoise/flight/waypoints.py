@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import TrajectoryError
+from gisnoise.flight._logkernels import msl_to_ellipsoid_undulation
 from gisnoise.flight.phases import MULTICOPTER_PHASES, PHASES
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.flight.vehicle import GRAVITY, VehicleModel
@@ -103,20 +104,19 @@ def _settings(doc: Mapping[str, Any], source: str, vehicle: VehicleModel | None)
 
 
 def _heights(alt: np.ndarray, lon: np.ndarray, lat: np.ndarray, st: Mapping[str, Any], dem: Any,
-             dem_offset_m: float, source: str) -> tuple[np.ndarray, float | None]:
-    """Ellipsoidal heights of altitudes, and the flat ground height the source states (or None)."""
+             dem_offset_m: float, source: str) -> tuple[np.ndarray, float | None, dict[str, Any]]:
+    """Ellipsoidal heights of altitudes, the flat ground height the source states (or None), and for heights
+    above mean sea level the geoid metadata (:func:`~gisnoise.flight._logkernels.msl_to_ellipsoid_undulation`)."""
     ref = st["altitude_reference"]
     if ref == "ellipsoid":
-        return alt, None
+        return alt, None, {}
     if ref == "msl":
-        n = st.get("geoid_undulation_m")
-        if n is None:
-            from gisnoise.geo import geoid_undulation
-
-            n, _ = geoid_undulation(lat, lon, what=f"{source}: altitude_reference 'msl'")
-        return alt + n, None
+        n, meta = msl_to_ellipsoid_undulation(lat, lon, st.get("geoid_undulation_m"),
+                                              what=f"{source}: altitude_reference 'msl'")
+        return alt + n, None, {"height_datum": f"mean sea level (alt) + geoid undulation: {meta['geoid_model']}",
+                               **meta}
     if dem is None:
-        return alt + st["ground_h_m"], st["ground_h_m"]
+        return alt + st["ground_h_m"], st["ground_h_m"], {}
     from gisnoise.geo import Dem, read_dem, sample_dem
 
     d = dem if isinstance(dem, Dem) else read_dem(dem)
@@ -126,7 +126,7 @@ def _heights(alt: np.ndarray, lon: np.ndarray, lat: np.ndarray, st: Mapping[str,
         i = int(np.flatnonzero(bad)[0])
         raise TrajectoryError(f"{source}: waypoint {i} ({lon[i]:.6f}, {lat[i]:.6f}) lies outside the DEM; "
                               "AGL altitudes need the ground there", field="alt")
-    return alt + g, None
+    return alt + g, None, {}
 
 
 def _num(v: Any, name: str, source: str, i: int) -> float:
@@ -239,7 +239,7 @@ def route_from_waypoints(waypoints: Sequence[Mapping[str, Any]], settings: Mappi
         hd = wp.get("heading_deg")
         hd = None if hd is None else math.radians(_num(hd, "heading_deg", source, i))
         extra.append((speed, phase, hold, hd))
-    h, ground = _heights(alt, lon, lat, st, dem, dem_offset_m, source)
+    h, ground, datum = _heights(alt, lon, lat, st, dem, dem_offset_m, source)
     check_heights(h, field="alt", source=f"{source}: waypoints", error=TrajectoryError)  # before any geometry
     frame = LocalFrame(float(lat[0]), float(lon[0]), float(h[0] - alt[0]) if st["altitude_reference"] == "agl"
                        else float(h.min()))
@@ -265,7 +265,7 @@ def route_from_waypoints(waypoints: Sequence[Mapping[str, Any]], settings: Mappi
         pitch=np.degrees(np.interp(t_out, t, dense.cat("pitch"))),
         yaw=np.degrees(yaw_o), power_w=np.interp(t_out, t, dense.cat("power")),
         phase=dense.cat("phase")[idx], airspeed_m_s=np.interp(t_out, t, dense.cat("speed")),
-        source=source)
+        source=source, metadata=datum)
     return Route(traj, ground)
 
 
