@@ -64,7 +64,11 @@ class FitError(GisnoiseError, RuntimeError):
 
 
 class NotIdentifiableError(FitError):
-    """The data cannot tell some parameters apart (rank-deficient problem)."""
+    """The data cannot tell some parameters apart (rank-deficient problem); ``parameters``: the ones involved."""
+
+    def __init__(self, message: str, *, field: str | None = None, parameters: tuple[str, ...] = ()) -> None:
+        super().__init__(message, field=field)
+        self.parameters = tuple(parameters)
 
 
 class DesignError(InputError):

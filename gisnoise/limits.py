@@ -25,7 +25,7 @@ samples of a trajectory    <= 1,000,000     ``max_samples`` (the service sets it
 work of one map            <= 5e11          ``max_work``: grid cells x time steps (samples
                                             x substeps), checked before evaluating
 receiver height            0 .. 1000 m      above ground, never below it
-sound level at a mic       -50 .. 200 dB    ``LEVEL_RANGE_DB``: below any microphone's self-noise,
+sound level at a mic       -50 .. 200 dB    ``MEASURED_LEVEL_RANGE_DB``: below any microphone's self-noise,
                                             above a jet engine at 1 m (a band may lie lower, down
                                             to -inf: silence)
 flights per day            <= 100,000       ``max_daily_count``
@@ -59,7 +59,7 @@ from gisnoise.errors import InputError
 __all__ = ["Limits", "WorkLimitError", "DEFAULTS", "current", "override", "check_range", "check_array", "check_lonlat",
            "check_attitude", "check_power", "check_track", "check_heights", "check_times", "check_samples", "check_count",
            "check_receiver_height", "check_ground_below", "check_receivers", "GROUND_TOLERANCE_M", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id",
-           "MIN_SAMPLES", "check_work", "LEVEL_RANGE_DB", "check_levels"]
+           "MIN_SAMPLES", "check_work", "MEASURED_LEVEL_RANGE_DB", "check_levels"]
 
 
 @dataclass(frozen=True)
@@ -271,14 +271,14 @@ def check_work(cells: float, steps: float, *, field: str = "resolution_m") -> fl
     return work
 
 
-LEVEL_RANGE_DB = (-50.0, 200.0)
+MEASURED_LEVEL_RANGE_DB = (-50.0, 200.0)
 """Sound levels a microphone can record, dB: below the self-noise of any measurement microphone, above a jet
 engine at 1 m."""
 
 
 def check_levels(values: Any, *, field: str, source: str = "", error: type[InputError] = InputError,
                  silence: bool = False) -> None:
-    """Measured levels within :data:`LEVEL_RANGE_DB`.
+    """Measured levels within :data:`MEASURED_LEVEL_RANGE_DB`.
 
     ``silence``: a band's level may lie below the range, down to ``-inf`` (digital silence, or the leakage of
     synthetic audio into a band it does not reach); only its top is checked.
@@ -293,8 +293,8 @@ def check_levels(values: Any, *, field: str, source: str = "", error: type[Input
     """
     a = np.asarray(values, dtype=float)
     if silence:
-        a = np.where(a < LEVEL_RANGE_DB[0], LEVEL_RANGE_DB[0], a)  # -inf and any quieter band: silence
-    check_array(field, a, *LEVEL_RANGE_DB, unit="dB", source=source, error=error,
+        a = np.where(a < MEASURED_LEVEL_RANGE_DB[0], MEASURED_LEVEL_RANGE_DB[0], a)  # -inf and any quieter band: silence
+    check_array(field, a, *MEASURED_LEVEL_RANGE_DB, unit="dB", source=source, error=error,
                 why="no microphone records this level")
 
 

@@ -17,7 +17,6 @@ import warnings
 import zipfile
 from pathlib import Path
 
-import numpy as np
 import pytest
 from _jsonedit import put
 from hypothesis import given
@@ -243,7 +242,6 @@ def test_the_request_fuzzers_reach_both_outcomes():
     assert r.status_code == 422 and r.json()["field"] == "trajectory.rows.3.lon"
     _card_property(json.dumps(dict(CARD, id="fuzz-seed")).encode())
     assert c.get("/cards/fuzz-seed").status_code == 200
-    assert np.isfinite(CARD["parameters"]["p0"])
 
 
 @pytest.mark.parametrize("kind", sorted(_PROPS))

@@ -164,5 +164,6 @@ def test_crs_label_is_the_authority_code_else_the_wkt_cached_by_identity():
     local = CRS.from_proj4("+proj=tmerc +lat_0=52 +lon_0=10.5 +k=1 +x_0=0 +y_0=0 +ellps=GRS80 +units=m")
     assert local.to_authority() is None
     assert crs_label(local) == local.to_wkt()
-    for _ in range(70):  # more objects than the cache holds: each still gets its own label
-        assert crs_label(CRS.from_epsg(32633)) == "EPSG:32633"
+    for k in range(70):  # more objects than the cache holds, of two CRSs in turn: each gets its own label
+        code = 32633 + k % 2
+        assert crs_label(CRS.from_epsg(code)) == f"EPSG:{code}"

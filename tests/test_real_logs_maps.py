@@ -19,6 +19,8 @@ from gisnoise.model import ModelCard, save
 pyulog = pytest.importorskip("pyulog")
 DFReader = pytest.importorskip("pymavlink.DFReader")
 
+from test_logs import _coulomb_power  # noqa: E402  (pyulog read directly: V x 3.6 dQ/dt)
+
 DATA = Path(__file__).parent / "data"
 VTOL = DATA / "pyulog_sample_log_small_vtol.ulg"
 QUAD = DATA / "robologs_test_quad_fmuv5.ulg"
@@ -36,15 +38,6 @@ def card(tmp_path):
 
 def run(*args):
     return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
-
-
-def _coulomb_power(b):
-    """(t s, W): voltage x the mean current of each log interval from the battery's coulomb count (mAh), at the
-    intervals' middles, the first and last means held to the log's ends."""
-    t = b["timestamp"] / 1e6
-    c = 3.6 * np.diff(b["discharged_mah"].astype(float)) / np.diff(t)
-    tm = np.r_[t[0], (t[1:] + t[:-1]) / 2, t[-1]]
-    return tm, np.interp(tm, t, b["voltage_v"].astype(float)) * np.r_[c[0], c, c[-1]]
 
 
 def _ulog_expect(path):

@@ -322,9 +322,7 @@ def _identifiability(jac_w: np.ndarray, names: Sequence[str], rcond: float, wher
            f"value {ratio:.1e} < rcond {rcond:g}; near-null direction(s) of the scaled Jacobian: "
            f"{'; '.join(parts)}); add data that vary what they depend on (distances, powers, emission angles) "
            f"or fix some of them")
-    err = NotIdentifiableError(msg, field=involved[0] if involved else "parameters")
-    err.parameters = tuple(involved)  # type: ignore[attr-defined]
-    raise err
+    raise NotIdentifiableError(msg, field=involved[0] if involved else "parameters", parameters=tuple(involved))
 
 
 def fit_arrays(

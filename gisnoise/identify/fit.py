@@ -174,7 +174,7 @@ def fit_campaign(
         why = (f"{bg} = {res.params.get(bg, float('nan')):.1f} +- {res.std.get(bg, 0.0):.2g} dB(A) from the data"
                + (" (on a bound)" if bg in res.at_bounds else "")) if bg is not None else ""
     except NotIdentifiableError as exc:
-        if bg is None or bg in fixed or bg not in getattr(exc, "parameters", ()):
+        if bg is None or bg in fixed or bg not in exc.parameters:
             raise
         weak_bg, why = True, f"{bg} not identifiable from the data"
     if weak_bg:   # too few background-dominated rows to fit p7: hold it at the campaign's background
@@ -271,23 +271,17 @@ def identifiable_form(samples: Samples, ansatz: str | Ansatz,
     if "p0" not in model.params:
         base = model.name.split("+", 1)[0]
         offset = model.name.replace(base, f"{base}-offset", 1) if base == "paper" else "paper-offset"
-        _not_identifiable(f"{what}, and ansatz {model.name!r} makes p1 log10(P_el) its whole level, so p1 would "
-                          f"be a level scale, not a power slope; use --ansatz {offset} (a level offset valid at the "
-                          f"power flown) or fix p1", ("p1",))
+        raise NotIdentifiableError(f"{what}, and ansatz {model.name!r} makes p1 log10(P_el) its whole level, so p1 "
+                                   f"would be a level scale, not a power slope; use --ansatz {offset} (a level offset "
+                                   f"valid at the power flown) or fix p1", field="p1", parameters=("p1",))
     if "p0" in out:
-        _not_identifiable(f"{what}: the level p0 + p1 log10(P_el) is one number; with p0 fixed, p1 would only "
-                          f"absorb the offset, not a power slope; fix p1 too, or leave p0 free (p1 is then held at 0)",
-                          ("p1", "p0"))
+        raise NotIdentifiableError(f"{what}: the level p0 + p1 log10(P_el) is one number; with p0 fixed, p1 would "
+                                   f"only absorb the offset, not a power slope; fix p1 too, or leave p0 free (p1 is "
+                                   f"then held at 0)", field="p1", parameters=("p1", "p0"))
     out["p1"] = 0.0
     held["p1"] = (f"steady power ({pw.min():.4g}-{pw.max():.4g} W): no power information; held at 0, the card "
                   f"is a level offset p0 valid at the power flown")
     return out, held
-
-
-def _not_identifiable(message: str, parameters: tuple[str, ...]) -> None:
-    err = NotIdentifiableError(message, field=parameters[0])
-    err.parameters = parameters  # type: ignore[attr-defined]
-    raise err
 
 
 def usable_rows(samples: Samples, phase: str | None, *, include_low_snr: bool = True) -> Samples:

@@ -166,10 +166,7 @@ def substeps_and_min_distance(substeps: Any, min_distance_m: Any) -> tuple[int, 
 def period_and_snapshot(traj: Trajectory, metrics: Sequence[str], thresholds: Sequence[float], period_s: Any,
                         snapshot_t: Any) -> tuple[bool, float | None, float | None]:
     """Whether time integrals are asked for, the LAeq period (s) and the snapshot time (s)."""
-    integral = bool({"LAeq", "SEL"} & set(metrics)) or bool(thresholds)
-    if integral and len(traj) < 2:
-        raise TrajectoryError(f"{traj.source}: LAeq, SEL and time above need at least two samples, got "
-                              f"{len(traj)}", field="t")
+    integral = bool({"LAeq", "SEL"} & set(metrics)) or bool(thresholds)  # a trajectory has two samples or more
     duration = traj.duration_s
     period = None
     if "LAeq" in metrics:
@@ -195,7 +192,7 @@ def eval_states(traj: Trajectory, substeps: int) -> tuple[np.ndarray, dict[str, 
     With ``substeps > 1`` every sample interval is cut into equal sub-intervals and the
     state interpolated (:meth:`Trajectory.interpolate`).
     """
-    if substeps == 1 or len(traj) < 2:
+    if substeps == 1:
         state = {k: getattr(traj, k) for k in ("lat", "lon", "h", "roll", "pitch", "yaw", "power_w")}
         for k in ("rpm", "airspeed_m_s"):
             if getattr(traj, k) is not None:
