@@ -58,7 +58,7 @@ def absorption_band_holdout(s: Samples, x: Mapping[str, Any], fold: np.ndarray, 
     -------
     dict or None
         ``improvement_db2``, ``p_value`` (one-sided paired block test), ``rms_db_baseline``,
-        ``rms_db_extended``, ``shrinkage_pct``, ``iso_multiple`` (``beta`` on all rows used) and
+        ``rms_db_extended``, ``shrinkage_pct``, ``iso_multiple`` (the ISO multiple fitted without its >= 0 bound on all rows used) and
         ``iso_multiple_std``, ``n_rows``, ``n_bands``, ``what``.
     """
     meta = x.get("meta") or {}
@@ -132,8 +132,9 @@ def absorption_band_holdout(s: Samples, x: Mapping[str, Any], fold: np.ndarray, 
         err1[te] = row_rms(te, fit(tr, True))
     imp, p = _block_test(err0, err1, np.asarray(block)[rows])
     all_rows = np.ones(len(rows), dtype=bool)
-    yb, db, s0, beta_all = fit(all_rows, True)
-    # the multiple's standard error (unconstrained fit, one effective sample per second and microphone)
+    yb, db, _, _ = fit(all_rows, False)  # per-band means of all rows used
+    # the multiple and its standard error: unconstrained fit on all rows used, one effective sample per second
+    # and microphone
     dc = d[ii] - db[jj]
     a = np.column_stack([dc, -alpha[jj] * dc])
     coef, *_ = np.linalg.lstsq(a, y[ii, jj] - yb[jj], rcond=None)

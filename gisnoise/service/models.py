@@ -10,6 +10,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, WithJsonSchem
 
 from gisnoise import limits as _limits
 from gisnoise.errors import GisnoiseError
+from gisnoise.flight import OPTIONAL_COLUMNS, REQUIRED_COLUMNS
 from gisnoise.limits import CARD_REF_PATTERN, SAFE_ID_PATTERN
 from gisnoise.model import EFFECT_NAMES, PHASES, ansatz_names, get_ansatz
 
@@ -244,9 +245,8 @@ _ANGLE = Annotated[float, Field(ge=-180, le=180, description="deg")]
 _YAW = Annotated[float, Field(ge=-360, le=360, description="deg (wrapped)")]
 _POWER = Annotated[float, Field(ge=0, le=_LIM.max_power_w, description="electric power, W")]
 
-TRAJECTORY_COLUMNS = ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w", "phase", "rpm", "airspeed_m_s",
-                      "on_ground")
-"""The columns of a flight (SPEC section 3), each with the range of :mod:`gisnoise.limits`."""
+TRAJECTORY_COLUMNS = (*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS)
+"""The columns of a flight (SPEC section 3, :mod:`gisnoise.flight`), each with the range of :mod:`gisnoise.limits`."""
 
 
 class FlightColumns(BaseModel):
@@ -285,6 +285,9 @@ class FlightRow(BaseModel):
     rpm: float | None = None
     airspeed_m_s: float | None = None
     on_ground: Literal[0, 1] | None = None
+
+
+assert set(FlightColumns.model_fields) == set(TRAJECTORY_COLUMNS) == set(FlightRow.model_fields)
 
 
 class ColumnsTrajectory(BaseModel):

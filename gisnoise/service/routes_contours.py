@@ -208,7 +208,7 @@ def _checked_grid(traj: Trajectory, req: ContourRequest, max_cells: int) -> Grid
             grid = grid_for_trajectory(traj, req.grid.resolution_m, req.grid.margin_m, crs=req.grid.crs)
         except GridTooLargeError as exc:
             raise GridTooLargeError(str(exc), field="grid.resolution_m") from None
-    cells = int(grid.width) * int(grid.height)
+    cells = grid.n_cells
     if cells > max_cells:
         raise GridTooLargeError(f"grid.resolution_m: the grid has {cells} cells ({grid.width} x {grid.height}), "
                                 f"more than the limit of {max_cells}; use a coarser resolution_m or a smaller "
@@ -304,17 +304,13 @@ def _prepare(req: ContourRequest, state: State) -> tuple[ContourRequest, Traject
     req = _auto_margin(traj, cards, req, s.max_cells)
     grid = _checked_grid(traj, req, s.max_cells)
     with limits.override(max_work=s.max_work):  # the work bound, before a job is queued or a map evaluated
-        limits.check_work(_cells(grid), len(traj) * req.substeps, field="grid.resolution_m")
+        limits.check_work(grid.n_cells, len(traj) * req.substeps, field="grid.resolution_m")
     return req, traj, cards, grid
-
-
-def _cells(grid: GridSpec) -> int:
-    return int(grid.width) * int(grid.height)
 
 
 def _queue(request: Request, state: State, req: ContourRequest, traj: Trajectory, cards: list[ModelCard],
            grid: GridSpec) -> JSONResponse:
-    j = state.jobs.submit("contours", {"cells": _cells(grid), "samples": len(traj)},
+    j = state.jobs.submit("contours", {"cells": grid.n_cells, "samples": len(traj)},
                           {"request.json": json.dumps(_job_request(req, cards)).encode()})
     info = job_info(request, j)
     return JSONResponse(info.model_dump(), status_code=202, headers={"Location": info.url})
@@ -344,7 +340,7 @@ def _prepare_and_map(req: ContourRequest, state: State, job: bool, accept: str, 
                      ) -> tuple[ContourRequest, Trajectory, list[ModelCard], GridSpec, bytes | None]:
     """:func:`_prepare`, then the map's bytes, or None when the request becomes a job (``job`` or large work)."""
     req, traj, cards, grid = _prepare(req, state)
-    if job or float(_cells(grid)) * len(traj) * req.substeps > state.settings.sync_work_limit:
+    if job or float(grid.n_cells) * len(traj) * req.substeps > state.settings.sync_work_limit:
         return req, traj, cards, grid, None
     return req, traj, cards, grid, _sync_map(traj, cards, req, _want_tiff(req, accept), timing, grid)
 

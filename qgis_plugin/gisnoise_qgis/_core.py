@@ -33,7 +33,7 @@ EXT_DIR = os.path.join(HERE, "ext")
 VENDOR_DIR = os.path.join(HERE, "vendor")
 
 #: Compiled packages QGIS's Python must provide: module (= pip name), minimum version, Debian/Ubuntu package,
-#: Fedora package.  scripts/build-plugin's QGIS_PROVIDES lists the same.
+#: Fedora package.  scripts/build-plugin reads its list of what QGIS provides from here.
 REQUIRED = (
     ("numpy", "1.24", "python3-numpy", "python3-numpy"),
     ("scipy", "1.10", "python3-scipy", "python3-scipy"),
