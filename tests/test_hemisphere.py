@@ -26,8 +26,7 @@ M300 = Path(__file__).parent / "data" / "hemispheres" / "Hem_Ed_M3_10_F05_Y_W_dw
 T, RH = 25.0, 70.0  # the file's back-propagation atmosphere
 
 
-@pytest.fixture(scope="module")
-def sheets():
+def read_sheets():
     """The workbook read here, independently of the importer: {band name: (phi, theta, table)}."""
     wb = openpyxl.load_workbook(M300, read_only=True, data_only=True)
     out = {}
@@ -39,6 +38,11 @@ def sheets():
         phi = [float(r[0]) for r in rows[1:]]
         out[name[5:]] = (phi, theta, np.array([[float(v) for v in r[1:]] for r in rows[1:]]))
     return out
+
+
+@pytest.fixture(scope="module")
+def sheets():
+    return read_sheets()
 
 
 @pytest.fixture(scope="module")

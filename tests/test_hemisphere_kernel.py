@@ -23,8 +23,8 @@ def m300():
 
 @pytest.fixture(scope="module")
 def sheets():
-    from test_hemisphere import sheets as fx
-    return fx.__wrapped__()
+    from test_hemisphere import read_sheets
+    return read_sheets()
 
 
 def test_distance_table_holds_the_per_band_sum_within_a_thousandth_of_a_db(m300, sheets):

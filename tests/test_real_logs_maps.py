@@ -160,13 +160,8 @@ def test_quad_airborne_samples_without_current_are_silent_and_named(tmp_path, ca
 def test_track_without_current_in_flight_names_power_w(tmp_path, card):
     """A log that measures no current in flight (every airborne sample at 0 W): one line naming --power-w."""
     tr = read_route(VTOL).trajectory
-    zero = tr.select(np.ones(len(tr), bool))
     csv = tmp_path / "no_current.csv"
-    zero.to_csv(csv)
-    text = csv.read_text().splitlines()
-    col = text[0].split(",").index("power_w")
-    rows = [",".join("0" if k == col else v for k, v in enumerate(line.split(","))) for line in text[1:]]
-    csv.write_text("\n".join([text[0], *rows]) + "\n")
+    tr.with_(power_w=np.zeros(len(tr))).to_csv(csv)
     r = run("contour", str(csv), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", str(tr.h.min()))
     assert r.exit_code == 2
     assert "--power-w" in r.output and "all" in r.output and len(r.output.strip().splitlines()) == 1

@@ -200,17 +200,11 @@ def population_points(pop: Population, grid: GridSpec, *, max_points: int = 50_0
 
 def _points_that_count(band: np.ndarray, grid: GridSpec, der: tuple[np.ndarray, ...], x: np.ndarray,
                        y: np.ndarray, side: float, floor_db: float) -> np.ndarray:
-    """Indices of the points whose level square may reach ``floor_db`` (or that have no level)."""
-    col, row = apply_affine(~grid.transform, x, y)
-    c = np.floor(np.asarray(col)).astype(np.int64)
-    r = np.floor(np.asarray(row)).astype(np.int64)
-    h, w = band.shape
-    inside = (c >= 0) & (c < w) & (r >= 0) & (r < h)
+    """Indices of the points whose level square may reach ``floor_db`` (or that have no level: outside the
+    grid, or NaN bounds of cells next to no value)."""
     rx, ry = grid.resolution
     upper = _cell_upper(band, der, 0.5 * rx, 0.5 * ry, side)
-    below = np.zeros(x.shape, dtype=bool)
-    below[inside] = upper[r[inside], c[inside]] < floor_db  # NaN bounds (cells next to no value) stay in
-    return np.flatnonzero(~below)
+    return np.flatnonzero(~(cell_values(upper, grid, x, y) < floor_db))
 
 
 def population_scores(band: np.ndarray, grid: GridSpec, points: tuple[np.ndarray, np.ndarray, np.ndarray, float],

@@ -81,13 +81,16 @@ def audible_distance(cards: Sequence[ModelCard], powers_w: Sequence[float], leve
     beyond distance, angles and power.
     """
     d, table = level_table(cards, powers_w)
+    return _farthest_at(d, table, level_db)
+
+
+def _farthest_at(distances: np.ndarray, table: np.ndarray, level_db: float) -> float:
+    """The first tabulated distance beyond the last one at which any row of ``table`` reaches ``level_db`` (0: none)."""
     far = 0.0
     for loud in table:
         idx = np.flatnonzero(loud >= level_db)
-        if idx.size == 0:
-            continue
-        k = int(idx[-1])
-        far = max(far, float(d[min(k + 1, d.size - 1)]))
+        if idx.size:
+            far = max(far, float(distances[min(int(idx[-1]) + 1, distances.size - 1)]))
     return far
 
 
@@ -190,12 +193,7 @@ def auto_margin(traj: Trajectory, cardset: CardSet, lowest_db: float, *, resolut
         if unbounded:
             warnings.append(f"the extent is bounded by the base ansatz of {', '.join(sorted(unbounded))}, without "
                             "its effects; check the contours' clipped flags")
-    far = 0.0
-    for loud in table:
-        above = np.flatnonzero(loud >= target)
-        if above.size:
-            far = max(far, float(distances[min(int(above[-1]) + 1, distances.size - 1)]))
-    margin = max(far, float(min_margin_m)) + res
+    margin = max(_farthest_at(distances, table, target), float(min_margin_m)) + res
     base = grid_for_trajectory(traj, resolution_m, 0.0, crs)
     limit = max_cells() if cell_limit is None else int(cell_limit)
     w0, h0 = base.width * res, base.height * res

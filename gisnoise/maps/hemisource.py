@@ -26,6 +26,7 @@ over cells of the SEL energy) from hemisphere instants that came from filled tab
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -257,8 +258,7 @@ def _with_hemispheres(t: np.ndarray, state: dict[str, np.ndarray], idx: np.ndarr
         kind[sel] = h
         gain[sel] = 0.0
         radius[sel] = _radius(tables.bound[h], tables.s0, tables.hs_step, floor_db)
-    tables = HemiTables(kind, tables.hs, tables.tab, tables.axg, tables.axinv, tables.s0,
-                        tables.hs_step, tables.nd, tables.reach_m, tables.bound)
+    tables = dataclasses.replace(tables, kind=kind)
     return HemiFlight(t=fl.t, src=fl.src, C=fl.C, gain=gain, cidx=fl.cidx, coef=fl.coef, w=fl.w, dt=fl.dt,
                       radius=radius, source=fl.source, hemi=tables)
 

@@ -8,6 +8,7 @@ on the command line.
 import json
 import shutil
 
+import numpy as np
 import pytest
 from conftest import CARDS, H_GROUND, LAT0, LON0, REPO, assert_same_raster
 
@@ -175,11 +176,7 @@ def test_a_track_without_current_in_flight_needs_the_constant_power(plugin, omni
 
     tr = read_route(LOGS / "pyulog_sample_log_small_vtol.ulg").trajectory
     csv = tmp_path / "no_current.csv"
-    tr.to_csv(csv)
-    text = csv.read_text().splitlines()
-    col = text[0].split(",").index("power_w")
-    rows = [",".join("0" if k == col else v for k, v in enumerate(line.split(","))) for line in text[1:]]
-    csv.write_text("\n".join([text[0], *rows]) + "\n")
+    tr.with_(power_w=np.zeros(len(tr))).to_csv(csv)
     with pytest.raises(QgsProcessingException, match="power[_-]w"):
         _run(tmp_path, "nopower", TRAJECTORY_FILE=str(csv), CARDS=[omni_card], RESOLUTION=20.0, MARGIN=100.0,
              GROUND_HEIGHT=float(tr.h.min()))
