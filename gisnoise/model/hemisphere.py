@@ -246,7 +246,8 @@ class HemisphereCard(ModelCard):
         c = ex.max(axis=1)
         g = 10.0 ** ((ex - c[:, None]) / 10.0)
         e = 10.0 ** ((la2 - top[:, None]) / 10.0)
-        s = np.maximum(g @ e, 1e-300)
+        # einsum, not BLAS: BLAS threads keep spinning after a call, taking CPU from the map's threads
+        s = np.maximum(np.einsum("kb,bn->kn", g, e), 1e-300)
         lv = 10.0 * np.log10(s) + c[:, None] - 20.0 * np.log10(flat / r0)[:, None]
         return lv.reshape(d.shape + la.shape[1:])
 
