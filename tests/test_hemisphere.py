@@ -192,6 +192,26 @@ def test_between_nodes_the_level_lies_between_its_neighbours(card, sheets):
         assert min(corners) - 1e-9 <= got <= max(corners) + 1e-9
 
 
+def test_loudest_level_is_the_largest_node_and_bounds_every_direction(card, sheets):
+    # the map's default extent takes a hemisphere's loudest level over the sphere at each distance
+    # from loudest_level: the largest node level (bilinear interpolation never exceeds its nodes)
+    from gisnoise.maps import level_table
+
+    phi, theta, _ = sheets["1000"]
+    rng = np.random.default_rng(5)
+    dist = np.array([1.0, 10.0, 120.0, 900.0])
+    top = card.loudest_level(dist)
+    for d, t in zip(dist, top, strict=True):
+        want = max(node_level(sheets, i, j, d) for i in range(len(phi)) for j in range(len(theta)))
+        assert t == pytest.approx(want, abs=1e-9)
+        az, pol = rng.uniform(-np.pi, np.pi, 20000), rng.uniform(-np.pi / 2, np.pi / 2, 20000)
+        swept = card.level(card.inputs(np.full(az.size, d), az, pol, 1.0))
+        assert swept.max() <= t + 1e-9
+        assert swept.max() >= t - 1.0  # and dense directions come close to it
+    d_tab, table = level_table([card], [1.0])
+    assert np.allclose(table[0], card.loudest_level(d_tab), rtol=0, atol=1e-12)
+
+
 def test_interpolation_is_continuous_across_cells_and_the_horizon(card):
     # a fine sweep of directions: neighbouring directions give neighbouring levels
     az = np.radians(30.0)

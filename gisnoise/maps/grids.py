@@ -9,7 +9,8 @@ requested level can still be reached; :func:`grid_for_map` grows the margin to i
 that the lowest contour of the maximum level closes inside the grid.  The bound is an
 upper one: each card's own model (one definition, :meth:`gisnoise.model.ModelCard.level_uav`)
 is evaluated over the whole emission sphere at the loudest electric power the track flies
-with that card, at distances from 1 m to 100 km; spreading is the card's (``p6`` in the
+with that card, at distances from 1 m to 100 km (a measured hemisphere's: its largest node level,
+:meth:`gisnoise.model.HemisphereCard.loudest_level`, exact); spreading is the card's (``p6`` in the
 paper's ansatz); atmospheric absorption, which only lowers levels, is left out, so the
 bound holds with it too.  The time-averaged level ``LAeq`` never exceeds ``LAmax``, so the
 same extent closes its lowest contour as well.  The sound exposure level ``SEL`` grows with
@@ -109,6 +110,9 @@ def level_table(cards: Sequence[ModelCard], powers_w: Sequence[float]) -> tuple[
             table[i] = table[done[key]]
             continue
         done[key] = i
+        if isinstance(card, HemisphereCard):  # its largest node level: exact, where the directions' grid samples
+            table[i] = card.loudest_level(_DISTANCES)
+            continue
         try:
             lv = card.level_uav(card.inputs(d, phi, theta, float(pw)))
         except InputError as exc:

@@ -56,6 +56,10 @@ HEMISPHERE_ANSATZ = "hemisphere"
 DEFAULT_ATMOSPHERE = {"temperature_c": 20.0, "humidity_pct": 70.0, "pressure_kpa": 101.325}
 
 
+_LN10_10 = math.log(10.0) / 10.0
+"""``10^(x/10) = exp(x _LN10_10)``."""
+
+
 def table_angles(phi: Any, theta: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Table angles ``(phi_t, theta_t)`` in degrees of product angles ``phi``, ``theta`` (rad).
 
@@ -235,21 +239,34 @@ class HemisphereCard(ModelCard):
         """A-weighted level of every node at distance ``d`` (m): ``(…d, phi, theta)``."""
         d = np.asarray(d, dtype=float)
         flat = d.reshape(-1)
-        r0 = float(self.reference_distance_m)
-        la, alpha = self._weighted  # type: ignore[attr-defined]
-        nb = la.shape[0]
-        la2 = la.reshape(nb, -1)
-        # sum_b 10^((la_b - alpha_b x) / 10) as a matrix product, scaled so that nothing overflows:
-        # 10^(c_k/10) sum_b G[k, b] E[b, node] with E = 10^((la - top_b)/10), G = 10^((top_b - alpha_b x_k - c_k)/10)
-        top = la2.max(axis=1)
-        ex = top[None, :] - alpha[None, :] * (flat[:, None] - r0)
-        c = ex.max(axis=1)
-        g = 10.0 ** ((ex - c[:, None]) / 10.0)
-        e = 10.0 ** ((la2 - top[:, None]) / 10.0)
+        g, c, e = self._band_terms(flat)
         # einsum, not BLAS: BLAS threads keep spinning after a call, taking CPU from the map's threads
         s = np.maximum(np.einsum("kb,bn->kn", g, e), 1e-300)
-        lv = 10.0 * np.log10(s) + c[:, None] - 20.0 * np.log10(flat / r0)[:, None]
-        return lv.reshape(d.shape + la.shape[1:])
+        lv = 10.0 * np.log10(s) + c[:, None] - 20.0 * np.log10(flat / float(self.reference_distance_m))[:, None]
+        return lv.reshape(d.shape + self.a_weighted_db.shape[1:])
+
+    def loudest_level(self, d: Any) -> np.ndarray:
+        """The loudest level over all directions at distance ``d`` (m), dB(A): the largest node level.
+
+        Exact: bilinear interpolation never exceeds its nodes, and every node is a direction
+        (those at +-90 deg the horizon's limit).
+        """
+        d = np.asarray(d, dtype=float)
+        return np.asarray(self.node_levels(d).reshape(d.shape + (-1,)).max(axis=-1))
+
+    def _band_terms(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(G, c, E)`` with ``sum_b 10^((la_b,n - alpha_b (x - r0)) / 10) = 10^(c/10) sum_b G[x, b] E[b, n]``.
+
+        ``x`` (m) flat; ``E = 10^((la - top_b) / 10)`` per band and node, ``G = 10^((top_b -
+        alpha_b (x - r0) - c) / 10)`` and ``c`` the largest exponent at ``x``: nothing
+        overflows, and the loudest band at each distance never underflows.
+        """
+        la, alpha = self._weighted  # type: ignore[attr-defined]
+        la2 = la.reshape(la.shape[0], -1)
+        top = la2.max(axis=1)
+        ex = top[None, :] - alpha[None, :] * (x[:, None] - float(self.reference_distance_m))
+        c = ex.max(axis=1)
+        return np.exp((ex - c[:, None]) * _LN10_10), c, np.exp((la2 - top[:, None]) * _LN10_10)
 
     def interpolation(self, phi: Any, theta: Any) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray,
                                                            np.ndarray]:
@@ -275,18 +292,21 @@ class HemisphereCard(ModelCard):
         """A-weighted level (dB(A)) at distance ``d`` (m) in direction ``phi``, ``theta`` (rad); broadcasts."""
         d, phi, theta = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (d, phi, theta)))
         st, _, _ = self.interpolation(phi, theta)
-        la, alpha = self._weighted  # type: ignore[attr-defined]
-        nb = la.shape[0]
-        flat = la.reshape(nb, -1)
-        r0 = float(self.reference_distance_m)
-        att = d - r0
-        out = np.zeros(d.shape)
-        for k, w in st:
-            e = np.zeros(d.shape)
-            for bnd in range(nb):
-                e += np.power(10.0, (flat[bnd][k] - alpha[bnd] * att) / 10.0)
-            out += w * 10.0 * np.log10(e)
-        return out - 20.0 * np.log10(d / r0)
+        flat = d.reshape(-1)
+        nodes = [np.asarray(k).reshape(-1) for k, _ in st]  # flat node index per point
+        weights = [np.broadcast_to(w, d.shape).reshape(-1) for _, w in st]
+        out = np.empty(flat.shape)
+        step = 1 << 14  # points per pass: the (points, bands) terms stay a few MB
+        for a in range(0, flat.size, step):
+            x = flat[a:a + step]
+            g, c, e = self._band_terms(x)
+            et = np.ascontiguousarray(e.T)  # (nodes, bands)
+            lv = np.zeros(x.shape)
+            for k, w in zip(nodes, weights, strict=True):
+                s = np.maximum(np.einsum("kb,kb->k", g, et[k[a:a + step]]), 1e-300)
+                lv += w[a:a + step] * (10.0 * np.log10(s) + c)
+            out[a:a + step] = lv - 20.0 * np.log10(x / float(self.reference_distance_m))
+        return out.reshape(d.shape)
 
     def _kernel(self, p: np.ndarray, x: Mapping[str, Any], d_ref: float, want_jac: bool
                 ) -> tuple[np.ndarray, np.ndarray | None]:
