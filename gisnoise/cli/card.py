@@ -200,7 +200,8 @@ def sample_hemisphere_cmd(card: str, out: str, p_el: float, radius: float | None
 @command.command("plot")
 @click.argument("card", type=click.Path(dir_okay=False))
 @click.option("--p-el", "p_el", type=float, default=1.1, show_default=True,
-              help="Nondimensional electric power (the paper's Fig. 7: 1.1, Fig. 9: 6.5).")
+              help="Nondimensional electric power (the paper's Fig. 7: 1.1, Fig. 9: 6.5); a measured hemisphere "
+                   "has no power term.")
 @click.option("--distance", "distance", type=float, default=30.0, show_default=True,
               help="Source-observer distance, m.")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Output PNG.")

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gisnoise.errors import InputError
+from gisnoise.maps.hemifill import has_hemisphere
 from gisnoise.maps.palette import ISOLINE_COLOUR, PHASE_COLOURS, class_colours
 from gisnoise.maps.sel import metric_levels
 
@@ -223,7 +224,8 @@ def plot_directivity(card: ModelCard, path: str | os.PathLike[str], *, p_el: flo
         ax.set_ylabel("polar angle θ, deg (−90 below)")
         ax.set_xticks(np.arange(-180, 181, 45))
         ax.set_yticks(np.arange(-90, 91, 30))
-        ax.set_title(f"{card.id} ({card.phase}): level at {distance_m:g} m, P_el = {p_el:g}", fontsize=11)
+        power = "measured hemisphere (no power term)" if has_hemisphere([card]) else f"P_el = {p_el:g}"
+        ax.set_title(f"{card.id} ({card.phase}): level at {distance_m:g} m, {power}", fontsize=11)
         p = _save_png(fig, path, dpi)
     finally:
         plt.close(fig)
