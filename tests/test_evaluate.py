@@ -301,15 +301,18 @@ def uncertainty_case(dt=1.0, rows=5):
 def test_uncertainty_matches_finite_differences():
     traj, grid = uncertainty_case()
     card = fitted_card()
-    res = evaluate_grid(traj, [card], grid, ground_h=0.0, metrics=("LAmax", "LAeq"), uncertainty=True)
+    res = evaluate_grid(traj, [card], grid, ground_h=0.0, metrics=("LAmax", "LAeq"), uncertainty=True,
+                        engine="numpy")  # the reference (the fast engine's bands: tests/test_fast_uncertainty.py)
     grads = {"LAmax": [], "LAeq": []}
     for k in range(8):
         h = 1e-5
         p_hi, p_lo = card.p.copy(), card.p.copy()
         p_hi[k] += h
         p_lo[k] -= h
-        hi = evaluate_grid(traj, [with_parameters(card, p_hi)], grid, ground_h=0.0, metrics=("LAmax", "LAeq"))
-        lo = evaluate_grid(traj, [with_parameters(card, p_lo)], grid, ground_h=0.0, metrics=("LAmax", "LAeq"))
+        hi = evaluate_grid(traj, [with_parameters(card, p_hi)], grid, ground_h=0.0, metrics=("LAmax", "LAeq"),
+                           engine="numpy")
+        lo = evaluate_grid(traj, [with_parameters(card, p_lo)], grid, ground_h=0.0, metrics=("LAmax", "LAeq"),
+                           engine="numpy")
         for m in grads:
             grads[m].append((hi.bands[m] - lo.bands[m]) / (2 * h))
     for m in grads:

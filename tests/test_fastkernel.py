@@ -120,8 +120,10 @@ def test_default_engine_is_the_fast_one():
         assert fast_engine_serves([c]) is None
         assert evaluate_grid(traj, [c], g, ground_h=0.0).metadata["engine"] == "fast"
     assert DEFAULT_ENGINE == "auto"
-    # the uncertainty bands are the NumPy engine's: the default engine takes it for them
-    assert "uncertainty" in fast_engine_serves([card()], uncertainty=True)
+    # the uncertainty bands of paper cards are the fast engine's too; those of effect extensions the NumPy engine's
+    assert fast_engine_serves([card()], uncertainty=True) is None
+    assert fast_engine_serves([card(ansatz="paper")], uncertainty=True) is None
+    assert "uncertainty" in fast_engine_serves([bank_card()], uncertainty=True)
 
 
 def bank_card(ansatz="paper-offset+bank_angle", k_bank=3.0, **p):
@@ -148,7 +150,7 @@ def test_bank_angle_term_is_the_model_own():
 def test_fast_engine_refuses_what_it_does_not_compute():
     traj, g = circle_flight(5), grid_around(50.0, 3, 3)
     with pytest.raises(InputError) as err:
-        evaluate_grid(traj, [card()], g, ground_h=0.0, engine="fast", uncertainty=True)
+        evaluate_grid(traj, [bank_card()], g, ground_h=0.0, engine="fast", uncertainty=True)
     assert err.value.field == "engine"
     with pytest.raises(InputError) as err:
         evaluate_grid(traj, [card()], g, ground_h=0.0, engine="vulkan")

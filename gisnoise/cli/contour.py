@@ -107,17 +107,19 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
               help="Sub-intervals per sample interval for time integration.")
 @click.option("--background", "background", is_flag=True, help="Include the cards' background level.")
 @click.option("--uncertainty", "uncertainty", is_flag=True,
-              help="Add LAmax_std, LAeq_std and the 95 %-confidence levels LAmax_p95, LAeq_p95 "
-                   "(cards need a covariance).  The bands are computed by the NumPy engine (--engine auto "
-                   "takes it; several times slower than the fast engine).")
+              help="Add LAmax_std, LAeq_std, SEL_std and the 95 %-confidence levels LAmax_p95, LAeq_p95 "
+                   "(delta method; cards need a covariance).  The fast engine computes them for paper and "
+                   "paper-offset cards; for effect extensions --engine auto takes the NumPy engine (several "
+                   "times slower).")
 @click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png.")
 @click.option("--engine", "engine", type=click.Choice(["auto", "numpy", "fast"]), default="auto", show_default=True,
               help="Evaluator.  'fast': the numba float32 kernel (paper ansatzes and their effect extensions "
                    "alone and chained: +bank_angle, +rpm, +doppler, +wind, +ground_reflection, "
                    "+atmospheric_absorption; hemisphere cards), equal to 'numpy' within 0.01 dB and tens of "
-                   "times faster.  'numpy': the reference (any ansatz, the --uncertainty bands).  'auto': 'fast' "
-                   "unless --uncertainty, a card it does not implement, or hemisphere cards together with "
-                   "receiver-dependent extensions need 'numpy'; the engine that ran is printed.")
+                   "times faster; --uncertainty of paper cards).  'numpy': the reference (any ansatz, every "
+                   "--uncertainty band).  'auto': 'fast' unless --uncertainty of an effect extension, a card it "
+                   "does not implement, or hemisphere cards together with receiver-dependent extensions need "
+                   "'numpy'; the engine that ran is printed.")
 @click.option("--atmosphere", "atmosphere", default=None, callback=_atmosphere, metavar="T,RH[,P]",
               help="Atmosphere of the hemisphere cards' absorption on the map: temperature (C), relative humidity "
                    "(%) and optionally pressure (kPa, default 101.325) [default: each card's map atmosphere, "

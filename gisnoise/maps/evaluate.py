@@ -28,8 +28,8 @@ positions, power linearly, angles on the circle, phase from the earlier sample).
 
 ``engine="auto"`` (the default)
     the fast engine whenever it computes what is asked (:func:`fast_engine_serves`), else
-    the NumPy engine: for the uncertainty bands, a ``kernel=`` replacement, or cards it does
-    not implement.  ``metadata["engine"]`` names the engine that ran;
+    the NumPy engine: for the uncertainty bands of cards other than ``paper``/``paper-offset``,
+    a ``kernel=`` replacement, or cards it does not implement.  ``metadata["engine"]`` names the engine that ran;
 
 ``engine="numpy"``
     the reference (:mod:`gisnoise.maps.reference`): any ansatz, the uncertainty bands
@@ -58,6 +58,7 @@ from gisnoise.geo import GridSpec
 from gisnoise.maps import _numba
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.fast_effects import NotOnFastEngine, base_card
+from gisnoise.maps.fast_uncertainty import uncertainty_refusal
 from gisnoise.maps.fastkernel import evaluate_fast
 from gisnoise.maps.hemifill import has_hemisphere
 from gisnoise.maps.prepare import MapOptions
@@ -80,7 +81,8 @@ def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, unce
                        kernel: Any = None) -> str | None:
     """Why the fast engine cannot compute a request (one line), or None when it can.
 
-    It cannot without numba, with the uncertainty bands or a ``kernel=`` replacement, or
+    It cannot without numba or with a ``kernel=`` replacement, the uncertainty bands of cards
+    other than ``paper``/``paper-offset`` (:func:`~gisnoise.maps.fast_uncertainty.uncertainty_refusal`), or
     for a card whose ansatz is neither ``paper``/``paper-offset`` nor one of their
     extensions by per-instant effects and the receiver-dependent ones of
     :mod:`gisnoise.maps.receiver_terms` (hemisphere cards it computes, but not in one
@@ -88,11 +90,11 @@ def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, unce
     """
     if _numba.numba is None:
         return "numba is not installed"
-    if uncertainty:
-        return "the uncertainty bands need the NumPy engine"
     if kernel is not None:
         return "a kernel replacement belongs to the NumPy engine"
     cs = as_cardset(cards).cards
+    if uncertainty:  # the delta method's bands of paper and paper-offset cards (maps/fast_uncertainty.py)
+        return uncertainty_refusal(cs)
     hemi = has_hemisphere(cs)
     for c in cs:
         if isinstance(c, HemisphereCard):  # measured hemispheres: their kernel (maps/hemisource.py)
@@ -193,7 +195,8 @@ def evaluate_grid(
     engine : {"auto", "numpy", "fast"}
         ``"fast"``: the numba kernel of :mod:`gisnoise.maps.fastkernel` (same bands within
         0.01 dB; ansatzes ``paper``, ``paper-offset`` and their effect extensions, per-instant
-        and receiver-dependent, alone and chained; hemisphere cards; no uncertainty).  ``"auto"`` (default): the fast engine when
+        and receiver-dependent, alone and chained; hemisphere cards; the uncertainty bands of
+        ``paper`` and ``paper-offset`` cards).  ``"auto"`` (default): the fast engine when
         :func:`fast_engine_serves` finds nothing against it, else the NumPy engine (logged;
         ``metadata["engine"]`` names the engine that ran).
     floor_db : float, optional
@@ -246,8 +249,8 @@ def evaluate_grid_fast(traj: Trajectory, cards: CardSet | Iterable[ModelCard] | 
                        engine: str = "fast", **options: Any) -> MapResult:
     """:func:`evaluate_grid` with the fast kernel (``engine="fast"``; same parameters and bands).
 
-    The fast engine refuses ``uncertainty`` (the Jacobian stays with the NumPy engine) and
-    a ``kernel``; ``floor_db`` and ``threads`` are its own options.
+    The fast engine refuses ``uncertainty`` for cards other than ``paper``/``paper-offset`` (their
+    Jacobian stays with the NumPy engine) and a ``kernel``; ``floor_db`` and ``threads`` are its own options.
 
     Returns
     -------

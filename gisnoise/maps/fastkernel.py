@@ -7,8 +7,9 @@ runs :func:`evaluate_fast`: the same bands as the NumPy engine
 check the kernel against the registry's definition) and their effect extensions: per-instant
 terms (:mod:`gisnoise.maps.fast_effects`) in this kernel, receiver-dependent ones
 (:mod:`gisnoise.maps.receiver_terms`) in its sibling :mod:`gisnoise.maps._numba_receiver`,
-which :func:`run_window` picks for a flight with such terms.  It refuses every other ansatz,
-the uncertainty bands and a ``kernel=`` replacement.
+which :func:`run_window` picks for a flight with such terms; the uncertainty bands of ``paper``
+and ``paper-offset`` cards in :mod:`gisnoise.maps.fast_uncertainty`.  It refuses every other
+ansatz, the uncertainty bands of effect extensions and a ``kernel=`` replacement.
 
 The engine's steps, each usable alone (the operations of :mod:`gisnoise.ops` run them
 per tile):
@@ -35,6 +36,7 @@ Accumulation: the maximum and the trapezoid energy ``sum w_i 10^(L_i/10)`` per c
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -47,6 +49,7 @@ from gisnoise.maps import _numba as _kernels
 from gisnoise.maps import _numba_receiver as _rx_kernels
 from gisnoise.maps._checks import as_float
 from gisnoise.maps._poly import _ATAN_C, _EXP2_C, _LOG2_C, _poly_eval  # noqa: F401  (the kernel's polynomials)
+from gisnoise.maps.fast_uncertainty import uncertainty_bands, uncertainty_refusal
 from gisnoise.maps.hemifill import has_hemisphere
 from gisnoise.maps.hemisource import HemiFlight, evaluate_hemisphere_fast, run_hemi_window
 from gisnoise.maps.instants import (
@@ -59,12 +62,19 @@ from gisnoise.maps.instants import (
     snapshot_instant,
 )
 from gisnoise.maps.kernelbands import chunk_cells_of, kernel_bands
-from gisnoise.maps.prepare import MapOptions, check_request, map_metadata
+from gisnoise.maps.prepare import (
+    UNCERTAINTY_NOTE,
+    MapOptions,
+    band_order,
+    check_request,
+    map_metadata,
+    require_covariances,
+)
 from gisnoise.maps.receiver_terms import kernel_flags
 from gisnoise.maps.receivers import SEGMENT_M, Receivers, receivers_for, segment_cells
 from gisnoise.maps.result import MapResult
-from gisnoise.maps.threads import default_threads, map_threads
-from gisnoise.model import ModelCard
+from gisnoise.maps.threads import default_threads, map_threads, row_blocks
+from gisnoise.model import HemisphereCard, ModelCard
 
 __all__ = [
     "DEFAULT_CHUNK_CELLS",
@@ -149,22 +159,11 @@ def run_window(fl: FlightInstants, rc: Receivers, r0: int, r1: int, c0: int, c1:
     require_numba()
     if isinstance(fl, HemiFlight):  # a flight with hemisphere cards: their kernel (maps/hemisource.py)
         return run_hemi_window(fl, rc, r0, r1, c0, c1, thresholds, lattice=lattice)  # type: ignore[return-value]
-    W = rc.grid.width
-    if not (0 <= r0 < r1 <= rc.grid.height and 0 <= c0 < c1 <= W):
-        raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the grid {rc.grid.shape}",
-                         field="window")
+    dh = rc.window_heights(r0, r1, c0, c1)
     k = rc.seg
     m0 = c0 // k
     P, U = window_lattice(rc, r0, r1, c0, c1) if lattice is None else lattice
     nr, ncw = r1 - r0, c1 - c0
-    if rc.dh is not None:
-        o_r, o_c = rc.dh_origin
-        if r0 < o_r or c0 < o_c or r1 - o_r > rc.dh.shape[0] or c1 - o_c > rc.dh.shape[1]:
-            raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the receivers' DEM heights",
-                             field="window")
-        dh = np.ascontiguousarray(rc.dh[r0 - o_r:r1 - o_r, c0 - o_c:c1 - o_c])
-    else:
-        dh = np.zeros((1, 1), np.float32)
     thr = np.asarray(list(thresholds), dtype=np.float64)
     emax = np.zeros((nr, ncw), np.float32)
     energy = np.zeros((nr, ncw), np.float64)
@@ -191,8 +190,7 @@ def run_grid(fl: FlightInstants, rc: Receivers, thresholds: Sequence[float] = ()
     """
     H, W = rc.grid.shape
     nthreads = default_threads() if threads is None else max(1, int(threads))
-    rows = max(1, min(int(chunk_cells) // W, -(-H // (4 * nthreads))))  # >= 4 blocks a thread when it can
-    blocks = [(r, min(r + rows, H)) for r in range(0, H, rows)]
+    blocks = row_blocks(H, W, chunk_cells, nthreads)
     nt = len(list(thresholds))
     emax = np.zeros((H, W), np.float32)
     energy = np.zeros((H, W), np.float64)
@@ -263,6 +261,9 @@ def warm_up() -> dict[str, Any]:
                                         r_ground=0.5, f_ground=500.0), reference_power_w=1000.0)
     evaluate_fast(traj, rx_card, grid, opts)  # the kernel of receiver-dependent terms (maps/_numba_receiver.py)
     evaluate_fast(traj, sample_card(card), grid, opts)  # the hemisphere kernel (maps/_hemikernel.py)
+    cov = tuple(tuple(0.01 * float(i == j) for j in range(8)) for i in range(8))
+    evaluate_fast(traj, dataclasses.replace(card, covariance=cov), grid,  # the uncertainty kernel (maps/_numba_jac.py)
+                  dataclasses.replace(opts, uncertainty=True))
     level_from_body(card, 1.0, 1.0, 1.0, 1000.0)
     return {"seconds": time.perf_counter() - t0, "cached": bool(_kernels.cache_used)}
 
@@ -282,10 +283,14 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
     if opts.kernel is not None:
         raise InputError("kernel: a replacement block function belongs to engine='numpy'", field="kernel")
     require_numba()
-    if opts.uncertainty:
-        raise InputError("uncertainty: engine 'fast' computes levels only; use engine='numpy' for the "
-                         "uncertainty bands", field="engine")
     req = check_request(traj, cards, grid, opts)
+    if opts.uncertainty:
+        used_cards = [req.cardset.cards[k] for k in sorted(set(req.cardset.assign(req.traj.phase, req.traj.t,
+                                                                                    source=req.traj.source).tolist()))]
+        why = uncertainty_refusal(used_cards + [c for c in req.cardset.cards if isinstance(c, HemisphereCard)])
+        if why is not None:
+            raise InputError(f"uncertainty: {why}; use engine='numpy'", field="engine")
+        require_covariances(used_cards)
     if has_hemisphere(req.cardset.cards):  # measured hemispheres: their own kernel (maps/hemisource.py)
         return evaluate_hemisphere_fast(req, opts)
     traj, grid, metrics, thresholds = req.traj, req.grid, req.metrics, req.thresholds
@@ -315,9 +320,16 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
         s = run_grid(s_fl, rc, (), threads=threads, chunk_cells=chunk, cancel=cancel,
                      progress=None if progress is None else (lambda f: progress(share + (1 - share) * f)))
     bands, below = kernel_bands(res, grid.shape, metrics, thresholds, snap, period, floor, s, rc.valid)
+    if opts.uncertainty:  # the delta method's bands (maps/fast_uncertainty.py)
+        bands.update(uncertainty_bands(traj, req.cardset.cards, fl, rc, metrics, bands, substeps=req.substeps,
+                                       background=background, min_distance_m=req.min_distance_m, threads=threads,
+                                       chunk_cells=chunk, cancel=cancel))
+        bands = {name: bands[name] for name in band_order(metrics, thresholds, snap, True)}
     used = sorted(set(fl.cidx.tolist()))
     meta = map_metadata(req, bands, fl.n, float(opts.receiver_height), rc.ground or {}, background, used)
     meta.update({"engine": "fast", "floor_db": floor, "cells_below_floor": int(below.sum())})
+    if opts.uncertainty:
+        meta["uncertainty"] = UNCERTAINTY_NOTE
     if fl.rx is not None:  # the speed of sound of the receiver-dependent terms, as the NumPy engine states it
         meta["speed_of_sound_m_s"] = float(speed_of_sound(temp))
     return MapResult(bands=bands, grid=grid, metadata=meta)

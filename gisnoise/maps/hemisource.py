@@ -53,7 +53,7 @@ from gisnoise.maps.prepare import (
 )
 from gisnoise.maps.receivers import Receivers, receivers_for
 from gisnoise.maps.result import MapResult
-from gisnoise.maps.threads import default_threads, map_threads
+from gisnoise.maps.threads import default_threads, map_threads, row_blocks
 from gisnoise.model import HemisphereCard, ModelCard
 
 __all__ = [
@@ -319,21 +319,10 @@ def run_hemi_window(fl: HemiFlight, rc: Receivers, r0: int, r1: int, c0: int, c1
         raise InputError("engine 'fast' needs numba (pip install 'gisnoise[fast]')", field="engine")
     ht = fl.hemi
     assert ht is not None
-    W = rc.grid.width
-    if not (0 <= r0 < r1 <= rc.grid.height and 0 <= c0 < c1 <= W):
-        raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the grid {rc.grid.shape}",
-                         field="window")
+    dh = rc.window_heights(r0, r1, c0, c1)
     k = rc.seg
     P, U = rc.lattice(r0, r1, c0 // k, -(-c1 // k)) if lattice is None else lattice
     nr, ncw = r1 - r0, c1 - c0
-    if rc.dh is not None:
-        o_r, o_c = rc.dh_origin
-        if r0 < o_r or c0 < o_c or r1 - o_r > rc.dh.shape[0] or c1 - o_c > rc.dh.shape[1]:
-            raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the receivers' DEM heights",
-                             field="window")
-        dh = np.ascontiguousarray(rc.dh[r0 - o_r:r1 - o_r, c0 - o_c:c1 - o_c])
-    else:
-        dh = np.zeros((1, 1), np.float32)
     # the tables must reach every cell of the window from every hemisphere instant
     hsel = ht.kind >= 0
     if hsel.any():
@@ -356,8 +345,7 @@ def _run_grid(fl: HemiFlight, rc: Receivers, thresholds: Sequence[float], thread
               progress: Callable[[float], Any] | None, cancel: Callable[[], bool] | None) -> HemiWindowResult:
     H, W = rc.grid.shape
     nthreads = default_threads() if threads is None else max(1, int(threads))
-    rows = max(1, min(int(chunk) // W, -(-H // (4 * nthreads))))
-    blocks = [(r, min(r + rows, H)) for r in range(0, H, rows)]
+    blocks = row_blocks(H, W, chunk, nthreads)
     nt = len(list(thresholds))
     out = HemiWindowResult(np.zeros((H, W), np.float32), np.zeros((H, W)), np.zeros((nt, H, W)),
                            np.zeros((H, W), bool), np.zeros((H, W)))

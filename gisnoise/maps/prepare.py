@@ -26,12 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import InputError, TrajectoryError
+from gisnoise.errors import CardError, InputError, TrajectoryError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import Dem, GridSpec, LocalFrame, read_dem, resample_dem
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.result import METRICS, band_unit, snapshot_name, threshold_name
+from gisnoise.model import ModelCard
 
 __all__ = [
     "Ground",
@@ -44,8 +45,11 @@ __all__ = [
     "ground_on_grid",
     "local_frame",
     "map_metadata",
+    "require_covariances",
     "snapshot_state",
     "trapezoid_weights",
+    "UNCERTAINTY_NOTE",
+    "Z95",
 ]
 
 log = logging.getLogger(__name__)
@@ -309,6 +313,23 @@ def ground_on_grid(grid: GridSpec, trajectories: Iterable[Trajectory] = (), *, d
 
 
 # --------------------------------------------------------------------------- the result
+
+
+Z95 = 1.6448536269514722
+"""One-sided 95 % quantile of the standard normal distribution (the ``*_p95`` bands: level - Z95 std)."""
+
+UNCERTAINTY_NOTE = ("delta method through the ansatz Jacobian with the cards' covariance; *_std standard deviation "
+                    "(dB); *_p95 = level - 1.645 std, the level exceeded with 95 % confidence (one-sided, normal "
+                    "approximation)")
+"""The map metadata's ``uncertainty`` entry, both engines."""
+
+
+def require_covariances(cards: Iterable[ModelCard]) -> None:
+    """Refuse uncertainty bands for a card without a parameter covariance (field ``covariance``)."""
+    for c in cards:
+        if c.cov is None:
+            raise CardError(f"card {c.id!r} has no covariance; uncertainty needs cards with a parameter "
+                            "covariance (fitted cards)", field="covariance")
 
 
 def band_order(metrics: Sequence[str], thresholds: Sequence[float], snap: float | None,

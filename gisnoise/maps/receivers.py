@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import WGS84, GridSpec, LocalFrame, transformer
 from gisnoise.maps._checks import as_float
@@ -82,6 +83,20 @@ class Receivers:
         return replace(self, dh=np.ascontiguousarray(self.dh[sl]),
                        valid=None if self.valid is None else np.ascontiguousarray(self.valid[sl]),
                        dh_origin=(r0, c0))
+
+    def window_heights(self, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """The window's DEM heights above the reference as a kernel reads them (``(1, 1)`` zeros without a DEM),
+        after checking that rows ``r0:r1`` and columns ``c0:c1`` lie in the grid and in the held heights."""
+        if not (0 <= r0 < r1 <= self.grid.height and 0 <= c0 < c1 <= self.grid.width):
+            raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the grid {self.grid.shape}",
+                             field="window")
+        if self.dh is None:
+            return np.zeros((1, 1), np.float32)
+        o_r, o_c = self.dh_origin
+        if r0 < o_r or c0 < o_c or r1 - o_r > self.dh.shape[0] or c1 - o_c > self.dh.shape[1]:
+            raise InputError(f"window rows {r0}:{r1}, columns {c0}:{c1} outside the receivers' DEM heights",
+                             field="window")
+        return np.ascontiguousarray(self.dh[r0 - o_r:r1 - o_r, c0 - o_c:c1 - o_c])
 
     @property
     def frame(self) -> LocalFrame:

@@ -31,11 +31,13 @@ from typing import Any
 import numpy as np
 
 from gisnoise.acoustics import speed_of_sound
-from gisnoise.errors import Cancelled, CardError, GisnoiseError, InputError
+from gisnoise.errors import Cancelled, GisnoiseError, InputError
 from gisnoise.geo import WGS84, emission_angles, transformer
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.hemifill import filled_weights, has_hemisphere, hemisphere_atmospheres
 from gisnoise.maps.prepare import (
+    UNCERTAINTY_NOTE,
+    Z95,
     MapOptions,
     band_order,
     check_request,
@@ -43,6 +45,7 @@ from gisnoise.maps.prepare import (
     ground_on_grid,
     local_frame,
     map_metadata,
+    require_covariances,
     snapshot_state,
     trapezoid_weights,
 )
@@ -51,8 +54,6 @@ from gisnoise.model import ModelCard
 
 __all__ = ["DEFAULT_BLOCK", "Z95", "evaluate_numpy"]
 
-Z95 = 1.6448536269514722
-"""One-sided 95 % quantile of the standard normal distribution."""
 
 DEFAULT_BLOCK = 1 << 18
 """Default cell-instants per block (about 2 MB per float64 temporary)."""
@@ -277,11 +278,9 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
             offsets.append(n_jac)
             n_jac += c.model.n_params
         cov = np.zeros((n_jac, n_jac))
+        require_covariances([cardset.cards[k] for k in used])
         for k in used:
             c = cardset.cards[k]
-            if c.cov is None:
-                raise CardError(f"card {c.id!r} has no covariance; uncertainty needs cards with a parameter "
-                                "covariance (fitted cards)", field="covariance")
             o = offsets[k]
             cov[o:o + c.model.n_params, o:o + c.model.n_params] = c.cov
 
@@ -426,7 +425,5 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
     if has_hemisphere(cardset.cards):
         meta["hemisphere_atmospheres"] = hemisphere_atmospheres([cardset.cards[k] for k in used])
     if uncertainty:
-        meta["uncertainty"] = ("delta method through the ansatz Jacobian with the cards' covariance; "
-                               "*_std standard deviation (dB); *_p95 = level - 1.645 std, the level exceeded "
-                               "with 95 % confidence (one-sided, normal approximation)")
+        meta["uncertainty"] = UNCERTAINTY_NOTE
     return MapResult(bands=bands, grid=grid, metadata=meta)

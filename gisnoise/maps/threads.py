@@ -15,7 +15,7 @@ from typing import Any
 
 from gisnoise.errors import InputError
 
-__all__ = ["default_threads", "map_threads", "thread_pool"]
+__all__ = ["default_threads", "map_threads", "row_blocks", "thread_pool"]
 
 
 _POOLS: dict[int, ThreadPoolExecutor] = {}
@@ -29,6 +29,13 @@ def thread_pool(n: int) -> ThreadPoolExecutor:
         if pool is None:
             pool = _POOLS[n] = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"gisnoise-fast{n}")
         return pool
+
+
+def row_blocks(height: int, width: int, chunk_cells: int, threads: int) -> list[tuple[int, int]]:
+    """Blocks of whole rows ``(r0, r1)`` of a grid for ``threads`` threads: at most ``chunk_cells`` cells
+    each (at least one row), and at least four blocks a thread when the grid has the rows."""
+    rows = max(1, min(int(chunk_cells) // width, -(-height // (4 * threads))))
+    return [(r, min(r + rows, height)) for r in range(0, height, rows)]
 
 
 def default_threads() -> int:

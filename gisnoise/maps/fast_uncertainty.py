@@ -1,0 +1,150 @@
+"""The uncertainty bands on the fast engine: the delta method of the NumPy engine, accumulated in numba.
+
+The NumPy engine (:mod:`gisnoise.maps.reference`) propagates each card's parameter covariance
+``C`` through the ansatz's analytic Jacobian: ``LAmax_std = sqrt(J^T C J)`` with ``J = dL/dp`` at
+the instant of the maximum, ``LAeq_std = SEL_std = sqrt(g^T C g)`` with ``g = sum_i w_i
+10^(L_i/10) dL_i/dp / sum_i w_i 10^(L_i/10)``, ``*_p95 = level - 1.645 std``; cards are
+independent (block-diagonal covariance).  Here the kernel of :mod:`gisnoise.maps._numba_jac`
+accumulates ``J`` and the sums of ``g`` per cell over the same lattice, instants and audibility
+skipping as the level kernel, window by window, and each window is reduced to its standard
+deviations at once, so memory stays that of a window (``8`` columns per card).
+
+It serves the ``paper`` and ``paper-offset`` ansatzes (Eq. 8-11, whose Jacobian the kernel
+writes out; the tests check it against the ansatz's); effect extensions and measured
+hemispheres keep their uncertainty on the NumPy engine (:func:`uncertainty_refusal`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import Cancelled, CardError
+from gisnoise.flight import Trajectory
+from gisnoise.maps import _numba_jac as _jk
+from gisnoise.maps.instants import FlightInstants, card_coefficients
+from gisnoise.maps.prepare import Z95, eval_states, require_covariances
+from gisnoise.maps.receivers import Receivers
+from gisnoise.maps.threads import default_threads, map_threads, row_blocks
+from gisnoise.model import HemisphereCard, ModelCard
+
+__all__ = ["UNCERTAINTY_ANSATZES", "uncertainty_bands", "uncertainty_refusal"]
+
+UNCERTAINTY_ANSATZES = ("paper", "paper-offset")
+"""Ansatzes whose uncertainty bands the fast engine computes."""
+
+
+def uncertainty_refusal(cards: Sequence[ModelCard]) -> str | None:
+    """Why the fast engine cannot give the uncertainty bands of ``cards`` (one line), or None when it can."""
+    for c in cards:
+        if isinstance(c, HemisphereCard):
+            return f"card {c.id!r}: a measured hemisphere has no parameters to propagate"
+        if c.ansatz not in UNCERTAINTY_ANSATZES:
+            return f"card {c.id!r}: the uncertainty bands of ansatz {c.ansatz!r} need the NumPy engine"
+    return None
+
+
+def _card_rows(cards: Sequence[ModelCard], used: Sequence[int], *, background: bool,
+               min_distance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's per-card rows ``jc`` (:data:`~gisnoise.maps._numba_jac.JC_COLUMNS`) and each used card's
+    covariance in the columns ``p0 .. p7`` (``(len(used), 8, 8)``; ``paper``'s ``p0`` row and column zero)."""
+    require_covariances([cards[k] for k in used])
+    jc = np.zeros((len(cards), len(_jk.JC_COLUMNS)))
+    cov = np.zeros((len(used), _jk.N_JAC, _jk.N_JAC))
+    for u, k in enumerate(used):
+        c = cards[k]
+        _p0, _p1, row = card_coefficients(c, background=background, min_distance_m=min_distance_m)
+        p = dict(zip(c.model.params, c.p, strict=True))
+        jc[k] = row
+        jc[k, 6] = p["p6"]
+        jc[k, 7] = 20.0 * math.log10(c.reference_distance_m)
+        cols = [_jk.N_JAC - len(c.model.params) + i for i in range(len(c.model.params))]  # paper: p1 .. p7
+        cov[u][np.ix_(cols, cols)] = np.asarray(c.cov, dtype=float)
+    return jc, cov
+
+
+def uncertainty_bands(traj: Trajectory, cards: Sequence[ModelCard], fl: FlightInstants, rc: Receivers,
+                      metrics: Sequence[str], levels: dict[str, np.ndarray], *, substeps: int, background: bool,
+                      min_distance_m: float, threads: int | None = None, chunk_cells: int = 1 << 17,
+                      cancel: Callable[[], bool] | None = None,
+                      progress: Callable[[float], Any] | None = None) -> dict[str, np.ndarray]:
+    """The bands ``LAmax_std``, ``LAmax_p95``, ``LAeq_std``, ``LAeq_p95``, ``SEL_std`` of the requested metrics.
+
+    ``fl``: the flight as the level kernel ran it (:func:`~gisnoise.maps.instants.prepare_flight`
+    of ``traj`` with ``substeps``, ``background``, ``min_distance_m``: its instants, weights,
+    rotations and audibility radii); ``levels``: the level bands already computed (the
+    ``*_p95`` bands subtract from them).  NaN where a level band is NaN.
+    """
+    why = uncertainty_refusal([cards[k] for k in sorted(set(fl.cidx.tolist()))])
+    if why is not None:
+        raise CardError(why, field="uncertainty")
+    used = sorted(set(fl.cidx.tolist()))
+    jc, cov = _card_rows(cards, used, background=background, min_distance_m=min_distance_m)
+    _t, state, _src = eval_states(traj, int(substeps))
+    ref_w = np.array([c.reference_power_w for c in cards], dtype=float)
+    lgp = np.log10(np.asarray(state["power_w"], dtype=float) / ref_w[fl.cidx])
+    slot = {k: u for u, k in enumerate(used)}
+    jo = np.array([_jk.N_JAC * slot[int(k)] for k in fl.cidx], dtype=np.int64)
+    nj = _jk.N_JAC * len(used)
+    H, W = rc.grid.shape
+    want_max = "LAmax" in metrics
+    want_int = "LAeq" in metrics or "SEL" in metrics
+    s_max = np.full((H, W), np.nan)
+    s_int = np.full((H, W), np.nan)
+    k = rc.seg
+    done = 0
+
+    def window(b: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        r0, r1 = b
+        dh = rc.window_heights(r0, r1, 0, W)
+        P, U = rc.lattice(r0, r1, 0, -(-W // k))
+        nr = r1 - r0
+        emax = np.zeros((nr, W), np.float32)
+        who = np.zeros((nr, W), np.int32)
+        energy = np.zeros((nr, W))
+        jmax = np.zeros((_jk.N_JAC, nr, W), np.float32)
+        gsum = np.zeros((nj, nr, W))
+        computed = np.zeros((nr, W), np.uint8)
+        _jk._jac_window_kernel(P, U, dh, rc.dh is not None, k, 0, 0, W, fl.src, fl.C, fl.gain, lgp, fl.cidx, jc, jo,
+                               fl.w, fl.radius, emax, who, energy, jmax, gsum, computed)
+        jm = jmax.astype(np.float64)
+        var_max = np.einsum("prc,rcpq,qrc->rc", jm, cov[who], jm)  # the loudest instant's card's covariance
+        with np.errstate(invalid="ignore", divide="ignore"):
+            g = gsum.reshape(len(used), _jk.N_JAC, nr, W) / energy
+        var_int = np.einsum("uprc,upq,uqrc->rc", g, cov, g)
+        out_max = np.sqrt(np.maximum(var_max, 0.0))
+        out_int = np.sqrt(np.maximum(var_int, 0.0))
+        off = computed == 0
+        out_max[off] = np.nan
+        out_int[off] = np.nan
+        return out_max, out_int
+
+    def put(b: tuple[int, int], res: tuple[np.ndarray, np.ndarray]) -> None:
+        nonlocal done
+        s_max[b[0]:b[1]], s_int[b[0]:b[1]] = res
+        done += b[1] - b[0]
+        if progress is not None:
+            progress(done / H)
+
+    def check() -> None:
+        if cancel is not None and cancel():
+            raise Cancelled("cancelled", field="cancel")
+
+    nthreads = default_threads() if threads is None else max(1, int(threads))
+    map_threads(window, row_blocks(H, W, max(1, int(chunk_cells) // max(1, nj // 4)), nthreads), put, nthreads,
+                poll=check)
+    out: dict[str, np.ndarray] = {}
+    if want_max:
+        s = np.where(np.isfinite(levels["LAmax"]), s_max, np.nan)
+        out["LAmax_std"], out["LAmax_p95"] = s, levels["LAmax"] - Z95 * s
+    if want_int:
+        for name in ("LAeq", "SEL"):
+            if name in metrics:
+                s = np.where(np.isfinite(levels[name]), s_int, np.nan)
+                out[f"{name}_std"] = s
+                if name == "LAeq":
+                    out["LAeq_p95"] = levels["LAeq"] - Z95 * s
+    return out

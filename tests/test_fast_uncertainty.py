@@ -1,0 +1,130 @@
+"""The fast engine's uncertainty bands equal the NumPy engine's delta method (maps/fast_uncertainty.py)."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("numba")
+
+from test_fastkernel import bank_card, circle_flight, grid_around  # noqa: E402
+
+from gisnoise.errors import CardError, InputError  # noqa: E402
+from gisnoise.maps import Z95, evaluate_grid, snapshot_name  # noqa: E402
+from gisnoise.model import ModelCard  # noqa: E402
+
+STD_TOL_DB = 1e-3
+"""The bands' standard deviations agree to this (dB); the levels and the 95 % levels to the product's 0.01 dB."""
+
+BANDS = ("LAmax_std", "LAmax_p95", "LAeq_std", "LAeq_p95", "SEL_std")
+
+
+def fitted(ansatz="paper-offset", phase="horizontal", seed=0, **p):
+    """A card with a covariance of random correlations (its parameters near a fitted card's)."""
+    base = dict(p0=66.0, p1=20.0, p2=0.15, p3=-0.28, p4=-0.3, p5=1.05, p6=1.0, p7=40.0)
+    base.update(p)
+    ref_w = 3000.0
+    if ansatz == "paper":  # p1 lg(P_el) is its whole gain: a power well above the reference makes it audible
+        base.pop("p0")
+        base["p1"], ref_w = 50.0, 100.0
+    n = len(base)
+    rng = np.random.default_rng(seed)
+    std = np.array([0.4, 1.5, 0.01, 0.05, 0.02, 0.05, 0.01, 0.3])[8 - n:]
+    a = rng.normal(size=(n, n))
+    corr = np.corrcoef(a @ a.T + n * np.eye(n))
+    cov = corr * np.outer(std, std)
+    return ModelCard(id=f"{ansatz}-{phase}", vehicle="test", phase=phase, ansatz=ansatz, parameters=base,
+                     reference_power_w=ref_w, covariance=tuple(map(tuple, cov)))
+
+
+def unique_maximum(traj, cards, grid, **kw):
+    """Cells whose loudest instant is louder than the second by more than 1e-3 dB (NumPy engine).
+
+    Elsewhere ``dL/dp`` at the maximum is not one value: two instants tie within the engines'
+    float32 / float64 difference (about 1e-5 dB), and each engine may take the other one.
+    """
+    levels = []
+    for t in traj.t:
+        r = evaluate_grid(traj, cards, grid, engine="numpy", metrics=("LAmax",), snapshot_t=float(t), **kw)
+        levels.append(r.bands[snapshot_name(float(t))])
+    top2 = np.sort(np.stack(levels), axis=0)[-2:]
+    return top2[1] - top2[0] > 1e-3
+
+
+def assert_bands_agree(ref, fast, unique=None):
+    assert list(fast.bands) == list(ref.bands)
+    assert fast.metadata["engine"] == "fast" and ref.metadata["engine"] == "numpy"
+    assert fast.metadata["uncertainty"] == ref.metadata["uncertainty"]
+    for name in fast.bands:
+        a, b = ref.bands[name], fast.bands[name]
+        np.testing.assert_array_equal(np.isnan(a), np.isnan(b), err_msg=name)
+        tol = STD_TOL_DB if name.endswith("_std") else 0.01
+        cells = unique if (unique is not None and name.startswith("LAmax_")) else np.ones(a.shape, bool)
+        assert cells.mean() > 0.5
+        assert np.nanmax(np.abs(a - b)[cells]) <= tol, name
+    for m in ("LAmax", "LAeq"):
+        if f"{m}_p95" in fast.bands:
+            np.testing.assert_allclose(fast.bands[f"{m}_p95"], fast.bands[m] - Z95 * fast.bands[f"{m}_std"],
+                                       atol=1e-9)
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(ansatz=st.sampled_from(["paper", "paper-offset"]), background=st.booleans(), two_cards=st.booleans(),
+       p2=st.floats(-0.4, 0.4), p4=st.floats(-0.6, 0.6), p3=st.floats(-3, 3), p5=st.floats(-3, 3),
+       height=st.floats(20.0, 120.0), seed=st.integers(0, 2 ** 16))
+def test_fast_bands_equal_the_numpy_engines(ansatz, background, two_cards, p2, p4, p3, p5, height, seed):
+    phases = ("horizontal", "climb") if two_cards else ("horizontal",)
+    cards = [fitted(ansatz, ph, seed + i, p2=p2, p3=p3, p4=p4, p5=p5) for i, ph in enumerate(phases)]
+    traj = circle_flight(16, height=height, dt=3.0, phases=phases)
+    g = grid_around(40.0, 13, 11)
+    kw = dict(ground_h=0.0, background=background, check_cards=False)
+    unique = unique_maximum(traj, cards, g, **kw)
+    assert_bands_agree(evaluate_grid(traj, cards, g, engine="numpy", uncertainty=True, **kw),
+                       evaluate_grid(traj, cards, g, engine="fast", uncertainty=True, **kw), unique)
+
+
+def test_dem_and_metrics_without_lamax():
+    traj = circle_flight(20, dt=2.0)
+    g = grid_around(30.0, 19, 15)
+    dem = 5.0 + 20.0 * np.random.default_rng(2).random(g.shape)
+    dem[:2, :3] = np.nan  # outside the DEM: NaN in both
+    kw = dict(dem=dem, uncertainty=True, metrics=("LAeq", "SEL"))  # no LAmax: no ties to set aside
+    ref = evaluate_grid(traj, [fitted()], g, engine="numpy", **kw)
+    fast = evaluate_grid(traj, [fitted()], g, engine="fast", **kw)
+    assert "LAmax_std" not in fast.bands
+    assert_bands_agree(ref, fast)
+
+
+def test_p0_variance_alone_is_its_standard_deviation_everywhere():
+    # dL/dp0 = 1 for an omnidirectional card without background: LAmax_std = LAeq_std = sqrt(var p0) exactly
+    cov = np.zeros((8, 8))
+    cov[0, 0] = 0.36
+    card = ModelCard(id="omni", vehicle="t", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=70.0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0, covariance=tuple(map(tuple, cov)))
+    res = evaluate_grid(circle_flight(10), [card], grid_around(50.0, 9, 9), ground_h=0.0, uncertainty=True,
+                        engine="fast")
+    for name in ("LAmax_std", "LAeq_std", "SEL_std"):
+        np.testing.assert_allclose(res.bands[name], 0.6, atol=1e-6)
+
+
+def test_cells_below_the_floor_have_no_bands():
+    traj = circle_flight(12, radius=100.0)
+    g = grid_around(100.0, 41, 41)
+    res = evaluate_grid(traj, [fitted(p2=0.0, p4=0.0)], g, ground_h=0.0, uncertainty=True, engine="fast",
+                        floor_db=55.0)
+    skipped = np.isnan(res.bands["LAmax"])
+    assert res.metadata["cells_below_floor"] == skipped.sum() > 0
+    for name in BANDS:
+        assert np.all(np.isnan(res.bands[name][skipped])) and np.all(np.isfinite(res.bands[name][~skipped]))
+
+
+def test_refusals_name_the_field():
+    traj, g = circle_flight(5), grid_around(50.0, 3, 3)
+    with pytest.raises(InputError) as err:  # the Jacobian of an effect extension: the NumPy engine's
+        evaluate_grid(traj, [bank_card()], g, ground_h=0.0, engine="fast", uncertainty=True)
+    assert err.value.field == "engine" and "bank_angle" in str(err.value)
+    no_cov = ModelCard(**{**fitted().__dict__, "covariance": None})
+    with pytest.raises(CardError) as err:
+        evaluate_grid(traj, [no_cov], g, ground_h=0.0, engine="fast", uncertainty=True)
+    assert err.value.field == "covariance"
