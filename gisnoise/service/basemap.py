@@ -85,7 +85,8 @@ def _file_key(p: Path) -> tuple[str, int, int, int]:
 
 
 class Basemap:
-    """The basemap file the service serves: the tiles, attribution and zooms of the file now at ``path``.
+    """The basemap file the service serves: the tiles (:meth:`tile`), attribution and zooms (:meth:`opened`) of the
+    file now at ``path``.
 
     The opened file (:class:`MBTiles` or :class:`PMTiles`) is kept while the file's
     :func:`_file_key` stays the same and opened afresh when it changes; a lock lets the
@@ -108,25 +109,11 @@ class Basemap:
             self._src, self._key = src, key
         return self._src
 
-    def _opened(self) -> MBTiles | PMTiles:
+    def opened(self) -> MBTiles | PMTiles:
+        """The file as now opened (its media type, attribution, zooms: read them from one call, so they belong
+        together); :class:`~gisnoise.errors.InputError` when the file is gone or no longer a basemap."""
         with self._lock:
             return self._current()
-
-    @property
-    def media_type(self) -> str:
-        return self._opened().media_type
-
-    @property
-    def attribution(self) -> str:
-        return self._opened().attribution
-
-    @property
-    def min_zoom(self) -> int:
-        return self._opened().min_zoom
-
-    @property
-    def max_zoom(self) -> int:
-        return self._opened().max_zoom
 
     def tile(self, z: int, x: int, y: int) -> tuple[bytes, str] | None:
         """The tile at XYZ ``z/x/y`` and its media type, or None when the file has none there."""

@@ -159,8 +159,9 @@ def test_a_replaced_basemap_file_serves_its_new_tiles_and_an_unchanged_one_stays
     assert colours() == other
     assert client.get("/config.json").json()["tile_attribution"] == "Other tiles"
     path.unlink()
-    r = client.get("/basemap/1/0/0")
-    assert r.status_code == 503 and "no such file" in r.json()["detail"]
+    for url in ("/basemap/1/0/0", "/config.json"):
+        r = client.get(url)
+        assert r.status_code == 503 and "no such file" in r.json()["detail"], url
 
 
 def test_no_basemap_no_tiles(client):
