@@ -118,6 +118,10 @@ def test_loud_samples_are_each_microphones_louder_half_or_15_db_above_the_backgr
     assert np.array_equal(ok[:, 2], ok[:, 0])
     short = _band_entries(level, mic, bands, np.zeros(200))  # no distance span: no band
     assert not short.any()
+    unmeasured = np.column_stack([level, np.full(200, np.nan)])  # a band without any level: no entry, no warning
+    got = _band_entries(level, mic, unmeasured, d)
+    assert np.array_equal(got[:, 0], _band_entries(level, mic, bands, d)[:, 0]) and not got[:, 1].any()
+    assert np.array_equal(got[:, 0], np.r_[t >= 50.0, t >= 50.0])  # no exclusion: both microphones' louder half
 
 
 def test_localize_finds_a_known_excess_and_nothing_in_noise():

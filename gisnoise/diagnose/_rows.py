@@ -78,8 +78,11 @@ def _band_entries(level: np.ndarray, mic: np.ndarray, bands: np.ndarray, d: np.n
     loud = _loud_samples(level, mic, background_db)
     if exclude is not None:
         loud &= ~np.asarray(exclude, dtype=bool)
-    floor = np.nanpercentile(bands, 5, axis=0)
-    ok = loud[:, None] & np.isfinite(bands) & (bands > floor + above_floor_db)
+    finite = np.isfinite(bands)
+    floor = np.full(bands.shape[1], np.inf)  # a band without any level has no entry
+    has = finite.any(axis=0)
+    floor[has] = np.nanpercentile(bands[:, has], 5, axis=0)
+    ok = loud[:, None] & finite & (bands > floor + above_floor_db)
     for j in range(bands.shape[1]):
         if ok[:, j].sum() < min_entries or np.ptp(d[ok[:, j]]) < min_span_m:
             ok[:, j] = False
