@@ -2,6 +2,10 @@
 
 import pytest
 
+collect_ignore = ["conftest.py"]
+"""This file holds fixtures, no doctests: collected as a module (``--doctest-modules``) it would clash with
+``tests/api/conftest.py``, both named ``conftest`` outside a package."""
+
 
 @pytest.fixture()
 def no_geoid_grid(monkeypatch):
