@@ -64,16 +64,20 @@ def baseline(traj: Trajectory, grid: GridSpec) -> dict[str, np.ndarray]:
             "LAeq": (10 * np.log10(energy / traj.duration_s)).reshape(grid.shape)}
 
 
-def timed(fn, repeat: int = 3):
-    """Smallest wall time of ``repeat`` runs (the machine may be shared), the result and peak MB."""
+def timed(fn, repeat: int = 3, trace: bool = True):
+    """Smallest wall time of ``repeat`` runs (the machine may be shared), the result and peak MB.
+
+    ``trace``: the first run measures the peak memory (tracemalloc, which slows it); without,
+    every run is timed alike and the peak is 0.
+    """
     best, out, peak = float("inf"), None, 0.0
     for i in range(repeat):
-        if i == 0:
+        if i == 0 and trace:
             tracemalloc.start()
         t0 = time.perf_counter()
         out = fn()
         best = min(best, time.perf_counter() - t0)
-        if i == 0:
+        if i == 0 and trace:
             peak = tracemalloc.get_traced_memory()[1] / 1e6
             tracemalloc.stop()
     return best, out, peak

@@ -20,9 +20,7 @@ band, and the load average before and after.
 
 from __future__ import annotations
 
-import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +28,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from bench_default import CARD_PATH, circle, rows  # noqa: E402
+from bench_default import CARD_PATH, circle, load_avg, rows  # noqa: E402
+from bench_evaluator import timed  # noqa: E402
 
 from gisnoise.maps import evaluate_grid, grid_for_trajectory  # noqa: E402
 from gisnoise.model import ModelCard, load  # noqa: E402
@@ -54,19 +53,6 @@ def extended(card: ModelCard, chain: str) -> ModelCard:
                      ansatz=card.ansatz + chain, parameters=p, reference_power_w=card.reference_power_w)
 
 
-def load_avg() -> str:
-    return " ".join(f"{v:.2f}" for v in os.getloadavg())
-
-
-def timed(fn, repeat: int = 3) -> float:
-    best = float("inf")
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
 def main(quick: bool = False, rounds: int = 3) -> None:
     traj = circle(200, radius=900.0) if quick else circle()
     grid = grid_for_trajectory(traj, 10.0, 500.0)
@@ -83,7 +69,8 @@ def main(quick: bool = False, rounds: int = 3) -> None:
         for threads in (1, None):
             plain = None
             for name, c in variants.items():
-                wall = timed(lambda c=c, threads=threads: evaluate_grid(traj, [c], grid, threads=threads, **kw))
+                wall = timed(lambda c=c, threads=threads: evaluate_grid(traj, [c], grid, threads=threads, **kw),
+                             trace=False)[0]
                 plain = wall if name == "plain" else plain
                 assert plain is not None
                 rates.setdefault((name, threads or 0), []).append(cells / wall)
@@ -96,10 +83,8 @@ def main(quick: bool = False, rounds: int = 3) -> None:
     # the NumPy engine on a band of rows, scaled to the grid
     chain = variants["+bank_angle+ground_reflection+doppler"]
     band = rows(grid, grid.height // 2 - 10, grid.height // 2 + 10)
-    t_np = timed(lambda: evaluate_grid(traj, [chain], band, engine="numpy", **kw), repeat=1)
-    t_fast = timed(lambda: evaluate_grid(traj, [chain], band, **kw))
-    ref = evaluate_grid(traj, [chain], band, engine="numpy", **kw)
-    fast = evaluate_grid(traj, [chain], band, **kw)
+    t_np, ref, _ = timed(lambda: evaluate_grid(traj, [chain], band, engine="numpy", **kw), repeat=1, trace=False)
+    t_fast, fast, _ = timed(lambda: evaluate_grid(traj, [chain], band, **kw), trace=False)
     diff = max(float(np.max(np.abs(ref.bands[k] - fast.bands[k]))) for k in ("LAmax", "LAeq", "SEL"))
     scale = grid.height / band.height
     print(f"\nNumPy engine, +bank_angle+ground_reflection+doppler, scaled to the grid: {t_np * scale:.1f} s "

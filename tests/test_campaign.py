@@ -381,11 +381,8 @@ def test_campaign_with_a_px4_log_aligned_by_gps_time(tmp_path):
     assert s.power_w.min() > 0.0 and s.power_w.max() > 100.0   # the hop, then idle after landing
 
 
-def test_campaign_with_an_ardupilot_log_needs_the_geoid_undulation(tmp_path, monkeypatch):
+def test_campaign_with_an_ardupilot_log_needs_the_geoid_undulation(tmp_path, no_geoid_grid):
     import shutil
-
-    monkeypatch.delenv("GISNOISE_GEOID_GRID", raising=False)
-    monkeypatch.setattr("gisnoise.geo.geoid.geoid_search_dirs", lambda: [])   # no geoid grid here
 
     root = tmp_path / "c"
     (root / "flights").mkdir(parents=True)

@@ -33,6 +33,7 @@ from gisnoise.diagnose import (
     run_diagnosis,
     write_diagnosis,
 )
+from gisnoise.diagnose._rows import _band_entries, _loud_samples
 from gisnoise.diagnose._series import _window_mean_error
 from gisnoise.errors import Cancelled, InputError
 from gisnoise.measure import Samples
@@ -96,6 +97,31 @@ def test_window_mean_error_counts_coloured_noise():
     got = _window_mean_error(e, n_w, white)
     assert got == pytest.approx(exact, rel=0.05)
     assert white / math.sqrt(n_w) < 0.6 * exact
+
+
+def test_loud_samples_are_each_microphones_louder_half_or_15_db_above_the_background():
+    """One rule for the band-level test and the band-slope evidence: without the card's background a
+    microphone's louder half (its own median), so a far microphone, quieter throughout, keeps its half."""
+    t = np.arange(100.0)
+    level = np.r_[t, t - 200.0]  # microphone b entirely below a's quietest sample
+    mic = np.r_[np.full(100, "a"), np.full(100, "b")]
+    loud = _loud_samples(level, mic)
+    assert np.array_equal(loud, np.r_[t >= 50.0, t >= 50.0])  # median 49.5 of 0..99 (and of -200..-101 + 200)
+    assert np.array_equal(_loud_samples(level, mic, background_db=40.0), level > 55.0)
+    # band entries: loud samples, bands 10 dB above their 5th percentile, >= 30 of them over >= 50 m
+    bands = np.column_stack([level, np.full(200, 7.0), level])
+    d = np.r_[2.0 * t, 2.0 * t]  # the louder half spans 98 m
+    ok = _band_entries(level, mic, bands, d, exclude=np.r_[np.zeros(100, bool), np.ones(100, bool)])
+    floor = np.percentile(level, 5)  # 5th percentile of the band levels: -190.05
+    assert np.array_equal(ok[:, 0], np.r_[t >= 50.0, np.zeros(100, bool)]) and floor + 10 < 50.0
+    assert not ok[:, 1].any()  # a flat band never stands above its own floor
+    assert np.array_equal(ok[:, 2], ok[:, 0])
+    short = _band_entries(level, mic, bands, np.zeros(200))  # no distance span: no band
+    assert not short.any()
+    unmeasured = np.column_stack([level, np.full(200, np.nan)])  # a band without any level: no entry, no warning
+    got = _band_entries(level, mic, unmeasured, d)
+    assert np.array_equal(got[:, 0], _band_entries(level, mic, bands, d)[:, 0]) and not got[:, 1].any()
+    assert np.array_equal(got[:, 0], np.r_[t >= 50.0, t >= 50.0])  # no exclusion: both microphones' louder half
 
 
 def test_localize_finds_a_known_excess_and_nothing_in_noise():

@@ -1,6 +1,7 @@
 """The map's extent: the default grid closes the lowest level; a fixed margin flags what it cuts (issue 17)."""
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -11,7 +12,16 @@ from gisnoise.cli.main import cli
 from gisnoise.data import card_path
 from gisnoise.data import sample_route_path as sample_route
 from gisnoise.flight import read_route
-from gisnoise.maps import SEL_OFFSET_DB, CardSet, audible_distance, auto_margin, level_table, make_map, sel_edge_bound
+from gisnoise.maps import (
+    SEL_OFFSET_DB,
+    CardSet,
+    audible_distance,
+    auto_margin,
+    level_table,
+    make_map,
+    sel_edge_bound,
+    sel_margin,
+)
 from gisnoise.model import ModelCard
 
 DEMO = ["demo-horizontal", "demo-climb", "demo-sink"]
@@ -211,3 +221,37 @@ def test_the_default_extent_closes_sel_of_a_long_hover():
     assert r_max <= m_max <= r_max * 1.05 + 40.0
     # within one table step (4.9 %), the bisection's cell and two cells of safety
     assert w == [] and r_sel <= m_sel <= r_sel * 1.05 + 80.0
+
+
+def test_sel_margin_steps_are_the_edge_bound_of_their_rectangle_with_the_track_prepared_once(monkeypatch):
+    """sel_margin prepares the track (CRS transform, weights) once; each bisection step's bound equals
+    sel_edge_bound of that step's rectangle and spacing computed afresh."""
+    from gisnoise.geo import transformer, utm_crs
+    from gisnoise.maps import sel as sel_module
+
+    traj = hover(300.0)
+    crs = utm_crs(11.575, 48.137)
+    x0, y0 = transformer("EPSG:4326", crs).transform(11.575, 48.137)
+    d, table = level_table([omni()], [3000.0])
+    ci = np.zeros(2, dtype=int)
+    steps, made = [], []
+    edge_bound, make = sel_module._edge_bound, sel_module.transformer
+
+    def recording(src, rect, spacing, background_db):
+        steps.append((rect, spacing, background_db, edge_bound(src, rect, spacing, background_db)))
+        return steps[-1][-1]
+
+    def counting(*a, **kw):
+        made.append(a)
+        return make(*a, **kw)
+
+    monkeypatch.setattr(sel_module, "_edge_bound", recording)
+    monkeypatch.setattr(sel_module, "transformer", counting)
+    m = sel_margin(traj, ci, d, table, 55.0, (x0 - 10.0, y0 - 10.0, x0 + 10.0, y0 + 10.0), crs, start_m=100.0,
+                   resolution_m=20.0, max_margin_m=20000.0, background_db=30.0)
+    assert len(made) == 1 and len(steps) >= 5  # doubling, then bisection: one transformer for all steps
+    monkeypatch.undo()
+    for rect, spacing, bg, got in steps:
+        assert got == sel_edge_bound(traj, ci, d, table, rect, crs, spacing_m=spacing, background_db=bg)
+    at_m = [b for r, _, _, b in steps if math.isclose(r[2] - r[0], 20.0 + 2.0 * m)]
+    assert at_m and at_m[-1] < 55.0 <= max(b for *_, b in steps)  # the margin returned closes SEL 55, a smaller one not

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
+from _enginecases import TOL_DB, assert_fast_equals_numpy, extended_cards, floor_across, with_rpm  # noqa: E402
 from test_fastkernel import FRAME, card, cases, circle_flight, grid_around  # noqa: E402
 
 from gisnoise.acoustics import speed_of_sound  # noqa: E402
@@ -24,7 +25,6 @@ from gisnoise.maps import evaluate_grid, fast_engine_serves  # noqa: E402
 from gisnoise.maps import fastkernel as fk  # noqa: E402
 from gisnoise.model import THIRD_OCTAVE, ModelCard, band_cos, sample_card  # noqa: E402
 
-TOL_DB = 0.01
 C15 = float(speed_of_sound(15.0))  # the maps' default temperature (temperature_c=15)
 
 PARAMS = {
@@ -257,33 +257,12 @@ KINDS = ["+atmospheric_absorption", "+wind", "+doppler", "+ground_reflection",
 @st.composite
 def receiver_cases(draw):
     traj, cards, grid, kw, floor_q = draw(cases())
-    n = len(traj)
     # retimed to at most 90 m/s between samples (subsonic: the Doppler term is defined)
     e, nn, u = LocalFrame(traj.lat[0], traj.lon[0], 0.0).to_enu(traj.lat, traj.lon, traj.h)
     step = np.hypot(np.hypot(np.diff(e), np.diff(nn)), np.diff(u))
     dt = np.maximum(np.diff(traj.t), step / 90.0)
-    t = np.concatenate([[0.0], np.cumsum(dt)])
-    rpm = np.array(draw(st.lists(st.floats(2000.0, 6000.0), min_size=n, max_size=n)))
-    traj = Trajectory(t=t, lat=traj.lat, lon=traj.lon, h=traj.h, roll=traj.roll, pitch=traj.pitch, yaw=traj.yaw,
-                      power_w=traj.power_w, phase=traj.phase, rpm=rpm)
-    kind = draw(st.sampled_from(KINDS))
-    out = []
-    for c in cards:
-        p = dict(c.parameters)
-        if "bank_angle" in kind:
-            p["k_bank"] = draw(st.floats(-5.0, 10.0))
-        if "rpm" in kind:
-            p.update(k_rpm=draw(st.floats(-3.0, 3.0)), rpm_ref=draw(st.floats(2500.0, 5000.0)))
-        if "absorption" in kind:
-            p["a_abs"] = draw(st.floats(0.0, 60.0))
-        if "wind" in kind:
-            p.update(w_east=draw(st.floats(-5.0, 5.0)), w_north=draw(st.floats(-5.0, 5.0)))
-        if "doppler" in kind:
-            p["q_doppler"] = draw(st.floats(0.0, 6.0))
-        if "ground" in kind:
-            p.update(r_ground=draw(st.floats(0.0, 1.0)), f_ground=draw(st.floats(20.0, 8000.0)))
-        out.append(ModelCard(id=c.id + kind, vehicle="test", phase=c.phase, ansatz=c.ansatz + kind,
-                             parameters=p, reference_power_w=c.reference_power_w))
+    traj = with_rpm(draw, traj, np.concatenate([[0.0], np.cumsum(dt)]))
+    out = extended_cards(draw, cards, draw(st.sampled_from(KINDS)))
     kw = dict(kw, receiver_height=draw(st.sampled_from([0.2, 1.5, 4.0])) + draw(st.floats(0.0, 2.0)),
               temperature_c=draw(st.floats(-20.0, 40.0)))
     return traj, out, grid, kw, floor_q
@@ -296,26 +275,9 @@ def test_fast_equals_numpy_for_receiver_dependent_terms(case):
     kw = dict(kw, check_cards=False)  # random synthetic cards: the engines are compared, not the cards judged
     snap = float(traj.t[len(traj) // 2])
     ref = evaluate_grid(traj, cards, grid, engine="numpy", snapshot_t=snap, **kw)
-    floor = None
-    if floor_q is not None:  # a floor across the map's range: some cells may fall below it
-        lo, hi = np.nanmin(ref.bands["LAmax"]), np.nanmax(ref.bands["LAmax"])
-        floor = float(lo + floor_q * (hi - lo + 30.0) - 15.0)
+    floor = floor_across(ref, floor_q)
     fast = evaluate_grid(traj, cards, grid, snapshot_t=snap, floor_db=floor, **kw)
-    assert fast.metadata["engine"] == "fast"
-    skipped = np.isnan(fast.bands["LAmax"]) & np.isfinite(ref.bands["LAmax"])
-    if skipped.any():  # skipped cells are certainly below the floor
-        assert floor is not None and np.all(ref.bands["LAmax"][skipped] < floor)
-    for name in ("LAmax", "LAeq", "SEL"):
-        a, b = ref.bands[name][~skipped], fast.bands[name][~skipped]
-        assert np.array_equal(np.isnan(a), np.isnan(b)), name
-        assert np.max(np.abs(a - b), initial=0.0, where=np.isfinite(a)) <= TOL_DB, name
-    name = next(k for k in ref.bands if k.startswith("LA@"))
-    a, b = ref.bands[name], fast.bands[name]
-    both = np.isfinite(a) & np.isfinite(b)
-    assert np.all(np.isnan(b[~both]) | np.isnan(a[~both]))
-    if floor is not None:
-        assert np.all(a[np.isnan(b) & np.isfinite(a)] < floor)
-    assert np.max(np.abs(a[both] - b[both]), initial=0.0) <= TOL_DB, name
+    assert_fast_equals_numpy(ref, fast, floor, snapshot=True)
 
 
 # --------------------------------------------------------------------------- the command

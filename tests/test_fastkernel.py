@@ -10,6 +10,8 @@ from hypothesis import strategies as st
 
 pytest.importorskip("numba")
 
+from _enginecases import TOL_DB, assert_fast_equals_numpy, extended_cards, floor_across, with_rpm  # noqa: E402
+
 from gisnoise.errors import CardError, InputError  # noqa: E402
 from gisnoise.flight import Trajectory  # noqa: E402
 from gisnoise.geo import (  # noqa: E402
@@ -24,7 +26,6 @@ from gisnoise.model import ModelCard, get_ansatz  # noqa: E402
 LAT0, LON0 = 52.27, 10.52
 TMERC = f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
 FRAME = LocalFrame(LAT0, LON0, 0.0)
-TOL_DB = 0.01
 
 
 def card(phase="horizontal", ansatz="paper-offset", **p):
@@ -323,37 +324,16 @@ def test_fast_equals_numpy_on_random_trajectories_and_grids(case):
     traj, cards, grid, kw, floor_q = case
     kw = dict(kw, check_cards=False)  # random synthetic cards: the engines are compared, not the cards judged
     ref = evaluate_grid(traj, cards, grid, engine="numpy", **kw)
-    floor = None
-    if floor_q is not None:  # a floor across the map's range: some cells may fall below it
-        lo, hi = np.nanmin(ref.bands["LAmax"]), np.nanmax(ref.bands["LAmax"])
-        floor = float(lo + floor_q * (hi - lo + 30.0) - 15.0)
+    floor = floor_across(ref, floor_q)
     fast = evaluate_grid(traj, cards, grid, engine="fast", floor_db=floor, **kw)
-    skipped = np.isnan(fast.bands["LAmax"])
-    if skipped.any():
-        assert floor is not None and np.all(ref.bands["LAmax"][skipped] < floor)
-    for name in ("LAmax", "LAeq", "SEL"):
-        a, b = ref.bands[name][~skipped], fast.bands[name][~skipped]
-        assert np.max(np.abs(a - b), initial=0.0) <= TOL_DB, name
+    assert_fast_equals_numpy(ref, fast, floor)
 
 
 @st.composite
 def extension_cases(draw):
     traj, cards, grid, kw, floor_q = draw(cases())
-    n = len(traj)
-    rpm = np.array(draw(st.lists(st.floats(2000.0, 6000.0), min_size=n, max_size=n)))
-    traj = Trajectory(t=traj.t, lat=traj.lat, lon=traj.lon, h=traj.h, roll=traj.roll, pitch=traj.pitch,
-                      yaw=traj.yaw, power_w=traj.power_w, phase=traj.phase, rpm=rpm)
-    kinds = draw(st.sampled_from(["+bank_angle", "+rpm", "+bank_angle+rpm", "+rpm+bank_angle"]))
-    out = []
-    for c in cards:
-        params = dict(c.parameters)
-        if "bank_angle" in kinds:
-            params["k_bank"] = draw(st.floats(-5.0, 10.0))
-        if "rpm" in kinds:
-            params.update(k_rpm=draw(st.floats(-3.0, 3.0)), rpm_ref=draw(st.floats(2500.0, 5000.0)))
-        out.append(ModelCard(id=c.id + kinds, vehicle="test", phase=c.phase, ansatz=c.ansatz + kinds,
-                             parameters=params, reference_power_w=c.reference_power_w))
-    return traj, out, grid, kw, floor_q
+    chain = draw(st.sampled_from(["+bank_angle", "+rpm", "+bank_angle+rpm", "+rpm+bank_angle"]))
+    return with_rpm(draw, traj), extended_cards(draw, cards, chain), grid, kw, floor_q
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -363,8 +343,4 @@ def test_fast_equals_numpy_for_effect_extensions(case):
     kw = dict(kw, check_cards=False)  # random synthetic cards: the engines are compared, not the cards judged
     ref = evaluate_grid(traj, cards, grid, engine="numpy", snapshot_t=float(traj.t[len(traj) // 2]), **kw)
     fast = evaluate_grid(traj, cards, grid, snapshot_t=float(traj.t[len(traj) // 2]), **kw)
-    assert fast.metadata["engine"] == "fast"
-    for name in ("LAmax", "LAeq", "SEL", next(k for k in ref.bands if k.startswith("LA@"))):
-        a, b = ref.bands[name], fast.bands[name]
-        assert np.array_equal(np.isnan(a), np.isnan(b))
-        assert np.max(np.abs(a - b), initial=0.0, where=np.isfinite(a)) <= TOL_DB, name
+    assert_fast_equals_numpy(ref, fast, snapshot=True)

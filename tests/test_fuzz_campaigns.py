@@ -21,7 +21,7 @@ from _jsonedit import put
 from hypothesis import given
 from hypothesis import strategies as st
 from test_campaign import MICS, make_campaign, straight_track
-from test_fuzz_readers import _CELL, _NUM, DEFAULT_BUDGET, STUDY_BUDGET, _budget, _refused_with_field, event
+from test_fuzz_readers import _CELL, _VALUE, DEFAULT_BUDGET, STUDY_BUDGET, _budget, _refused_with_field, event
 
 from gisnoise import limits
 from gisnoise.measure import build_samples, read_campaign
@@ -50,8 +50,6 @@ _JSON_KEYS = ["schema", "origin.lat", "origin.lon", "origin.h", "speed_of_sound_
               "weather.humidity_pct", "weather.pressure_kpa", "vehicle.reference_power_w", "microphones.0.lat",
               "microphones.0.lon", "microphones.0.h", "microphones.0.mount", "microphones.0.id", "flights.0.id",
               "flights.0.start_utc", "microphones", "flights", "exclusions", "background_db"]
-_VALUE = st.one_of(_NUM, st.text(max_size=6), st.none(), st.booleans(), st.lists(_NUM, max_size=2),
-                   st.dictionaries(st.text(max_size=3), _NUM, max_size=2))
 
 
 @st.composite

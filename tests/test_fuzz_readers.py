@@ -57,6 +57,9 @@ def _refused_with_field(exc: BaseException) -> None:
 _NUM = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**12, 10**12),
                  st.sampled_from([0.0, -0.0, 1e300, -1e300, 180.0000001, 90.5, -500.1, 1e9]))
 _CELL = st.one_of(_NUM.map(repr), st.text(max_size=6), st.sampled_from(["", "nan", "inf", "1e999", "0x10", " "]))
+_VALUE = st.one_of(_NUM, st.text(max_size=6), st.none(), st.booleans(), st.lists(_NUM, max_size=3),
+                   st.dictionaries(st.text(max_size=3), _NUM, max_size=2))
+"""A JSON value put in place of a document's field by the fuzzers' mutations (:mod:`_jsonedit`)."""
 _COLS = ["t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w", "phase", "rpm"]
 
 

@@ -22,7 +22,7 @@ from _jsonedit import put
 from hypothesis import given
 from hypothesis import strategies as st
 from test_fuzz_campaigns import campaign_files
-from test_fuzz_readers import _NUM, CARD, STUDY_BUDGET, _budget, card_doc, event
+from test_fuzz_readers import _VALUE, CARD, STUDY_BUDGET, _budget, card_doc, event
 
 fastapi = pytest.importorskip("fastapi")
 
@@ -63,8 +63,6 @@ def _valid_contour_request() -> dict:
             "metrics": ["LAmax", "LAeq"]}
 
 
-_VALUE = st.one_of(_NUM, st.text(max_size=5), st.none(), st.booleans(), st.lists(_NUM, max_size=3),
-                   st.dictionaries(st.text(max_size=3), _NUM, max_size=2))
 _REQ_KEYS = ["trajectory.format", "trajectory.rows", "cards", "cards.0", "grid.resolution_m", "grid.margin_m",
              "grid.crs", "levels", "levels.0", "metrics", "receiver_height_m", "ground_h_m", "period_s",
              "threshold_db", "snapshot_t", "substeps", "uncertainty", "background", "output", "phase_cards",
@@ -164,11 +162,19 @@ def _zip(files: dict[str, bytes]) -> bytes:
 
 
 @st.composite
-def upload(draw) -> tuple[bytes, dict[str, str]]:
+def campaign_zip(draw) -> bytes:
+    """A zipped campaign folder (:func:`campaign_files`), one in ten archives broken."""
     data = _zip(draw(campaign_files()))
     if draw(st.integers(0, 9)) == 0:  # a broken archive
         k = draw(st.integers(0, len(data)))
         data = data[:k] + draw(st.binary(max_size=8)) + data[k + 8:]
+    return data
+
+
+@st.composite
+def upload(draw) -> tuple[bytes, dict[str, str]]:
+    """A fit upload: the archive and the fit's form fields (phase, ansatz, card_id), some of them bad."""
+    data = draw(campaign_zip())
     form = {"phase": draw(st.sampled_from(["horizontal", "horizontal", "climb", "cruise", ""]))}
     if draw(st.integers(0, 4)) == 0:
         form["ansatz"] = draw(st.sampled_from(["paper", "paper-offset+bank_angle", "nope", ""]))
@@ -207,8 +213,7 @@ def _fit_property(req: tuple[bytes, dict[str, str]]) -> None:
             assert all(math.isfinite(v) for v in card["parameters"].values())
 
 
-def _diagnose_property(req: tuple[bytes, dict[str, str]]) -> None:
-    data, form = req
+def _diagnose_property(data: bytes) -> None:
     r = client().post("/jobs/diagnose", files={"campaign": ("c.zip", data, "application/zip")},
                       data={"card_id": "demo-horizontal", "report": "false"}, headers=HDR)
     _answer_ok(r)
@@ -221,7 +226,7 @@ def _diagnose_property(req: tuple[bytes, dict[str, str]]) -> None:
 
 
 _PROPS = {"contours": (contour_request(), _contour_property, 40), "cards": (card_request(), _card_property, 40),
-          "fit": (upload(), _fit_property, 6), "diagnose": (upload(), _diagnose_property, 3)}
+          "fit": (upload(), _fit_property, 6), "diagnose": (campaign_zip(), _diagnose_property, 3)}
 
 
 def _fuzz(name: str, budget: int) -> None:

@@ -55,12 +55,6 @@ def grid():
     return g
 
 
-@pytest.fixture()
-def no_grid(monkeypatch):
-    monkeypatch.delenv("GISNOISE_GEOID_GRID", raising=False)
-    monkeypatch.setattr("gisnoise.geo.geoid.geoid_search_dirs", lambda: [])
-
-
 @pytest.mark.parametrize("lat,lon,n_nga", NGA_EGM96)
 def test_egm96_undulation_at_nga_test_points(grid, lat, lon, n_nga):
     n, used = geoid_undulation(lat, lon)
@@ -90,7 +84,7 @@ def test_grid_named_by_the_environment_variable(grid, monkeypatch, tmp_path):
         find_geoid_grid()
 
 
-def test_no_grid_is_an_error_naming_the_way_out(no_grid):
+def test_no_grid_is_an_error_naming_the_way_out(no_geoid_grid):
     with pytest.raises(InputError, match="--geoid-undulation") as e:
         geoid_undulation(50.0, 10.0)
     assert e.value.field == "geoid_undulation_m"
@@ -153,7 +147,7 @@ def test_map_of_an_ardupilot_log_states_the_datum(grid, tmp_path):
     assert "mean sea level" in meta["trajectory"]["height_datum"]
 
 
-def test_ardupilot_map_without_grid_exits_2_naming_the_option(no_grid, tmp_path):
+def test_ardupilot_map_without_grid_exits_2_naming_the_option(no_geoid_grid, tmp_path):
     pytest.importorskip("pymavlink")
     r = CliRunner().invoke(cli, ["-q", "contour", str(COPTER), "--card", "demo-horizontal",
                                  "--out", str(tmp_path / "m")], catch_exceptions=False)

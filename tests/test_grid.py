@@ -153,6 +153,31 @@ def test_parse_crs_accepts_projected_metre_crs():
     assert parse_crs("EPSG:3035").to_epsg() == 3035
 
 
+def test_transformer_is_cached_per_thread_by_the_identity_of_its_crss():
+    """One cache rule with crs_label: the same CRS objects give the same transformer in one thread, another
+    thread builds its own (transformers are not shared), and an equal CRS object transforms the same."""
+    import threading
+
+    from pyproj import CRS
+
+    from gisnoise.geo import WGS84, transformer
+
+    utm = CRS.from_epsg(32632)
+    tr = transformer(WGS84, utm)
+    assert transformer(WGS84, utm) is tr
+    other: list = []
+    t = threading.Thread(target=lambda: other.append(transformer(WGS84, utm)))
+    t.start()
+    t.join()
+    assert other[0] is not tr
+    x, y = transformer(WGS84, CRS.from_epsg(32632)).transform(9.0, 0.0)  # zone 32's central meridian, equator
+    assert (x, y) == pytest.approx((500000.0, 0.0), abs=1e-6) and tr.transform(9.0, 0.0) == (x, y)
+    for k in range(70):  # more pairs than the cache holds: each pair still gets its own transformer
+        code = 32633 + k % 2
+        assert transformer(WGS84, CRS.from_epsg(code)).transform(6.0 * (code - 32600) - 183.0, 0.0) == \
+            pytest.approx((500000.0, 0.0), abs=1e-6)
+
+
 def test_crs_label_is_the_authority_code_else_the_wkt_cached_by_identity():
     from pyproj import CRS
 

@@ -183,9 +183,7 @@ def test_dataflash_positions_attitude_power_equal_pymavlink(dataflash_raw):
     assert {"hover", "horizontal"} <= set(np.unique(tr.phase))
 
 
-def test_dataflash_without_a_geoid_grid_names_geoid_undulation(monkeypatch):
-    monkeypatch.delenv("GISNOISE_GEOID_GRID", raising=False)
-    monkeypatch.setattr("gisnoise.geo.geoid.geoid_search_dirs", lambda: [])   # no grid anywhere
+def test_dataflash_without_a_geoid_grid_names_geoid_undulation(no_geoid_grid):
     with pytest.raises(InputError, match="--geoid-undulation") as e:
         read_flight(BIN)
     assert e.value.field == "geoid_undulation_m" and "proj-data" in str(e.value)

@@ -169,3 +169,35 @@ def test_cli_operations_writes_exposure_and_refuses_a_bad_layer_before_evaluatin
                                  "--buildings", str(tmp_path / "missing.gpkg")])
     assert r.exit_code == 2 and r.output.strip().count("\n") == 0 and "buildings" in r.output
     assert not (bad / "operations.tif").exists()
+
+
+def test_facade_levels_of_a_day_equal_the_maps_cells_at_the_same_points_empty_evening_included(tmp_path):
+    """The façades and the map combine one day by one rule (gisnoise.ops.period_bands): at a façade
+    point the façade bands equal the map's cell centred there; an empty period is NaN in both."""
+    from gisnoise.exposure import exposure_table, operations_facade_levels
+
+    counts = {"day": 40, "evening": 0, "night": 4}
+    b = read_buildings(write_buildings(tmp_path / "b.gpkg"))
+    flat = dict(cards=[omni()], ground_h_m=0.0, thresholds_db=(50.0, 60.0), receiver_height_m=4.0)
+    fl = operations_facade_levels(b, Schedule(flights=(Flight("A", hover(), counts),), **flat), ground_h=0.0,
+                                  height_m=4.0)
+    pts = fl["points"]
+    x, y = transformer(WGS84, TMERC).transform(pts.lon, pts.lat)
+    d = np.hypot(x, y)
+    for i in (int(np.argmin(d)), int(np.argmax(d))):  # the nearest and the farthest façade point
+        grid = GridSpec(TMERC, Affine(1.0, 0, x[i] - 1.5, 0, -1.0, y[i] + 1.5), 3, 3)  # cell (1, 1) centred on it
+        res = evaluate_operations(Schedule(flights=(Flight("A", hover(), counts),), grid=grid, **flat), threads=1)
+        for n in ("Lden", "Lday", "Lnight", "LAmax"):
+            assert np.isfinite(fl["levels"][n][i])
+            assert fl["levels"][n][i] == pytest.approx(res.bands[n][1, 1], abs=1e-3), n
+        assert np.isnan(fl["levels"]["Levening"][i]) and np.isnan(res.bands["Levening"][1, 1])
+        for n in ("NA50", "NA60"):
+            assert fl["levels"][n][i] == res.bands[n][1, 1], n
+    # LAmax 59.5-61 dB along the façades: every flight of the day above 50 dB, above 60 dB at the near wall only
+    assert set(fl["levels"]["NA50"]) == {44.0} and set(fl["levels"]["NA60"]) == {0.0, 44.0}
+    sched = Schedule(flights=(Flight("A", hover(), counts),), **flat)
+    doc = operations_exposure(res, sched, buildings=b)
+    assert doc["operations"]["empty_periods"] == ["evening"]
+    assert math.isnan(doc["buildings"]["metrics"]["Levening"]["peak_facade_db"])
+    assert doc["buildings"]["metrics"]["Lden"]["peak_facade_db"] == pytest.approx(np.max(fl["levels"]["Lden"]))
+    assert "peak façade level: none (no flight in the period)" in exposure_table(doc)

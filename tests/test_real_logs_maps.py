@@ -167,9 +167,7 @@ def test_track_without_current_in_flight_names_power_w(tmp_path, card):
     assert "--power-w" in r.output and "all" in r.output and len(r.output.strip().splitlines()) == 1
 
 
-def test_copter_log_without_undulation_or_geoid_grid_names_the_option(tmp_path, card, monkeypatch):
-    monkeypatch.delenv("GISNOISE_GEOID_GRID", raising=False)
-    monkeypatch.setattr("gisnoise.geo.geoid.geoid_search_dirs", lambda: [])   # no geoid grid here
+def test_copter_log_without_undulation_or_geoid_grid_names_the_option(tmp_path, card, no_geoid_grid):
     r = run("contour", str(COPTER), "--card", card, "--out", str(tmp_path / "m"))
     assert r.exit_code == 2 and "--geoid-undulation" in r.output
 

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.acoustics import atmospheric_absorption
+from gisnoise.diagnose._rows import _band_entries, _effective_samples
 from gisnoise.diagnose.verdict import _block_test, _rms
 from gisnoise.measure import Samples
 
@@ -74,24 +75,13 @@ def absorption_band_holdout(s: Samples, x: Mapping[str, Any], fold: np.ndarray, 
     bands = np.asarray(s.bands, dtype=float)[:, use_b]
     level = np.asarray(s.level, dtype=float)
     mics = s.mic.astype(str)
-    if background_db is not None and np.isfinite(background_db):
-        loud = level > background_db + 15.0
-    else:
-        loud = np.zeros(len(s), dtype=bool)
-        for m in set(mics.tolist()):
-            rows = mics == m
-            loud |= rows & (level >= np.quantile(level[rows], 0.5))
-    if exclude is not None:
-        loud &= ~np.asarray(exclude, dtype=bool)
-    # entries: a band well above its own quietest level (its background), on a loud sample
-    floor = np.nanpercentile(bands, 5, axis=0)
-    ok = loud[:, None] & np.isfinite(bands) & (bands > floor + above_floor_db)
     d = np.asarray(s.d, dtype=float)
-    good_b = np.array([ok[:, j].sum() >= 30 and np.ptp(d[ok[:, j]]) >= 50.0 if ok[:, j].any() else False
-                       for j in range(bands.shape[1])])
+    # entries: a band well above its own quietest level (its background), on a loud sample
+    ok = _band_entries(level, mics, bands, d, background_db=background_db, exclude=exclude,
+                       above_floor_db=above_floor_db)
+    good_b = ok.any(axis=0)
     if good_b.sum() < 4:
         return None
-    ok[:, ~good_b] = False
     rows = np.flatnonzero(ok.any(axis=1))
     fold = np.asarray(fold, dtype=int)
     if len(rows) < 100 or len(np.unique(fold[rows])) < 2:
@@ -139,8 +129,7 @@ def absorption_band_holdout(s: Samples, x: Mapping[str, Any], fold: np.ndarray, 
     a = np.column_stack([dc, -alpha[jj] * dc])
     coef, *_ = np.linalg.lstsq(a, y[ii, jj] - yb[jj], rcond=None)
     resid = y[ii, jj] - yb[jj] - a @ coef
-    span = float(np.ptp(s.t_e[rows])) if len(rows) > 1 else 1.0
-    n_eff = max(min(len(rows), span * len(set(mics[rows].tolist()))), 2.0)
+    n_eff = _effective_samples(s.t_e[rows], len(set(mics[rows].tolist())))
     try:
         cov = np.linalg.inv(a.T @ a) * float(np.mean(resid * resid)) * len(rows) / n_eff
         sd = float(math.sqrt(max(cov[1, 1], 0.0)))

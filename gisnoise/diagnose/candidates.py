@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from gisnoise.diagnose._rows import _rows_of
 from gisnoise.errors import Cancelled, FitError, GisnoiseError, NotIdentifiableError
 from gisnoise.identify import FitResult, fit_arrays
 from gisnoise.measure import Samples, series_key
@@ -101,8 +102,7 @@ def _fit(level: np.ndarray, x: Mapping[str, Any], model: Ansatz, s: Samples, row
          p0: Any = None, fixed: Mapping[str, float] | None = None, bounds: Mapping[str, Any] | None = None,
          cancel: CancelFn | None = None) -> FitResult:
     """Output-error fit of ``model`` to the rows ``rows`` (one series per microphone and flight)."""
-    sub = {k: (v[rows] if isinstance(v, np.ndarray) and k != "band_f" and v.shape[:1] == (len(s),) else v)
-           for k, v in x.items()}
+    sub = _rows_of(x, rows, len(s))
     mic = s.mic[rows].astype(str)
     series = series_key(mic, s.flight[rows])
     res = fit_arrays(level[rows], sub, model, mic=mic, series=series, time=s.t_e[rows], p0=p0, fixed=fixed,
@@ -116,8 +116,7 @@ def _fit(level: np.ndarray, x: Mapping[str, Any], model: Ansatz, s: Samples, row
 
 def _predict(model: Ansatz, p: np.ndarray, x: Mapping[str, Any], rows: np.ndarray, n: int) -> np.ndarray:
     """Level of ``model`` at parameters ``p`` on the rows ``rows`` of the ``n``-row inputs ``x``."""
-    sub = {k: (v[rows] if isinstance(v, np.ndarray) and k != "band_f" and v.shape[:1] == (n,) else v)
-           for k, v in x.items()}
+    sub = _rows_of(x, rows, n)
     return np.broadcast_to(model.level(p, sub), (len(rows),))
 
 

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise.diagnose._rows import _band_entries
 from gisnoise.diagnose.candidates import _Candidate, _Context
 from gisnoise.model import effects as _effects
 
@@ -89,20 +90,12 @@ def _ev_absorption(ctx: _Context, cand: _Candidate) -> dict[str, Any]:
     alpha = np.asarray(atmospheric_absorption(f, float(w["temperature_c"]), float(w["humidity_pct"]),
                                               float(w.get("pressure_kpa", 101.325))), dtype=float)
     bands = np.asarray(s.bands, dtype=float)
-    bg = ctx.background_db
-    loud = s.level > (bg + 15.0 if bg is not None else np.percentile(s.level, 50))
+    # loud samples, bands well above their own quietest level (its background): as the band-level test
+    entries = _band_entries(s.level, s.mic, bands, s.d, background_db=ctx.background_db)
     slopes, al = [], []
-    for j in range(len(f)):
-        y = bands[:, j] - s.level
-        ok = loud & np.isfinite(y)
-        if ok.sum() < 30 or np.ptp(s.d[ok]) < 50.0:
-            continue
-        # keep rows where this band stands well above its own quietest level (its background)
-        floor = np.nanpercentile(bands[:, j], 5)
-        ok &= bands[:, j] > floor + 10.0
-        if ok.sum() < 30 or np.ptp(s.d[ok]) < 50.0:
-            continue
-        slopes.append(np.polyfit(s.d[ok], y[ok], 1)[0])
+    for j in np.flatnonzero(entries.any(axis=0)):
+        ok = entries[:, j]
+        slopes.append(np.polyfit(s.d[ok], bands[ok, j] - s.level[ok], 1)[0])
         al.append(alpha[j])
     if len(slopes) < 3:
         return {"supports": None, "summary": "too few band levels above background to see band slopes"}

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise.diagnose._rows import _effective_samples
 from gisnoise.measure import Samples, series_ids
 from gisnoise.model import Ansatz, Effect, emission_covariates, mic_height_agl, shifted_inputs, speed_of_sound
 
@@ -146,8 +147,7 @@ def estimate_mic_heights(s: Samples, x: Mapping[str, Any], fold: np.ndarray, *, 
         kh, ka, kp = np.unravel_index(int(np.argmin(tot)), tot.shape)
         h_hat, a, phi = float(grid[kh]), _AMPS[ka], float(_PHASES[kp])
         ss_min, ss0 = float(tot[kh, ka, kp]), float(np.sum(e * e))
-        span_s = float(np.ptp(s.t_e[rows])) if len(rows) > 1 else 1.0
-        n_eff = max(min(len(rows), span_s), 2.0)  # one effective sample per second
+        n_eff = _effective_samples(s.t_e[rows])
         prof = tot.reshape(len(grid), -1).min(axis=1)
         inside = grid[prof <= ss_min * (1.0 + 1.0 / n_eff)]
         std = float(max((inside.max() - inside.min()) / 2.0, _MIN_HEIGHT_STD_M))
@@ -232,8 +232,7 @@ def estimate_clock_offsets(s: Samples, x: Mapping[str, Any], model: Ansatz, p: n
         shift = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2) if curv > 0 else 0.0
         dt = float(grid[i] + np.clip(shift, -1.0, 1.0) * step_s)
         n_m = int(np.sum(mics == m))
-        span = float(np.ptp(s.t_e[mics == m])) if n_m > 1 else 1.0
-        n_eff = max(min(n_m, span), 2.0)
+        n_eff = _effective_samples(s.t_e[mics == m])
         s2 = y1 / max(n_m, 1)
         # sum of squares ~ n (s2 + k dt^2): curvature per effective sample gives the variance of dt
         std = float(math.sqrt(2.0 * s2 / (curv / n_m * n_eff))) if curv > 0 else float("inf")

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise.diagnose._rows import _effective_samples, _rows_of
 from gisnoise.geo import emission_angles
 from gisnoise.measure import Samples
 from gisnoise.model import Ansatz
@@ -58,9 +59,7 @@ def _geometry(s: Samples, rows: np.ndarray, de: float, dn: float) -> tuple[np.nd
 def _ss(s: Samples, x: Mapping[str, Any], model: Ansatz, p: np.ndarray, rows: np.ndarray,
         offsets: np.ndarray) -> np.ndarray:
     """Centred residual sum of squares of rows ``rows`` for each horizontal offset (k x 2)."""
-    n = len(s)
-    sub = {k: (v[rows] if isinstance(v, np.ndarray) and k != "band_f" and v.shape[:1] == (n,) else v)
-           for k, v in x.items()}
+    sub = _rows_of(x, rows, len(s))
     level = np.asarray(s.level, dtype=float)[rows]
     out = np.empty(len(offsets))
     for i, (de, dn) in enumerate(offsets):
@@ -127,8 +126,7 @@ def estimate_mic_positions(s: Samples, x: Mapping[str, Any], model: Ansatz, p: n
         coef = np.linalg.lstsq(a, ss_f[near], rcond=None)[0]
         hess = np.array([[2 * coef[3], coef[4]], [coef[4], 2 * coef[5]]])
         n_m = len(rows)
-        span = float(np.ptp(s.t_e[rows])) if n_m > 1 else 1.0
-        n_eff = max(min(n_m, span), 2.0)
+        n_eff = _effective_samples(s.t_e[rows])
         s2 = y_min / max(n_m, 1)
         try:
             # sum of squares ~ n (s2 + dx' H dx / 2n): with n_eff independent samples cov = 2 s2 (H n_eff / n)^-1

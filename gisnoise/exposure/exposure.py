@@ -207,8 +207,10 @@ def exposure_table(doc: dict[str, Any]) -> str:
         if pop:
             lines += ["", f"people without a level (outside the map or on cells without value): {pop['people_without_level']:.0f}"]
         if bld:
-            lines += [f"peak façade value: {bld['peak_facade_db']:.0f} events" if ev else
-                      f"peak façade level: {bld['peak_facade_db']:.1f} dB(A)"]
+            peak = bld["peak_facade_db"]
+            lines += [f"peak façade value: {peak:.0f} events" if ev else
+                      f"peak façade level: {peak:.1f} dB(A)" if np.isfinite(peak) else
+                      "peak façade level: none (no flight in the period)"]
         lines.append("")
     return "\n".join(lines)
 

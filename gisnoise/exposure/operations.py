@@ -3,17 +3,19 @@
 :func:`operations_facade_levels` places the façade receivers of the buildings
 (:func:`gisnoise.exposure.facade_points`), evaluates every flight of the schedule that has
 a count there (:func:`gisnoise.exposure.point_levels`: the card's model at every sample)
-and combines them with the rules of :mod:`gisnoise.ops` (EU Directive 2002/49/EC,
-Annex I):
+and combines them with the map's rule (:func:`gisnoise.ops.period_bands`; EU Directive
+2002/49/EC, Annex I):
 
 ``Lday``, ``Levening``, ``Lnight``
-    ``10 log10( sum_f n_f,p 10^(SEL_f/10) / T_p )``;
+    ``10 log10( sum_f n_f,p 10^(SEL_f/10) / T_p )``; NaN (no level) for an *empty period*,
+    one in which no flight of the schedule departs;
 ``Lden``
-    :func:`gisnoise.ops.lden` of the three;
+    :func:`gisnoise.ops.lden` of the three (an empty period adds no energy);
 ``LAmax``
     the loudest flight;
 ``NA<L>``
-    flights of the day whose LAmax exceeds ``L`` (strictly, as the map), events.
+    flights of the day whose LAmax exceeds ``L`` (strictly, on the float32 ``10^(LAmax/10)``
+    as the map), events.
 
 :func:`operations_exposure` gives the ``exposure.json`` document of a day of operations:
 people by class of every level band and of the N-above bands of the operations' map, and
@@ -25,20 +27,22 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
 from gisnoise.errors import InputError
 from gisnoise.exposure.exposure import map_exposure
 from gisnoise.exposure.facades import ASSESSMENT_HEIGHT_M, facade_points, most_exposed, point_levels
 from gisnoise.exposure.layers import Buildings, LevelsRaster, Population
 from gisnoise.exposure.stats import EVENT_EDGES
 from gisnoise.maps import MapResult
-from gisnoise.ops import PERIOD_HOURS, PERIODS, Schedule, lden
+from gisnoise.ops import PERIODS, Schedule, add_flight, new_accumulators, period_bands
 
 __all__ = ["OPERATIONS_LEVELS", "operations_facade_levels", "operations_exposure"]
 
 OPERATIONS_LEVELS = ("Lden", "Lday", "Levening", "Lnight", "LAmax")
 """Level bands of a day of operations that exposure classes (dB(A)); with them every ``NA<L>`` band."""
+
+EMPTY_PERIOD_RULE = ("a period in which no flight of the schedule departs (an empty period) has no level: its band "
+                     "is without value on the map and at the façades (null), its people are counted in "
+                     "people_without_level, and it adds nothing to Lden")
 
 
 def operations_facade_levels(b: Buildings, schedule: Schedule, *, ground_h: float,
@@ -53,27 +57,18 @@ def operations_facade_levels(b: Buildings, schedule: Schedule, *, ground_h: floa
     if schedule.dem is not None:
         raise InputError("buildings: façade levels need flat ground; the schedule gives a DEM", field="buildings")
     pts = facade_points(b, spacing_m=spacing_m, height_m=height_m, offset_m=offset_m)
-    energy = {p: np.zeros(pts.x.size) for p in PERIODS}
-    lmax = np.full(pts.x.size, -np.inf)
     thresholds = [float(v) for v in schedule.thresholds_db]
-    na = {thr: np.zeros(pts.x.size) for thr in thresholds}
+    acc = new_accumulators((pts.x.size,), len(thresholds), time_above=False)
     for f in schedule.flights:
         if f.total == 0:
             continue
         cards = f.cards if f.cards is not None else schedule.cards
         lv = point_levels(f.trajectory, cards, pts.lon, pts.lat, ground_h + height_m,
                           min_distance_m=schedule.min_distance_m)
-        e = 10.0 ** (lv["SEL"] / 10.0)
-        for p in PERIODS:
-            energy[p] += f.counts[p] * e
-        np.maximum(lmax, lv["LAmax"], out=lmax)
-        for thr in thresholds:
-            na[thr] += f.total * (lv["LAmax"] > thr)
-    with np.errstate(divide="ignore"):
-        per = {p: 10.0 * np.log10(energy[p] / (PERIOD_HOURS[p] * 3600.0)) for p in PERIODS}
-    levels = {"Lden": lden(per["day"], per["evening"], per["night"]), "Lday": per["day"],
-              "Levening": per["evening"], "Lnight": per["night"], "LAmax": lmax}
-    levels.update({f"NA{thr:g}": v for thr, v in na.items()})
+        add_flight(acc, 10.0 ** (lv["SEL"] / 10.0), 10.0 ** (lv["LAmax"] / 10.0), f.counts, thresholds)
+    bands = period_bands(acc, thresholds)
+    levels = {n: bands[n] for n in OPERATIONS_LEVELS}
+    levels.update({f"NA{thr:g}": bands[f"NA{thr:g}"] for thr in thresholds})
     return most_exposed(b, pts, levels, list(levels))
 
 
@@ -88,7 +83,8 @@ def operations_exposure(result: MapResult | LevelsRaster, schedule: Schedule | N
     ``edges``) and of every ``NA<L>`` band (classes of ``event_edges``); with ``buildings`` the
     same at each building's most exposed façade (:func:`operations_facade_levels`, flat ground
     of the map).  Cells the map left without value (no flight above the schedule's
-    ``floor_db``) hold no level: their people are counted in ``people_without_level``.
+    ``floor_db``) hold no level: their people are counted in ``people_without_level``; so do
+    all people in the band of an empty period (no flight departs in it: ``operations.empty_periods``).
     """
     names = [n for n in OPERATIONS_LEVELS if n in result.bands]
     names += [n for n in result.bands if n.startswith("NA") and "_" not in n]
@@ -108,7 +104,11 @@ def operations_exposure(result: MapResult | LevelsRaster, schedule: Schedule | N
     doc = map_exposure(lr, population=population, buildings=buildings, metrics=names, edges=edges, facades=fl,
                        event_edges=event_edges)
     meta = result.metadata
+    flights = meta.get("flights")
     doc["operations"] = {"schedule": schedule.source if schedule is not None else meta.get("schedule"),
-                         "flights": [f["id"] for f in meta.get("flights", [])],
-                         "lden": "EU Directive 2002/49/EC, Annex I", "floor_db": meta.get("floor_db")}
+                         "flights": [f["id"] for f in flights or []],
+                         "lden": "EU Directive 2002/49/EC, Annex I", "floor_db": meta.get("floor_db"),
+                         "empty_periods": None if flights is None else
+                         [p for p in PERIODS if not any(float(f["counts"][p]) > 0 for f in flights)],
+                         "empty_period_rule": EMPTY_PERIOD_RULE}
     return doc

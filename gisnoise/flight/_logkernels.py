@@ -4,7 +4,7 @@ the phase, and the trajectory with its times referred to the flight's start."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -94,6 +94,16 @@ def _finish(src: str, t: np.ndarray, cols: dict[str, Any], start_utc: Any, utc_o
     else:
         t_rel = t - t[0]
     return Trajectory(t=t_rel, source=src, metadata=dict(metadata or {}), **cols)
+
+
+def msl_height_datum(field: str, geoid_meta: Mapping[str, Any]) -> str:
+    """The ``height_datum`` of heights logged above mean sea level in ``field`` and made ellipsoidal with the
+    undulation that ``geoid_meta`` states (:func:`msl_to_ellipsoid_undulation`).
+
+    >>> msl_height_datum("GPS.Alt", {"geoid_model": "EGM96 (egm96_15.gtx)"})
+    'mean sea level (GPS.Alt) + geoid undulation: EGM96 (egm96_15.gtx)'
+    """
+    return f"mean sea level ({field}) + geoid undulation: {geoid_meta['geoid_model']}"
 
 
 def msl_to_ellipsoid_undulation(lat: np.ndarray, lon: np.ndarray, given: float | None,

@@ -29,6 +29,7 @@ from gisnoise.flight._logkernels import (
     _phase,
     _power,
     _time_base,
+    msl_height_datum,
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.clock import gps_to_unix
@@ -154,7 +155,7 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
     cols["phase"] = _phase(t, lat_i, lon_i, h_i, None)
     landed = _landed_from_events(t, events)
     cols["on_ground"] = landed if landed is not None else _at_rest_low(t, lat_i, lon_i, h_i)
-    meta = {"height_datum": f"mean sea level ({pos_name}.Alt) + geoid undulation: {geoid_meta['geoid_model']}",
+    meta = {"height_datum": msl_height_datum(f"{pos_name}.Alt", geoid_meta),
             **geoid_meta,
             "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}
     return _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)

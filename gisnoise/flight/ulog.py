@@ -31,6 +31,7 @@ from gisnoise.flight._logkernels import (
     _phase,
     _power,
     _time_base,
+    msl_height_datum,
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.trajectory import Trajectory
@@ -104,7 +105,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         else:
             n_und, geoid_meta = _undulation(src, gps_cols, geoid_undulation_m, lat, lon,
                                             "vehicle_global_position.alt")
-            datum = f"mean sea level (vehicle_global_position.alt) + geoid undulation: {geoid_meta['geoid_model']}"
+            datum = msl_height_datum("vehicle_global_position.alt", geoid_meta)
             h = g["alt"].astype(float) + n_und
         pos_name = "vehicle_global_position"
     elif gps_cols is not None:
@@ -117,7 +118,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         else:
             n_und, geoid_meta = _undulation(src, None, geoid_undulation_m, lat, lon, f"{pos_name}.alt")
             h = h_msl + n_und
-            datum = f"mean sea level ({pos_name}.alt) + geoid undulation: {geoid_meta['geoid_model']}"
+            datum = msl_height_datum(f"{pos_name}.alt", geoid_meta)
     else:
         raise MissingColumnError(f"{src}: topic 'vehicle_global_position' or 'vehicle_gps_position' missing "
                                  "(no position)", field="vehicle_global_position")

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import TrajectoryError
-from gisnoise.flight._logkernels import msl_to_ellipsoid_undulation
+from gisnoise.flight._logkernels import msl_height_datum, msl_to_ellipsoid_undulation
 from gisnoise.flight.phases import MULTICOPTER_PHASES, PHASES
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.flight.vehicle import GRAVITY, VehicleModel
@@ -113,8 +113,7 @@ def _heights(alt: np.ndarray, lon: np.ndarray, lat: np.ndarray, st: Mapping[str,
     if ref == "msl":
         n, meta = msl_to_ellipsoid_undulation(lat, lon, st.get("geoid_undulation_m"),
                                               what=f"{source}: altitude_reference 'msl'")
-        return alt + n, None, {"height_datum": f"mean sea level (alt) + geoid undulation: {meta['geoid_model']}",
-                               **meta}
+        return alt + n, None, {"height_datum": msl_height_datum("alt", meta), **meta}
     if dem is None:
         return alt + st["ground_h_m"], st["ground_h_m"], {}
     from gisnoise.geo import Dem, read_dem, sample_dem

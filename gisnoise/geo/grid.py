@@ -25,9 +25,10 @@ from __future__ import annotations
 import math
 import os
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from affine import Affine
@@ -55,25 +56,43 @@ __all__ = [
 DEFAULT_MAX_CELLS = 25_000_000
 WGS84 = CRS.from_epsg(4326)
 _local = threading.local()
+_T = TypeVar("_T")
+
+
+class _IdentityCache:
+    """Values keyed by the identity of the objects they are made of (hashing a CRS formats its WKT, which is slow).
+
+    The objects are kept with their value, so their ids are not reused while cached; past
+    ``size`` entries the cache starts afresh.
+    """
+
+    def __init__(self, size: int = 64) -> None:
+        self._size = size
+        self._items: dict[tuple[int, ...], tuple[tuple[object, ...], Any]] = {}
+
+    def get(self, objs: tuple[object, ...], make: Callable[[], _T]) -> _T:
+        """The value of ``objs``: cached, else ``make()`` (then cached)."""
+        key = tuple(id(o) for o in objs)
+        hit = self._items.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], objs, strict=True)):
+            value: _T = hit[1]
+            return value
+        if len(self._items) > self._size:
+            self._items.clear()
+        value = make()
+        self._items[key] = (objs, value)
+        return value
 
 
 def transformer(src: CRS, dst: CRS) -> Transformer:
     """A cached ``always_xy`` transformer ``src -> dst`` (one cache per thread: transformers are not shared).
 
-    Keyed by the identity of the CRS objects (hashing a CRS formats its WKT, which is slow).
+    Keyed by the identity of the CRS objects (:class:`_IdentityCache`).
     """
-    cache = getattr(_local, "cache", None)
+    cache = getattr(_local, "transformers", None)
     if cache is None:
-        cache = _local.cache = {}
-    key = (id(src), id(dst))
-    hit = cache.get(key)
-    if hit is not None and hit[0] is src and hit[1] is dst:
-        return hit[2]
-    if len(cache) > 64:
-        cache.clear()
-    tr = Transformer.from_crs(src, dst, always_xy=True)
-    cache[key] = (src, dst, tr)
-    return tr
+        cache = _local.transformers = _IdentityCache()
+    return cache.get((src, dst), lambda: Transformer.from_crs(src, dst, always_xy=True))
 
 
 def apply_affine(t: Affine, x: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -89,18 +108,14 @@ def crs_label(crs: CRS) -> str:
     Cached by the identity of the CRS object, as :func:`transformer` (the look-up is slow, and so is
     hashing a CRS: it formats its WKT).
     """
-    hit = _labels.get(id(crs))
-    if hit is not None and hit[0] is crs:
-        return hit[1]
-    auth = crs.to_authority()
-    label = ":".join(auth) if auth else crs.to_wkt()
-    if len(_labels) > 64:
-        _labels.clear()
-    _labels[id(crs)] = (crs, label)  # the object is kept, so its id is not reused while cached
-    return label
+    def label() -> str:
+        auth = crs.to_authority()
+        return ":".join(auth) if auth else crs.to_wkt()
+
+    return _labels.get((crs,), label)
 
 
-_labels: dict[int, tuple[CRS, str]] = {}
+_labels = _IdentityCache()
 
 
 def max_cells() -> int:

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -64,14 +65,39 @@ def sel_edge_bound(traj: Trajectory, card_index: np.ndarray, distances: np.ndarr
     taken every ``spacing_m`` along the edge; the distances are shortened by half that spacing,
     so the bound holds between them too.
     """
-    d_tab, env = np.asarray(distances, dtype=float), _envelope(table)
-    t = np.asarray(traj.t, dtype=float)
-    w = trapezoid_weights(t)
-    flying = np.asarray(traj.flying, dtype=bool) & (np.asarray(traj.power_w, dtype=float) > 0)
-    tr = transformer(WGS84, crs)
-    flying &= np.asarray(card_index) >= 0
-    x, y = tr.transform(np.asarray(traj.lon, dtype=float)[flying], np.asarray(traj.lat, dtype=float)[flying])
-    x, y, w, ci = np.asarray(x), np.asarray(y), w[flying], np.asarray(card_index)[flying]
+    return _edge_bound(_EdgeSources.of(traj, card_index, distances, table, crs), rect, spacing_m, background_db)
+
+
+@dataclass(frozen=True)
+class _EdgeSources:
+    """What the edge bound takes of a track, whatever the rectangle: the flying samples' map coordinates in the
+    CRS, trapezoid weights and card rows, the envelope table, the track's duration."""
+
+    x: np.ndarray
+    y: np.ndarray
+    w: np.ndarray
+    ci: np.ndarray
+    d_tab: np.ndarray
+    env: np.ndarray
+    duration_s: float
+
+    @classmethod
+    def of(cls, traj: Trajectory, card_index: np.ndarray, distances: np.ndarray, table: np.ndarray,
+           crs: Any) -> _EdgeSources:
+        t = np.asarray(traj.t, dtype=float)
+        w = trapezoid_weights(t)
+        flying = np.asarray(traj.flying, dtype=bool) & (np.asarray(traj.power_w, dtype=float) > 0)
+        tr = transformer(WGS84, crs)
+        flying &= np.asarray(card_index) >= 0
+        x, y = tr.transform(np.asarray(traj.lon, dtype=float)[flying], np.asarray(traj.lat, dtype=float)[flying])
+        return cls(np.asarray(x), np.asarray(y), w[flying], np.asarray(card_index)[flying],
+                   np.asarray(distances, dtype=float), _envelope(table), float(t[-1] - t[0]))
+
+
+def _edge_bound(src: _EdgeSources, rect: tuple[float, float, float, float], spacing_m: float,
+                background_db: float | None) -> float:
+    """:func:`sel_edge_bound` of sources already prepared."""
+    x, y, w, ci, d_tab, env = src.x, src.y, src.w, src.ci, src.d_tab, src.env
     xmin, ymin, xmax, ymax = rect
     nx = max(2, math.ceil((xmax - xmin) / spacing_m) + 1)
     ny = max(2, math.ceil((ymax - ymin) / spacing_m) + 1)
@@ -87,7 +113,7 @@ def sel_edge_bound(traj: Trajectory, card_index: np.ndarray, distances: np.ndarr
         lv = env[sk[None, :], j]
         energy += np.sum(sw[None, :] * 10.0 ** (np.where(np.isfinite(lv), lv, -np.inf) / 10.0), axis=1)
     if background_db is not None:
-        energy += 10.0 ** (background_db / 10.0) * float(t[-1] - t[0])
+        energy += 10.0 ** (background_db / 10.0) * src.duration_s
     top = float(energy.max()) if energy.size else 0.0
     return 10.0 * math.log10(top) if top > 0 else -math.inf
 
@@ -102,12 +128,12 @@ def sel_margin(traj: Trajectory, card_index: np.ndarray, distances: np.ndarray, 
     smaller rectangle is nearer to every sample inside it), so the margin is found by bisection.
     """
     res = float(resolution_m)
+    src = _EdgeSources.of(traj, card_index, distances, table, crs)  # once: every step takes the same track
 
     def bound(m: float) -> float:
         xmin, ymin, xmax, ymax = base_rect
         spacing = max(res, m / 64.0)
-        return sel_edge_bound(traj, card_index, distances, table, (xmin - m, ymin - m, xmax + m, ymax + m), crs,
-                              spacing_m=spacing, background_db=background_db)
+        return _edge_bound(src, (xmin - m, ymin - m, xmax + m, ymax + m), spacing, background_db)
 
     lo = max(float(start_m), res)
     if bound(lo) < level_db:

@@ -3,6 +3,11 @@
 
 from __future__ import annotations
 
+from gisnoise.ops.accumulate import (
+    add_flight,
+    new_accumulators,
+    period_bands,
+)
 from gisnoise.ops.operations import (
     evaluate_operations,
 )
@@ -30,4 +35,4 @@ from gisnoise.ops.tiles import (
     tile_windows,
 )
 
-__all__ = ['Flight', 'PENALTY_DB', 'PERIODS', 'PERIOD_HOURS', 'SCHEMA', 'Schedule', 'evaluate_operations', 'lden', 'load_schedule', 'local_cluster', 'period_of', 'schedule_from_dict', 'tile_windows', 'write_operations']
+__all__ = ['Flight', 'PENALTY_DB', 'PERIODS', 'PERIOD_HOURS', 'SCHEMA', 'Schedule', 'add_flight', 'evaluate_operations', 'lden', 'load_schedule', 'local_cluster', 'new_accumulators', 'period_bands', 'period_of', 'schedule_from_dict', 'tile_windows', 'write_operations']

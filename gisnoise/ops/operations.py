@@ -40,7 +40,7 @@ import numpy as np
 from gisnoise.errors import InputError
 from gisnoise.geo import GridSpec
 from gisnoise.maps import MapResult, band_unit, default_threads
-from gisnoise.ops.accumulate import bands_of, new_accumulators
+from gisnoise.ops.accumulate import new_accumulators, period_bands
 from gisnoise.ops.periods import PENALTY_DB, PERIOD_HOURS, PERIOD_START_H, PERIODS
 from gisnoise.ops.scale import SCHEDULER_ENV, run_on_dask
 from gisnoise.ops.schedule import Schedule
@@ -131,7 +131,7 @@ def evaluate_operations(
     else:
         run_local(plan, windows, put, n, cancel)
         how = {"executor": "threads", "threads": n}
-    bands = bands_of(acc, plan.thresholds, plan.floor_db)
+    bands = period_bands(acc, plan.thresholds, plan.floor_db)
     if plan.rc.valid is not None and not plan.rc.valid.all():
         for a in bands.values():
             a[~plan.rc.valid] = np.nan

@@ -26,7 +26,7 @@ class State:
     cards: CardStore
     jobs: JobStore
     pool: WorkerPool
-    basemap: Any = None  # gisnoise.service.basemap.MBTiles served at /basemap, or None
+    basemap: Any = None  # gisnoise.service.basemap.Basemap served at /basemap, or None
 
 
 def get_state(request: Request) -> State:

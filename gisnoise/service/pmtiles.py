@@ -1,5 +1,8 @@
 """Raster tiles of a PMTiles (version 3) archive, for the service's offline basemap.
 
+An opened archive (:func:`open_pmtiles`) holds its header and root directory parsed, and
+keeps the leaf directories it reads; a tile costs one read of its data.
+
 The archive's layout (the PMTiles v3 specification): a 127-byte header (magic
 ``PMTiles``, version 3, little-endian offsets and lengths of the root directory, the
 metadata, the leaf directories and the tile data, the compressions, the tile type and the
@@ -14,6 +17,7 @@ from __future__ import annotations
 import gzip
 import json
 import struct
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +32,8 @@ MAGIC = b"PMTiles"
 _HEADER = struct.Struct("<7sB11QBBBBBBiiiiBii")
 _COMPRESSION = {1: "none", 2: "gzip", 3: "brotli", 4: "zstd"}
 _TILE_TYPE = {1: "mvt", 2: "image/png", 3: "image/jpeg", 4: "image/webp", 5: "avif"}
+_MAX_LEAVES = 256
+"""Leaf directories an opened archive keeps parsed (then it starts afresh)."""
 
 
 def zxy_to_tileid(z: int, x: int, y: int) -> int:
@@ -62,6 +68,11 @@ def _varint(buf: bytes, pos: int) -> tuple[int, int]:
         shift += 7
 
 
+def _parse_directory(data: bytes, header: tuple[Any, ...]) -> list[tuple[int, int, int, int]]:
+    """Entries of a directory's bytes as stored (gzip when the header's internal compression says so)."""
+    return _entries(gzip.decompress(data) if header[14] == 2 else data)
+
+
 def _entries(data: bytes) -> list[tuple[int, int, int, int]]:
     """Directory entries ``(tile_id, run_length, length, offset)``."""
     n, pos = _varint(data, 0)
@@ -94,6 +105,8 @@ class PMTiles:
     min_zoom: int
     max_zoom: int
     _header: tuple[Any, ...] = field(repr=False, default=())
+    _root: list[tuple[int, int, int, int]] = field(repr=False, default_factory=list)
+    _leaves: dict[tuple[int, int], list[tuple[int, int, int, int]]] = field(repr=False, default_factory=dict)
 
     def _read(self, offset: int, length: int) -> bytes:
         with open(self.path, "rb") as fh:
@@ -101,8 +114,15 @@ class PMTiles:
             return fh.read(length)
 
     def _directory(self, offset: int, length: int) -> list[tuple[int, int, int, int]]:
-        data = self._read(offset, length)
-        return _entries(gzip.decompress(data) if self._header[14] == 2 else data)
+        """The directory at ``offset``: the root parsed once at opening, leaf directories kept once read."""
+        if (offset, length) == (self._header[2], self._header[3]):
+            return self._root
+        entries = self._leaves.get((offset, length))
+        if entries is None:
+            if len(self._leaves) >= _MAX_LEAVES:
+                self._leaves.clear()
+            entries = self._leaves[(offset, length)] = _parse_directory(self._read(offset, length), self._header)
+        return entries
 
     def tile(self, z: int, x: int, y: int) -> bytes | None:
         """The tile at XYZ ``z/x/y``, or None when the archive has none there."""
@@ -152,13 +172,19 @@ def open_pmtiles(path: Path) -> PMTiles:
         raise InputError(f"basemap: {path.name} holds {media.replace('image/', '')} tiles; the web page draws "
                          "raster tiles (png, jpg, webp)", field="basemap")
     meta_raw = b""
-    if h[5]:
-        with open(path, "rb") as fh:
+    with open(path, "rb") as fh:
+        fh.seek(h[2])
+        root_raw = fh.read(h[3])
+        if h[5]:
             fh.seek(h[4])
             meta_raw = fh.read(h[5])
+    try:
+        root = _parse_directory(root_raw, h)
+    except (OSError, EOFError, IndexError, zlib.error) as exc:
+        raise InputError(f"basemap: {path.name} has an unreadable root directory ({exc})", field="basemap") from None
     try:
         meta = json.loads((gzip.decompress(meta_raw) if internal == 2 else meta_raw) or b"{}")
     except (OSError, ValueError):
         meta = {}
     credit = str(meta.get("attribution", "")) if isinstance(meta, dict) else ""
-    return PMTiles(path, media, credit, int(h[17]), int(h[18]), h)
+    return PMTiles(path, media, credit, int(h[17]), int(h[18]), h, root)

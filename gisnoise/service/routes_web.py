@@ -11,6 +11,7 @@ from fastapi.staticfiles import StaticFiles
 
 from gisnoise import __version__
 from gisnoise.data import data_path
+from gisnoise.errors import InputError
 from gisnoise.service.basemap import TILE_URL
 from gisnoise.service.deps import StateDep
 from gisnoise.service.errors import ApiError
@@ -50,10 +51,15 @@ def config(state: StateDep) -> Response:
 
     s = state.settings
     tile_url, credit = s.tile_url, s.tile_attribution
+    zooms = None
     if state.basemap is not None:  # gisnoise serve --basemap FILE.mbtiles
-        tile_url, credit = TILE_URL, state.basemap.attribution
+        try:
+            served = state.basemap.opened()
+        except InputError as exc:  # the served file was removed or replaced by one that is not a basemap
+            raise ApiError(503, f"path: the basemap cannot be read now: {exc}", field="path") from None
+        tile_url, credit, zooms = TILE_URL, served.attribution, [served.min_zoom, served.max_zoom]
     body = {"version": __version__, "tile_url": tile_url, "tile_attribution": credit,
-            "basemap_zoom": None if state.basemap is None else [state.basemap.min_zoom, state.basemap.max_zoom],
+            "basemap_zoom": zooms,
             "api_key_required": bool(s.api_keys),
             "sample_route": _sample_route_path() is not None, "palette": palette_doc()}
     return Response(json.dumps(body), media_type=MediaType.json.value)

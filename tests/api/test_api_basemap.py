@@ -26,18 +26,18 @@ def _png(rgb: tuple[int, int, int]) -> bytes:
     return buf.getvalue()
 
 
-def make_mbtiles(path: Path, fmt: str = "png") -> Path:
+def make_mbtiles(path: Path, fmt: str = "png", *, z1: dict = Z1, credit: str = CREDIT) -> Path:
     """Zooms 0-3 of the whole world, in the TMS rows MBTiles stores (row 0 in the south)."""
     con = sqlite3.connect(path)
     con.execute("CREATE TABLE metadata (name TEXT, value TEXT)")
     con.execute("CREATE TABLE tiles (zoom_level INTEGER, tile_column INTEGER, tile_row INTEGER, tile_data BLOB)")
     con.executemany("INSERT INTO metadata VALUES (?, ?)", [("name", "test"), ("format", fmt),
-                                                           ("attribution", CREDIT)])
+                                                           ("attribution", credit)])
     land = _png(LAND)
     for z in range(4):
         for x in range(1 << z):
             for y in range(1 << z):
-                data = _png(Z1[(x, y)]) if z == 1 else land
+                data = _png(z1[(x, y)]) if z == 1 else land
                 con.execute("INSERT INTO tiles VALUES (?, ?, ?, ?)", (z, x, (1 << z) - 1 - y, data))
     con.commit()
     con.close()
@@ -54,7 +54,8 @@ def _varint(n: int) -> bytes:
             return bytes(out)
 
 
-def make_pmtiles(path: Path, *, gzip_dirs: bool = False, tile_type: int = 2, internal: int | None = None) -> Path:
+def make_pmtiles(path: Path, *, gzip_dirs: bool = False, tile_type: int = 2, internal: int | None = None,
+                 z1: dict = Z1, credit: str = CREDIT) -> Path:
     """The same tiles as :func:`make_mbtiles` in a PMTiles v3 archive written by the specification's layout:
     tile ids along the Hilbert curve (the spec's own examples fix them: z1 (0,0) 1, (0,1) 2, (1,1) 3, (1,0) 4)."""
     import gzip
@@ -63,7 +64,7 @@ def make_pmtiles(path: Path, *, gzip_dirs: bool = False, tile_type: int = 2, int
 
     hilbert1 = {(0, 0): 1, (0, 1): 2, (1, 1): 3, (1, 0): 4}
     tiles = {0: _png(LAND)}
-    for (x, y), rgb in Z1.items():
+    for (x, y), rgb in z1.items():
         tiles[hilbert1[(x, y)]] = _png(rgb)
     from gisnoise.service.pmtiles import zxy_to_tileid
 
@@ -84,7 +85,7 @@ def make_pmtiles(path: Path, *, gzip_dirs: bool = False, tile_type: int = 2, int
         last = i
     d += b"".join(_varint(1) for _ in ids) + b"".join(_varint(len(tiles[i])) for i in ids)
     d += b"".join(_varint(0 if k else offsets[k] + 1) for k in range(len(ids)))  # contiguous: 0 after the first
-    meta = json.dumps({"attribution": CREDIT}).encode()
+    meta = json.dumps({"attribution": credit}).encode()
     comp = internal or (2 if gzip_dirs else 1)
     if comp == 2:
         d, meta = gzip.compress(d), gzip.compress(meta)
@@ -114,6 +115,53 @@ def test_tiles_are_served_in_the_xyz_scheme(make_client, tmp_path, kind):
         assert Image.open(io.BytesIO(r.content)).convert("RGB").getpixel((128, 128)) == rgb
     assert client.get("/basemap/4/0/0").status_code == 404  # beyond the file's zooms
     assert client.get("/basemap/1/2/0").status_code == 404  # no such tile at zoom 1
+
+
+@pytest.mark.parametrize("kind", ["mbtiles", "pmtiles-gzip"])
+def test_a_replaced_basemap_file_serves_its_new_tiles_and_an_unchanged_one_stays_open(make_client, tmp_path,
+                                                                                      monkeypatch, kind):
+    import os
+
+    from gisnoise.service import basemap, pmtiles
+
+    opened = {"connections": 0, "directories": 0}
+    connect, parse = sqlite3.connect, pmtiles._parse_directory
+
+    def counting_connect(*a, **kw):
+        opened["connections"] += 1
+        return connect(*a, **kw)
+
+    def counting_parse(*a, **kw):
+        opened["directories"] += 1
+        return parse(*a, **kw)
+
+    monkeypatch.setattr(basemap.sqlite3, "connect", counting_connect)
+    monkeypatch.setattr(pmtiles, "_parse_directory", counting_parse)
+    make = make_mbtiles if kind == "mbtiles" else lambda p, **kw: make_pmtiles(p, gzip_dirs=True, **kw)
+    path = make(tmp_path / f"world.{kind[:7]}")
+    client = make_client(basemap=path)
+    opens = dict(opened)
+
+    def colours():
+        got = {}
+        for x, y in Z1:
+            r = client.get(f"/basemap/1/{x}/{y}")
+            assert r.status_code == 200
+            got[(x, y)] = Image.open(io.BytesIO(r.content)).convert("RGB").getpixel((128, 128))
+        return got
+
+    assert colours() == Z1 and colours() == Z1
+    # eight tiles of an unchanged file: one connection (MBTiles), the root directory parsed at opening (PMTiles)
+    assert opened == ({**opens, "connections": opens["connections"] + 1} if kind == "mbtiles" else opens)
+    other = {k: tuple(255 - c for c in rgb) for k, rgb in Z1.items()}
+    new = make(tmp_path / f"new.{kind[:7]}", z1=other, credit="Other tiles")
+    os.replace(new, path)
+    assert colours() == other
+    assert client.get("/config.json").json()["tile_attribution"] == "Other tiles"
+    path.unlink()
+    for url in ("/basemap/1/0/0", "/config.json"):
+        r = client.get(url)
+        assert r.status_code == 503 and "no such file" in r.json()["detail"], url
 
 
 def test_no_basemap_no_tiles(client):
