@@ -145,7 +145,9 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
             handles += [Line2D([], [], marker="^", ls="", color="black", label="start"),
                         Line2D([], [], marker="s", ls="", color="black", label="end")]
         handles.append(Line2D([], [], color="black", lw=0.7, label=f"{metric} contours, dB(A)"))
-        ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.85)
+        # below the map, not over it: no corner of a map is sure to be empty
+        fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4), fontsize=8,
+                   frameon=False)
         cb = fig.colorbar(im, ax=ax, shrink=0.9, extend="max", ticks=bounds[:-1], aspect=30)
         cb.set_label(f"{metric}, dB(A) (colours of DIN 18005-2, 5 dB classes)")
         _scale_bar(ax, left, bottom, right - left, top - bottom)
