@@ -21,6 +21,10 @@ number) and server-side (``1 - evaluate / total``, ``total`` the service's own
 ``Server-Timing`` entry from the request's arrival in the app to its answer's head:
 without the client's HTTP stack, the connection and the server's HTTP parser).
 
+``--baseline-tree DIR`` runs the service of another source tree (a worktree of an earlier commit)
+and this tree's side by side, one client, request by request alternating, and prints both, their
+ratio and whether the answers are byte-identical.
+
 ``--compare-stacks`` runs uvicorn's plain stack (``--loop asyncio --http h11``) and its fast
 one (``uvloop``, ``httptools``; what ``gisnoise serve`` picks when they are installed) side by
 side in one run, single-client rounds interleaved, and prints both and their ratio.
@@ -77,16 +81,18 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_server(data: Path, stack: tuple[str, str] | None = None) -> tuple[subprocess.Popen, str]:
+def start_server(data: Path, stack: tuple[str, str] | None = None, tree: Path = REPO) -> tuple[subprocess.Popen, str]:
     """uvicorn on the app factory; ``stack``: its ``(--loop, --http)`` (default: uvicorn's choice, as ``gisnoise
-    serve``)."""
+    serve``); ``tree``: the source tree whose ``gisnoise`` it serves (default this one)."""
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("GISNOISE_")}
     env.update(GISNOISE_DATA_DIR=str(data), GISNOISE_TILE_URL="", GISNOISE_WORKERS="1",
-               GISNOISE_SEED_CARDS_DIR=str(REPO / "gisnoise" / "data" / "cards"))
+               GISNOISE_SEED_CARDS_DIR=str(tree / "gisnoise" / "data" / "cards"))
+    if tree != REPO:
+        env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [os.environ.get("PYTHONPATH")])])
     proc = subprocess.Popen([sys.executable, "-m", "uvicorn", "gisnoise.service.app:create_app", "--factory", "--host",
                              "127.0.0.1", "--port", str(port), "--log-level", "warning",
-                             *(("--loop", stack[0], "--http", stack[1]) if stack else ())], env=env, cwd=str(REPO))
+                             *(("--loop", stack[0], "--http", stack[1]) if stack else ())], env=env, cwd=str(tree))
     url = f"http://127.0.0.1:{port}"
     end = time.monotonic() + 60
     while time.monotonic() < end:
@@ -260,6 +266,63 @@ def compare_stacks(requests: int, max_s: float) -> int:
     return 1 if errors else 0
 
 
+def compare_trees(baseline: Path, requests: int) -> int:
+    """POST /contours from one client to the service of ``baseline`` (another source tree, e.g. a worktree of an
+    earlier commit) and of this tree, request by request in alternating order."""
+    names = {"baseline": baseline.resolve(), "this tree": REPO}
+    out: dict[str, dict[str, list[float]]] = {n: {"lat": [], "eval": [], "total": []} for n in names}
+    bodies: dict[str, set[bytes]] = {n: set() for n in names}
+    errors: list[str] = []
+    with tempfile.TemporaryDirectory(prefix="gisnoise-bench-") as tmp:
+        servers = {n: start_server(Path(tmp) / str(i), tree=t) for i, (n, t) in enumerate(names.items())}
+        clients = {n: httpx.Client(timeout=120) for n in names}
+        try:
+            for n, (_, url) in servers.items():
+                for _ in range(5):
+                    clients[n].post(url + "/contours", json=typical_request())  # warm-up
+            for i in range(requests):
+                for n in (list(names) if i % 2 == 0 else list(names)[::-1]):
+                    t0 = time.perf_counter()
+                    r = clients[n].post(servers[n][1] + "/contours", json=typical_request())
+                    dt = time.perf_counter() - t0
+                    if r.status_code != 200:
+                        errors.append(f"{n}: {r.status_code} {r.text[:200]}")
+                        continue
+                    timing = dict(part.strip().split(";dur=") for part in r.headers["server-timing"].split(","))
+                    out[n]["lat"].append(dt)
+                    out[n]["eval"].append(float(timing["evaluate"]) / 1000)
+                    out[n]["total"].append(float(timing["total"]) / 1000)
+                    bodies[n].add(r.content)
+        finally:
+            for proc, _ in servers.values():
+                proc.terminate()
+                proc.wait(30)
+    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print(f"POST /contours, one client, {requests} requests to each service, alternating:")
+    med: dict[str, dict[str, float]] = {}
+    for n, d in out.items():
+        lat, ev, tot = d["lat"], d["eval"], d["total"]
+        if not lat:
+            continue
+        m = med[n] = {"p50": pct(lat, 50), "p95": pct(lat, 95), "eval": statistics.median(ev),
+                      "out_c": statistics.median([a - b for a, b in zip(lat, ev, strict=True)]),
+                      "out_s": statistics.median([a - b for a, b in zip(tot, ev, strict=True)]),
+                      "sh_c": statistics.median([1 - b / a for a, b in zip(lat, ev, strict=True)]),
+                      "sh_s": statistics.median([1 - b / a for a, b in zip(tot, ev, strict=True)])}
+        print(f"  {n} ({names[n]}): p50 {m['p50'] * 1000:.1f} ms, p95 {m['p95'] * 1000:.1f} ms, evaluator "
+              f"{m['eval'] * 1000:.1f} ms; outside the evaluator client-side {m['out_c'] * 1000:.2f} ms "
+              f"({100 * m['sh_c']:.1f} %), server-side {m['out_s'] * 1000:.2f} ms ({100 * m['sh_s']:.1f} %)")
+    if len(med) == 2:
+        a, b = med["baseline"], med["this tree"]
+        print(f"ratio this tree / baseline: time outside the evaluator client-side {b['out_c'] / a['out_c']:.3f}, "
+              f"server-side {b['out_s'] / a['out_s']:.3f}; p50 {b['p50'] / a['p50']:.3f}")
+        same = len(bodies["baseline"]) == 1 and bodies["baseline"] == bodies["this tree"]
+        print(f"answers byte-identical: {same}")
+    for e in errors[:5]:
+        print("error:", e)
+    return 1 if errors else 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--requests", type=int, default=40, help="typical contour requests (default 40)")
@@ -268,6 +331,9 @@ def main() -> int:
     ap.add_argument("--skip-jobs", action="store_true", help="skip the queued large jobs (part 3)")
     ap.add_argument("--compare-stacks", action="store_true",
                     help="only POST /contours, one client: uvicorn's asyncio+h11 against uvloop+httptools, interleaved")
+    ap.add_argument("--baseline-tree", type=Path, default=None,
+                    help="only POST /contours, one client: the service of another source tree (a worktree of an "
+                         "earlier commit) against this tree's, request by request alternating")
     ap.add_argument("--max-seconds", type=float, default=120, help="time bound of each load phase, s")
     ap.add_argument("--jobs", type=int, default=8, help="large jobs queued at once (default 8)")
     ap.add_argument("--job-seconds", type=float, default=60, help="watch the queued jobs this long, s")
@@ -278,6 +344,8 @@ def main() -> int:
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     if args.compare_stacks:
         return compare_stacks(args.requests, args.max_seconds)
+    if args.baseline_tree is not None:
+        return compare_trees(args.baseline_tree, args.requests)
     direct_baseline(1)  # imports, kernels loaded
     base, t_eval = direct_baseline(5)
     with tempfile.TemporaryDirectory(prefix="gisnoise-bench-") as tmp:

@@ -135,3 +135,22 @@ def test_the_core_reaches_shapely_only_through_shapes():
         bad += [f"{rel}: {d}" for d in direct]
         bad += [f"{rel}: shapes.{u} is not offered" for u in sorted(used - shapes.NAMES)]
     assert not bad, "\n".join(bad)
+
+
+def test_ring_polygons_check_and_orient_as_shapely_does(path):
+    """Areas, validity and orientation of polygons in ragged arrays: the unit truths of each polygon."""
+    cw_square = [(0, 0), (0, 2), (2, 2), (2, 0), (0, 0)]  # exterior clockwise: reversed
+    ccw_hole = [(0.5, 0.5), (1, 0.5), (1, 1), (0.5, 1), (0.5, 0.5)]  # hole counter-clockwise: reversed
+    bow_tie = [(0, 0), (1, 1), (1, 0), (0, 1), (0, 0)]  # self-crossing: invalid, signed halves cancel
+    triangle = [(3, 0), (4, 0), (3, 1), (3, 0)]  # counter-clockwise already
+    sliver = [(0, 0), (1, 0), (2, 0), (0, 0)]  # no area: invalid
+    rings = [cw_square, ccw_hole, bow_tie, triangle, sliver]
+    coords = np.array([p for r in rings for p in r], dtype=float)
+    ring_off = np.cumsum([0] + [len(r) for r in rings])
+    poly_off = np.array([0, 2, 3, 4, 5])
+    area, valid, oriented, pos = shapes.ring_polygons(coords, ring_off, poly_off)
+    np.testing.assert_array_equal(area, [3.75, 0.0, 0.5, 0.0])
+    np.testing.assert_array_equal(shapes.ring_polygon_areas(coords, ring_off, poly_off), area)
+    assert valid.tolist() == [True, False, True, False] and oriented.tolist() == [True, False, True, False]
+    want = [cw_square[::-1], ccw_hole[::-1], triangle]
+    np.testing.assert_array_equal(pos, np.array([p for r in want for p in r], dtype=float))

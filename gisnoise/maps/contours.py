@@ -34,10 +34,10 @@ import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
-from shapely.geometry import LineString, MultiLineString, MultiPolygon, Polygon, mapping
+from shapely.geometry import LineString, Polygon
 from shapely.geometry.polygon import orient
 
 from gisnoise.errors import InputError
@@ -122,9 +122,14 @@ def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
         x, z = x[::-1], z[:, ::-1]
     if y.size > 1 and y[1] < y[0]:  # north-up rasters: rows run southwards
         y, z = y[::-1], z[::-1, :]
-    zz = z if np.isfinite(z).all() else np.ma.masked_invalid(z)  # a mask costs contourpy time: only when needed
-    return contourpy.contour_generator(x, y, zz,
-                                       line_type="Separate", fill_type="OuterOffset")
+    finite = np.isfinite(z)
+    # contourpy.contour_generator(x, y, np.ma.masked_invalid(z), line_type="Separate", fill_type="OuterOffset")
+    # builds this generator, after a pass of numpy.ma over z that costs more than a band's contours
+    xx, yy = np.meshgrid(x, y)
+    return contourpy.SerialContourGenerator(
+        xx, yy, np.ascontiguousarray(z), cast(Any, None) if finite.all() else ~finite, corner_mask=True,
+        line_type=contourpy.LineType.Separate, fill_type=contourpy.FillType.OuterOffset, quad_as_tri=False,
+        z_interp=contourpy.ZInterp.Linear, x_chunk_size=0, y_chunk_size=0)
 
 
 def _polygons(points: Sequence[np.ndarray], offsets: Sequence[np.ndarray]) -> list[Polygon]:
@@ -208,15 +213,18 @@ def _bulk_wgs84(arrays: list[np.ndarray], tr: Any) -> np.ndarray:
 
 
 def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[tuple[float, float | None]],
-                     lv: list[float], tr: Any) -> tuple[list[MultiPolygon | None], list[list[np.ndarray] | None]]:
-    """Isobands (one per bound) and isolines (one per level, as their lines' position arrays) of one band,
-    in WGS84, finished.
+                     lv: list[float], tr: Any) -> tuple[list[list[list[np.ndarray]] | None], list[list[np.ndarray] | None]]:
+    """Isobands (one per bound) and isolines (one per level) of one band, in WGS84, finished and rounded.
 
-    One contour generator serves every level; the points of all levels are transformed to
-    WGS84 in one call and snapped to :data:`PRECISION_DEG` together (:func:`_snapped_pieces`);
-    repair and orientation as :func:`isobands` and :func:`isolines` define them (exterior rings
-    counter-clockwise, holes clockwise).  An isoline's line is the array of its snapped positions
-    (what a LineString of them holds).
+    An isoband is a list of polygons, each the list of its rings' position arrays (exterior
+    first); an isoline the list of its lines' position arrays; positions rounded as they are
+    written (:func:`_rounded`).  One contour generator serves every level; the points of all
+    levels are transformed to WGS84 in one call and snapped to :data:`PRECISION_DEG` together
+    (:func:`_snapped_buffer`).  Repair and orientation as :func:`isobands` and :func:`isolines`
+    define them (exterior rings counter-clockwise, holes clockwise): a polygon whose snapped rings
+    are closed is checked, and oriented when valid, by GEOS for all such polygons at once
+    (:func:`gisnoise.geo.shapes.ring_polygons`); any other goes through GEOS's repair and
+    precision reduction on its own (:func:`_repaired`).
     """
     nb, nl = len(bounds), len(lv)
     if z.ndim != 2 or z.shape[0] < 2 or z.shape[1] < 2 or not np.isfinite(z).any():
@@ -243,44 +251,115 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
             if len(seg) >= 2:
                 segs.append(seg)
                 seg_level.append(j)
+    nr = len(rings)
     pieces = rings + segs
     wgs = _bulk_wgs84(pieces, tr)
     ends = np.cumsum([len(p) for p in pieces], dtype=np.intp)
-    snapped = _snapped_pieces(wgs, ends)
-    wrings = np.split(wgs, ends[:len(rings)])[:len(rings)] if rings else []
-    srings = snapped[:len(rings)]
-    closed = [len(q) >= 4 and not np.any(q[0] != q[-1]) for q in srings]  # a ring that collapses: GEOS repairs
-    bands: list[list[Polygon]] = [[] for _ in range(nb)]
-    for b, i0, n in polys:
-        geom = Polygon(wrings[i0], wrings[i0 + 1:i0 + n])
-        if geom.is_empty or geom.area == 0:
-            continue
-        # snapped to the grid in NumPy; GEOS's precision reduction (which also repairs) only where that is invalid
-        g = Polygon(srings[i0], srings[i0 + 1:i0 + n]) if all(closed[i0:i0 + n]) else None
-        if g is None or not g.is_valid:
-            g = shapely.set_precision(shapely.make_valid(geom), PRECISION_DEG)
-        for part in _valid_polygons(g):
-            if part.area > 0:
-                bands[b].append(orient(part, sign=1.0))
+    q, starts = _snapped_buffer(wgs, ends)  # piece k: q[starts[k]:starts[k + 1]]
+    out = _rounded(q[starts[nr]:], True)  # the lines' positions as written
+    bands = _finished_polygons(polys, nb, rings, wgs, ends, q, starts)
     lines: list[list[np.ndarray]] = [[] for _ in range(nl)]
-    for j, pts in zip(seg_level, snapped[len(rings):], strict=True):
-        if len(pts) >= 2:
-            lines[j].append(pts)
-    return [MultiPolygon(p) if p else None for p in bands], [ln if ln else None for ln in lines]
+    bl = starts[nr:].tolist()
+    for i, j in enumerate(seg_level):
+        if bl[i + 1] - bl[i] >= 2:
+            lines[j].append(out[bl[i] - bl[0]:bl[i + 1] - bl[0]])
+    return [p if p else None for p in bands], [ln if ln else None for ln in lines]
 
 
-def _snapped_pieces(pts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
-    """Each piece ``pts[ends[i - 1]:ends[i]]`` (rings and lines) on the :data:`PRECISION_DEG` grid, consecutive
-    repeats within a piece dropped (as GEOS's snapping does), in one pass of NumPy."""
-    if not len(ends):
+def _finished_polygons(polys: list[tuple[int, int, int]], nb: int, rings: list[np.ndarray], wgs: np.ndarray,
+                       ends: np.ndarray, q: np.ndarray, starts: np.ndarray) -> list[list[list[np.ndarray]]]:
+    """The isobands' polygons (``polys``: bound, first ring, ring count) as lists of rounded ring position arrays.
+
+    ``wgs``: every piece's projected positions (piece ``k`` ends at ``ends[k]``); ``q``: the snapped ones (piece
+    ``k`` is ``q[starts[k]:starts[k + 1]]``).  As :func:`isobands` and the old one-polygon-at-a-time code define
+    it: a polygon without area before snapping is left out; one whose snapped rings stay closed and make a valid
+    polygon is kept as snapped, oriented; any other is repaired by GEOS (:func:`_repaired`).  The checks and the
+    orientation are GEOS's, for all polygons at once (:func:`gisnoise.geo.shapes.ring_polygons`).
+    """
+    bands: list[list[list[np.ndarray]]] = [[] for _ in range(nb)]
+    if not polys:
+        return bands
+    nr = len(rings)
+    wstarts = np.zeros(nr + 1, np.intp)
+    wstarts[1:] = ends[:nr]
+    n_pos = np.diff(starts[:nr + 1])
+    # snapped rings that stay closed (a ring that collapses is left to GEOS's repair)
+    closed = ((n_pos >= 4) & ~np.any(q[starts[:nr]] != q[starts[1:nr + 1] - 1], axis=1)).tolist()
+    ok = [all(closed[i0:i0 + n]) for _, i0, n in polys]
+    fast = [p for p, k in zip(polys, ok, strict=True) if k]
+    ring_ids = np.array([i for _, i0, n in fast for i in range(i0, i0 + n)], np.intp)
+    poly_off = np.cumsum([0] + [n for _, _, n in fast], dtype=np.intp)
+    if np.any(wgs[wstarts[:-1]] != wgs[wstarts[1:] - 1]):  # contourpy closes its rings: never met, but exact
+        raw_area = np.array([Polygon(w[0], w[1:]).area for w in
+                             ([wgs[wstarts[k]:wstarts[k + 1]] for k in range(i0, i0 + n)] for _, i0, n in fast)])
+    else:
+        raw_area = shapely.ring_polygon_areas(*_ragged(wgs, wstarts, ring_ids), poly_off)
+    _, valid, oriented, pos = shapely.ring_polygons(*_ragged(q, starts, ring_ids), poly_off)
+    pos = _rounded(pos, True)
+    lens = n_pos.tolist()
+    at = 0  # where the next oriented polygon's positions start
+    k = 0  # the next polygon of ``fast``
+    for (b, i0, n), fine in zip(polys, ok, strict=True):
+        if not fine:
+            bands[b].extend(_repaired(rings, wgs, ends, i0, n))
+            continue
+        if raw_area[k] == 0:
+            pass
+        elif oriented[k]:
+            poly = []
+            for m in range(i0, i0 + n):
+                poly.append(pos[at:at + lens[m]])
+                at += lens[m]
+            bands[b].append(poly)
+        elif not valid[k]:
+            bands[b].extend(_repaired(rings, wgs, ends, i0, n))
+        k += 1
+    return bands
+
+
+def _ragged(pts: np.ndarray, starts: np.ndarray, ring_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rings ``ring_ids`` (pieces ``pts[starts[k]:starts[k + 1]]``) as one position array and its ring offsets."""
+    off = np.zeros(len(ring_ids) + 1, np.intp)
+    np.cumsum(starts[ring_ids + 1] - starts[ring_ids], out=off[1:])
+    if len(ring_ids) == 0 or ring_ids[-1] == len(ring_ids) - 1:  # increasing: rings 0 .. n - 1, one slice
+        return pts[starts[0]:starts[0] + off[-1]], off
+    idx = np.concatenate([np.arange(starts[k], starts[k + 1]) for k in ring_ids]) if len(ring_ids) else \
+        np.zeros(0, np.intp)
+    return pts[idx], off
+
+
+def _repaired(rings: list[np.ndarray], wgs: np.ndarray, ends: np.ndarray, i0: int, n: int) -> list[list[np.ndarray]]:
+    """One polygon (rings ``i0 .. i0 + n - 1`` of ``rings``, projected in ``wgs``) made valid by GEOS and snapped to
+    :data:`PRECISION_DEG`, oriented, as the lists of its parts' ring position arrays (rounded)."""
+    wr = [wgs[(ends[k - 1] if k else 0):ends[k]] for k in range(i0, i0 + n)]
+    geom = Polygon(wr[0], wr[1:])
+    if geom.is_empty or geom.area == 0:
         return []
+    g = shapely.set_precision(shapely.make_valid(geom), PRECISION_DEG)
+    return [[_rounded(np.asarray(ring.coords, dtype=float)[:, :2], True) for ring in (o.exterior, *o.interiors)]
+            for o in (orient(part, sign=1.0) for part in _valid_polygons(g) if part.area > 0)]
+
+
+def _snapped_buffer(pts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each piece ``pts[ends[i - 1]:ends[i]]`` (rings and lines) on the :data:`PRECISION_DEG` grid, consecutive
+    repeats within a piece dropped (as GEOS's snapping does), in one pass of NumPy: the kept positions and where
+    each piece starts among them (one more: the end)."""
+    if not len(ends):
+        return np.zeros((0, 2)), np.zeros(1, np.intp)
     q = np.rint(pts / PRECISION_DEG) * PRECISION_DEG
     keep = np.ones(len(q), bool)
     if len(q) > 1:
         np.any(q[1:] != q[:-1], axis=1, out=keep[1:])
     keep[ends[:-1]] = True  # the first position of every piece
-    kept = np.cumsum(keep)[ends - 1]  # positions kept up to the end of each piece (pieces are not empty)
-    return np.split(q[keep], kept[:-1])
+    starts = np.zeros(len(ends) + 1, np.intp)
+    starts[1:] = np.cumsum(keep)[ends - 1]  # positions kept up to the end of each piece (pieces are not empty)
+    return q[keep], starts
+
+
+def _snapped_pieces(pts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
+    """:func:`_snapped_buffer` as one array per piece."""
+    q, starts = _snapped_buffer(pts, ends)
+    return np.split(q, starts[1:-1]) if len(ends) else []
 
 
 def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[dict]:
@@ -321,52 +400,24 @@ def _features(result: MapResult, levels: Any, metrics: Sequence[str] | None, *, 
             if geom is None:
                 continue
             label = f"{name} >= {lo:g} {unit}" if hi is None else f"{name} {lo:g}-{hi:g} {unit}"
-            features.append(_feature(geom, arrays, {"metric": name, "level": lo, "level_max": hi, "kind": "isoband",
-                                            "unit": unit, "name": label, "clipped": bool(top >= lo)}))
+            coords = geom if arrays else [[ring.tolist() for ring in poly] for poly in geom]
+            features.append({"type": "Feature", "geometry": {"type": "MultiPolygon", "coordinates": coords},
+                             "properties": {"metric": name, "level": lo, "level_max": hi, "kind": "isoband",
+                                            "unit": unit, "name": label, "clipped": bool(top >= lo)}})
         for lo, ml in zip(mlv, lines, strict=True):
             if ml is None:
                 continue
-            features.append(_line_feature(ml, arrays, {
+            features.append({"type": "Feature", "geometry": {
+                "type": "MultiLineString", "coordinates": ml if arrays else [a.tolist() for a in ml]}, "properties": {
                 "metric": name, "level": lo, "level_max": None, "kind": "isoline", "unit": unit,
-                "name": f"{name} {lo:g} {unit}", "clipped": bool(top >= lo)}))
+                "name": f"{name} {lo:g} {unit}", "clipped": bool(top >= lo)}})
     return features
 
 
-def _coords(ring: Any, arrays: bool) -> Any:
-    """A ring's or line's positions rounded to 9 decimals (as :func:`round` does): lists, or an array."""
-    return _rounded(np.asarray(ring.coords, dtype=float)[:, :2], arrays)
-
-
 def _rounded(a: np.ndarray, arrays: bool) -> Any:
+    """Positions rounded to 9 decimals (as :func:`round` does): an array, or lists."""
     a = np.rint(a * 1e9) / 1e9
     return a if arrays else a.tolist()
-
-
-def _line_feature(lines: list[np.ndarray], arrays: bool, props: dict) -> dict:
-    """An isoline feature from its lines' position arrays (the coordinates a MultiLineString of them has)."""
-    return {"type": "Feature", "geometry": {"type": "MultiLineString",
-                                            "coordinates": [_rounded(a, arrays) for a in lines]}, "properties": props}
-
-
-def _feature(geom: Any, arrays: bool, props: dict) -> dict:
-    if isinstance(geom, MultiPolygon):
-        coords = [[_coords(p.exterior, arrays), *(_coords(h, arrays) for h in p.interiors)] for p in geom.geoms]
-        g = {"type": "MultiPolygon", "coordinates": coords}
-    elif isinstance(geom, MultiLineString):
-        g = {"type": "MultiLineString", "coordinates": [_coords(ln, arrays) for ln in geom.geoms]}
-    else:
-        g = _plain(mapping(geom))
-    return {"type": "Feature", "geometry": g, "properties": props}
-
-
-def _plain(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {k: _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, float):
-        return round(obj, 9)
-    return obj
 
 
 def contours_geojson(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> dict:

@@ -1,0 +1,198 @@
+"""The written contours against their definition, on fields made to break a contour writer.
+
+Fields: plateaus exactly at the levels, nodes a hair off a level, saddles, a checkerboard,
+single loud cells, NaN cells (scattered, a block, a whole column), levels reaching the
+grid's edge, noise.  For every isoband and isoline of ``contours_geojson``, with the
+positions taken back to the grid's CRS:
+
+* each vertex lies on its level by linear interpolation along the cell edge it sits on
+  (or, where NaN cells cut a cell corner off, along that corner's diagonal), or is a grid
+  node inside the band (the grid's edge, a NaN border, a plateau);
+* grid nodes clearly inside a band lie in its polygons, nodes clearly outside do not;
+* polygons are valid, exteriors counter-clockwise, holes clockwise, positions on the
+  1e-8 deg grid; ``clipped`` says whether the band's level reaches the grid's outer nodes;
+* the polygons checked and oriented all at once (:func:`gisnoise.geo.shapes.ring_polygons`)
+  equal those done one by one with shapely's ``orient`` (the shapely 1.8 path).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from affine import Affine
+from shapely.geometry import LinearRing, Point, shape
+
+from gisnoise.geo import WGS84, GridSpec, shapes, transformer, utm_crs
+from gisnoise.maps import contours, contours_geojson
+from gisnoise.maps.result import MapResult
+
+LEVELS = [45.0, 50.0, 55.0, 60.0, 65.0]
+CELL = 10.0
+TOL_CELLS = 2e-4  # snapping to 1e-8 deg and rounding move a vertex by under 1 mm: 1e-4 of a 10 m cell
+GRID = GridSpec(utm_crs(10.52, 52.26), Affine(CELL, 0.0, 603_000.0, 0.0, -CELL, 5_792_000.0), 41, 31)
+
+
+def _fields() -> dict[str, np.ndarray]:
+    ny, nx = GRID.height, GRID.width
+    v, u = np.mgrid[0:ny, 0:nx].astype(float)
+    rng = np.random.default_rng(11)
+    cone = 72.0 - 1.1 * np.hypot(u - 17.3, v - 13.6)
+    out = {"cone": cone, "plateaus_at_levels": np.round(cone), "plateaus_5db": np.round(cone / 5.0) * 5.0}
+    near = cone.copy()
+    near[np.abs(near - 55.0) < 0.6] = 55.0 + 1e-12  # nodes a hair above a level
+    near[np.abs(near - 50.0) < 0.6] = 50.0 - 1e-12  # and a hair below one
+    out["hair_off_levels"] = near
+    out["saddles"] = 55.0 + 12.0 * np.sin(u / 2.5) * np.sin(v / 2.5)
+    out["saddles_at_levels"] = 55.0 + 10.0 * np.round(np.sin(u * np.pi / 2) * np.sin(v * np.pi / 2))
+    out["checkerboard"] = 50.0 + 10.0 * ((u + v) % 2)
+    single = np.full((ny, nx), 40.0)
+    single[15, 20], single[1, 1], single[0, nx - 1], single[ny - 1, 7] = 70.0, 55.0, 66.0, 50.0
+    out["single_cells"] = single
+    scattered = cone.copy()
+    scattered[rng.random((ny, nx)) < 0.06] = np.nan
+    out["nan_scattered"] = scattered
+    block = out["saddles"].copy()
+    block[8:14, 10:19] = np.nan
+    block[:, 0] = np.nan
+    out["nan_block_and_column"] = block
+    out["ramp_to_the_edge"] = 68.0 - 0.6 * u
+    out["noise"] = np.round(55.0 + rng.normal(0.0, 6.0, (ny, nx)), 1)
+    return out
+
+
+FIELDS = _fields()
+
+
+def _grid_coords(ring: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """WGS84 positions -> column and row of the contour grid (cell centres at integers, rows northwards)."""
+    x, y = transformer(WGS84, GRID.crs).transform(ring[:, 0], ring[:, 1])
+    xs, ys = GRID.xs, GRID.ys[::-1]  # contourpy's rows run northwards
+    return (np.asarray(x) - xs[0]) / CELL, (np.asarray(y) - ys[0]) / CELL
+
+
+def _on_level(z: np.ndarray, u: float, v: float, levels: list[float], lo: float, hi: float | None) -> str | None:
+    """None when the vertex ``(u, v)`` lies on one of ``levels`` by linear interpolation along its cell's edge or
+    diagonal, or is a node whose value lies in the band ``[lo, hi]``; else what is wrong."""
+    ny, nx = z.shape
+    iu, iv = round(u), round(v)
+    du, dv = abs(u - iu), abs(v - iv)
+    top = np.inf if hi is None else hi
+    if du < TOL_CELLS and dv < TOL_CELLS and lo - 1e-9 <= z[iv, iu] <= top + 1e-9:
+        return None  # a node in the band
+    u0, v0 = min(int(np.floor(u)), nx - 2), min(int(np.floor(v)), ny - 2)
+    fu, fv = u - u0, v - v0
+    edges = []  # the cell edges (and cut-off corners' diagonals) the vertex may lie on: their ends and its fraction
+    if dv < TOL_CELLS:  # on a row: between columns u0 and u0 + 1
+        edges.append((z[iv, u0], z[iv, u0 + 1], fu))
+    if du < TOL_CELLS:  # on a column
+        edges.append((z[v0, iu], z[v0 + 1, iu], fv))
+    if abs(fu - fv) < TOL_CELLS:
+        edges.append((z[v0, u0], z[v0 + 1, u0 + 1], fu))
+    if abs(fu + fv - 1.0) < TOL_CELLS:
+        edges.append((z[v0, u0 + 1], z[v0 + 1, u0], fv))
+    for za, zb, t in edges:
+        level = za + t * (zb - za)
+        if any(abs(level - lv) <= abs(zb - za) * 2 * TOL_CELLS + 1e-9 for lv in levels):
+            return None
+    return f"({u:.5f}, {v:.5f}) on no level along {len(edges)} edges near it"
+
+
+_REPAIRED_WRONG = pytest.mark.xfail(strict=True, reason=(
+    "a row or plateau exactly at a level: contourpy's ring runs along it twice (self-intersection) and GEOS's "
+    "make_valid, which repairs it, also fills nodes of the next band (the text is kept byte-identical to earlier "
+    "releases here; to be fixed on its own)"))
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=_REPAIRED_WRONG) if n in ("saddles", "plateaus_5db")
+                                  else n for n in sorted(FIELDS)])
+def test_contours_lie_on_their_levels_and_bound_their_bands(name):
+    z = FIELDS[name]  # rows northwards (contour rows); the map holds them southwards
+    result = MapResult({"LAmax": z[::-1].copy()}, GRID, {"units": {"LAmax": "dB(A)"}})
+    doc = contours_geojson(result, LEVELS, metrics=["LAmax"])
+    zc = z  # rows northwards: row v of zc is contour row v
+    finite = np.isfinite(zc)
+    edge_max = np.nanmax(np.concatenate([zc[0], zc[-1], zc[:, 0], zc[:, -1]]))
+    # the contoured domain: nodes of a cell with at least three finite corners (a cell with one NaN corner
+    # keeps the triangle of the other three)
+    corners = finite[:-1, :-1].astype(int) + finite[1:, :-1] + finite[:-1, 1:] + finite[1:, 1:]
+    full = np.zeros_like(finite)
+    for dv in (0, 1):
+        for du in (0, 1):
+            full[dv:dv + corners.shape[0], du:du + corners.shape[1]] |= corners >= 3
+    domain = finite & full
+    bands = 0
+    for feat in doc["features"]:
+        p = feat["properties"]
+        lo, hi = p["level"], p["level_max"]
+        assert p["clipped"] == bool(edge_max >= lo)
+        if p["kind"] == "isoline":
+            for line in feat["geometry"]["coordinates"]:
+                a = np.asarray(line)
+                assert np.all(np.abs(a * 1e8 - np.rint(a * 1e8)) < 1e-4)
+                for u, v in zip(*_grid_coords(a), strict=True):
+                    bad = _on_level(zc, u, v, [lo], lo, lo)
+                    assert bad is None, f"{name} isoline {lo}: {bad}"
+            continue
+        bands += 1
+        geom = shape(feat["geometry"])
+        assert geom.is_valid, f"{name} band {lo}: {shapely.is_valid_reason(geom)}"
+        for poly, rings in zip(geom.geoms, feat["geometry"]["coordinates"], strict=True):
+            assert LinearRing(rings[0]).is_ccw and not any(LinearRing(h).is_ccw for h in rings[1:])
+            for ring in rings:
+                a = np.asarray(ring)
+                assert np.all(np.abs(a * 1e8 - np.rint(a * 1e8)) < 1e-4)  # on the 1e-8 deg grid
+                for u, v in zip(*_grid_coords(a), strict=True):
+                    bad = _on_level(zc, u, v, [lo] if hi is None else [lo, hi], lo, hi)
+                    assert bad is None, f"{name} band {lo}-{hi}: {bad}"
+            assert poly.area > 0
+        # point sampling: nodes clearly in the band are covered, nodes clearly outside are not
+        top = np.inf if hi is None else hi
+        vv, uu = np.nonzero(domain)
+        lon, lat = GRID.to_wgs84(GRID.xs[0] + CELL * uu, GRID.ys[::-1][0] + CELL * vv)
+        near = geom.boundary
+        for zi, x, y in zip(zc[vv, uu], lon, lat, strict=True):
+            pt = Point(x, y)
+            if min(abs(zi - lo), abs(zi - top)) < 1e-9 or near.distance(pt) < 3e-8:
+                continue  # a node at a level (its set may have no area) or on the boundary (a cut corner)
+            assert geom.contains(pt) == bool(lo <= zi < top), f"{name} band {lo}-{hi}: node at {zi} dB"
+    assert bands or not np.nanmax(zc) >= LEVELS[0]
+
+
+@pytest.mark.parametrize("name", sorted(FIELDS))
+def test_polygons_checked_at_once_equal_polygons_checked_one_by_one(name, monkeypatch):
+    """``ring_polygons`` on a band's snapped rings: shapely 2's vectorised calls give what ``orient`` gives per
+    polygon (the shapely 1.8 path), bit for bit, valid or not."""
+    z = FIELDS[name]
+    gen = contours._generator(GRID.xs, GRID.ys[::-1], z)
+    tr = transformer(GRID.crs, WGS84)
+    rings, counts = [], []
+    for lo, hi in zip(LEVELS, LEVELS[1:] + [float(np.nanmax(z)) + 1.0], strict=True):
+        if hi <= lo:
+            continue
+        pts, offs = gen.filled(lo, hi)
+        for pt, off in zip(pts, offs, strict=True):
+            rr = [pt[off[i]:off[i + 1]] for i in range(len(off) - 1)]
+            counts.append(len(rr))
+            rings += rr
+    if not rings:
+        pytest.skip("no band on this field")
+    wgs = contours._bulk_wgs84(rings, tr)
+    q, starts = contours._snapped_buffer(wgs, np.cumsum([len(r) for r in rings]))
+    closed = [e - s >= 4 and np.array_equal(q[s], q[e - 1]) for s, e in zip(starts[:-1], starts[1:], strict=True)]
+    keep, at = [], 0
+    for n in counts:
+        if all(closed[at:at + n]):
+            keep.append(range(at, at + n))
+        at += n
+    ids = np.array([k for r in keep for k in r])
+    coords = np.concatenate([q[starts[k]:starts[k + 1]] for k in ids])
+    ring_off = np.cumsum([0] + [starts[k + 1] - starts[k] for k in ids])
+    poly_off = np.cumsum([0] + [len(r) for r in keep])
+    monkeypatch.setattr(shapes, "SHAPELY2", True)
+    at_once = shapes.ring_polygons(coords, ring_off, poly_off)
+    monkeypatch.setattr(shapes, "SHAPELY2", False)
+    one_by_one = shapes.ring_polygons(coords, ring_off, poly_off)
+    for a, b in zip(at_once, one_by_one, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert at_once[2].sum() > 0
