@@ -34,8 +34,8 @@ import math
 
 import numpy as np
 
+from gisnoise.maps import _hemikernel as _hk
 from gisnoise.maps import _numba as _k
-from gisnoise.maps._hemikernel import _vectorize_gathers
 
 numba = _k.numba
 
@@ -45,6 +45,7 @@ N_JAC = 8
 """Jacobian columns per card (``p0 .. p7``)."""
 
 if numba is not None:
+    _vectorize_gathers = _hk._vectorize_gathers
     _ONE = np.float32(1.0)
     _ZERO = np.float32(0.0)
     _TINY = np.float32(1e-30)
