@@ -97,15 +97,41 @@ def test_dem_and_metrics_without_lamax():
 
 def test_p0_variance_alone_is_its_standard_deviation_everywhere():
     # dL/dp0 = 1 for an omnidirectional card without background: LAmax_std = LAeq_std = sqrt(var p0) exactly
-    cov = np.zeros((8, 8))
-    cov[0, 0] = 0.36
-    card = ModelCard(id="omni", vehicle="t", phase="horizontal", ansatz="paper-offset",
-                     parameters=dict(p0=70.0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
-                     reference_power_w=3000.0, covariance=tuple(map(tuple, cov)))
-    res = evaluate_grid(circle_flight(10), [card], grid_around(50.0, 9, 9), ground_h=0.0, uncertainty=True,
+    res = evaluate_grid(circle_flight(10), [omni_p0()], grid_around(50.0, 9, 9), ground_h=0.0, uncertainty=True,
                         engine="fast")
     for name in ("LAmax_std", "LAeq_std", "SEL_std"):
         np.testing.assert_allclose(res.bands[name], 0.6, atol=1e-6)
+
+
+def omni_p0(var=0.36):
+    """An omnidirectional card whose covariance is ``var`` on p0 alone: dL_UAV/dp0 = 1 at every instant."""
+    cov = np.zeros((8, 8))
+    cov[0, 0] = var
+    return ModelCard(id="omni", vehicle="t", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=70.0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0, covariance=tuple(map(tuple, cov)))
+
+
+@pytest.mark.filterwarnings("ignore:divide by zero encountered in log10:RuntimeWarning")  # lg P_el of P_el = 0
+@pytest.mark.filterwarnings("ignore:invalid value encountered in multiply:RuntimeWarning")  # its -inf times 0
+def test_silent_samples_add_nothing_in_both_engines():
+    # samples without power (motors off, a current dropout; make_map leaves them out, evaluate_grid takes them)
+    # are silent: they add no energy and no Jacobian (their dL/dp1 = lg P_el is -inf); without a background
+    # the p0 variance alone stays sqrt(var p0) exactly
+    traj = circle_flight(20, dt=2.0)
+    pw = traj.power_w.copy()
+    pw[5:9] = 0.0
+    traj = traj.with_(power_w=pw)
+    g = grid_around(40.0, 13, 11)
+    for engine in ("numpy", "fast"):
+        res = evaluate_grid(traj, [omni_p0()], g, ground_h=0.0, uncertainty=True, engine=engine)
+        for name in ("LAmax_std", "LAeq_std", "SEL_std"):
+            np.testing.assert_allclose(res.bands[name], 0.6, atol=1e-6, err_msg=f"{engine} {name}")
+    kw = dict(ground_h=0.0, uncertainty=True, background=True)  # with it the background's share, finite
+    ref = evaluate_grid(traj, [fitted()], g, engine="numpy", **kw)
+    fast = evaluate_grid(traj, [fitted()], g, engine="fast", **kw)
+    assert all(np.isfinite(ref.bands[n]).all() for n in BANDS)
+    assert_bands_agree(ref, fast, unique_maximum(traj, [fitted()], g, ground_h=0.0, background=True))
 
 
 def test_cells_below_the_floor_have_no_bands():

@@ -36,6 +36,9 @@ __all__ = ["UNCERTAINTY_ANSATZES", "uncertainty_bands", "uncertainty_refusal"]
 UNCERTAINTY_ANSATZES = ("paper", "paper-offset")
 """Ansatzes whose uncertainty bands the fast engine computes."""
 
+_SILENT_GAIN_DB = -1.0e4
+"""Gain of an instant without power in the Jacobian kernel: its energy underflows to the kernel's floor (2^-126)."""
+
 
 def uncertainty_refusal(cards: Sequence[ModelCard]) -> str | None:
     """Why the fast engine cannot give the uncertainty bands of ``cards`` (one line), or None when it can."""
@@ -85,9 +88,15 @@ def uncertainty_bands(traj: Trajectory, cards: Sequence[ModelCard], fl: FlightIn
     jc, cov = _card_rows(cards, used, background=background, min_distance_m=min_distance_m)
     _t, state, _src = eval_states(traj, int(substeps))
     ref_w = np.array([c.reference_power_w for c in cards], dtype=float)
-    lgp = np.log10(np.asarray(state["power_w"], dtype=float) / ref_w[fl.cidx])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lgp = np.log10(np.asarray(state["power_w"], dtype=float) / ref_w[fl.cidx])
     slot = {k: u for u, k in enumerate(used)}
     jo = np.array([_jk.N_JAC * slot[int(k)] for k in fl.cidx], dtype=np.int64)
+    # a silent instant (no power: gain and lg P_el -inf) adds no energy and no Jacobian of its own, only the
+    # background's (dL/dp7 = 1): a finite gain far below any level and lg P_el = 0 give exactly that
+    silent = ~(np.isfinite(fl.gain) & np.isfinite(lgp))
+    gain = np.where(silent, _SILENT_GAIN_DB, fl.gain)
+    lgp = np.where(silent, 0.0, lgp)
     nj = _jk.N_JAC * len(used)
     H, W = rc.grid.shape
     want_max = "LAmax" in metrics
@@ -108,7 +117,7 @@ def uncertainty_bands(traj: Trajectory, cards: Sequence[ModelCard], fl: FlightIn
         jmax = np.zeros((_jk.N_JAC, nr, W), np.float32)
         gsum = np.zeros((nj, nr, W))
         computed = np.zeros((nr, W), np.uint8)
-        _jk._jac_window_kernel(P, U, dh, rc.dh is not None, k, 0, 0, W, fl.src, fl.C, fl.gain, lgp, fl.cidx, jc, jo,
+        _jk._jac_window_kernel(P, U, dh, rc.dh is not None, k, 0, 0, W, fl.src, fl.C, gain, lgp, fl.cidx, jc, jo,
                                fl.w, fl.radius, emax, who, energy, jmax, gsum, computed)
         jm = jmax.astype(np.float64)
         var_max = np.einsum("prc,rcpq,qrc->rc", jm, cov[who], jm)  # the loudest instant's card's covariance

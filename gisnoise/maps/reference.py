@@ -371,7 +371,8 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
                 ew = e * weights[s0:s1]
                 energy += ew.sum(axis=1)
                 if gsum is not None and J is not None:
-                    gsum += np.einsum("cs,csp->cp", ew, J[:, :m, :])
+                    # a silent instant (no power: L = -inf) adds nothing, though its dL/dp1 is -inf
+                    gsum += np.einsum("cs,csp->cp", ew, np.where(ew[..., None] > 0, J[:, :m, :], 0.0))
                 if hemi:
                     fw = filled_weights(rcv, src_enu[s0:s1], att[s0:s1], card_idx[s0:s1], cardset.cards)
                     e_fill += float(np.sum(ew[valid] * fw[valid]))

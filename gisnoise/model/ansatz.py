@@ -155,7 +155,9 @@ class Ansatz:
             return l_uav, jac
         k = self.background_index
         total, w = add_background(l_uav, p[k])
-        jac = jac * w[..., None]
+        # where the UAV is silent (L_UAV = -inf, w = 0) only the background moves the level: w J -> 0
+        with np.errstate(invalid="ignore"):
+            jac = np.where(w[..., None] > 0, jac * w[..., None], 0.0)
         jac[..., k] = 1.0 - w
         return total, jac
 
