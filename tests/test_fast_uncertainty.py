@@ -69,12 +69,13 @@ def assert_bands_agree(ref, fast, unique=None):
 
 
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(ansatz=st.sampled_from(["paper", "paper-offset"]), background=st.booleans(), two_cards=st.booleans(),
-       p2=st.floats(-0.4, 0.4), p4=st.floats(-0.6, 0.6), p3=st.floats(-3, 3), p5=st.floats(-3, 3),
-       height=st.floats(20.0, 120.0), seed=st.integers(0, 2 ** 16))
-def test_fast_bands_equal_the_numpy_engines(ansatz, background, two_cards, p2, p4, p3, p5, height, seed):
-    phases = ("horizontal", "climb") if two_cards else ("horizontal",)
-    cards = [fitted(ansatz, ph, seed + i, p2=p2, p3=p3, p4=p4, p5=p5) for i, ph in enumerate(phases)]
+@given(ansatz=st.sampled_from(["paper", "paper-offset"]), ansatz2=st.sampled_from(["paper", "paper-offset"]),
+       background=st.booleans(), two_cards=st.booleans(), p2=st.floats(-0.4, 0.4), p4=st.floats(-0.6, 0.6),
+       p3=st.floats(-3, 3), p5=st.floats(-3, 3), height=st.floats(20.0, 120.0), seed=st.integers(0, 2 ** 16))
+def test_fast_bands_equal_the_numpy_engines(ansatz, ansatz2, background, two_cards, p2, p4, p3, p5, height, seed):
+    phases = ("horizontal", "climb") if two_cards else ("horizontal",)  # two cards: of one ansatz or of both
+    cards = [fitted(a, ph, seed + i, p2=p2, p3=p3, p4=p4, p5=p5)
+             for i, (ph, a) in enumerate(zip(phases, (ansatz, ansatz2), strict=False))]
     traj = circle_flight(16, height=height, dt=3.0, phases=phases)
     g = grid_around(40.0, 13, 11)
     kw = dict(ground_h=0.0, background=background, check_cards=False)
@@ -154,3 +155,16 @@ def test_refusals_name_the_field():
     with pytest.raises(CardError) as err:
         evaluate_grid(traj, [no_cov], g, ground_h=0.0, engine="fast", uncertainty=True)
     assert err.value.field == "covariance"
+
+
+def test_progress_covers_the_bands_and_ends_at_one():
+    seen = []
+    evaluate_grid(circle_flight(20), [fitted()], grid_around(40.0, 21, 17), ground_h=0.0, uncertainty=True,
+                  engine="fast", progress=seen.append, chunk_cells=21 * 2)
+    assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0)
+    assert seen[0] <= 0.25  # the levels' pass reports its part only
+    assert sum(f > 0.25 for f in seen) >= 4  # and the bands' pass reports as it goes
+    # no band asked: no Jacobian kernel, no bands
+    res = evaluate_grid(circle_flight(20), [fitted()], grid_around(40.0, 5, 5), ground_h=0.0, uncertainty=True,
+                        engine="fast", metrics=(), threshold_db=60.0)
+    assert [n for n in res.bands if "std" in n or "p95" in n] == []

@@ -22,11 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import Cancelled, CardError
-from gisnoise.flight import Trajectory
+from gisnoise.errors import Cancelled
 from gisnoise.maps import _numba_jac as _jk
 from gisnoise.maps.instants import FlightInstants, card_coefficients
-from gisnoise.maps.prepare import Z95, eval_states, require_covariances
+from gisnoise.maps.prepare import Z95
 from gisnoise.maps.receivers import Receivers
 from gisnoise.maps.threads import default_threads, map_threads, row_blocks
 from gisnoise.model import HemisphereCard, ModelCard
@@ -54,7 +53,6 @@ def _card_rows(cards: Sequence[ModelCard], used: Sequence[int], *, background: b
                min_distance_m: float) -> tuple[np.ndarray, np.ndarray]:
     """The kernel's per-card rows ``jc`` (:data:`~gisnoise.maps._numba_jac.JC_COLUMNS`) and each used card's
     covariance in the columns ``p0 .. p7`` (``(len(used), 8, 8)``; ``paper``'s ``p0`` row and column zero)."""
-    require_covariances([cards[k] for k in used])
     jc = np.zeros((len(cards), len(_jk.JC_COLUMNS)))
     cov = np.zeros((len(used), _jk.N_JAC, _jk.N_JAC))
     for u, k in enumerate(used):
@@ -69,38 +67,35 @@ def _card_rows(cards: Sequence[ModelCard], used: Sequence[int], *, background: b
     return jc, cov
 
 
-def uncertainty_bands(traj: Trajectory, cards: Sequence[ModelCard], fl: FlightInstants, rc: Receivers,
-                      metrics: Sequence[str], levels: dict[str, np.ndarray], *, substeps: int, background: bool,
-                      min_distance_m: float, threads: int | None = None, chunk_cells: int = 1 << 17,
+def uncertainty_bands(cards: Sequence[ModelCard], fl: FlightInstants, rc: Receivers, metrics: Sequence[str],
+                      levels: dict[str, np.ndarray], *, background: bool, min_distance_m: float,
+                      threads: int | None = None, chunk_cells: int = 1 << 17,
                       cancel: Callable[[], bool] | None = None,
                       progress: Callable[[float], Any] | None = None) -> dict[str, np.ndarray]:
     """The bands ``LAmax_std``, ``LAmax_p95``, ``LAeq_std``, ``LAeq_p95``, ``SEL_std`` of the requested metrics.
 
     ``fl``: the flight as the level kernel ran it (:func:`~gisnoise.maps.instants.prepare_flight`
-    of ``traj`` with ``substeps``, ``background``, ``min_distance_m``: its instants, weights,
-    rotations and audibility radii); ``levels``: the level bands already computed (the
-    ``*_p95`` bands subtract from them).  NaN where a level band is NaN.
+    with ``background`` and ``min_distance_m``: its instants, weights, rotations, ``lg P_el`` and
+    audibility radii); its cards pass :func:`uncertainty_refusal` and
+    :func:`~gisnoise.maps.prepare.require_covariances` (the caller checks, before the levels);
+    ``levels``: the level bands already computed (the ``*_p95`` bands subtract from them).
+    NaN where a level band is NaN.
     """
-    why = uncertainty_refusal([cards[k] for k in sorted(set(fl.cidx.tolist()))])
-    if why is not None:
-        raise CardError(why, field="uncertainty")
+    want_max = "LAmax" in metrics
+    want_int = "LAeq" in metrics or "SEL" in metrics
+    if not (want_max or want_int) or fl.lg_power is None:
+        return {}
     used = sorted(set(fl.cidx.tolist()))
     jc, cov = _card_rows(cards, used, background=background, min_distance_m=min_distance_m)
-    _t, state, _src = eval_states(traj, int(substeps))
-    ref_w = np.array([c.reference_power_w for c in cards], dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lgp = np.log10(np.asarray(state["power_w"], dtype=float) / ref_w[fl.cidx])
     slot = {k: u for u, k in enumerate(used)}
     jo = np.array([_jk.N_JAC * slot[int(k)] for k in fl.cidx], dtype=np.int64)
     # a silent instant (no power: gain and lg P_el -inf) adds no energy and no Jacobian of its own, only the
     # background's (dL/dp7 = 1): a finite gain far below any level and lg P_el = 0 give exactly that
-    silent = ~(np.isfinite(fl.gain) & np.isfinite(lgp))
+    silent = ~(np.isfinite(fl.gain) & np.isfinite(fl.lg_power))
     gain = np.where(silent, _SILENT_GAIN_DB, fl.gain)
-    lgp = np.where(silent, 0.0, lgp)
+    lgp = np.where(silent, 0.0, fl.lg_power)
     nj = _jk.N_JAC * len(used)
     H, W = rc.grid.shape
-    want_max = "LAmax" in metrics
-    want_int = "LAeq" in metrics or "SEL" in metrics
     s_max = np.full((H, W), np.nan)
     s_int = np.full((H, W), np.nan)
     k = rc.seg
@@ -120,7 +115,9 @@ def uncertainty_bands(traj: Trajectory, cards: Sequence[ModelCard], fl: FlightIn
         _jk._jac_window_kernel(P, U, dh, rc.dh is not None, k, 0, 0, W, fl.src, fl.C, gain, lgp, fl.cidx, jc, jo,
                                fl.w, fl.radius, emax, who, energy, jmax, gsum, computed)
         jm = jmax.astype(np.float64)
-        var_max = np.einsum("prc,rcpq,qrc->rc", jm, cov[who], jm)  # the loudest instant's card's covariance
+        var_max = np.zeros((nr, W))
+        for u in range(len(used)):  # the loudest instant's card's covariance
+            var_max += np.where(who == u, np.einsum("prc,pq,qrc->rc", jm, cov[u], jm), 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             g = gsum.reshape(len(used), _jk.N_JAC, nr, W) / energy
         var_int = np.einsum("uprc,upq,uqrc->rc", g, cov, g)
@@ -130,7 +127,6 @@ def uncertainty_bands(traj: Trajectory, cards: Sequence[ModelCard], fl: FlightIn
         out_max[off] = np.nan
         out_int[off] = np.nan
         return out_max, out_int
-
     def put(b: tuple[int, int], res: tuple[np.ndarray, np.ndarray]) -> None:
         nonlocal done
         s_max[b[0]:b[1]], s_int[b[0]:b[1]] = res

@@ -306,10 +306,12 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
     fl = prepare_flight(traj, req.cardset, frame, substeps=req.substeps, background=background,
                         min_distance_m=req.min_distance_m, floor_db=floor, temperature_c=temp)
     share = 1.0 if snap is None else fl.n / (fl.n + 1.0)
+    # the uncertainty bands' kernel takes about three times the levels' (bench/bench_uncertainty.py)
+    lev_share = 0.25 if opts.uncertainty and {"LAmax", "LAeq", "SEL"} & set(metrics) else 1.0
 
     def prog(f: float) -> None:
         if progress is not None:
-            progress(share * f)
+            progress(lev_share * share * f)
 
     res = run_grid(fl, rc, thresholds, threads=threads, chunk_cells=chunk, progress=prog, cancel=cancel)
     s = None
@@ -318,12 +320,13 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
                                 min_distance_m=req.min_distance_m, floor_db=floor, substeps=req.substeps,
                                 temperature_c=temp)
         s = run_grid(s_fl, rc, (), threads=threads, chunk_cells=chunk, cancel=cancel,
-                     progress=None if progress is None else (lambda f: progress(share + (1 - share) * f)))
+                     progress=None if progress is None else (lambda f: progress(lev_share * (share + (1 - share) * f))))
     bands, below = kernel_bands(res, grid.shape, metrics, thresholds, snap, period, floor, s, rc.valid)
     if opts.uncertainty:  # the delta method's bands (maps/fast_uncertainty.py)
-        bands.update(uncertainty_bands(traj, req.cardset.cards, fl, rc, metrics, bands, substeps=req.substeps,
-                                       background=background, min_distance_m=req.min_distance_m, threads=threads,
-                                       chunk_cells=chunk, cancel=cancel))
+        bands.update(uncertainty_bands(req.cardset.cards, fl, rc, metrics, bands, background=background,
+                                       min_distance_m=req.min_distance_m, threads=threads, chunk_cells=chunk,
+                                       cancel=cancel, progress=None if progress is None else
+                                       (lambda f: progress(lev_share + (1.0 - lev_share) * f))))
         bands = {name: bands[name] for name in band_order(metrics, thresholds, snap, True)}
     used = sorted(set(fl.cidx.tolist()))
     meta = map_metadata(req, bands, fl.n, float(opts.receiver_height), rc.ground or {}, background, used)

@@ -130,6 +130,9 @@ class FlightInstants:
     rx : ndarray (n, 9) or None
         Coefficients of the receiver-dependent effect terms
         (:func:`~gisnoise.maps.receiver_terms.instant_receiver_terms`); None when no card has one.
+    lg_power : ndarray (n,) or None
+        ``log10(P_el)`` of each instant (``-inf`` without power), for the uncertainty bands
+        (:mod:`gisnoise.maps.fast_uncertainty`).
     """
 
     t: np.ndarray
@@ -143,6 +146,7 @@ class FlightInstants:
     radius: np.ndarray
     source: str = "trajectory"
     rx: np.ndarray | None = None
+    lg_power: np.ndarray | None = None
 
     @property
     def duration_s(self) -> float:
@@ -287,7 +291,9 @@ def _instants(t: np.ndarray, state: dict[str, np.ndarray], card_idx: np.ndarray,
         ref_w[k] = c.reference_power_w
         d_ref[k] = c.reference_distance_m
     p_el = np.asarray(state["power_w"], dtype=float) / ref_w[ci]
-    gain = p0[ci] + p1[ci] * np.log10(p_el)
+    with np.errstate(divide="ignore", invalid="ignore"):  # no power: lg P_el = -inf, a silent instant
+        lg_power = np.log10(p_el)
+    gain = p0[ci] + p1[ci] * lg_power
     C = dcm_ned_to_body(np.radians(state["yaw"]), np.radians(state["pitch"]), np.radians(state["roll"]))
     C = np.ascontiguousarray(np.broadcast_to(C, (n, 3, 3)) @ _ENU_TO_NED)
     w = trapezoid_weights(t)
@@ -310,7 +316,7 @@ def _instants(t: np.ndarray, state: dict[str, np.ndarray], card_idx: np.ndarray,
         coef[:, 7] += offset
         ci = np.arange(n, dtype=np.int64)
     return FlightInstants(t=np.asarray(t, dtype=float), src=src, C=C, gain=gain, cidx=ci, coef=coef, w=w, dt=dt,
-                          radius=radius, source=source, rx=rx)
+                          radius=radius, source=source, rx=rx, lg_power=lg_power)
 
 
 def _gradient_velocity(t: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:

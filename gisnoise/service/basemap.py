@@ -123,8 +123,8 @@ class Basemap:
             return None if data is None else (data, src.media_type)
 
     def close(self) -> None:
-        """Close what the opened file holds (an MBTiles connection)."""
-        if isinstance(self._src, MBTiles):
+        """Close what the opened file holds (an MBTiles connection, a PMTiles file)."""
+        if self._src is not None:
             self._src.close()
 
 

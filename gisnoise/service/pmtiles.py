@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import os
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -97,7 +98,11 @@ def _entries(data: bytes) -> list[tuple[int, int, int, int]]:
 
 @dataclass
 class PMTiles:
-    """An opened PMTiles archive: path, tile media type, attribution, zoom range."""
+    """An opened PMTiles archive: path, tile media type, attribution, zoom range.
+
+    It holds the file open (``_fd``) from its opening: tiles are read from the file whose
+    directories it parsed, even when another file replaces it at ``path`` meanwhile.
+    """
 
     path: Path
     media_type: str
@@ -107,11 +112,19 @@ class PMTiles:
     _header: tuple[Any, ...] = field(repr=False, default=())
     _root: list[tuple[int, int, int, int]] = field(repr=False, default_factory=list)
     _leaves: dict[tuple[int, int], list[tuple[int, int, int, int]]] = field(repr=False, default_factory=dict)
+    _fd: int = field(repr=False, default=-1)
 
     def _read(self, offset: int, length: int) -> bytes:
-        with open(self.path, "rb") as fh:
-            fh.seek(offset)
-            return fh.read(length)
+        return os.pread(self._fd, length, offset)
+
+    def close(self) -> None:
+        """Close the file."""
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+    def __del__(self) -> None:
+        self.close()
 
     def _directory(self, offset: int, length: int) -> list[tuple[int, int, int, int]]:
         """The directory at ``offset``: the root parsed once at opening, leaf directories kept once read."""
@@ -153,8 +166,17 @@ class PMTiles:
 
 def open_pmtiles(path: Path) -> PMTiles:
     """Open and check a PMTiles v3 archive of raster tiles (:class:`InputError`, field ``basemap``)."""
-    with open(path, "rb") as fh:
-        raw = fh.read(_HEADER.size)
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        return _checked(path, fd)
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def _checked(path: Path, fd: int) -> PMTiles:
+    """The archive open on ``fd``, its header, root directory and metadata read and checked."""
+    raw = os.pread(fd, _HEADER.size, 0)
     if len(raw) < _HEADER.size or raw[:7] != MAGIC:
         raise InputError(f"basemap: {path.name} is not a PMTiles archive", field="basemap")
     h = _HEADER.unpack(raw)
@@ -171,13 +193,8 @@ def open_pmtiles(path: Path) -> PMTiles:
     if not media.startswith("image/"):
         raise InputError(f"basemap: {path.name} holds {media.replace('image/', '')} tiles; the web page draws "
                          "raster tiles (png, jpg, webp)", field="basemap")
-    meta_raw = b""
-    with open(path, "rb") as fh:
-        fh.seek(h[2])
-        root_raw = fh.read(h[3])
-        if h[5]:
-            fh.seek(h[4])
-            meta_raw = fh.read(h[5])
+    root_raw = os.pread(fd, h[3], h[2])
+    meta_raw = os.pread(fd, h[5], h[4]) if h[5] else b""
     try:
         root = _parse_directory(root_raw, h)
     except (OSError, EOFError, IndexError, zlib.error) as exc:
@@ -187,4 +204,4 @@ def open_pmtiles(path: Path) -> PMTiles:
     except (OSError, ValueError):
         meta = {}
     credit = str(meta.get("attribution", "")) if isinstance(meta, dict) else ""
-    return PMTiles(path, media, credit, int(h[17]), int(h[18]), h, root)
+    return PMTiles(path, media, credit, int(h[17]), int(h[18]), h, root, _fd=fd)

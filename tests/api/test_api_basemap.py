@@ -226,3 +226,23 @@ def test_the_page_draws_the_served_basemap(tmp_path):
     finally:
         browser.close()
         srv.stop()
+
+
+def test_an_opened_pmtiles_archive_reads_its_own_file_after_a_replacement(tmp_path):
+    # the directories parsed at opening index the file opened then: a file replaced at the path meanwhile
+    # must not be read through them (the basemap reopens the path when it sees the change)
+    import os
+
+    from gisnoise.service.pmtiles import open_pmtiles
+
+    path = make_pmtiles(tmp_path / "world.pmtiles")
+    archive = open_pmtiles(path)
+    other = {k: tuple(255 - c for c in rgb) for k, rgb in Z1.items()}
+    os.replace(make_pmtiles(tmp_path / "new.pmtiles", z1=other, credit="Other tiles"), path)
+    try:
+        for (x, y), rgb in Z1.items():
+            tile = archive.tile(1, x, y)
+            assert tile is not None and Image.open(io.BytesIO(tile)).convert("RGB").getpixel((128, 128)) == rgb
+        assert Image.open(io.BytesIO(open_pmtiles(path).tile(1, 0, 0))).convert("RGB").getpixel((9, 9)) == other[0, 0]
+    finally:
+        archive.close()
