@@ -42,18 +42,24 @@ def test_distinct_points_transformed_once_equal_every_point_transformed(zero):
     assert contours._bulk_wgs84([], tr).shape == (0, 2)
 
 
+def _snapped_pieces(pts, ends):
+    """The one-pass snapping's buffer split into its pieces."""
+    q, starts = contours._snapped_buffer(pts, ends)
+    return np.split(q, starts[1:-1]) if len(ends) else []
+
+
 def test_snapping_in_one_pass_equals_snapping_each_piece():
     p = contours.PRECISION_DEG
     ring = np.array([[0.0, 0.0], [1.0, 0.0], [1.0 + 0.2 * p, 0.0], [1.0, 1.0], [0.0, 0.0]])  # a repeat once snapped
     line = np.array([[0.0, 0.0], [0.3 * p, 0.0], [2.0, 2.0]])  # starts where the ring ends: kept, it is another piece
-    pieces = contours._snapped_pieces(np.vstack([ring, line]), np.array([5, 8]))
+    pieces = _snapped_pieces(np.vstack([ring, line]), np.array([5, 8]))
     np.testing.assert_array_equal(pieces[0], [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 0.0]])
     np.testing.assert_array_equal(pieces[1], [[0.0, 0.0], [2.0, 2.0]])
     rng = np.random.default_rng(5)
     # points within a few grid steps of each other: many snap onto the same node as their neighbour
     pts = 0.5 + rng.integers(-1, 2, (300, 2)) * p + rng.uniform(-0.4, 0.4, (300, 2)) * p
     ends = np.array([4, 9, 60, 61, 200, 300])
-    one_pass = contours._snapped_pieces(pts, ends)
+    one_pass = _snapped_pieces(pts, ends)
     repeats = 0
     for x, (s, e) in zip(one_pass, zip(np.r_[0, ends[:-1]], ends, strict=True), strict=True):
         q = np.rint(pts[s:e] / p) * p  # the rule, piece by piece: on the grid, no two equal positions in a row
@@ -61,7 +67,7 @@ def test_snapping_in_one_pass_equals_snapping_each_piece():
         repeats += int((~keep).sum())
         np.testing.assert_array_equal(x, q[keep])
     assert repeats > 10  # the data exercise the dropping
-    assert contours._snapped_pieces(np.zeros((0, 2)), np.zeros(0, np.intp)) == []
+    assert _snapped_pieces(np.zeros((0, 2)), np.zeros(0, np.intp)) == []
 
 
 def test_a_map_on_the_callers_grid_is_the_map_on_the_grid_make_map_builds():

@@ -356,12 +356,6 @@ def _snapped_buffer(pts: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.n
     return q[keep], starts
 
 
-def _snapped_pieces(pts: np.ndarray, ends: np.ndarray) -> list[np.ndarray]:
-    """:func:`_snapped_buffer` as one array per piece."""
-    q, starts = _snapped_buffer(pts, ends)
-    return np.split(q, starts[1:-1]) if len(ends) else []
-
-
 def contour_features(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[dict]:
     """GeoJSON features (dicts) of isobands and isolines of ``result``'s level bands.
 
