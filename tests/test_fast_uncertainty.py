@@ -168,3 +168,13 @@ def test_progress_covers_the_bands_and_ends_at_one():
     res = evaluate_grid(circle_flight(20), [fitted()], grid_around(40.0, 5, 5), ground_h=0.0, uncertainty=True,
                         engine="fast", metrics=(), threshold_db=60.0)
     assert [n for n in res.bands if "std" in n or "p95" in n] == []
+
+
+def test_auto_takes_the_fast_engine_unless_a_flown_card_needs_numpy():
+    traj, g = circle_flight(12), grid_around(50.0, 5, 5)  # flies "horizontal" only
+    unused_effect = bank_card(phase="climb")  # an effect extension for a phase this flight does not fly
+    res = evaluate_grid(traj, [fitted(), unused_effect], g, ground_h=0.0, uncertainty=True)
+    assert res.metadata["engine"] == "fast" and "LAmax_std" in res.bands
+    flown_effect = ModelCard(**{**bank_card().__dict__, "covariance": tuple(map(tuple, 1e-4 * np.eye(9)))})
+    res = evaluate_grid(traj, [flown_effect], g, ground_h=0.0, uncertainty=True)
+    assert res.metadata["engine"] == "numpy" and "LAmax_std" in res.bands

@@ -93,8 +93,8 @@ def fast_engine_serves(cards: CardSet | Iterable[ModelCard] | ModelCard, *, unce
     if kernel is not None:
         return "a kernel replacement belongs to the NumPy engine"
     cs = as_cardset(cards).cards
-    if uncertainty:  # the delta method's bands of paper and paper-offset cards (maps/fast_uncertainty.py)
-        return uncertainty_refusal(cs)
+    if uncertainty:  # the delta method's bands of paper and paper-offset cards (maps/fast_uncertainty.py): every
+        return uncertainty_refusal(cs)  # card of the set here; evaluate_grid's "auto" asks of the cards flown
     hemi = has_hemisphere(cs)
     for c in cs:
         if isinstance(c, HemisphereCard):  # measured hemispheres: their kernel (maps/hemisource.py)
@@ -228,7 +228,8 @@ def evaluate_grid(
     for card in cards if check_cards else ():  # the plausibility guard (cached per card content): never a map of an implausible card
         check_card(card)
     if engine == "auto":
-        why = fast_engine_serves(cards, uncertainty=uncertainty, kernel=kernel)
+        # the uncertainty bands: evaluate_fast checks the cards the flight uses (an unused one may be any)
+        why = fast_engine_serves(cards, kernel=kernel)
         if why is None:
             try:
                 return evaluate_fast(traj, cards, grid, opts)

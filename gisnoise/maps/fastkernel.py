@@ -49,6 +49,7 @@ from gisnoise.maps import _numba as _kernels
 from gisnoise.maps import _numba_receiver as _rx_kernels
 from gisnoise.maps._checks import as_float
 from gisnoise.maps._poly import _ATAN_C, _EXP2_C, _LOG2_C, _poly_eval  # noqa: F401  (the kernel's polynomials)
+from gisnoise.maps.fast_effects import NotOnFastEngine
 from gisnoise.maps.fast_uncertainty import uncertainty_bands, uncertainty_refusal
 from gisnoise.maps.hemifill import has_hemisphere
 from gisnoise.maps.hemisource import HemiFlight, evaluate_hemisphere_fast, run_hemi_window
@@ -288,8 +289,8 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
         used_cards = [req.cardset.cards[k] for k in sorted(set(req.cardset.assign(req.traj.phase, req.traj.t,
                                                                                     source=req.traj.source).tolist()))]
         why = uncertainty_refusal(used_cards + [c for c in req.cardset.cards if isinstance(c, HemisphereCard)])
-        if why is not None:
-            raise InputError(f"uncertainty: {why}; use engine='numpy'", field="engine")
+        if why is not None:  # (NotOnFastEngine: engine="auto" takes the NumPy engine)
+            raise NotOnFastEngine(f"uncertainty: {why}; use engine='numpy'", field="engine")
         require_covariances(used_cards)
     if has_hemisphere(req.cardset.cards):  # measured hemispheres: their own kernel (maps/hemisource.py)
         return evaluate_hemisphere_fast(req, opts)
