@@ -45,6 +45,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -79,6 +80,18 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def stop(procs: Iterable[subprocess.Popen]) -> None:
+    """Stop the services started by :func:`start_server`."""
+    for proc in procs:
+        proc.terminate()
+        proc.wait(30)
+
+
+def load_line() -> str:
+    """The machine's load averages (1, 5, 15 min)."""
+    return " ".join(f"{v:.2f}" for v in os.getloadavg())
 
 
 def start_server(data: Path, stack: tuple[str, str] | None = None, tree: Path = REPO) -> tuple[subprocess.Popen, str]:
@@ -242,10 +255,8 @@ def compare_stacks(requests: int, max_s: float) -> int:
                 for name, (_, url) in (list(servers.items()) if i % 2 == 0 else list(servers.items())[::-1]):
                     out[name].append(load(url, "POST", "/contours", typical_request(), 5, 1, max_s))
         finally:
-            for proc, _ in servers.values():
-                proc.terminate()
-                proc.wait(30)
-    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+            stop(proc for proc, _ in servers.values())
+    print(f"load average after: {load_line()}")
     print(f"POST /contours, one client, {rounds} interleaved rounds of 5 per stack (medians over rounds):")
     med: dict[str, dict[str, float]] = {}
     for name, rs in out.items():
@@ -294,10 +305,8 @@ def compare_trees(baseline: Path, requests: int) -> int:
                     out[n]["total"].append(float(timing["total"]) / 1000)
                     bodies[n].add(r.content)
         finally:
-            for proc, _ in servers.values():
-                proc.terminate()
-                proc.wait(30)
-    print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+            stop(proc for proc, _ in servers.values())
+    print(f"load average after: {load_line()}")
     print(f"POST /contours, one client, {requests} requests to each service, alternating:")
     med: dict[str, dict[str, float]] = {}
     for n, d in out.items():
@@ -341,7 +350,7 @@ def main() -> int:
     global RESOLUTION_M
     RESOLUTION_M = args.resolution
 
-    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print(f"load average before: {load_line()}")
     if args.compare_stacks:
         return compare_stacks(args.requests, args.max_seconds)
     if args.baseline_tree is not None:
@@ -358,8 +367,7 @@ def main() -> int:
             cards = load(url, "GET", "/cards", None, 20 * args.requests, args.clients, args.max_seconds)
             mem = None if args.skip_jobs else memory_with_queued_jobs(url, proc, args.jobs, args.job_seconds)
         finally:
-            proc.terminate()
-            proc.wait(30)
+            stop([proc])
 
     print("gisnoise service load test (loopback, uvicorn, 1 job worker)")
     print(f"baseline: the same map in-process via make_map: {base * 1000:.0f} ms, of which the evaluator "
