@@ -73,13 +73,13 @@ from gisnoise.maps.plots import (
 from gisnoise.maps.powers import (
     check_power_ranges,
 )
+from gisnoise.maps.prepare import (
+    Z95,
+)
 from gisnoise.maps.receivers import (
     Receivers,
     receivers_for,
     segment_cells,
-)
-from gisnoise.maps.reference import (
-    Z95,
 )
 from gisnoise.maps.result import (
     METRICS,

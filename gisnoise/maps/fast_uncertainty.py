@@ -24,16 +24,14 @@ import numpy as np
 
 from gisnoise.errors import Cancelled
 from gisnoise.maps import _numba_jac as _jk
+from gisnoise.maps.fast_effects import KERNEL_BASES
 from gisnoise.maps.instants import FlightInstants, card_coefficients
 from gisnoise.maps.prepare import Z95
 from gisnoise.maps.receivers import Receivers
 from gisnoise.maps.threads import default_threads, map_threads, row_blocks
 from gisnoise.model import HemisphereCard, ModelCard
 
-__all__ = ["UNCERTAINTY_ANSATZES", "uncertainty_bands", "uncertainty_refusal"]
-
-UNCERTAINTY_ANSATZES = ("paper", "paper-offset")
-"""Ansatzes whose uncertainty bands the fast engine computes."""
+__all__ = ["uncertainty_bands", "uncertainty_refusal"]
 
 _SILENT_GAIN_DB = -1.0e4
 """Gain of an instant without power in the Jacobian kernel: its energy underflows to the kernel's floor (2^-126)."""
@@ -44,7 +42,7 @@ def uncertainty_refusal(cards: Sequence[ModelCard]) -> str | None:
     for c in cards:
         if isinstance(c, HemisphereCard):
             return f"card {c.id!r}: a measured hemisphere has no parameters to propagate"
-        if c.ansatz not in UNCERTAINTY_ANSATZES:
+        if c.ansatz not in KERNEL_BASES:  # the kernel's base ansatzes, without effect extensions
             return f"card {c.id!r}: the uncertainty bands of ansatz {c.ansatz!r} need the NumPy engine"
     return None
 

@@ -52,7 +52,7 @@ from gisnoise.maps.prepare import (
 from gisnoise.maps.result import MapResult, snapshot_name, threshold_name
 from gisnoise.model import ModelCard
 
-__all__ = ["DEFAULT_BLOCK", "Z95", "evaluate_numpy"]
+__all__ = ["DEFAULT_BLOCK", "evaluate_numpy"]
 
 
 DEFAULT_BLOCK = 1 << 18
