@@ -155,3 +155,23 @@ def test_progress_reaches_the_end_and_cancel_stops(plugin, flight_csv, tmp_path)
             "TRAJECTORY_FILE": str(flight_csv), "CARDS": [CARD], **MAP_OPTIONS,
             "OUTPUT_RASTER": str(tmp_path / "c.tif"), "OUTPUT_BANDS": str(tmp_path / "c.gpkg")}, feedback=cancelled)
     assert not (tmp_path / "c.tif").exists()
+
+
+def test_uncertainty_bands_equal_the_command_line(plugin, cli, flight_csv, tmp_path):
+    # the delta-method bands in QGIS (the bundled core, no numba: the NumPy engine) and on the command line
+    # (the fast engine by default): the same bands, the same values
+    import numpy as np
+
+    cli("contour", flight_csv, "--card", CARD, "--out", tmp_path / "cli", "--uncertainty", *CLI_OPTIONS)
+    res = run_map(tmp_path, "qgis", TRAJECTORY_FILE=str(flight_csv), UNCERTAINTY=True)
+    a, names_a, *_, nd_a = read_raster(res["OUTPUT_RASTER"])
+    b, names_b, *_, nd_b = read_raster(tmp_path / "cli" / "levels.tif")
+    assert names_a == names_b and {"LAmax_std", "LAeq_std", "LAmax_p95"} <= set(names_a)
+    valid = (a != nd_a) & (b != nd_b)
+    assert valid.mean() > 0.9
+    for i, name in enumerate(names_a):
+        if name.startswith("LAmax_"):  # where two instants tie for the maximum each engine may take either
+            continue
+        np.testing.assert_allclose(a[i][valid[i]], b[i][valid[i]], rtol=0, atol=1e-3, err_msg=name)
+    std = a[names_a.index("LAeq_std")][valid[0]]
+    assert std.max() > 0.05  # a map where the uncertainty shows (the demo card: up to 0.085 dB here)
