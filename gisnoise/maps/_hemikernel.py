@@ -263,34 +263,19 @@ if numba is not None:
         half_k32 = np.float32(half_k)
         for r in range(nr):
             for sg in range(ns):
-                a = (m0 + sg) * k
-                lo = max(a, c0)
-                hi = min(a + k, c0 + ncw)
-                if hi <= lo:
-                    continue
-                m = hi - lo
-                q0 = lo - a
-                jl = lo - c0
-                if not _k._segment(P, U, dh, has_dem, r, sg, k, q0, m, jl, src, radius, e0, e1, e2, n0, n1, lo_b, hi_b):
+                m, q0, jl = _k._segment(P, U, dh, has_dem, r, sg, k, m0, c0, ncw, src, radius, e0, e1, e2, n0, n1,
+                                        lo_b, hi_b, computed)
+                if m == 0:
                     continue
                 em = emax[r, jl:jl + m]
                 en = energy[r, jl:jl + m]
                 ef = efill[r, jl:jl + m]
                 dhr = dh[r, jl:jl + m] if has_dem else dh[0, 0:1]
-                for q in range(m):
-                    computed[r, jl + q] = 1
                 for i in range(n):
                     ci = cidx[i]
-                    v0 = e0[0] - src[i, 0]
-                    v1 = e0[1] - src[i, 1]
-                    v2 = e0[2] - src[i, 2]
-                    ax, ay, az = _k._rot32(C, i, v0, v1, v2)
-                    bx, by, bz = _k._rot32(C, i, e1[0], e1[1], e1[2])
-                    dx, dy, dz = _k._rot32(C, i, e2[0], e2[1], e2[2])
-                    nx = ny = nz = tx = ty = tz = _F0
-                    if has_dem:
-                        nx, ny, nz = _k._rot32(C, i, n0[0], n0[1], n0[2])
-                        tx, ty, tz = _k._rot32(C, i, n1[0], n1[1], n1[2])
+                    # body frame: A + u (B + u D) (+ dh (N + u T)), u = q - k/2
+                    (ax, ay, az, bx, by, bz, dx, dy, dz,
+                     nx, ny, nz, tx, ty, tz) = _k._lattice(C, i, src, e0, e1, e2, n0, n1, has_dem)
                     wt = np.float32(w[i])
                     hk = kind[i]
                     if hk >= 0:

@@ -124,21 +124,13 @@ if numba is not None:
         fl = np.int64(flags)
         for r in range(nr):
             for s in range(ns):
-                a = (m0 + s) * k
-                lo = max(a, c0)
-                hi = min(a + k, c0 + ncw)
-                if hi <= lo:
-                    continue
-                m = hi - lo
-                q0 = lo - a
-                jl = lo - c0
-                if not _k._segment(P, U, dh, has_dem, r, s, k, q0, m, jl, src, radius, e0, e1, e2, n0, n1, lo_b, hi_b):
+                m, q0, jl = _k._segment(P, U, dh, has_dem, r, s, k, m0, c0, ncw, src, radius, e0, e1, e2, n0, n1,
+                                        lo_b, hi_b, computed)
+                if m == 0:
                     continue
                 em = emax[r, jl:jl + m]
                 en = energy[r, jl:jl + m]
                 dhr = dh[r, jl:jl + m] if has_dem else dh[0, 0:1]
-                for q in range(m):
-                    computed[r, jl + q] = 1
                 f1e = np.float32(e1[0])
                 f1n = np.float32(e1[1])
                 f1u = np.float32(e1[2])
@@ -153,24 +145,13 @@ if numba is not None:
                 g1u = np.float32(n1[2])
                 for i in range(n):
                     ci = cidx[i]
-                    v0 = e0[0] - src[i, 0]
-                    v1 = e0[1] - src[i, 1]
-                    v2 = e0[2] - src[i, 2]
-                    ax, ay, az = _k._rot32(C, i, v0, v1, v2)
-                    bx, by, bz = _k._rot32(C, i, e1[0], e1[1], e1[2])
-                    dx, dy, dz = _k._rot32(C, i, e2[0], e2[1], e2[2])
-                    ve = np.float32(v0)
-                    vn = np.float32(v1)
-                    vu = np.float32(v2)
-                    gk = np.float32(gain[i] * _K10_64)
-                    a3 = np.float32(coef[ci, 0] * coef[ci, 1])
-                    b3 = np.float32(coef[ci, 0] * coef[ci, 2])
-                    a5 = np.float32(coef[ci, 3] * coef[ci, 4])
-                    b5 = np.float32(coef[ci, 3] * coef[ci, 5])
-                    c6k = np.float32(coef[ci, 6] * _K10_64)
-                    kkk = np.float32(coef[ci, 7] * _K10_64)
-                    e7 = np.float32(coef[ci, 8])
-                    dmin2 = np.float32(coef[ci, 9])
+                    # body frame: A + u (B + u D) (+ dh (N + u T)), u = q - k/2
+                    (ax, ay, az, bx, by, bz, dx, dy, dz,
+                     nx, ny, nz, tx, ty, tz) = _k._lattice(C, i, src, e0, e1, e2, n0, n1, has_dem)
+                    ve = np.float32(e0[0] - src[i, 0])
+                    vn = np.float32(e0[1] - src[i, 1])
+                    vu = np.float32(e0[2] - src[i, 2])
+                    gk, a3, b3, a5, b5, c6k, kkk, e7, dmin2 = _k._folded_row(gain, coef, i, ci)
                     wi = np.float32(w[i])
                     kab = np.float32(rx[i, 0])
                     kwe = np.float32(rx[i, 1])
@@ -186,8 +167,6 @@ if numba is not None:
                     # the base level and the ENU vector per cell, then each term in its own loop (a flag
                     # tested outside a loop costs nothing; inside one LLVM would compute every term)
                     if has_dem:
-                        nx, ny, nz = _k._rot32(C, i, n0[0], n0[1], n0[2])
-                        tx, ty, tz = _k._rot32(C, i, n1[0], n1[1], n1[2])
                         for q in range(m):
                             qf = np.float32(q0 + q) - half_k32
                             hh = dhr[q]
