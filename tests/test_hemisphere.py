@@ -1,6 +1,7 @@
 """Measured hemispheres as sources: import of the real DJI Matrice 300 hemisphere, evaluation, maps."""
 
 import csv
+import dataclasses
 import math
 from pathlib import Path
 
@@ -220,10 +221,17 @@ def test_interpolation_is_continuous_across_cells_and_the_horizon(card):
     assert np.max(np.abs(np.diff(lv))) < 0.5
 
 
-def test_summary_sound_power_near_the_file(card):
-    # the file's SWL_Bands Overall is 91.0 dB; the card integrates its own table over the sphere
+def test_summary_sound_power_and_the_file_s_own(card):
+    # the file's SWL_Bands Overall, 91.0 dB, is the Salford tool's: the nodes' mean square pressure (no solid-angle
+    # weights) times the lower hemisphere's area 2 pi r^2, rounded to 0.1 dB; the table gives it back
     assert card.statistics["file_sound_power_db"]["Overall"] == 91.0
-    assert card.sound_power_db()["overall_z"] == pytest.approx(91.0, abs=1.0)
+    p2 = (10.0 ** (card.levels_db / 10.0)).sum(axis=0)
+    assert 10 * np.log10(p2.mean() * 2 * np.pi * card.reference_distance_m ** 2) == pytest.approx(91.0, abs=0.05)
+    # the card's own: the intensity integrated by solid angle over the lower half, the upper half mirrored;
+    # a table of one level L at 1 m everywhere is L + 10 lg(4 pi) dB
+    flat = dataclasses.replace(card, levels_db=np.full_like(card.levels_db, 60.0))
+    assert flat.sound_power_db()["overall_z"] == pytest.approx(60.0 + 10 * np.log10(card.levels_db.shape[0] * 4 * np.pi),
+                                                               abs=1e-9)
     top = card.loudest_direction()
     assert top["level_db_a"] == pytest.approx(float(card.overall_a_db.max()))
 

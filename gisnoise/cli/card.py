@@ -101,7 +101,12 @@ def _show_hemisphere(c: HemisphereCard) -> None:
     click.echo(f"on maps   {m['temperature_c']:g} C, {m['humidity_pct']:g} % RH, {m['pressure_kpa']:g} kPa "
                "(ISO 9613-1 absorption)")
     w = c.sound_power_db()
-    click.echo(f"sound power {w['overall_z']:.1f} dB, {w['overall_a']:.1f} dB(A) (re 1 pW, table integrated)")
+    click.echo(f"sound power {w['overall_z']:.1f} dB, {w['overall_a']:.1f} dB(A) (re 1 pW: the table over the whole "
+               "sphere by solid angle, its upper half mirrored)")
+    own = c.statistics.get("file_sound_power_db", {}).get("Overall")
+    if own is not None:
+        click.echo(f"          the file states {own:.1f} dB (its SWL_Bands: the nodes' mean square pressure times the "
+                   "lower hemisphere's area, not weighted by solid angle)")
     top = c.loudest_direction()
     click.echo(f"max level {top['level_db_a']:.1f} dB(A) at {c.reference_distance_m:g} m, phi {top['phi_t_deg']:g} deg "
                f"({'ahead' if top['phi_t_deg'] < 0 else 'behind' if top['phi_t_deg'] > 0 else 'below'}), "
