@@ -10,7 +10,10 @@ Features
 --------
 isoband
     ``MultiPolygon`` of the area where ``level <= L < level_max`` (the last band is
-    open: ``level_max`` is null).
+    open: ``level_max`` is null).  A node exactly at a level belongs to the band from
+    that level up, so a plateau at 50 dB is drawn in the 50 dB band.  What has no area
+    is not drawn apart: a node or a row of nodes exactly at ``level_max`` inside a band
+    (a ridge) lies inside the band's polygon, one exactly at ``level`` on its edge.
 isoline
     ``MultiLineString`` where ``L == level``; ``level_max`` is null.
 
@@ -132,6 +135,29 @@ def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
         z_interp=contourpy.ZInterp.Linear, x_chunk_size=0, y_chunk_size=0)
 
 
+def _filled_levels(z: np.ndarray, levels: Sequence[float]) -> list[float]:
+    """The levels to give contourpy's ``filled`` so that its bands hold the nodes of this module's bands.
+
+    contourpy fills ``lower < z <= upper``; a band here is ``level <= z < level_max``.  The two differ
+    only at nodes exactly at a level, which contourpy gives to the band below: a plateau at a level
+    would be drawn in the band under it.  Where some node equals a level, the largest float below it,
+    ``numpy.nextafter(level, -inf)``, is given instead: for float64 values ``z > nextafter(level, -inf)``
+    exactly when ``z >= level``, so every band holds the nodes its definition names, and its edge runs
+    within a rounding error of the level.  A level no node equals is given as it is (the nodes of every
+    band are the same either way, and so is the text written).
+
+    Where a band has no width along a row of nodes at the level (a ridge at ``level_max``, a row at
+    ``level`` between lower rows), its ring runs along both sides of the row, and the two sides fall on
+    the same coordinates: :func:`gisnoise.geo.shapes.repaired` reads the band's area from such rings
+    by their winding number, and :func:`_merged` joins the parts of a band such a row parts.
+
+    >>> z = np.array([[45.0, 50.0], [50.0, 55.0]])
+    >>> _filled_levels(z, [50.0, 52.0]) == [np.nextafter(50.0, -np.inf), 52.0]
+    True
+    """
+    return [float(np.nextafter(lv, -np.inf)) if (z == lv).any() else float(lv) for lv in levels]
+
+
 def _polygons(points: Sequence[np.ndarray], offsets: Sequence[np.ndarray]) -> list[Polygon]:
     out: list[Polygon] = []
     for pts, off in zip(points, offsets, strict=True):
@@ -148,7 +174,7 @@ def _polygons(points: Sequence[np.ndarray], offsets: Sequence[np.ndarray]) -> li
 
 def _valid_polygons(geom: Any) -> list[Polygon]:
     if not geom.is_valid:
-        geom = shapely.make_valid(geom)
+        geom = shapely.repaired(geom)
     if isinstance(geom, Polygon):
         return [] if geom.is_empty else [geom]
     parts = getattr(geom, "geoms", [])
@@ -182,8 +208,11 @@ def isobands(x: Any, y: Any, z: Any, levels: Sequence[float]) -> list[Polygon]:
     hi = float(levels[1]) if len(levels) > 1 else float(np.nanmax(z)) + 1.0
     if hi <= lo:
         return []
-    pts, offs = _generator(x, y, z).filled(lo, hi)
-    return _polygons(pts, offs)
+    given = _filled_levels(z, [lo, hi])
+    polys = _polygons(*_generator(x, y, z).filled(*given))
+    if given != [lo, hi] and len(polys) > 1:  # a row of nodes at a level may part a band: one polygon each side
+        polys = _valid_polygons(shapely.union_all(polys))
+    return polys
 
 
 def isolines(x: Any, y: Any, z: Any, level: float) -> list[LineString]:
@@ -223,8 +252,9 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     (:func:`_snapped_buffer`).  Repair and orientation as :func:`isobands` and :func:`isolines`
     define them (exterior rings counter-clockwise, holes clockwise): a polygon whose snapped rings
     are closed is checked, and oriented when valid, by GEOS for all such polygons at once
-    (:func:`gisnoise.geo.shapes.ring_polygons`); any other goes through GEOS's repair and
-    precision reduction on its own (:func:`_repaired`).
+    (:func:`gisnoise.geo.shapes.ring_polygons`); any other is repaired (by winding number,
+    :func:`gisnoise.geo.shapes.repaired`) and reduced to the precision by GEOS on its own
+    (:func:`_repaired`).  Levels exactly at nodes: :func:`_filled_levels`.
     """
     nb, nl = len(bounds), len(lv)
     if z.ndim != 2 or z.shape[0] < 2 or z.shape[1] < 2 or not np.isfinite(z).any():
@@ -233,11 +263,12 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     top = float(np.nanmax(z)) + 1.0
     rings: list[np.ndarray] = []  # every ring of every polygon of every bound, projected
     polys: list[tuple[int, int, int]] = []  # (bound, first ring, ring count)
+    at = dict(zip(lv, _filled_levels(z, lv), strict=True))
     for b, (lo, hi) in enumerate(bounds):
         up = top if hi is None else float(hi)
         if up <= lo:
             continue
-        pts, offs = gen.filled(float(lo), up)
+        pts, offs = gen.filled(at.get(lo, float(lo)), up if hi is None else at.get(hi, up))
         for pt, off in zip(pts, offs, strict=True):
             rr = [pt[off[i]:off[i + 1]] for i in range(len(off) - 1)]
             rr = [r for r in rr if len(r) >= 4]
@@ -258,6 +289,9 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     q, starts = _snapped_buffer(wgs, ends)  # piece k: q[starts[k]:starts[k + 1]]
     out = _rounded(q[starts[nr]:], True)  # the lines' positions as written
     bands = _finished_polygons(polys, nb, rings, wgs, ends, q, starts)
+    for b, (lo, hi) in enumerate(bounds):  # a band with nodes exactly at one of its levels (:func:`_merged`)
+        if len(bands[b]) > 1 and (at.get(lo, lo) != lo or (hi is not None and at.get(hi, hi) != hi)):
+            bands[b] = _merged(bands[b])
     lines: list[list[np.ndarray]] = [[] for _ in range(nl)]
     bl = starts[nr:].tolist()
     for i, j in enumerate(seg_level):
@@ -273,7 +307,7 @@ def _finished_polygons(polys: list[tuple[int, int, int]], nb: int, rings: list[n
     ``wgs``: every piece's projected positions (piece ``k`` ends at ``ends[k]``); ``q``: the snapped ones (piece
     ``k`` is ``q[starts[k]:starts[k + 1]]``).  As :func:`isobands` and the old one-polygon-at-a-time code define
     it: a polygon without area before snapping is left out; one whose snapped rings stay closed and make a valid
-    polygon is kept as snapped, oriented; any other is repaired by GEOS (:func:`_repaired`).  The checks and the
+    polygon is kept as snapped, oriented; any other is repaired (:func:`_repaired`).  The checks and the
     orientation are GEOS's, for all polygons at once (:func:`gisnoise.geo.shapes.ring_polygons`).
     """
     bands: list[list[list[np.ndarray]]] = [[] for _ in range(nb)]
@@ -283,7 +317,7 @@ def _finished_polygons(polys: list[tuple[int, int, int]], nb: int, rings: list[n
     wstarts = np.zeros(nr + 1, np.intp)
     wstarts[1:] = ends[:nr]
     n_pos = np.diff(starts[:nr + 1])
-    # snapped rings that stay closed (a ring that collapses is left to GEOS's repair)
+    # snapped rings that stay closed (a ring that collapses is left to the repair)
     closed = ((n_pos >= 4) & ~np.any(q[starts[:nr]] != q[starts[1:nr + 1] - 1], axis=1)).tolist()
     ok = [all(closed[i0:i0 + n]) for _, i0, n in polys]
     fast = [p for p, k in zip(polys, ok, strict=True) if k]
@@ -329,13 +363,31 @@ def _ragged(pts: np.ndarray, starts: np.ndarray, ring_ids: np.ndarray) -> tuple[
 
 
 def _repaired(rings: list[np.ndarray], wgs: np.ndarray, ends: np.ndarray, i0: int, n: int) -> list[list[np.ndarray]]:
-    """One polygon (rings ``i0 .. i0 + n - 1`` of ``rings``, projected in ``wgs``) made valid by GEOS and snapped to
-    :data:`PRECISION_DEG`, oriented, as the lists of its parts' ring position arrays (rounded)."""
+    """One polygon (rings ``i0 .. i0 + n - 1`` of ``rings``, projected in ``wgs``) made valid
+    (:func:`gisnoise.geo.shapes.repaired`) and snapped to :data:`PRECISION_DEG`, oriented, as the lists of its
+    parts' ring position arrays (rounded)."""
     wr = [wgs[(ends[k - 1] if k else 0):ends[k]] for k in range(i0, i0 + n)]
     geom = Polygon(wr[0], wr[1:])
     if geom.is_empty or geom.area == 0:
         return []
-    g = shapely.set_precision(shapely.make_valid(geom), PRECISION_DEG)
+    return _snapped_parts(shapely.repaired(geom))
+
+
+def _merged(polys: list[list[np.ndarray]]) -> list[list[np.ndarray]]:
+    """A band's polygons (lists of ring position arrays) merged where they share an edge, snapped and oriented.
+
+    Called for bands with nodes exactly at one of their levels.  A row of nodes exactly at a band's
+    ``level_max`` with the band on both sides (a ridge) belongs to the band above, a set without area;
+    contourpy's band then runs along the row on each side of it, and the two polygons share that edge
+    (no valid MultiPolygon holds both).  Their union is the band's area.
+    """
+    return _snapped_parts(shapely.union_all([Polygon(p[0], p[1:]) for p in polys]))
+
+
+def _snapped_parts(geom: Any) -> list[list[np.ndarray]]:
+    """The polygons of a valid ``geom`` snapped to :data:`PRECISION_DEG`, oriented, as lists of their rings'
+    position arrays (rounded)."""
+    g = shapely.set_precision(geom, PRECISION_DEG)
     return [[_rounded(np.asarray(ring.coords, dtype=float)[:, :2], True) for ring in (o.exterior, *o.interiors)]
             for o in (orient(part, sign=1.0) for part in _valid_polygons(g) if part.area > 0)]
 
