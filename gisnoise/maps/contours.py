@@ -12,8 +12,8 @@ isoband
     ``MultiPolygon`` of the area where ``level <= L < level_max`` (the last band is
     open: ``level_max`` is null).  A node exactly at a level belongs to the band from
     that level up, so a plateau at 50 dB is drawn in the 50 dB band.  What has no area
-    is not drawn apart: a node or a row of nodes exactly at ``level_max`` inside a band
-    (a ridge) lies inside the band's polygon, one exactly at ``level`` on its edge.
+    is not drawn apart: a node or a row of nodes exactly at ``level_max`` with the band
+    on both sides (a peak, a ridge) lies inside the band's polygon.
 isoline
     ``MultiLineString`` where ``L == level``; ``level_max`` is null.
 
