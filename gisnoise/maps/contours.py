@@ -135,7 +135,12 @@ def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
         z_interp=contourpy.ZInterp.Linear, x_chunk_size=0, y_chunk_size=0)
 
 
-def _filled_levels(z: np.ndarray, levels: Sequence[float]) -> list[float]:
+def _exact_nodes(z: np.ndarray, levels: Sequence[float]) -> list[np.ndarray]:
+    """For each level, the flat indices of the nodes of ``z`` exactly at it."""
+    return [np.flatnonzero(z == lv) for lv in levels]
+
+
+def _filled_levels(levels: Sequence[float], nodes: Sequence[np.ndarray]) -> list[float]:
     """The levels to give contourpy's ``filled`` so that its bands hold the nodes of this module's bands.
 
     contourpy fills ``lower < z <= upper``; a band here is ``level <= z < level_max``.  The two differ
@@ -151,11 +156,35 @@ def _filled_levels(z: np.ndarray, levels: Sequence[float]) -> list[float]:
     the same coordinates: :func:`gisnoise.geo.shapes.repaired` reads the band's area from such rings
     by their winding number, and :func:`_merged` joins the parts of a band such a row parts.
 
+    ``nodes``: for each level the nodes exactly at it (:func:`_exact_nodes`).
+
     >>> z = np.array([[45.0, 50.0], [50.0, 55.0]])
-    >>> _filled_levels(z, [50.0, 52.0]) == [np.nextafter(50.0, -np.inf), 52.0]
+    >>> _filled_levels([50.0, 52.0], _exact_nodes(z, [50.0, 52.0])) == [np.nextafter(50.0, -np.inf), 52.0]
     True
     """
-    return [float(np.nextafter(lv, -np.inf)) if (z == lv).any() else float(lv) for lv in levels]
+    return [float(np.nextafter(lv, -np.inf)) if len(k) else float(lv) for lv, k in zip(levels, nodes, strict=True)]
+
+
+def _parted_at(z: np.ndarray, level: float, nodes: np.ndarray) -> bool:
+    """Whether a band whose ``level_max`` is ``level`` may lie on both sides of a cell edge whose two nodes are
+    exactly at ``level`` (a ridge): the cells on both sides hold a node below ``level`` and none above (NaN
+    corners aside).  contourpy then draws the band as two polygons sharing that edge (:func:`_merged`).
+    ``nodes``: the flat indices of the nodes exactly at ``level``."""
+    ny, nx = z.shape
+    flat = z.ravel()
+    v, u = np.divmod(nodes, nx)
+
+    def reach(cell: np.ndarray) -> np.ndarray:  # cells by the flat index of their first corner
+        c = flat[np.stack([cell, cell + 1, cell + nx, cell + nx + 1])]
+        return np.any(c < level, axis=0) & ~np.any(c > level, axis=0)
+
+    k = nodes[(u < nx - 1) & (v >= 1) & (v < ny - 1)]
+    k = k[flat[k + 1] == level]  # edges along a row: the cells below and above
+    if k.size and np.any(reach(k - nx) & reach(k)):
+        return True
+    k = nodes[(v < ny - 1) & (u >= 1) & (u < nx - 1)]
+    k = k[flat[k + nx] == level]  # edges along a column: the cells left and right
+    return bool(k.size and np.any(reach(k - 1) & reach(k)))
 
 
 def _polygons(points: Sequence[np.ndarray], offsets: Sequence[np.ndarray]) -> list[Polygon]:
@@ -208,9 +237,9 @@ def isobands(x: Any, y: Any, z: Any, levels: Sequence[float]) -> list[Polygon]:
     hi = float(levels[1]) if len(levels) > 1 else float(np.nanmax(z)) + 1.0
     if hi <= lo:
         return []
-    given = _filled_levels(z, [lo, hi])
-    polys = _polygons(*_generator(x, y, z).filled(*given))
-    if given != [lo, hi] and len(polys) > 1:  # a row of nodes at a level may part a band: one polygon each side
+    nodes = _exact_nodes(z, [lo, hi])
+    polys = _polygons(*_generator(x, y, z).filled(*_filled_levels([lo, hi], nodes)))
+    if len(polys) > 1 and _parted_at(z, hi, nodes[1]):  # a ridge at hi parts the band (:func:`_merged`)
         polys = _valid_polygons(shapely.union_all(polys))
     return polys
 
@@ -263,7 +292,9 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     top = float(np.nanmax(z)) + 1.0
     rings: list[np.ndarray] = []  # every ring of every polygon of every bound, projected
     polys: list[tuple[int, int, int]] = []  # (bound, first ring, ring count)
-    at = dict(zip(lv, _filled_levels(z, lv), strict=True))
+    exact = _exact_nodes(z, lv)
+    at = dict(zip(lv, _filled_levels(lv, exact), strict=True))
+    nodes_at = dict(zip(lv, exact, strict=True))
     for b, (lo, hi) in enumerate(bounds):
         up = top if hi is None else float(hi)
         if up <= lo:
@@ -289,8 +320,8 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     q, starts = _snapped_buffer(wgs, ends)  # piece k: q[starts[k]:starts[k + 1]]
     out = _rounded(q[starts[nr]:], True)  # the lines' positions as written
     bands = _finished_polygons(polys, nb, rings, wgs, ends, q, starts)
-    for b, (lo, hi) in enumerate(bounds):  # a band with nodes exactly at one of its levels (:func:`_merged`)
-        if len(bands[b]) > 1 and (at.get(lo, lo) != lo or (hi is not None and at.get(hi, hi) != hi)):
+    for b, (_, hi) in enumerate(bounds):  # a band a ridge exactly at its level_max parts (:func:`_merged`)
+        if len(bands[b]) > 1 and hi is not None and _parted_at(z, hi, nodes_at[hi]):
             bands[b] = _merged(bands[b])
     lines: list[list[np.ndarray]] = [[] for _ in range(nl)]
     bl = starts[nr:].tolist()
@@ -376,8 +407,8 @@ def _repaired(rings: list[np.ndarray], wgs: np.ndarray, ends: np.ndarray, i0: in
 def _merged(polys: list[list[np.ndarray]]) -> list[list[np.ndarray]]:
     """A band's polygons (lists of ring position arrays) merged where they share an edge, snapped and oriented.
 
-    Called for bands with nodes exactly at one of their levels.  A row of nodes exactly at a band's
-    ``level_max`` with the band on both sides (a ridge) belongs to the band above, a set without area;
+    Called for bands :func:`_parted_at` names.  A row of nodes exactly at a band's ``level_max`` with the
+    band on both sides (a ridge) belongs to the band above, a set without area;
     contourpy's band then runs along the row on each side of it, and the two polygons share that edge
     (no valid MultiPolygon holds both).  Their union is the band's area.
     """
