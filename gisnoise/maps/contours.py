@@ -143,20 +143,14 @@ def _exact_nodes(z: np.ndarray, levels: Sequence[float]) -> list[np.ndarray]:
 def _filled_levels(levels: Sequence[float], nodes: Sequence[np.ndarray]) -> list[float]:
     """The levels to give contourpy's ``filled`` so that its bands hold the nodes of this module's bands.
 
-    contourpy fills ``lower < z <= upper``; a band here is ``level <= z < level_max``.  The two differ
-    only at nodes exactly at a level, which contourpy gives to the band below: a plateau at a level
-    would be drawn in the band under it.  Where some node equals a level, the largest float below it,
-    ``numpy.nextafter(level, -inf)``, is given instead: for float64 values ``z > nextafter(level, -inf)``
-    exactly when ``z >= level``, so every band holds the nodes its definition names, and its edge runs
-    within a rounding error of the level.  A level no node equals is given as it is (the nodes of every
-    band are the same either way, and so is the text written).
-
-    Where a band has no width along a row of nodes at the level (a ridge at ``level_max``, a row at
-    ``level`` between lower rows), its ring runs along both sides of the row, and the two sides fall on
-    the same coordinates: :func:`gisnoise.geo.shapes.repaired` reads the band's area from such rings
-    by their winding number, and :func:`_merged` joins the parts of a band such a row parts.
-
-    ``nodes``: for each level the nodes exactly at it (:func:`_exact_nodes`).
+    contourpy fills ``lower < z <= upper``, a band here is ``level <= z < level_max``: a node exactly at
+    a level (a plateau) would fall in the band below.  Where some node equals a level (``nodes``, from
+    :func:`_exact_nodes`), ``numpy.nextafter(level, -inf)`` is given instead: for float64 values
+    ``z > nextafter(level, -inf)`` exactly when ``z >= level``; the band's edge moves by a rounding
+    error.  A level no node equals is given as it is (same nodes, same text written).  Where a band
+    has no width along a row at the level, its ring runs along both sides of the row on the same
+    coordinates: :func:`gisnoise.geo.shapes.repaired` reads its area by winding number, and
+    :func:`_merged` joins a band a ridge parts.
 
     >>> z = np.array([[45.0, 50.0], [50.0, 55.0]])
     >>> _filled_levels([50.0, 52.0], _exact_nodes(z, [50.0, 52.0])) == [np.nextafter(50.0, -np.inf), 52.0]
@@ -407,11 +401,9 @@ def _repaired(rings: list[np.ndarray], wgs: np.ndarray, ends: np.ndarray, i0: in
 def _merged(polys: list[list[np.ndarray]]) -> list[list[np.ndarray]]:
     """A band's polygons (lists of ring position arrays) merged where they share an edge, snapped and oriented.
 
-    Called for bands :func:`_parted_at` names.  A row of nodes exactly at a band's ``level_max`` with the
-    band on both sides (a ridge) belongs to the band above, a set without area;
-    contourpy's band then runs along the row on each side of it, and the two polygons share that edge
-    (no valid MultiPolygon holds both).  Their union is the band's area.
-    """
+    For bands :func:`_parted_at` names: a ridge of nodes exactly at ``level_max`` belongs to the band above
+    (a set without area), the band runs along it on each side, and its two polygons share that edge (no valid
+    MultiPolygon holds both).  Their union is the band's area."""
     return _snapped_parts(shapely.union_all([Polygon(p[0], p[1:]) for p in polys]))
 
 
