@@ -98,15 +98,25 @@ def _on_level(z: np.ndarray, u: float, v: float, levels: list[float], lo: float,
     return f"({u:.5f}, {v:.5f}) on no level along {len(edges)} edges near it"
 
 
-_REPAIRED_WRONG = pytest.mark.xfail(strict=True, reason=(
-    "a row or plateau exactly at a level: contourpy's ring runs along it twice (self-intersection) and GEOS's "
-    "make_valid, which repairs it, also fills nodes of the next band (the text is kept byte-identical to earlier "
-    "releases here; to be fixed on its own)"))
+def _plateau_cells(z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Columns and rows of the centres of cells whose four corners hold one value, and that value: the
+    level is that value all over such a cell (a plateau has area)."""
+    c = z[:-1, :-1]
+    same = np.isfinite(c) & (z[1:, :-1] == c) & (z[:-1, 1:] == c) & (z[1:, 1:] == c)
+    vv, uu = np.nonzero(same)
+    return uu + 0.5, vv + 0.5, c[vv, uu]
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=_REPAIRED_WRONG) if n in ("saddles", "plateaus_5db")
-                                  else n for n in sorted(FIELDS)])
-def test_contours_lie_on_their_levels_and_bound_their_bands(name):
+@pytest.fixture(params=[True, False], ids=["shapely2", "shapely1.8-path"])
+def shapely_path(request, monkeypatch):
+    """The core on shapely 2's functions, and on the calls it makes with shapely 1.8 (QGIS)."""
+    monkeypatch.setattr(shapes, "SHAPELY2", request.param)
+    return request.param
+
+
+@pytest.mark.filterwarnings("ignore:.*shapely.*deprecated:DeprecationWarning")  # the 1.8 calls on shapely 2
+@pytest.mark.parametrize("name", sorted(FIELDS))
+def test_contours_lie_on_their_levels_and_bound_their_bands(name, shapely_path):
     z = FIELDS[name]  # rows northwards (contour rows); the map holds them southwards
     result = MapResult({"LAmax": z[::-1].copy()}, GRID, {"units": {"LAmax": "dB(A)"}})
     doc = contours_geojson(result, LEVELS, metrics=["LAmax"])
@@ -121,7 +131,10 @@ def test_contours_lie_on_their_levels_and_bound_their_bands(name):
         for du in (0, 1):
             full[dv:dv + corners.shape[0], du:du + corners.shape[1]] |= corners >= 3
     domain = finite & full
+    pu, pv, pz = _plateau_cells(zc)
+    plon, plat = GRID.to_wgs84(GRID.xs[0] + CELL * pu, GRID.ys[::-1][0] + CELL * pv)
     bands = 0
+    present = set()
     for feat in doc["features"]:
         p = feat["properties"]
         lo, hi = p["level"], p["level_max"]
@@ -135,6 +148,7 @@ def test_contours_lie_on_their_levels_and_bound_their_bands(name):
                     assert bad is None, f"{name} isoline {lo}: {bad}"
             continue
         bands += 1
+        present.add(lo)
         geom = shape(feat["geometry"])
         assert geom.is_valid, f"{name} band {lo}: {shapely.is_valid_reason(geom)}"
         for poly, rings in zip(geom.geoms, feat["geometry"]["coordinates"], strict=True):
@@ -156,7 +170,14 @@ def test_contours_lie_on_their_levels_and_bound_their_bands(name):
             if min(abs(zi - lo), abs(zi - top)) < 1e-9 or near.distance(pt) < 3e-8:
                 continue  # a node at a level (its set may have no area) or on the boundary (a cut corner)
             assert geom.contains(pt) == bool(lo <= zi < top), f"{name} band {lo}-{hi}: node at {zi} dB"
+        # a plateau exactly at a level lies in the band from that level up, and in no other
+        for zi, x, y in zip(pz, plon, plat, strict=True):
+            assert geom.contains(Point(x, y)) == bool(lo <= zi < top), f"{name} band {lo}-{hi}: plateau at {zi} dB"
     assert bands or not np.nanmax(zc) >= LEVELS[0]
+    # every band that holds a node inside it or a plateau has a feature
+    for lo, hi in zip(LEVELS, LEVELS[1:] + [np.inf], strict=True):
+        if np.any(domain & (zc > lo) & (zc < hi)) or np.any((pz >= lo) & (pz < hi)):
+            assert lo in present, f"{name}: no band {lo}-{hi}"
 
 
 @pytest.mark.parametrize("name", sorted(FIELDS))
@@ -196,3 +217,47 @@ def test_polygons_checked_at_once_equal_polygons_checked_one_by_one(name, monkey
     for a, b in zip(at_once, one_by_one, strict=True):
         np.testing.assert_array_equal(a, b)
     assert at_once[2].sum() > 0
+
+
+def _band_areas(z: np.ndarray) -> dict[float, float]:
+    """Level -> area (m^2, in the grid's CRS) of the written isoband from that level; ``z`` with rows northwards."""
+    result = MapResult({"LAmax": z[::-1].copy()}, GRID, {"units": {"LAmax": "dB(A)"}})
+    to_grid = transformer(WGS84, GRID.crs)
+    out = {}
+    for feat in contours_geojson(result, LEVELS, metrics=["LAmax"])["features"]:
+        if feat["properties"]["kind"] == "isoband":
+            geom = shapely.transform(shape(feat["geometry"]), lambda c: np.column_stack(to_grid.transform(c[:, 0], c[:, 1])))
+            assert geom.is_valid
+            out[feat["properties"]["level"]] = geom.area
+    return out
+
+
+def test_a_plateau_exactly_at_a_level_lies_in_the_band_above_it():
+    """40 dB with a square of 5 x 5 nodes at exactly 50 dB (side s = 4 cells of 10 m): the 50 dB band is the
+    square, s^2 cells; 45-50 dB is the rim where the edges from 50 to 40 dB pass 45 dB at their middles, a strip
+    half a cell wide along each side and a corner triangle of 1/8 cell at each corner: 2 s + 1/2 cells."""
+    z = np.full((GRID.height, GRID.width), 40.0)
+    z[10:15, 12:17] = 50.0
+    s, cell_area = 4.0, CELL * CELL
+    areas = _band_areas(z)
+    assert areas.keys() == {45.0, 50.0}
+    assert areas[50.0] == pytest.approx(s * s * cell_area, rel=1e-4)  # snapping moves a vertex by under 1 mm
+    assert areas[45.0] == pytest.approx((2 * s + 0.5) * cell_area, rel=1e-4)
+    x, y = GRID.xs, GRID.ys[::-1]
+    assert sum(p.area for p in contours.isobands(x, y, z, [50.0, 55.0])) == pytest.approx(s * s * cell_area)
+    assert sum(p.area for p in contours.isobands(x, y, z, [45.0, 50.0])) == pytest.approx((2 * s + 0.5) * cell_area)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0], ids=["trough", "ridge"])
+def test_a_row_exactly_at_a_level_between_rising_rows(sign):
+    """z = 50 + sign 5 |v - 15| dB (row 15 exactly at 50 dB, 40 cells wide).  Trough: 50-55 dB is |v - 15| < 1,
+    two rows of cells; 55-60 dB the two strips 1 <= |v - 15| < 2; nothing lies below 50 dB.  Ridge: 45-50 dB is
+    0 < |v - 15| <= 1 (the row at 50 dB has no area); no band from 50 dB."""
+    v = np.arange(GRID.height, dtype=float)[:, None] * np.ones(GRID.width)
+    z = 50.0 + sign * 5.0 * np.abs(v - 15.0)
+    strip = (GRID.width - 1) * CELL * CELL  # one row of cells
+    areas = _band_areas(z)
+    expected = {50.0: 2 * strip, 55.0: 2 * strip, 60.0: 2 * strip} if sign > 0 else {45.0: 2 * strip}
+    for lo, area in expected.items():
+        assert areas.get(lo) == pytest.approx(area, rel=1e-4)
+    assert 45.0 not in areas if sign > 0 else 50.0 not in areas

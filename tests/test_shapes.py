@@ -154,3 +154,29 @@ def test_ring_polygons_check_and_orient_as_shapely_does(path):
     assert valid.tolist() == [True, False, True, False] and oriented.tolist() == [True, False, True, False]
     want = [cw_square[::-1], ccw_hole[::-1], triangle]
     np.testing.assert_array_equal(pos, np.array([p for r in want for p in r], dtype=float))
+
+
+def test_winding_polygons_leave_out_a_path_run_there_and_back(path):
+    """The square [1, 3] x [0, 2] whose ring first runs round the unit square [0, 1]^2 and back the same way: that
+    path winds around nothing, so the area is the square's 4 (GEOS's linework repair takes the path as edges)."""
+    ring = [(1, 0), (0, 0), (0, 1), (1, 1), (0, 1), (0, 0), (1, 0), (3, 0), (3, 2), (1, 2), (1, 0)]
+    poly = shapes.Polygon(ring)
+    assert not poly.is_valid
+    parts = shapes.winding_polygons(poly)
+    assert len(parts) == 1 and parts[0].is_valid and parts[0].area == pytest.approx(4.0, abs=1e-12)
+    assert parts[0].equals(shapes.box(1.0, 0.0, 3.0, 2.0))
+    fixed = shapes.repaired(poly)
+    assert fixed.is_valid and fixed.area == pytest.approx(4.0, abs=1e-12)
+    # a hole run along the same way inside a 4 x 4 square: the square less the 1 x 1 hole
+    hole = [(1, 1), (2, 1), (2, 2), (1, 2), (1, 1), (2, 1), (1, 1)]
+    with_hole = shapes.Polygon([(0, 0), (4, 0), (4, 4), (0, 4), (0, 0)], [hole])
+    assert sum(p.area for p in shapes.winding_polygons(with_hole)) == pytest.approx(15.0, abs=1e-12)
+
+
+def test_repaired_keeps_make_valid_where_both_give_one_area(path):
+    """A bow tie (two triangles of 1/4 each, wound opposite ways): both lobes, as ``make_valid`` gives them."""
+    bow_tie = shapes.Polygon([(0, 0), (1, 1), (1, 0), (0, 1), (0, 0)])
+    assert sum(p.area for p in shapes.winding_polygons(bow_tie)) == pytest.approx(0.5, abs=1e-12)
+    fixed = shapes.repaired(bow_tie)
+    assert fixed.equals(shapes.make_valid(bow_tie)) and fixed.area == pytest.approx(0.5, abs=1e-12)
+    assert shapes.winding_polygons(shapes.Polygon()) == []

@@ -20,12 +20,13 @@ from typing import Any
 import numpy as np
 import shapely as _shapely
 from shapely import wkb as _wkb
-from shapely.geometry import LineString, MultiLineString, MultiPolygon, Point, Polygon, box
+from shapely.geometry import GeometryCollection, LineString, MultiLineString, MultiPolygon, Point, Polygon, box
 from shapely.validation import make_valid
 
 __all__ = ["LineString", "MultiLineString", "MultiPolygon", "NAMES", "Point", "Polygon", "SHAPELY2", "VERSION",
            "box", "buffer", "contains_xy", "distance", "from_wkb", "intersects", "make_valid", "points", "prepare",
-           "ring_polygon_areas", "ring_polygons", "set_precision", "transform", "union_all"]
+           "repaired", "ring_polygon_areas", "ring_polygons", "set_precision", "transform", "union_all",
+           "winding_polygons"]
 
 #: The installed shapely's version.
 VERSION: str = str(_shapely.__version__)
@@ -42,6 +43,89 @@ def union_all(geoms: Sequence[Any]) -> Any:
     from shapely.ops import unary_union
 
     return unary_union(list(geoms))
+
+
+def winding_polygons(geom: Any) -> list[Polygon]:
+    """The area a polygon's rings wind around, as valid polygons, however the rings touch or overlap.
+
+    A point lies in the result where the exterior winds around it (a winding number other than
+    zero) and no hole does, as GEOS's "structure" repair reads rings.  The rings are noded
+    (:func:`union_all` of their lines) and polygonized; a face is kept by that rule at a point
+    inside it, and the kept faces are merged.  A part of a ring run along once each way (a
+    sliver of no width, a spike) winds around nothing; ``make_valid`` (GEOS's "linework" method,
+    the only one of shapely 1.8) takes such a run as an edge and may fill the area beside it.
+    The same calls on shapely 2 and 1.8.
+
+    >>> ring = [(0, 0), (4, 0), (4, 2), (2, 2), (2, 4), (2, 2), (0, 2), (0, 0)]  # a spike up x = 2
+    >>> [p.area for p in winding_polygons(Polygon(ring))]
+    [8.0]
+    """
+    if geom.is_empty:
+        return []
+    rings = [np.asarray(r.coords, dtype=float)[:, :2] for r in (geom.exterior, *geom.interiors)]
+    noded = union_all([LineString(r) for r in rings if len(r) >= 2])
+    if SHAPELY2:
+        faces = list(_shapely.get_parts(_shapely.polygonize([noded])))
+    else:
+        from shapely.ops import polygonize
+
+        faces = list(polygonize(noded))
+    if not faces:
+        return []
+    inner = [f.representative_point() for f in faces]
+    px = np.array([p.x for p in inner])
+    py = np.array([p.y for p in inner])
+    inside = _winding_number(rings[0], px, py) != 0
+    for hole in rings[1:]:
+        inside &= _winding_number(hole, px, py) == 0
+    kept = [f for f, k in zip(faces, inside.tolist(), strict=True) if k]
+    if not kept:
+        return []
+    merged = union_all(kept)
+    parts = [merged] if merged.geom_type == "Polygon" else list(getattr(merged, "geoms", []))
+    return [p for p in parts if p.geom_type == "Polygon" and not p.is_empty]
+
+
+def repaired(geom: Any) -> Any:
+    """A polygon whose rings touch, cross or run along themselves, made valid: the area its rings wind
+    around (:func:`winding_polygons`).
+
+    Where GEOS's ``make_valid`` gives that same area (rings that only touch or cross themselves) its
+    result is returned as it is, a Polygon, MultiPolygon or GeometryCollection; where it does not (a
+    ring run along once each way: ``make_valid``'s "linework" method takes the run as an edge and may
+    fill the area beside it) the winding-number polygons, as a MultiPolygon.
+
+    >>> ring = [(0, 0), (4, 0), (4, 4), (2, 4), (2, 2), (2, 4), (0, 4), (0, 0)]  # a spike down x = 2
+    >>> repaired(Polygon(ring)).area
+    16.0
+    """
+    fixed = make_valid(geom)
+    area = winding_polygons(geom)
+    parts = _polygon_parts(fixed)
+    if (not parts and not area) or (parts and area and union_all(parts).equals(union_all(area))):
+        return fixed
+    return MultiPolygon(area)
+
+
+def _polygon_parts(geom: Any) -> list[Polygon]:
+    if geom.geom_type == "Polygon":
+        return [] if geom.is_empty else [geom]
+    return [p for g in getattr(geom, "geoms", []) for p in _polygon_parts(g)]
+
+
+def _winding_number(ring: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """How often the closed ring winds counter-clockwise about each point ``(px, py)``: its edges crossing the
+    ray rightwards from the point, upwards less downwards, for a point left (right) of the edge."""
+    x0, y0, x1, y1 = ring[:-1, 0], ring[:-1, 1], ring[1:, 0], ring[1:, 1]
+    out = np.zeros(len(px))
+    step = max(1, 1_000_000 // max(len(x0), 1))  # points per pass: about a million point-edge pairs at a time
+    for i in range(0, len(px), step):
+        qx, qy = px[i:i + step, None], py[i:i + step, None]
+        side = (x1 - x0) * (qy - y0) - (qx - x0) * (y1 - y0)  # > 0: the point left of the edge
+        up = (y0 <= qy) & (y1 > qy) & (side > 0)
+        down = (y0 > qy) & (y1 <= qy) & (side < 0)
+        out[i:i + step] = np.count_nonzero(up, axis=1) - np.count_nonzero(down, axis=1)
+    return out
 
 
 def contains_xy(geom: Any, x: Any, y: Any) -> np.ndarray:
@@ -199,7 +283,7 @@ def _snap(geom: Any, g: float) -> Any:
         if len(rings[0]) < 4:
             return Polygon()
         poly = Polygon(rings[0], [r for r in rings[1:] if len(r) >= 4])
-        return poly if poly.is_valid else make_valid(poly)
+        return poly if poly.is_valid else repaired(poly)
     if kind == "MultiLineString":
         return MultiLineString([p for p in (_snap(part, g) for part in geom.geoms) if not p.is_empty])
     if kind == "MultiPolygon":
@@ -209,4 +293,6 @@ def _snap(geom: Any, g: float) -> Any:
             parts.extend([q] if q.geom_type == "Polygon" else [p for p in getattr(q, "geoms", [])
                                                                if p.geom_type == "Polygon"])
         return MultiPolygon([p for p in parts if not p.is_empty])
+    if kind == "GeometryCollection":
+        return GeometryCollection([p for p in (_snap(part, g) for part in geom.geoms) if not p.is_empty])
     raise TypeError(f"set_precision: no shapely 1.8 path for a {kind}")

@@ -10,7 +10,10 @@ Features
 --------
 isoband
     ``MultiPolygon`` of the area where ``level <= L < level_max`` (the last band is
-    open: ``level_max`` is null).
+    open: ``level_max`` is null).  A node exactly at a level belongs to the band from
+    that level up, so a plateau at 50 dB is drawn in the 50 dB band.  What has no area
+    is not drawn apart: a node or a row of nodes exactly at ``level_max`` with the band
+    on both sides (a peak, a ridge) lies inside the band's polygon.
 isoline
     ``MultiLineString`` where ``L == level``; ``level_max`` is null.
 
@@ -132,6 +135,52 @@ def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
         z_interp=contourpy.ZInterp.Linear, x_chunk_size=0, y_chunk_size=0)
 
 
+def _exact_nodes(z: np.ndarray, levels: Sequence[float]) -> list[np.ndarray]:
+    """For each level, the flat indices of the nodes of ``z`` exactly at it."""
+    return [np.flatnonzero(z == lv) for lv in levels]
+
+
+def _filled_levels(levels: Sequence[float], nodes: Sequence[np.ndarray]) -> list[float]:
+    """The levels to give contourpy's ``filled`` so that its bands hold the nodes of this module's bands.
+
+    contourpy fills ``lower < z <= upper``, a band here is ``level <= z < level_max``: a node exactly at
+    a level (a plateau) would fall in the band below.  Where some node equals a level (``nodes``, from
+    :func:`_exact_nodes`), ``numpy.nextafter(level, -inf)`` is given instead: for float64 values
+    ``z > nextafter(level, -inf)`` exactly when ``z >= level``; the band's edge moves by a rounding
+    error.  A level no node equals is given as it is (same nodes, same text written).  Where a band
+    has no width along a row at the level, its ring runs along both sides of the row on the same
+    coordinates: :func:`gisnoise.geo.shapes.repaired` reads its area by winding number, and
+    :func:`_merged` joins a band a ridge parts.
+
+    >>> z = np.array([[45.0, 50.0], [50.0, 55.0]])
+    >>> _filled_levels([50.0, 52.0], _exact_nodes(z, [50.0, 52.0])) == [np.nextafter(50.0, -np.inf), 52.0]
+    True
+    """
+    return [float(np.nextafter(lv, -np.inf)) if len(k) else float(lv) for lv, k in zip(levels, nodes, strict=True)]
+
+
+def _parted_at(z: np.ndarray, level: float, nodes: np.ndarray) -> bool:
+    """Whether a band whose ``level_max`` is ``level`` may lie on both sides of a cell edge whose two nodes are
+    exactly at ``level`` (a ridge): the cells on both sides hold a node below ``level`` and none above (NaN
+    corners aside).  contourpy then draws the band as two polygons sharing that edge (:func:`_merged`).
+    ``nodes``: the flat indices of the nodes exactly at ``level``."""
+    ny, nx = z.shape
+    flat = z.ravel()
+    v, u = np.divmod(nodes, nx)
+
+    def reach(cell: np.ndarray) -> np.ndarray:  # cells by the flat index of their first corner
+        c = flat[np.stack([cell, cell + 1, cell + nx, cell + nx + 1])]
+        return np.any(c < level, axis=0) & ~np.any(c > level, axis=0)
+
+    k = nodes[(u < nx - 1) & (v >= 1) & (v < ny - 1)]
+    k = k[flat[k + 1] == level]  # edges along a row: the cells below and above
+    if k.size and np.any(reach(k - nx) & reach(k)):
+        return True
+    k = nodes[(v < ny - 1) & (u >= 1) & (u < nx - 1)]
+    k = k[flat[k + nx] == level]  # edges along a column: the cells left and right
+    return bool(k.size and np.any(reach(k - 1) & reach(k)))
+
+
 def _polygons(points: Sequence[np.ndarray], offsets: Sequence[np.ndarray]) -> list[Polygon]:
     out: list[Polygon] = []
     for pts, off in zip(points, offsets, strict=True):
@@ -148,7 +197,7 @@ def _polygons(points: Sequence[np.ndarray], offsets: Sequence[np.ndarray]) -> li
 
 def _valid_polygons(geom: Any) -> list[Polygon]:
     if not geom.is_valid:
-        geom = shapely.make_valid(geom)
+        geom = shapely.repaired(geom)
     if isinstance(geom, Polygon):
         return [] if geom.is_empty else [geom]
     parts = getattr(geom, "geoms", [])
@@ -182,8 +231,11 @@ def isobands(x: Any, y: Any, z: Any, levels: Sequence[float]) -> list[Polygon]:
     hi = float(levels[1]) if len(levels) > 1 else float(np.nanmax(z)) + 1.0
     if hi <= lo:
         return []
-    pts, offs = _generator(x, y, z).filled(lo, hi)
-    return _polygons(pts, offs)
+    nodes = _exact_nodes(z, [lo, hi])
+    polys = _polygons(*_generator(x, y, z).filled(*_filled_levels([lo, hi], nodes)))
+    if len(polys) > 1 and _parted_at(z, hi, nodes[1]):  # a ridge at hi parts the band (:func:`_merged`)
+        polys = _valid_polygons(shapely.union_all(polys))
+    return polys
 
 
 def isolines(x: Any, y: Any, z: Any, level: float) -> list[LineString]:
@@ -223,8 +275,9 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     (:func:`_snapped_buffer`).  Repair and orientation as :func:`isobands` and :func:`isolines`
     define them (exterior rings counter-clockwise, holes clockwise): a polygon whose snapped rings
     are closed is checked, and oriented when valid, by GEOS for all such polygons at once
-    (:func:`gisnoise.geo.shapes.ring_polygons`); any other goes through GEOS's repair and
-    precision reduction on its own (:func:`_repaired`).
+    (:func:`gisnoise.geo.shapes.ring_polygons`); any other is repaired (by winding number,
+    :func:`gisnoise.geo.shapes.repaired`) and reduced to the precision by GEOS on its own
+    (:func:`_repaired`).  Levels exactly at nodes: :func:`_filled_levels`.
     """
     nb, nl = len(bounds), len(lv)
     if z.ndim != 2 or z.shape[0] < 2 or z.shape[1] < 2 or not np.isfinite(z).any():
@@ -233,11 +286,14 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     top = float(np.nanmax(z)) + 1.0
     rings: list[np.ndarray] = []  # every ring of every polygon of every bound, projected
     polys: list[tuple[int, int, int]] = []  # (bound, first ring, ring count)
+    exact = _exact_nodes(z, lv)
+    at = dict(zip(lv, _filled_levels(lv, exact), strict=True))
+    nodes_at = dict(zip(lv, exact, strict=True))
     for b, (lo, hi) in enumerate(bounds):
         up = top if hi is None else float(hi)
         if up <= lo:
             continue
-        pts, offs = gen.filled(float(lo), up)
+        pts, offs = gen.filled(at.get(lo, float(lo)), up if hi is None else at.get(hi, up))
         for pt, off in zip(pts, offs, strict=True):
             rr = [pt[off[i]:off[i + 1]] for i in range(len(off) - 1)]
             rr = [r for r in rr if len(r) >= 4]
@@ -258,6 +314,9 @@ def _band_geometries(x: np.ndarray, y: np.ndarray, z: np.ndarray, bounds: list[t
     q, starts = _snapped_buffer(wgs, ends)  # piece k: q[starts[k]:starts[k + 1]]
     out = _rounded(q[starts[nr]:], True)  # the lines' positions as written
     bands = _finished_polygons(polys, nb, rings, wgs, ends, q, starts)
+    for b, (_, hi) in enumerate(bounds):  # a band a ridge exactly at its level_max parts (:func:`_merged`)
+        if len(bands[b]) > 1 and hi is not None and _parted_at(z, hi, nodes_at[hi]):
+            bands[b] = _merged(bands[b])
     lines: list[list[np.ndarray]] = [[] for _ in range(nl)]
     bl = starts[nr:].tolist()
     for i, j in enumerate(seg_level):
@@ -273,7 +332,7 @@ def _finished_polygons(polys: list[tuple[int, int, int]], nb: int, rings: list[n
     ``wgs``: every piece's projected positions (piece ``k`` ends at ``ends[k]``); ``q``: the snapped ones (piece
     ``k`` is ``q[starts[k]:starts[k + 1]]``).  As :func:`isobands` and the old one-polygon-at-a-time code define
     it: a polygon without area before snapping is left out; one whose snapped rings stay closed and make a valid
-    polygon is kept as snapped, oriented; any other is repaired by GEOS (:func:`_repaired`).  The checks and the
+    polygon is kept as snapped, oriented; any other is repaired (:func:`_repaired`).  The checks and the
     orientation are GEOS's, for all polygons at once (:func:`gisnoise.geo.shapes.ring_polygons`).
     """
     bands: list[list[list[np.ndarray]]] = [[] for _ in range(nb)]
@@ -283,7 +342,7 @@ def _finished_polygons(polys: list[tuple[int, int, int]], nb: int, rings: list[n
     wstarts = np.zeros(nr + 1, np.intp)
     wstarts[1:] = ends[:nr]
     n_pos = np.diff(starts[:nr + 1])
-    # snapped rings that stay closed (a ring that collapses is left to GEOS's repair)
+    # snapped rings that stay closed (a ring that collapses is left to the repair)
     closed = ((n_pos >= 4) & ~np.any(q[starts[:nr]] != q[starts[1:nr + 1] - 1], axis=1)).tolist()
     ok = [all(closed[i0:i0 + n]) for _, i0, n in polys]
     fast = [p for p, k in zip(polys, ok, strict=True) if k]
@@ -329,13 +388,29 @@ def _ragged(pts: np.ndarray, starts: np.ndarray, ring_ids: np.ndarray) -> tuple[
 
 
 def _repaired(rings: list[np.ndarray], wgs: np.ndarray, ends: np.ndarray, i0: int, n: int) -> list[list[np.ndarray]]:
-    """One polygon (rings ``i0 .. i0 + n - 1`` of ``rings``, projected in ``wgs``) made valid by GEOS and snapped to
-    :data:`PRECISION_DEG`, oriented, as the lists of its parts' ring position arrays (rounded)."""
+    """One polygon (rings ``i0 .. i0 + n - 1`` of ``rings``, projected in ``wgs``) made valid
+    (:func:`gisnoise.geo.shapes.repaired`) and snapped to :data:`PRECISION_DEG`, oriented, as the lists of its
+    parts' ring position arrays (rounded)."""
     wr = [wgs[(ends[k - 1] if k else 0):ends[k]] for k in range(i0, i0 + n)]
     geom = Polygon(wr[0], wr[1:])
     if geom.is_empty or geom.area == 0:
         return []
-    g = shapely.set_precision(shapely.make_valid(geom), PRECISION_DEG)
+    return _snapped_parts(shapely.repaired(geom))
+
+
+def _merged(polys: list[list[np.ndarray]]) -> list[list[np.ndarray]]:
+    """A band's polygons (lists of ring position arrays) merged where they share an edge, snapped and oriented.
+
+    For bands :func:`_parted_at` names: a ridge of nodes exactly at ``level_max`` belongs to the band above
+    (a set without area), the band runs along it on each side, and its two polygons share that edge (no valid
+    MultiPolygon holds both).  Their union is the band's area."""
+    return _snapped_parts(shapely.union_all([Polygon(p[0], p[1:]) for p in polys]))
+
+
+def _snapped_parts(geom: Any) -> list[list[np.ndarray]]:
+    """The polygons of a valid ``geom`` snapped to :data:`PRECISION_DEG`, oriented, as lists of their rings'
+    position arrays (rounded)."""
+    g = shapely.set_precision(geom, PRECISION_DEG)
     return [[_rounded(np.asarray(ring.coords, dtype=float)[:, :2], True) for ring in (o.exterior, *o.interiors)]
             for o in (orient(part, sign=1.0) for part in _valid_polygons(g) if part.area > 0)]
 
