@@ -102,7 +102,8 @@ def uncertainty_bands(cards: Sequence[ModelCard], fl: FlightInstants, rc: Receiv
     if want_max:
         lamax = levels["LAmax"]
         ok = np.isfinite(lamax)
-        bar[ok] = np.power(10.0, (lamax[ok] - TIE_DB) / 10.0)
+        # (at least the smallest normal float32: a cell of silent instants only sits at the kernel's floor)
+        bar[ok] = np.maximum(np.power(10.0, (lamax[ok] - TIE_DB) / 10.0), np.finfo(np.float32).tiny)
     s_max = np.full((H, W), np.nan)
     s_int = np.full((H, W), np.nan)
     k = rc.seg

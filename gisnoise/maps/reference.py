@@ -388,7 +388,7 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
 
         lmax = np.full(nc, -np.inf)
         # LAmax_std: the largest tie_std of the instants within TIE_DB of the running maximum; a cell whose maximum
-        # rises by at most TIE_DB from one block of instants to the next (their tie_std changes): redone
+        # rises by less than TIE_DB from one block of instants to the next (their tie_std changes): redone
         smax = np.full(nc, -np.inf) if want_jac and "LAmax" in metrics else None
         redo = np.zeros(nc, bool)
         energy = np.zeros(nc)
