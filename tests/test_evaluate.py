@@ -10,7 +10,7 @@ from affine import Affine
 from gisnoise.errors import CardError, InputError, TrajectoryError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import GridSpec, LocalFrame
-from gisnoise.maps import Z95, CardSet, contour_features, grid_for_trajectory
+from gisnoise.maps import Z95, CardSet, contour_features, grid_for_trajectory, reference
 from gisnoise.maps import evaluate_grid as _evaluate_grid
 from gisnoise.maps.reference import _levels_chunk
 from gisnoise.model import ModelCard, level_sum, with_parameters
@@ -341,6 +341,27 @@ def test_uncertainty_matches_monte_carlo_over_the_covariance():
         mc = np.std(np.stack(samples[m]), axis=0, ddof=1)  # sampling error of each about 1.6 %
         assert np.all(res.bands[f"{m}_std"] > 1.0)  # a case where the uncertainty matters
         np.testing.assert_allclose(res.bands[f"{m}_std"], mc, rtol=0.05)
+
+
+def test_lamax_std_does_not_depend_on_how_the_instants_are_blocked(monkeypatch):
+    # a circle around the centre cell: there every instant ties for LAmax, around it many nearly tie.  The NumPy
+    # engine takes the instants in blocks; where a cell's maximum rises by less than TIE_DB from one block to the
+    # next it takes that cell's instants again (the tie rule measures from the final LAmax): the same band
+    t = np.arange(0.0, 63.0, 1.5)  # 20 m/s on a circle of 200 m radius: 0.15 rad per instant
+    ang = t / 10.0
+    lat, lon, h = FRAME.to_wgs84(200.0 * np.sin(ang), 200.0 * np.cos(ang), np.full(t.size, 60.0))
+    traj = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=np.full(t.size, 11.5), pitch=np.zeros(t.size),
+                      yaw=np.degrees(ang) + 90.0, power_w=np.full(t.size, 3000.0), phase=np.full(t.size, "horizontal"))
+    card, grid = fitted_card(p4=-0.3), centred_grid(20.0, 9, 9)
+    kw = dict(ground_h=0.0, metrics=("LAmax",), uncertainty=True, engine="numpy")
+    whole = evaluate_grid(traj, [card], grid, **kw)
+    redone = []
+    redo = reference._redo_ties
+    monkeypatch.setattr(reference, "_redo_ties", lambda *a: redone.append(len(a[1])) or redo(*a))
+    blocked = evaluate_grid(traj, [card], grid, block_size=27, chunk_cells=3, **kw)  # 3 instants a block
+    assert sum(redone) > 0  # some cells were taken again
+    for name in ("LAmax", "LAmax_std", "LAmax_p95"):
+        np.testing.assert_allclose(blocked.bands[name], whole.bands[name], rtol=0, atol=1e-12, err_msg=name)
 
 
 def test_uncertainty_needs_a_covariance(flyover):

@@ -108,9 +108,10 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
 @click.option("--background", "background", is_flag=True, help="Include the cards' background level.")
 @click.option("--uncertainty", "uncertainty", is_flag=True,
               help="Add LAmax_std, LAeq_std, SEL_std and the 95 %-confidence levels LAmax_p95, LAeq_p95 "
-                   "(delta method; cards need a covariance).  The fast engine computes them for paper and "
-                   "paper-offset cards; for effect extensions --engine auto takes the NumPy engine (several "
-                   "times slower).")
+                   "(delta method; cards need a covariance; where instants tie for LAmax, LAmax_std is the "
+                   "largest of their standard deviations, see gisnoise.maps.tie_std).  The fast engine "
+                   "computes them for paper and paper-offset cards; for effect extensions --engine auto takes "
+                   "the NumPy engine (several times slower).")
 @click.option("--plot", "plot", is_flag=True, help="Also draw DIR/map.png.")
 @click.option("--engine", "engine", type=click.Choice(["auto", "numpy", "fast"]), default="auto", show_default=True,
               help="Evaluator.  'fast': the numba float32 kernel (paper ansatzes and their effect extensions "

@@ -2,11 +2,12 @@
 
 :func:`_jac_window_kernel` walks the receivers' lattice as :func:`gisnoise.maps._numba._window_kernel`
 does (same segments, audibility skipping, rotation, level) and accumulates per cell, besides the
-largest energy and the trapezoid energy, the delta method's two Jacobians
-(:mod:`gisnoise.maps.fast_uncertainty`):
+trapezoid energy, the delta method's two results (:mod:`gisnoise.maps.fast_uncertainty`):
 
-* ``jmax[j]``, ``who``: ``dL/dp_j`` at the instant of the largest level (LAmax) and that instant's
-  card (its slot; the Jacobian of every other card is 0 there);
+* ``smax``: ``LAmax_std``, the largest :func:`~gisnoise.maps.prepare.tie_std` of ``sqrt(J_i C_i J_i^T)``
+  (``J_i = dL_i/dp``, ``C_i`` the covariance of instant ``i``'s card) over the instants less than
+  :data:`~gisnoise.maps.prepare.TIE_DB` below the cell's LAmax (the level kernel's): those whose
+  energy ``10^(L_i/10)`` reaches the cell's ``bar = 10^((LAmax - TIE_DB)/10)``;
 * ``gsum[j]``: ``sum_i w_i 10^(L_i/10) dL_i/dp_j`` (LAeq and SEL: divided by the energy).
 
 Columns ``j``: ``p0 .. p7`` of ``paper-offset`` (``paper`` has no ``p0``; its column stays 0); in
@@ -49,21 +50,26 @@ if numba is not None:
     _ONE = np.float32(1.0)
     _ZERO = np.float32(0.0)
     _TINY = np.float32(1e-30)
+    _NONE_LO = np.int32(1 << 30)  # the bounds of no cell
+    _NONE_HI = np.int32(-1)
     _C20 = np.float32(10.0 * math.log10(2.0))  # 20 lg d = _C20 log2(d^2)
     _K10 = _k._K10
     _FLUSH = _k._FLUSH
 
     @_k.jit(fastmath=_k._FM, error_model="numpy", nogil=True)
-    def _jac_cells(xb, yb, zb, m, g, lg, p2, c3, s3, p4, c5, s5, p6, drefdb, e7, dmin2, wt, slot, em, who, eacc,
+    def _jac_cells(xb, yb, zb, m, g, lg, p2, c3, s3, p4, c5, s5, p6, drefdb, e7, dmin2, wt, bar, eb, eacc,
                    m0_, m1_, m2_, m3_, m4_, m5_, m6_, m7_, g0_, g1_, g2_, g3_, g4_, g5_, g6_, g7_):
         """Level, energy and Jacobian of ``m`` body vectors of one instant, into the accumulators (module docstring).
 
         A function of its own, its array arguments distinct (:func:`~gisnoise.maps._hemikernel._vectorize_gathers`
-        tells LLVM so), so that the loop over the cells vectorizes.  ``m*_``: the Jacobian at the
-        largest energy so far (``em``), taken where this instant's is larger, with the card's ``slot``
-        in ``who``; ``g*_`` (the card's columns, and ``eacc``) add ``wt e`` times the Jacobian (and ``wt e``).
+        tells LLVM so), so that the loop over the cells vectorizes.  ``eb``, ``m*_``: this instant's
+        energy and Jacobian of each cell (work arrays); ``g*_`` (the card's columns, and ``eacc``) add
+        ``wt e`` times the Jacobian (and ``wt e``).  Returns ``lo, hi``: the cells ``lo <= q <= hi`` hold
+        every cell whose energy reaches its ``bar`` (``lo > hi``: none).
         """
         _vectorize_gathers()
+        lo = _NONE_LO  # int32 reductions, as wide as the cells' float32 lanes
+        hi = _NONE_HI
         for q in range(m):
             x = xb[q]
             y = yb[q]
@@ -94,17 +100,19 @@ if numba is not None:
             j_5 = -gb * fa * p4 * c_po
             j_6 = ls * wb
             j_7 = _ONE - wb
-            up = e > em[q]
-            em[q] = e if up else em[q]
-            who[q] = slot if up else who[q]
-            m0_[q] = j_0 if up else m0_[q]
-            m1_[q] = j_1 if up else m1_[q]
-            m2_[q] = j_2 if up else m2_[q]
-            m3_[q] = j_3 if up else m3_[q]
-            m4_[q] = j_4 if up else m4_[q]
-            m5_[q] = j_5 if up else m5_[q]
-            m6_[q] = j_6 if up else m6_[q]
-            m7_[q] = j_7 if up else m7_[q]
+            qi = np.int32(q)
+            tie = e >= bar[q]
+            lo = min(lo, qi if tie else _NONE_LO)
+            hi = max(hi, qi if tie else _NONE_HI)
+            eb[q] = e
+            m0_[q] = j_0
+            m1_[q] = j_1
+            m2_[q] = j_2
+            m3_[q] = j_3
+            m4_[q] = j_4
+            m5_[q] = j_5
+            m6_[q] = j_6
+            m7_[q] = j_7
             we = wt * e
             eacc[q] += we
             g0_[q] += we * j_0
@@ -115,18 +123,43 @@ if numba is not None:
             g5_[q] += we * j_5
             g6_[q] += we * j_6
             g7_[q] += we * j_7
+        return lo, hi
+
+    @_k.jit(error_model="numpy", inline="always")
+    def _tie_std(std, below_db, tie_db):
+        """:func:`gisnoise.maps.prepare.tie_std` with ``TIE_DB = tie_db`` (written out here, since numba's cache
+        knows this file's text only; ``tests/test_fast_uncertainty.py`` checks that the two agree)."""
+        return std - below_db * below_db / (tie_db * (tie_db - below_db))
+
+    @_k.jit(fastmath=_k._FM, error_model="numpy", nogil=True)
+    def _tie_stds(lo, hi, bar, eb, jb, cv, sm, tie_db):
+        """``sm[q] = max(sm[q], tie_std(sqrt(J C J^T), LAmax - L))`` for the cells ``lo <= q <= hi`` whose energy
+        ``eb`` reaches ``bar`` and lies less than ``tie_db`` below their LAmax; ``jb (8, k)``: their Jacobians
+        (:func:`_jac_cells`), ``cv (8, 8)``: the instant's card's covariance."""
+        for q in range(lo, hi + 1):
+            if eb[q] >= bar[q]:  # LAmax - L = tie_db - 10 lg(e / bar)
+                below = max(tie_db - 10.0 * math.log10(np.float64(eb[q]) / np.float64(bar[q])), 0.0)
+                if below < tie_db:
+                    v = 0.0
+                    for a in range(N_JAC):
+                        s = 0.0
+                        for b in range(N_JAC):
+                            s += cv[a, b] * np.float64(jb[b, q])
+                        v += np.float64(jb[a, q]) * s
+                    sm[q] = max(sm[q], _tie_std(math.sqrt(max(v, 0.0)), below, tie_db))
         return 0
 
     @_k.jit(fastmath=_k._FM, error_model="numpy", nogil=True)
     def _jac_window_kernel(P, U, dh, has_dem, k, m0, c0, ncw, src, C, gain, lgp, cidx, jc, jo, w, radius,
-                           emax, who, energy, jmax, gsum, computed):  # pragma: no cover - compiled
-        """Accumulate ``emax``, ``energy`` (as the window kernel), ``jmax`` and ``gsum`` (module docstring).
+                           bar, tie_db, cov, smax, energy, gsum, computed):  # pragma: no cover - compiled
+        """Accumulate ``smax``, ``energy`` (as the window kernel) and ``gsum`` (module docstring).
 
         Arguments as :func:`gisnoise.maps._numba._window_kernel` (no thresholds), plus per instant
-        ``lgp`` (``lg P_el``) and ``jo`` (first Jacobian column of its card), per card the rows
-        ``jc``.  Outputs (zero on entry): ``emax (nr, ncw)`` f32, ``who (nr, ncw)`` i32 (the card slot of the
-        loudest instant), ``energy (nr, ncw)`` f64, ``jmax (8, nr, ncw)`` f32 (that instant's Jacobian, the
-        other cards' columns being 0), ``gsum (nj, nr, ncw)`` f64, ``computed (nr, ncw)`` u8.
+        ``lgp`` (``lg P_el``) and ``jo`` (first Jacobian column of its card, ``8 slot``), per card the rows
+        ``jc``, per cell ``bar (nr, ncw)`` f32 (``10^((LAmax - tie_db)/10)``; the largest float32: no
+        LAmax_std), ``tie_db`` (:data:`~gisnoise.maps.prepare.TIE_DB`), per card slot ``cov (n_used, 8, 8)``
+        f64.  Outputs: ``smax (nr, ncw)`` f64 (-1 on entry: a cell no instant reached keeps it), and zero
+        on entry ``energy (nr, ncw)`` f64, ``gsum (nj, nr, ncw)`` f64, ``computed (nr, ncw)`` u8.
         """
         _k._prefer_512bit_vectors()
         nr = P.shape[0]
@@ -135,6 +168,8 @@ if numba is not None:
         nj = gsum.shape[0]
         thr32, lcur, lprev, eacc, tacc, e0, e1, e2, n0, n1, lo_b, hi_b = _k._window_buffers(k, np.zeros(0))
         gacc = np.zeros((nj, k), np.float32)
+        jb = np.empty((N_JAC, k), np.float32)
+        eb = np.empty(k, np.float32)
         xs = np.empty(k, np.float32)
         ys = np.empty(k, np.float32)
         zs = np.empty(k, np.float32)
@@ -145,8 +180,8 @@ if numba is not None:
                                         lo_b, hi_b, computed)
                 if m == 0:
                     continue
-                em = emax[r, jl:jl + m]
-                wh = who[r, jl:jl + m]
+                br = bar[r, jl:jl + m]
+                sm = smax[r, jl:jl + m]
                 en = energy[r, jl:jl + m]
                 dhr = dh[r, jl:jl + m] if has_dem else dh[0, 0:1]
                 for i in range(n):
@@ -174,12 +209,12 @@ if numba is not None:
                         xs[q] = ax + qf * (bx + qf * dx) + hh * (nx + qf * tx)
                         ys[q] = ay + qf * (by + qf * dy) + hh * (ny + qf * ty)
                         zs[q] = az + qf * (bz + qf * dz) + hh * (nz + qf * tz)
-                    _jac_cells(xs, ys, zs, m, g, lg, p2, c3, s3, p4, c5, s5, p6, drefdb, e7, dmin2, wt,
-                               np.int32(j0 // 8), em, wh, eacc, jmax[0, r, jl:jl + m], jmax[1, r, jl:jl + m],
-                               jmax[2, r, jl:jl + m], jmax[3, r, jl:jl + m], jmax[4, r, jl:jl + m],
-                               jmax[5, r, jl:jl + m], jmax[6, r, jl:jl + m], jmax[7, r, jl:jl + m], gacc[j0],
-                               gacc[j0 + 1], gacc[j0 + 2], gacc[j0 + 3], gacc[j0 + 4], gacc[j0 + 5], gacc[j0 + 6],
-                               gacc[j0 + 7])
+                    lo_t, hi_t = _jac_cells(xs, ys, zs, m, g, lg, p2, c3, s3, p4, c5, s5, p6, drefdb, e7, dmin2,
+                                            wt, br, eb, eacc, jb[0], jb[1], jb[2], jb[3], jb[4], jb[5], jb[6], jb[7],
+                                            gacc[j0], gacc[j0 + 1], gacc[j0 + 2], gacc[j0 + 3], gacc[j0 + 4],
+                                            gacc[j0 + 5], gacc[j0 + 6], gacc[j0 + 7])
+                    if lo_t <= hi_t:  # an instant that ties for some cells' LAmax
+                        _tie_stds(lo_t, hi_t, br, eb, jb, cov[j0 // N_JAC], sm, tie_db)
                     if (i + 1) % _FLUSH == 0 or i == n - 1:  # float32 partial sums into the float64 outputs
                         for q in range(m):
                             en[q] += eacc[q]

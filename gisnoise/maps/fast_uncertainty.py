@@ -4,10 +4,14 @@ The NumPy engine (:mod:`gisnoise.maps.reference`) propagates each card's paramet
 ``C`` through the ansatz's analytic Jacobian: ``LAmax_std = sqrt(J^T C J)`` with ``J = dL/dp`` at
 the instant of the maximum, ``LAeq_std = SEL_std = sqrt(g^T C g)`` with ``g = sum_i w_i
 10^(L_i/10) dL_i/dp / sum_i w_i 10^(L_i/10)``, ``*_p95 = level - 1.645 std``; cards are
-independent (block-diagonal covariance).  Here the kernel of :mod:`gisnoise.maps._numba_jac`
-accumulates ``J`` and the sums of ``g`` per cell over the same lattice, instants and audibility
-skipping as the level kernel, window by window, and each window is reduced to its standard
-deviations at once, so memory stays that of a window (``8`` columns per card).
+independent (block-diagonal covariance).  Where instants tie for the maximum, ``LAmax_std`` is the
+largest ``tie_std(sqrt(J_i^T C J_i), LAmax - L_i)`` over the instants less than ``TIE_DB`` below
+LAmax (:func:`~gisnoise.maps.prepare.tie_std`), in both engines.  Here the kernel of
+:mod:`gisnoise.maps._numba_jac` runs after the level kernel, whose LAmax sets each cell's bar
+``LAmax - TIE_DB``; over the same lattice, instants and audibility skipping it keeps per cell that
+largest value over the instants above the bar and the sums of ``g``, window by window, and each
+window is reduced to its standard deviations at once, so memory stays that of a window (``8``
+columns per card).
 
 It serves the ``paper`` and ``paper-offset`` ansatzes (Eq. 8-11, whose Jacobian the kernel
 writes out; the tests check it against the ansatz's); effect extensions and measured
@@ -26,7 +30,7 @@ from gisnoise.errors import Cancelled
 from gisnoise.maps import _numba_jac as _jk
 from gisnoise.maps.fast_effects import KERNEL_BASES
 from gisnoise.maps.instants import FlightInstants, card_coefficients
-from gisnoise.maps.prepare import Z95
+from gisnoise.maps.prepare import TIE_DB, Z95
 from gisnoise.maps.receivers import Receivers
 from gisnoise.maps.threads import default_threads, map_threads, row_blocks
 from gisnoise.model import HemisphereCard, ModelCard
@@ -76,8 +80,8 @@ def uncertainty_bands(cards: Sequence[ModelCard], fl: FlightInstants, rc: Receiv
     with ``background`` and ``min_distance_m``: its instants, weights, rotations, ``lg P_el`` and
     audibility radii); its cards pass :func:`uncertainty_refusal` and
     :func:`~gisnoise.maps.prepare.require_covariances` (the caller checks, before the levels);
-    ``levels``: the level bands already computed (the ``*_p95`` bands subtract from them).
-    NaN where a level band is NaN.
+    ``levels``: the level bands already computed (LAmax sets the instants that tie for it; the ``*_p95``
+    bands subtract from them).  NaN where a level band is NaN.
     """
     want_max = "LAmax" in metrics
     want_int = "LAeq" in metrics or "SEL" in metrics
@@ -94,6 +98,12 @@ def uncertainty_bands(cards: Sequence[ModelCard], fl: FlightInstants, rc: Receiv
     lgp = np.where(silent, 0.0, fl.lg_power)
     nj = _jk.N_JAC * len(used)
     H, W = rc.grid.shape
+    bar = np.full((H, W), np.finfo(np.float32).max, np.float32)  # the energy an instant reaches to tie for LAmax
+    if want_max:
+        lamax = levels["LAmax"]
+        ok = np.isfinite(lamax)
+        # (at least the smallest normal float32: a cell of silent instants only sits at the kernel's floor)
+        bar[ok] = np.maximum(np.power(10.0, (lamax[ok] - TIE_DB) / 10.0), np.finfo(np.float32).tiny)
     s_max = np.full((H, W), np.nan)
     s_int = np.full((H, W), np.nan)
     k = rc.seg
@@ -104,22 +114,20 @@ def uncertainty_bands(cards: Sequence[ModelCard], fl: FlightInstants, rc: Receiv
         dh = rc.window_heights(r0, r1, 0, W)
         P, U = rc.lattice(r0, r1, 0, -(-W // k))
         nr = r1 - r0
-        emax = np.zeros((nr, W), np.float32)
-        who = np.zeros((nr, W), np.int32)
+        thr = bar[r0:r1]
+        std_max = np.full((nr, W), -1.0)
         energy = np.zeros((nr, W))
-        jmax = np.zeros((_jk.N_JAC, nr, W), np.float32)
         gsum = np.zeros((nj, nr, W))
         computed = np.zeros((nr, W), np.uint8)
         _jk._jac_window_kernel(P, U, dh, rc.dh is not None, k, 0, 0, W, fl.src, fl.C, gain, lgp, fl.cidx, jc, jo,
-                               fl.w, fl.radius, emax, who, energy, jmax, gsum, computed)
-        jm = jmax.astype(np.float64)
-        var_max = np.zeros((nr, W))
-        for u in range(len(used)):  # the loudest instant's card's covariance
-            var_max += np.where(who == u, np.einsum("prc,pq,qrc->rc", jm, cov[u], jm), 0.0)
+                               fl.w, fl.radius, thr, TIE_DB, cov, std_max, energy, gsum, computed)
+        missed = (computed == 1) & (thr < np.finfo(np.float32).max) & (std_max < 0.0)
+        if missed.any():  # the level kernel's loudest instant reaches the bar: never
+            raise RuntimeError(f"uncertainty: {int(missed.sum())} cells without an instant at their LAmax")
         with np.errstate(invalid="ignore", divide="ignore"):
             g = gsum.reshape(len(used), _jk.N_JAC, nr, W) / energy
         var_int = np.einsum("uprc,upq,uqrc->rc", g, cov, g)
-        out_max = np.sqrt(np.maximum(var_max, 0.0))
+        out_max = std_max
         out_int = np.sqrt(np.maximum(var_int, 0.0))
         off = computed == 0
         out_max[off] = np.nan

@@ -14,7 +14,11 @@ the delta method through the ansatz's analytic Jacobian:
 * ``LAeq_std``: ``sqrt(g^T C g)`` with ``g = sum_i w_i 10^(L_i/10) dL_i/dp / sum_i
   w_i 10^(L_i/10)`` (energy-weighted mean Jacobian; ``w_i`` trapezoid weights);
   the same for ``SEL``, which differs from LAeq by a constant;
-* ``LAmax_std``: ``sqrt(J^T C J)`` with ``J = dL/dp`` at the instant of the maximum;
+* ``LAmax_std``: ``sqrt(J^T C J)`` with ``J = dL/dp`` at the instant of the maximum; where
+  instants tie for it (a circle's centre, symmetric passes), the largest of
+  ``tie_std(sqrt(J_i^T C J_i), LAmax - L_i)`` over the instants ``i`` less than
+  ``TIE_DB`` = 0.1 dB below LAmax (:func:`~gisnoise.maps.prepare.tie_std`: the largest of the
+  tied instants' standard deviations; conservative, well defined, the same on the fast engine);
 * ``LAmax_p95``, ``LAeq_p95``: ``L - 1.645 std``, the level that the true level
   exceeds with 95 % probability (one-sided, normal approximation of the linearised
   model).  Its contour bounds the area where the level is reached with 95 % confidence.
@@ -25,7 +29,7 @@ that serves several phases is one block.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -36,6 +40,7 @@ from gisnoise.geo import WGS84, emission_angles, transformer
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.hemifill import filled_weights, has_hemisphere, hemisphere_atmospheres
 from gisnoise.maps.prepare import (
+    TIE_DB,
     UNCERTAINTY_NOTE,
     Z95,
     MapOptions,
@@ -47,6 +52,7 @@ from gisnoise.maps.prepare import (
     map_metadata,
     require_covariances,
     snapshot_state,
+    tie_std,
     trapezoid_weights,
 )
 from gisnoise.maps.result import MapResult, snapshot_name, threshold_name
@@ -71,6 +77,37 @@ def _time_above(L: np.ndarray, dt: np.ndarray, thr: float) -> np.ndarray:
     denom = np.where(mixed, np.abs(a - b), 1.0)
     frac = np.where(up_a & up_b, 1.0, np.where(mixed, np.maximum(a, b) / denom, 0.0))
     return frac @ dt
+
+
+def _tie_std(L: np.ndarray, J: np.ndarray, top: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Per cell the largest :func:`~gisnoise.maps.prepare.tie_std` over the instants less than ``TIE_DB`` below
+    ``top`` (``-inf``: none).
+
+    ``L (nc, m)`` levels, ``J (nc, m, n_jac)`` their Jacobians, ``top (nc,)`` the level the
+    instants are measured from, ``cov (n_jac, n_jac)``; silent instants (``L = -inf``) are none.
+    """
+    with np.errstate(invalid="ignore"):  # (-inf - -inf: a cell without sound)
+        below = top[:, None] - L
+    rows, cols = np.nonzero((below < TIE_DB) & np.isfinite(L))
+    jc = J[rows, cols]
+    std = np.sqrt(np.maximum(np.einsum("kp,pq,kq->k", jc, cov, jc), 0.0))
+    out = np.full(L.shape[0], -np.inf)
+    np.maximum.at(out, rows, tie_std(std, below[rows, cols]))
+    return out
+
+
+def _redo_ties(levels_at: Callable[[np.ndarray, slice], tuple[np.ndarray, np.ndarray | None]], rcv: np.ndarray,
+               top: np.ndarray, cov: np.ndarray, ns: int, ns_chunk: int,
+               cancel: Callable[[], bool] | None) -> np.ndarray:
+    """:func:`_tie_std` of receivers ``rcv`` whose LAmax ``top`` is known, over all ``ns`` instants again."""
+    out = np.full(top.shape, -np.inf)
+    for s0 in range(0, ns, ns_chunk):
+        if cancel is not None and cancel():
+            raise Cancelled("cancelled", field="cancel")
+        L, J = levels_at(rcv, slice(s0, min(s0 + ns_chunk, ns)))
+        assert J is not None
+        out = np.maximum(out, _tie_std(L, J, top, cov))
+    return out
 
 
 class _SampleExtras:
@@ -332,6 +369,13 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
     kw: dict[str, Any] = dict(background=opts.background, receiver_extras=receiver_extras,
                               min_distance_m=req.min_distance_m, receiver_agl_m=hr,
                               meta={"speed_of_sound_m_s": c_sound, "temperature_c": temp})
+
+    def levels_at(rcv: np.ndarray, sl: slice) -> tuple[np.ndarray, np.ndarray | None]:
+        """Levels (and Jacobians) of receivers ``rcv`` at the instants ``sl``."""
+        return levels_fn(rcv, src_enu[sl], att[sl], power[sl], card_idx[sl], cardset.cards,
+                         sample_extras={k: v[sl] for k, v in sample_extras.items()},
+                         jac_offsets=offsets if want_jac else None, n_jac=n_jac, **kw)
+
     for c0 in range(0, n_cells, nc_chunk):
         c1 = min(c0 + nc_chunk, n_cells)
         nc = c1 - c0
@@ -343,7 +387,10 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
         rcv = np.stack(frame.to_enu(lat, lon, hgt), axis=-1)
 
         lmax = np.full(nc, -np.inf)
-        jmax = np.zeros((nc, n_jac)) if want_jac else None
+        # LAmax_std: the largest tie_std of the instants within TIE_DB of the running maximum; a cell whose maximum
+        # rises by less than TIE_DB from one block of instants to the next (their tie_std changes): redone
+        smax = np.full(nc, -np.inf) if want_jac and "LAmax" in metrics else None
+        redo = np.zeros(nc, bool)
         energy = np.zeros(nc)
         gsum = np.zeros((nc, n_jac)) if want_jac else None
         tabove = [np.zeros(nc) for _ in thresholds]
@@ -353,19 +400,16 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
             s1 = min(s0 + ns_chunk, ns)
             e1 = min(s1 + 1, ns)  # one more instant for the intervals
             sl = slice(s0, e1)
-            L, J = levels_fn(
-                rcv, src_enu[sl], att[sl], power[sl], card_idx[sl], cardset.cards,
-                sample_extras={k: v[sl] for k, v in sample_extras.items()},
-                jac_offsets=offsets if want_jac else None, n_jac=n_jac, **kw)
+            L, J = levels_at(rcv, sl)
             m = s1 - s0
             Lm = L[:, :m]
-            if "LAmax" in metrics or want_jac:
-                am = np.argmax(Lm, axis=1)
-                mx = Lm[np.arange(nc), am]
-                upd = mx > lmax
-                lmax[upd] = mx[upd]
-                if jmax is not None and J is not None:
-                    jmax[upd] = J[np.flatnonzero(upd), am[upd], :]
+            if "LAmax" in metrics:
+                top = np.maximum(lmax, Lm.max(axis=1))
+                if smax is not None and J is not None:
+                    drop = top - TIE_DB >= lmax  # every earlier instant falls out of the new maximum's band
+                    redo |= ~drop & (top > lmax)
+                    smax = np.maximum(np.where(drop, -np.inf, smax), _tie_std(Lm, J[:, :m], top, cov))
+                lmax = top
             if integral:
                 e = np.power(10.0, Lm / 10.0)
                 ew = e * weights[s0:s1]
@@ -403,8 +447,11 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
             if progress is not None:
                 progress(min(done / total_work, 1.0))
         if uncertainty:
-            if "LAmax" in metrics and jmax is not None:
-                s = np.sqrt(np.maximum(np.einsum("cp,pq,cq->c", jmax, cov, jmax), 0.0))
+            if smax is not None:
+                if redo.any():
+                    smax[redo] = _redo_ties(levels_at, rcv[redo], lmax[redo], cov, ns,
+                                            max(1, budget // int(redo.sum())), cancel)
+                s = np.maximum(smax, 0.0)  # (no audible instant, LAmax -inf: 0)
                 out["LAmax_std"][sl_c] = s
                 out["LAmax_p95"][sl_c] = lmax - Z95 * s
             if ("LAeq" in metrics or "SEL" in metrics) and gsum is not None:
