@@ -579,3 +579,22 @@ def test_microphone_height_above_ground_reaches_the_samples(tmp_path):
     h = mic_height_agl({**s.inputs(3000.0), "mic": s.mic})
     for mid, hm in stated.items():
         assert np.all(h[s.mic == mid] == hm)
+
+
+def test_a_byte_order_mark_in_campaign_json_is_accepted(tmp_path):
+    """campaign.json saved by an editor with a UTF-8 byte-order mark reads as without one, as every JSON input does
+    (the microphones' height_agl_m included, which the diagnosis takes from campaign.json)."""
+    from gisnoise.diagnose.samples import with_mic_heights
+
+    plain = make_campaign(tmp_path / "plain")
+    doc = json.loads((plain / "campaign.json").read_text())
+    doc["microphones"][0]["height_agl_m"] = 1.5
+    (plain / "campaign.json").write_text(json.dumps(doc))
+    bom = make_campaign(tmp_path / "bom")
+    (bom / "campaign.json").write_bytes(b"\xef\xbb\xbf" + (plain / "campaign.json").read_bytes())
+    assert check_campaign(bom) == []
+    a, b = read_campaign(plain).samples(), read_campaign(bom).samples()
+    np.testing.assert_array_equal(a.t_e, b.t_e)
+    np.testing.assert_array_equal(a.level, b.level)
+    hb = with_mic_heights(b, bom).meta["microphones"]
+    assert hb["m1"]["height_agl_m"] == 1.5
