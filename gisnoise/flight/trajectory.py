@@ -248,7 +248,7 @@ def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str
             raise TrajectoryError(f"{src}: not a UTF-8 text CSV (byte {exc.start}: {exc.reason})", field="csv") from None
     else:
         src = source or "flight CSV"
-        text = path.read()
+        text = path.read().removeprefix("\ufeff")  # a byte-order mark, as a file read with utf-8-sig drops it
     reader = csv.reader(io.StringIO(text, newline=None))
     try:
         header = [h.strip() for h in next(reader)]
