@@ -47,6 +47,7 @@ import numpy as np
 
 from gisnoise.errors import InputError, TrajectoryError
 from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
+from gisnoise.flight.ground import GROUND_TOLERANCE_M
 from gisnoise.geo import GridSpec
 from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
@@ -180,7 +181,9 @@ def make_map(
     # the shared rule set (gisnoise.limits): a ground the user gives lies below the flight; a ground taken from the
     # track's own take-off or landing point is within the log's height noise of it by construction
     check_receivers(receiver_height, ground_h, traj.h[traj.flying] if traj.flying.any() else traj.h)
+    from_track = ground_h is None and dem is None and route.ground_h_m is None and "ground_h_m" not in traj.metadata
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
+    below = _below_track_ground(traj, ground_h) if from_track else None
     unpowered = _airborne_without_power(traj)
     power_warnings, outside_range = check_power_ranges(traj, cardset)
     if grid is None:
@@ -188,7 +191,7 @@ def make_map(
                                       background=background, sel="SEL" in metrics)
     else:
         warnings = []
-    warnings = ([unpowered] if unpowered is not None else []) + power_warnings + warnings
+    warnings = [w for w in (below, unpowered) if w is not None] + power_warnings + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir) if out_dir is not None else None
     if out is not None and out.exists() and not out.is_dir():
@@ -209,6 +212,8 @@ def make_map(
         result = _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, eval_progress, kw)
     t_eval = time.perf_counter() - t_eval
     _check_cells(result, traj.source)
+    if from_track:
+        result.metadata["ground_h_source"] = GROUND_FROM_TRACK
     # the vertical datum of the track (flight logs: MSL + geoid undulation, and which)
     result.metadata.setdefault("trajectory", {}).update(
         {k: traj.metadata[k] for k in ("height_datum", "geoid_model", "geoid_undulation_m") if k in traj.metadata})
@@ -261,6 +266,28 @@ def _airborne_without_power(traj: Trajectory) -> str | None:
     return (f"{traj.source}: {int(silent.sum())} of {int(airborne.sum())} airborne samples draw no battery current "
             f"(first at t = {traj.t[i]:.2f} s; motors stopped while the land detector still says airborne, or a "
             f"current sensor dropout): silent on the map; --power-w W maps the whole flight at a constant power")
+
+
+GROUND_FROM_TRACK = "take-off or landing point of the track"
+"""The map metadata's ``ground_h_source`` when the ground is the track's own take-off or landing height."""
+
+
+def _below_track_ground(traj: Trajectory, ground_h: float | None) -> str | None:
+    """The warning for a track that flies lower than the ground taken from its own take-off or landing point.
+
+    Logged heights drift (GPS heights of a hovering vehicle wander by metres); more than
+    :data:`~gisnoise.flight.ground.GROUND_TOLERANCE_M` below that ground the UAV is put under the receivers.
+    """
+    fly = traj.flying
+    if ground_h is None or not fly.any():
+        return None
+    i = int(np.argmin(np.where(fly, traj.h, np.inf)))
+    depth = ground_h - float(traj.h[i])
+    if depth <= GROUND_TOLERANCE_M:
+        return None
+    return (f"{traj.source}: the track flies up to {depth:.1f} m below the ground taken from its take-off or landing "
+            f"point ({ground_h:.1f} m; at t = {traj.t[i]:.1f} s): its logged heights drift, and there the UAV is put "
+            f"under the receivers; give the ground with --ground-height M (field ground_h_m) or --dem DEM.tif")
 
 
 def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: float | None = None) -> float | None:
