@@ -234,3 +234,14 @@ def test_cli_runs_in_one_process_by_default(tmp_path, day, monkeypatch):
     r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "c"), "--single-process",
                                  "--workers", "2"])
     assert r.exit_code == 2 and "excludes" in r.output
+
+
+def test_thresholds_are_optional_in_a_schedule(tmp_path):
+    """thresholds_db may be left out (no N-above or time-above bands), as the schedule's documentation says."""
+    path = write_case(tmp_path)
+    doc = json.loads(path.read_text())
+    del doc["thresholds_db"]
+    sched = schedule_from_dict(doc, base_dir=tmp_path)
+    assert sched.thresholds_db == ()
+    res = evaluate_operations(sched, threads=1)
+    assert not [b for b in res.bands if b.startswith(("NA", "TA"))] and "Lden" in res.bands

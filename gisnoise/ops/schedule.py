@@ -185,7 +185,7 @@ def _num(doc: Mapping[str, Any], key: str, default: Any, source: str, *, minimum
 
 def _levels(doc: Mapping[str, Any], key: str, default: Sequence[float], source: str) -> tuple[float, ...]:
     v = doc.get(key, default)
-    if v is None or (isinstance(v, list) and not v):
+    if v is None or (isinstance(v, (list, tuple)) and not v):  # left out (the default ()), null or []
         return ()
     try:
         return tuple(parse_levels(v, field=key))
