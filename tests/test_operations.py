@@ -245,3 +245,42 @@ def test_thresholds_are_optional_in_a_schedule(tmp_path):
     assert sched.thresholds_db == ()
     res = evaluate_operations(sched, threads=1)
     assert not [b for b in res.bands if b.startswith(("NA", "TA"))] and "Lden" in res.bands
+
+
+def test_schedule_without_ground_takes_the_take_off_point_and_refuses_a_track_in_the_air(tmp_path):
+    """The ground rule of the maps holds for a day of operations: without ground_h_m or a DEM the ground is a flight's
+    take-off or landing point (not the lowest logged height), and flights that are in the air throughout are refused
+    (the receivers would stand at flight altitude)."""
+    from gisnoise.cli.main import cli
+
+    (tmp_path / "routes").mkdir()
+    t = np.arange(0.0, 61.0)
+    lat, lon, h = FRAME.to_wgs84(10.0 * t - 300.0, np.zeros_like(t), np.full(t.size, 31.5))  # a flyover at 10 m/s
+    Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=np.full(t.size, 90.0),
+               power_w=np.full(t.size, 3000.0), phase=np.full(t.size, "horizontal"),
+               source="air").to_csv(tmp_path / "routes" / "air.csv")
+    up = np.interp(t, [0.0, 10.0, 50.0, 60.0], [2.0, 31.5, 31.5, 0.5])  # lands 1.5 m below its take-off point
+    lat, lon, h = FRAME.to_wgs84(np.zeros_like(t), np.zeros_like(t), up)
+    power = np.where(t == 0.0, 0.0, 3000.0)  # on the ground, motors off, at the first sample
+    Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t, power_w=power,
+               phase=np.full(t.size, "hover"), source="hop").to_csv(tmp_path / "routes" / "hop.csv")
+    save(omni(), tmp_path / "hover.json")
+    save(omni("horizontal"), tmp_path / "horizontal.json")
+
+    def write(*routes):
+        doc = {"schema": "gisnoise/operations/1", "cards": ["hover.json", "horizontal.json"],
+               "grid": {"crs": TMERC, "bounds": [-425, -425, 425, 425], "resolution_m": 50},
+               "flights": [{"id": r, "trajectory": f"routes/{r}.csv", "counts": {"day": 1}} for r in routes]}
+        path = tmp_path / f"{'-'.join(routes)}.json"
+        path.write_text(json.dumps(doc))
+        return path
+
+    with pytest.raises(InputError) as err:
+        load_schedule(write("air"))
+    assert err.value.field == "ground_h_m" and "ground_h_m" in str(err.value)
+    r = CliRunner().invoke(cli, ["-q", "operations", str(write("air")), "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1 and "ground_h_m" in r.output
+    assert not (tmp_path / "o" / "operations.tif").exists()
+    for routes in (("hop",), ("air", "hop")):
+        res = evaluate_operations(load_schedule(write(*routes)), threads=1)
+        assert res.metadata["ground_h_m"] == pytest.approx(float(h[0]), abs=1e-6)
