@@ -132,3 +132,19 @@ def test_ground_from_the_take_off_point_is_named_and_a_track_below_it_is_flagged
     assert r.exit_code == 0, r.output
     meta = _map_meta(given)
     assert meta["ground_h_source"] == "given" and not [w for w in meta["warnings"] if "below the ground" in w]
+
+
+def test_a_snapshot_outside_a_track_with_samples_on_the_ground_is_refused(tmp_path):
+    """A snapshot after the end of a track that starts on the ground is refused naming snapshot_t, as for a track in
+    the air throughout (it gave a band without a value and no word)."""
+    csv, card, h0 = _hop(tmp_path, 0.0)
+    end = float(flyover(dt=0.5).t[-1])
+    out = tmp_path / "m"
+    r = run("contour", csv, "--card", card, "--out", str(out), "--resolution", "50", "--margin", "100",
+            "--metrics", "LAmax", "--snapshot", str(end + 100.0))
+    assert r.exit_code == 2 and "snapshot_t" in r.output and len(r.output.strip().splitlines()) == 1
+    assert not (out / "levels.tif").exists()
+    r = run("contour", csv, "--card", card, "--out", str(out), "--resolution", "50", "--margin", "100",
+            "--metrics", "LAmax", "--snapshot", str(end / 2))
+    assert r.exit_code == 0, r.output
+    assert f"LA@{end / 2:g}s" in _map_meta(out)["units"]

@@ -342,6 +342,9 @@ def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: fl
     if kw.get("uncertainty") and len(segs) > 1:
         raise InputError(f"{traj.source}: uncertainty bands need one flying stretch; the track lands and takes "
                          f"off again ({len(segs)} stretches)", field="uncertainty")
+    if snapshot_t is not None and not traj.t[0] <= float(snapshot_t) <= traj.t[-1]:  # as evaluate_grid refuses it
+        raise InputError(f"snapshot_t={float(snapshot_t):g} s lies outside the trajectory "
+                         f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
     period = traj.duration_s if period_s is None else period_s
     results: list[MapResult] = []
     for k, (i0, i1) in enumerate(segs):
