@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -248,3 +249,15 @@ def test_waypoint_altitudes_out_of_range_are_refused_before_the_path_is_flown(al
     with pytest.raises(TrajectoryError) as err:
         routes.read_trajectory(doc)
     assert err.value.field == "alt" and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("sep, name", [(";", "';'"), ("\t", "tab")])
+def test_a_csv_separated_otherwise_than_by_commas_is_refused_naming_the_separator(tmp_path, card, sep, name):
+    """A spreadsheet's export with ';' or tabs between fields (and often decimal commas) is named as such, not
+    reported as missing columns or a field count."""
+    text = Path(_flight_csv(tmp_path)).read_text()
+    p = tmp_path / "sep.csv"
+    p.write_text("\n".join(ln.replace(",", sep).replace(".", ",") for ln in text.splitlines()) + "\n")
+    refused(run("contour", str(p), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", "0"),
+            "separated by " + name, "comma")
+    assert not (tmp_path / "m").exists()

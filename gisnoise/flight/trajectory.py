@@ -257,6 +257,10 @@ def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str
         raise TrajectoryError(f"{src}: the file is empty", field="t") from None
     except csv.Error as exc:
         raise TrajectoryError(f"{src}: malformed CSV at line {reader.line_num}: {exc}", field="csv") from None
+    for sep, name in ((";", "';'"), ("\t", "tab")):
+        if len(header) == 1 and sep in header[0]:  # a spreadsheet's export in a decimal-comma locale
+            raise TrajectoryError(f"{src}: fields are separated by {name}; a flight CSV separates them by a comma "
+                                  "and writes numbers with a decimal point", field="csv")
     cols: dict[str, list[str]] = {h: [] for h in header}
     for ln, r in enumerate(rows, start=2):
         if len(r) != len(header):
