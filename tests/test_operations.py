@@ -284,3 +284,26 @@ def test_schedule_without_ground_takes_the_take_off_point_and_refuses_a_track_in
     for routes in (("hop",), ("air", "hop")):
         res = evaluate_operations(load_schedule(write(*routes)), threads=1)
         assert res.metadata["ground_h_m"] == pytest.approx(float(h[0]), abs=1e-6)
+
+
+def test_samples_on_the_ground_make_no_noise_in_a_day_of_operations():
+    """As on a map, a flight's samples on the ground (landed flag) are silent: 60 s parked at the pad, then a hover
+    of 60 s at 31.5 m above it.  Lday is the hover alone (its constant level over 60 s, times the count, over the
+    12 h day), LAmax the hover's level, and N-above counts the flight once; the parked minute was loud at the pad."""
+    t = np.concatenate([np.arange(0.0, 60.0), np.arange(60.0, 121.0)])
+    parked = t < 60.0
+    up = np.where(parked, 0.0, 31.5)
+    lat, lon, h = FRAME.to_wgs84(np.zeros_like(t), np.zeros_like(t), up)
+    tr = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t, power_w=np.full(t.size, 3000.0),
+                    phase=np.full(t.size, "hover"), on_ground=parked, source="pad")
+    counts = {"day": 10, "evening": 0, "night": 0}
+    sched = Schedule(flights=(Flight("pad", tr, counts),), cards=[omni()], grid=grid(), ground_h_m=0.0,
+                     thresholds_db=(40.0,))
+    res = evaluate_operations(sched, threads=1)
+    g = sched.grid
+    for where in ((0.0, 0.0), (200.0, -150.0), (-400.0, 400.0)):
+        r, c = cell(g, *where)
+        la = level(g.xs[c], g.ys[r], 0.0, 0.0, 31.5)
+        assert res.bands["LAmax"][r, c] == pytest.approx(la, abs=1e-3)
+        assert res.bands["Lday"][r, c] == pytest.approx(la + 10 * np.log10(10 * 60.0 / (12 * HOUR)), abs=1e-3)
+        assert res.bands["NA40_day"][r, c] == 10
