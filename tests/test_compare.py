@@ -125,3 +125,24 @@ def test_cli_compare(tmp_path):
     assert doc["ranking"][1]["people_above"]["55"] == pytest.approx(DENSITY * 200 * 200, rel=0.01)
     r = CliRunner().invoke(cli, ["-q", "compare", files[0], "--card", cp, "--out", str(tmp_path / "o2")])
     assert r.exit_code == 2 and "population" in r.output
+
+
+def test_samples_on_the_ground_make_no_noise_in_a_comparison():
+    """As on a map: a route that waits 60 s on its pad (landed flag) before flying north is scored by its flight
+    alone; LAmax and SEL at a cell beside the track equal those of the same flight without the wait."""
+    from gisnoise.planning import score_route
+
+    fly = northwards(0.0)
+    wait = np.arange(-60.0, 0.0)
+    lat0, lon0, h0 = FRAME.to_wgs84(0.0, -1000.0, 0.0)  # the pad under the start of the track
+    n = wait.size
+    parked = Trajectory(t=np.concatenate([wait, fly.t]), lat=np.concatenate([np.full(n, lat0), fly.lat]),
+                        lon=np.concatenate([np.full(n, lon0), fly.lon]), h=np.concatenate([np.full(n, h0), fly.h]),
+                        roll=np.zeros(n + len(fly)), pitch=np.zeros(n + len(fly)), yaw=np.zeros(n + len(fly)),
+                        power_w=np.full(n + len(fly), 3000.0), phase=np.full(n + len(fly), "horizontal"),
+                        on_ground=np.arange(n + len(fly)) < n, source="parked")
+    grid = GridSpec(TMERC, Affine(10.0, 0, -300.0, 0, -10.0, -900.0), 60, 20)  # around the pad
+    for metric in ("LAmax", "SEL"):
+        _, a = score_route(fly, [omni()], grid, metric=metric, ground_h=0.0)
+        _, b = score_route(parked, [omni()], grid, metric=metric, ground_h=0.0)
+        np.testing.assert_allclose(b, a, atol=1e-9, err_msg=metric)

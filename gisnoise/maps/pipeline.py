@@ -59,7 +59,7 @@ from gisnoise.maps.powers import check_power_ranges
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
-__all__ = ["make_map", "DEFAULT_LEVELS", "map_ground"]
+__all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground"]
 
 DEFAULT_LEVELS = (45.0, 50.0, 55.0, 60.0)
 
@@ -205,11 +205,8 @@ def make_map(
                               dem_offset_m=dem_offset_m, threshold_db=threshold_db, background=background,
                               substeps=substeps, uncertainty=uncertainty, engine=engine, cancel=cancel)
     t_eval = time.perf_counter()
-    if bool(np.all(traj.flying)):
-        result: MapResult = evaluate_grid(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t,
-                                          progress=eval_progress, **kw)
-    else:
-        result = _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, eval_progress, kw)
+    result = evaluate_flying(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t, progress=eval_progress,
+                             **kw)
     t_eval = time.perf_counter() - t_eval
     _check_cells(result, traj.source)
     if from_track:
@@ -330,6 +327,20 @@ def _part_progress(progress: Callable[[float], Any], k: int, n: int) -> Callable
     def update(f: float) -> None:
         progress((k + f) / n)
     return update
+
+
+def evaluate_flying(traj: Trajectory, cards: Any, grid: Any, *, period_s: float | None = None,
+                    snapshot_t: float | None = None, progress: Callable[[float], Any] | None = None,
+                    **kw: Any) -> MapResult:
+    """:func:`~gisnoise.maps.evaluate.evaluate_grid` by the rule of every map: samples on the ground make no noise.
+
+    A track flying throughout is evaluated as it is; otherwise over its flying stretches, summed
+    in energy (see the module docstring).  ``kw`` are :func:`evaluate_grid`'s further arguments.
+    """
+    cardset = as_cardset(cards)
+    if bool(np.all(traj.flying)):
+        return evaluate_grid(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t, progress=progress, **kw)
+    return _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, progress or (lambda f: None), kw)
 
 
 def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: float | None,

@@ -37,7 +37,7 @@ from gisnoise.exposure import (
 from gisnoise.flight import Trajectory, read_route
 from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
-from gisnoise.maps import CardSet, MapResult, evaluate_grid, write_geotiff
+from gisnoise.maps import CardSet, MapResult, evaluate_flying, write_geotiff
 
 __all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
 
@@ -94,8 +94,8 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
     (:func:`gisnoise.exposure.population_points`), computed once when several routes share the grid.
     """
     lv = [float(v) for v in levels]
-    res = evaluate_grid(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
-                        ground_h=ground_h, engine=engine)
+    res = evaluate_flying(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
+                          ground_h=ground_h, engine=engine)  # samples on the ground make no noise
     band = res.bands[metric]
     lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
                                                                "period_s": res.metadata.get("period_s")})
