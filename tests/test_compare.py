@@ -146,3 +146,28 @@ def test_samples_on_the_ground_make_no_noise_in_a_comparison():
         _, a = score_route(fly, [omni()], grid, metric=metric, ground_h=0.0)
         _, b = score_route(parked, [omni()], grid, metric=metric, ground_h=0.0)
         np.testing.assert_allclose(b, a, atol=1e-9, err_msg=metric)
+
+
+def test_without_a_ground_the_routes_take_off_point_is_the_ground_and_routes_in_the_air_are_refused(tmp_path):
+    """The ground rule of the maps: without --ground-height the ground is a route's take-off or landing point (not
+    its lowest logged height), and candidates that are all in the air throughout are refused: the receivers would
+    stand at flight altitude."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    with pytest.raises(InputError) as err:
+        compare_routes([northwards(0.0), northwards(400.0)], [omni()], population=pop)
+    assert err.value.field == "ground_h_m" and "ground_h_m" in str(err.value)
+    csvs = [tmp_path / f"r{e:g}.csv" for e in (0.0, 400.0)]
+    for e, p in zip((0.0, 400.0), csvs, strict=True):
+        northwards(e).to_csv(p)
+    r = CliRunner().invoke(cli, ["-q", "compare", *map(str, csvs), "--card", str(save(omni(), tmp_path / "o.json")),
+                                 "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "c")])
+    assert r.exit_code == 2 and "ground_h_m" in r.output and not (tmp_path / "c" / "comparison.json").exists()
+    fly = northwards(0.0)
+    up = fly.h.copy()
+    up[:25] = np.linspace(2.0, HEIGHT, 25)  # takes off at 2 m; its lowest logged height comes later (GPS drift)
+    up[-1] = 1.0
+    power = np.where(np.arange(up.size) == 0, 0.0, 3000.0)  # motors off on the pad at the first sample
+    hop = fly.with_(h=up, power_w=power)
+    cmp = compare_routes([hop, northwards(400.0)], [omni()], population=pop, grid=GridSpec(
+        TMERC, Affine(20.0, 0, -300.0, 0, -20.0, 150.0), 50, 15))
+    assert cmp.doc["ground_h_m"] == pytest.approx(2.0, abs=1e-6)

@@ -35,7 +35,8 @@ def _floats(value: str, name: str) -> list[float]:
               help="Margin around all routes, m.")
 @click.option("--crs", "crs", default=None, help="Projected CRS of the grid [default: local UTM].")
 @click.option("--ground-height", "ground_h", type=float, default=None,
-              help="Ellipsoidal height of flat ground, m [default: stated by the routes, else their lowest point].")
+              help="Ellipsoidal height of flat ground, m [default: stated by the routes, else the take-off or "
+                   "landing point of those that start or end on the ground].")
 @click.option("--engine", "engine", type=click.Choice(["numpy", "fast"]), default="numpy", show_default=True,
               help="Evaluator engine.")
 def command(routes: tuple[str, ...], cards: tuple[str, ...], out: str, population: str | None,

@@ -34,7 +34,7 @@ from gisnoise.exposure import (
     population_points,
     population_scores,
 )
-from gisnoise.flight import Trajectory, read_route
+from gisnoise.flight import Trajectory, ground_from_track, read_route
 from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
 from gisnoise.maps import CardSet, MapResult, evaluate_flying, write_geotiff
@@ -148,7 +148,8 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         The common grid and the evaluator, as ``gisnoise contour``.
     ground_h : float, optional
         Flat ground's ellipsoidal height, m; default the height the routes state (waypoints),
-        else the lowest point of all routes.
+        else the lowest take-off or landing point of the routes that start or end on the ground
+        (:func:`gisnoise.flight.ground_from_track`); routes all in the air throughout are refused.
     grid : GridSpec, optional
         A given common grid instead of one around the routes.
     """
@@ -167,9 +168,13 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     rs = [read_route(r) for r in routes]
     cardset = cards if isinstance(cards, CardSet) else CardSet(cards if isinstance(cards, (list, tuple)) else [cards])
     trajs = {n: r.trajectory for n, r in zip(nm, rs, strict=True)}
-    if ground_h is None:
+    if ground_h is None:  # the ground rule of the maps: stated by a route, else a take-off or landing point
         stated = [r.ground_h_m for r in rs if r.ground_h_m is not None]
-        ground_h = min(stated) if stated else min(float(np.min(t.h)) for t in trajs.values())
+        known = stated or [g for g in map(ground_from_track, trajs.values()) if g is not None]
+        if not known:
+            raise InputError("ground unknown: no route states its ground or starts or ends on the ground (a take-off "
+                             "or landing); give --ground-height M (field ground_h_m)", field="ground_h_m")
+        ground_h = min(known)
     if grid is None:
         lon = np.concatenate([t.lon for t in trajs.values()])
         lat = np.concatenate([t.lat for t in trajs.values()])
