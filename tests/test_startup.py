@@ -51,3 +51,21 @@ def test_lazy_help_lists_the_same_commands_and_lines_as_the_imported_ones():
 def test_unknown_command_is_a_usage_error():
     res = CliRunner().invoke(cli, ["nosuch"])
     assert res.exit_code == 2 and "No such command 'nosuch'" in res.output
+
+
+def test_files_the_help_texts_point_to_exist():
+    """Every help text that sends the reader to a file of the package ("see gisnoise/..." or "see x/y.py") names one
+    that exists."""
+    import re
+
+    runner = CliRunner()
+    load_all()
+    seen = 0
+    for name, cmd in cli.commands.items():
+        subs = getattr(cmd, "commands", {"": cmd})
+        for sub in subs:
+            out = runner.invoke(cli, [name, *([sub] if sub else []), "--help"]).output
+            for ref in re.findall(r"\bsee ([\w./-]+\.(?:py|md))", out):
+                seen += 1
+                assert (ROOT / ref).exists() or (ROOT / "gisnoise" / ref).exists(), (name, sub, ref)
+    assert seen >= 1
