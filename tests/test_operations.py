@@ -284,6 +284,7 @@ def test_schedule_without_ground_takes_the_take_off_point_and_refuses_a_track_in
     for routes in (("hop",), ("air", "hop")):
         res = evaluate_operations(load_schedule(write(*routes)), threads=1)
         assert res.metadata["ground_h_m"] == pytest.approx(float(h[0]), abs=1e-6)
+        assert res.metadata["ground_h_source"] == "take-off or landing point of a flight, or a route's stated ground"
 
 
 def test_samples_on_the_ground_make_no_noise_in_a_day_of_operations():

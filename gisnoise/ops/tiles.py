@@ -123,6 +123,8 @@ def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
             ground_h = min(stated)
     rc = receivers_for(grid, [f.trajectory for f in schedule.flights], receiver_height=schedule.receiver_height_m,
                        dem=schedule.dem, ground_h=ground_h, dem_offset_m=schedule.dem_offset_m)
+    if schedule.ground_h_m is None and schedule.dem is None and ground_h is not None and rc.ground is not None:
+        rc.ground["ground_h_source"] = "take-off or landing point of a flight, or a route's stated ground"
     frame = rc.frame
     flights, counts, ids = [], [], []
     for f in schedule.flights:
