@@ -261,3 +261,13 @@ def test_a_csv_separated_otherwise_than_by_commas_is_refused_naming_the_separato
     refused(run("contour", str(p), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", "0"),
             "separated by " + name, "comma")
     assert not (tmp_path / "m").exists()
+
+
+def test_an_unknown_phase_is_named_as_written(tmp_path, card):
+    """The refusal of an unknown phase quotes the value as the file has it."""
+    lines = Path(_flight_csv(tmp_path)).read_text().splitlines()
+    p = tmp_path / "phase.csv"
+    p.write_text("\n".join([lines[0] + ",phase"] + [ln + ",Hover" for ln in lines[1:]]) + "\n")
+    msg = refused(run("contour", str(p), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", "0"),
+                  "phase", "'Hover'")
+    assert "np." not in msg

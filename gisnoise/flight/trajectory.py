@@ -124,7 +124,7 @@ class Trajectory:
                     error=TrajectoryError)  # the shared rule set (gisnoise.limits)
         bad = [p for p in np.unique(self.phase) if p not in PHASES]
         if bad:
-            raise TrajectoryError(f"{src}: field 'phase' has unknown value {bad[0]!r}; known: {', '.join(PHASES)}",
+            raise TrajectoryError(f"{src}: field 'phase' has unknown value {str(bad[0])!r}; known: {', '.join(PHASES)}",
                                   field="phase")
 
     def __len__(self) -> int:
