@@ -171,3 +171,28 @@ def test_without_a_ground_the_routes_take_off_point_is_the_ground_and_routes_in_
     cmp = compare_routes([hop, northwards(400.0)], [omni()], population=pop, grid=GridSpec(
         TMERC, Affine(20.0, 0, -300.0, 0, -20.0, 150.0), 50, 15))
     assert cmp.doc["ground_h_m"] == pytest.approx(2.0, abs=1e-6)
+
+
+def test_a_grid_that_cuts_a_level_flags_the_counts_above_it(tmp_path):
+    """People above a level whose zone the grid's edge cuts are undercounted (the people beyond the edge have no
+    level): the comparison says which route and levels, as a map flags clipped contours; a grid that holds every
+    level's zone says nothing."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    routes = [northwards(0.0), northwards(400.0)]
+    # 60 m high at 20 m/s: LAmax reaches 65 dB(A) out to 46 m from the track; a grid 300 m north-south cuts it
+    small = GridSpec(TMERC, Affine(10.0, 0, -300.0, 0, -10.0, 150.0), 100, 30)
+    cmp = compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=small)
+    flagged = {w.split(":")[0] for w in cmp.doc["warnings"]}
+    assert flagged == {"route1", "route2"}
+    assert all("45, 50, 55, 60, 65" in w for w in cmp.doc["warnings"])
+    # both tracks and the 45 dB(A) reach around them (40 m 10^(25/20) = 711 m slant, 708 m across)
+    wide = GridSpec(TMERC, Affine(20.0, 0, -800.0, 0, -20.0, 1800.0), 100, 180)
+    cmp = compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=wide)
+    assert cmp.doc["warnings"] == []
+    csvs = [tmp_path / f"r{k}.csv" for k in range(2)]
+    for r, p in zip(routes, csvs, strict=True):
+        r.to_csv(p)
+    r = CliRunner().invoke(cli, ["-q", "compare", *map(str, csvs), "--card", str(save(omni(), tmp_path / "o.json")),
+                                 "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "c"),
+                                 "--ground-height", "0", "--margin", "100"])
+    assert r.exit_code == 0 and "warning: r0: LAmax reaches" in r.output

@@ -60,5 +60,7 @@ def command(routes: tuple[str, ...], cards: tuple[str, ...], out: str, populatio
                          margin_m=margin, crs=crs, ground_h=ground_h, engine=engine)
     paths = write_comparison(cmp, out)
     click.echo(comparison_table(cmp.doc).rstrip())
+    for w in cmp.doc["warnings"]:
+        click.echo(f"warning: {w}", err=True)
     for p in paths.values():
         click.echo(f"wrote {p}")

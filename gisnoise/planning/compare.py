@@ -189,6 +189,7 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         row["route"] = n
         bands[n] = band
         rows.append(row)
+    warnings = [w for w in (_clipped(n, b, lv, metric) for n, b in bands.items()) if w is not None]
     key = f"{float(rank_level_db):g}"
 
     def score(r: dict[str, Any]) -> tuple[float, float, float]:
@@ -203,8 +204,22 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
            "ranking_rule": f"people above {rank_level_db:g} dB(A) {metric}, then person-dB above {lv[0]:g} dB(A), "
                            "then peak level at a dwelling; lower is better",
            "dose_metric": f"person-dB: sum over people of max({metric} - {lv[0]:g} dB, 0)",
-           "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked}
+           "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked,
+           "warnings": warnings}
     return Comparison(nm, grid, bands, metric, doc, trajs)
+
+
+def _clipped(name: str, band: np.ndarray, levels: Sequence[float], metric: str) -> str | None:
+    """The warning for a route whose band reaches a level at the grid's edge: the counts above it miss the people
+    beyond the edge (as a map flags its clipped contours)."""
+    edge = np.concatenate([band[0], band[-1], band[:, 0], band[:, -1]])
+    edge = edge[np.isfinite(edge)]
+    top = float(edge.max()) if edge.size else -np.inf
+    cut = [v for v in levels if top >= v]
+    if not cut:
+        return None
+    return (f"{name}: {metric} reaches {top:.1f} dB(A) at the grid's edge: the people, buildings and areas above "
+            f"{', '.join(f'{v:g}' for v in cut)} dB(A) are lower bounds (a wider margin counts them whole)")
 
 
 def _track_length(traj: Trajectory) -> float:
