@@ -516,6 +516,16 @@ def test_level_csv_problems(tmp_path):
         read_level_csv(p)
 
 
+def test_level_csv_separated_by_semicolons_or_tabs_is_named_as_such(tmp_path):
+    """A spreadsheet's export with ';' or tabs between fields is named as such, not reported as a missing column."""
+    p = tmp_path / "l.csv"
+    for sep, name in ((";", "';'"), ("\t", "tab")):
+        p.write_text(f"t{sep}LA\n0{sep}50,5\n0,125{sep}51\n")
+        with pytest.raises(CampaignError, match=f"separated by {name}") as err:
+            read_level_csv(p)
+        assert err.value.field == "csv"
+
+
 def test_level_csv_round_trip_with_bands(tmp_path):
     f = np.array([10 ** 1.5, 10 ** 2.2, 10 ** 3.0, 10 ** 4.3])  # 31.5, 160, 1000, 20000 Hz bands
     text = write_level_csv(tmp_path / "x.csv", [0.0625, 0.1875], [61.234, 62.0], f, [[1, 2, 3, 4], [5, 6, 7, 8]])
