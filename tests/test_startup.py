@@ -69,3 +69,18 @@ def test_files_the_help_texts_point_to_exist():
                 seen += 1
                 assert (ROOT / ref).exists() or (ROOT / "gisnoise" / ref).exists(), (name, sub, ref)
     assert seen >= 1
+
+
+def test_progress_goes_to_stderr_and_stdout_holds_the_results(tmp_path):
+    """Piped stdout carries the results alone (the progress bar writes to stderr): the first line of a map's output is
+    its grid, and a refused map writes nothing to stdout."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    route = ROOT / "gisnoise" / "data" / "routes" / "delivery_route.geojson"
+    cmd = [sys.executable, "-m", "gisnoise.cli.main", "contour", str(route), "--card", "demo-horizontal", "--card",
+           "demo-climb", "--card", "demo-sink", "--resolution", "200", "--metrics", "LAmax"]
+    ok = subprocess.run([*cmd, "--out", str(tmp_path / "m")], capture_output=True, text=True, env=env, timeout=300)
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.splitlines()[0].startswith("grid:"), ok.stdout
+    bad = subprocess.run([*cmd, "--out", str(tmp_path / "b"), "--levels", "x"], capture_output=True, text=True,
+                         env=env, timeout=300)
+    assert bad.returncode == 2 and bad.stdout == "" and "Error" in bad.stderr
