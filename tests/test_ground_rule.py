@@ -148,3 +148,16 @@ def test_a_snapshot_outside_a_track_with_samples_on_the_ground_is_refused(tmp_pa
             "--metrics", "LAmax", "--snapshot", str(end / 2))
     assert r.exit_code == 0, r.output
     assert f"LA@{end / 2:g}s" in _map_meta(out)["units"]
+
+
+def test_the_laeq_period_must_cover_the_whole_track_also_with_samples_on_the_ground(tmp_path):
+    """The LAeq period covers the trajectory's duration, samples on the ground included (its default); a shorter one
+    is refused naming the track's duration, not that of its flying stretch."""
+    csv, card, h0 = _hop(tmp_path, 0.0)
+    end = float(flyover(dt=0.5).t[-1])
+    r = run("contour", csv, "--card", card, "--out", str(tmp_path / "m"), "--resolution", "50", "--margin", "100",
+            "--metrics", "LAeq", "--period", str(end - 0.25))
+    assert r.exit_code == 2 and "period_s" in r.output and f"({end:g} s)" in r.output
+    r = run("contour", csv, "--card", card, "--out", str(tmp_path / "m"), "--resolution", "50", "--margin", "100",
+            "--metrics", "LAeq", "--period", str(end))
+    assert r.exit_code == 0, r.output

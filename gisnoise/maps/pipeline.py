@@ -356,6 +356,10 @@ def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: fl
     if snapshot_t is not None and not traj.t[0] <= float(snapshot_t) <= traj.t[-1]:  # as evaluate_grid refuses it
         raise InputError(f"snapshot_t={float(snapshot_t):g} s lies outside the trajectory "
                          f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
+    if (period_s is not None and "LAeq" in kw.get("metrics", METRICS)
+            and float(period_s) < traj.duration_s * (1.0 - 1e-12)):  # the whole track's, as evaluate_grid asks
+        raise InputError(f"period_s ({float(period_s):g} s) must cover the trajectory's duration "
+                         f"({traj.duration_s:g} s)", field="period_s")
     period = traj.duration_s if period_s is None else period_s
     results: list[MapResult] = []
     for k, (i0, i1) in enumerate(segs):
