@@ -161,3 +161,16 @@ def test_the_laeq_period_must_cover_the_whole_track_also_with_samples_on_the_gro
     r = run("contour", csv, "--card", card, "--out", str(tmp_path / "m"), "--resolution", "50", "--margin", "100",
             "--metrics", "LAeq", "--period", str(end))
     assert r.exit_code == 0, r.output
+
+
+def test_an_unserved_phase_is_named_by_its_times_in_the_file(tmp_path):
+    """A track whose first sample stands on the ground and which has no card for its climb: the refusal names the
+    climb's samples and times as the file has them (they were counted among the flying samples only)."""
+    csv, _, _ = _hop(tmp_path, 0.0)
+    card = ModelCard(id="omni", vehicle="test", phase="horizontal", phases=["sink"], ansatz="paper-offset",
+                     parameters=dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0)
+    r = run("contour", csv, "--card", str(save(card, tmp_path / "nc.json")), "--out", str(tmp_path / "m"),
+            "--resolution", "50", "--margin", "100")
+    assert r.exit_code == 2 and "phase 'climb'" in r.output
+    assert "samples 1-19, t = 0.5-9.5 s" in r.output
