@@ -271,3 +271,28 @@ def test_an_unknown_phase_is_named_as_written(tmp_path, card):
     msg = refused(run("contour", str(p), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", "0"),
                   "phase", "'Hover'")
     assert "np." not in msg
+
+
+def _msl_waypoints(tmp_path):
+    """Waypoints with altitudes above mean sea level: take-off at 100 m MSL, cruise at 160 m MSL."""
+    lat0, lon0 = 52.27, 10.52
+    pts = [(0.0, 100.0), (0.0, 160.0), (0.01, 160.0), (0.01, 100.0)]
+    feats = [{"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon0 + d, lat0, a]},
+              "properties": {"alt": a}} for d, a in pts]
+    p = tmp_path / "msl.geojson"
+    p.write_text(json.dumps({"type": "FeatureCollection", "route": {"altitude_reference": "msl"}, "features": feats}))
+    return str(p)
+
+
+def test_geoid_undulation_is_applied_to_msl_waypoints(tmp_path, no_geoid_grid):
+    """--geoid-undulation N makes heights above mean sea level ellipsoidal (h = alt + N) for msl waypoints as for a
+    log: without a geoid grid it is the way out the refusal names, and it is the N the map states."""
+    from gisnoise.flight import read_route
+
+    path = _msl_waypoints(tmp_path)
+    with pytest.raises(InputError, match="--geoid-undulation"):
+        read_route(path)
+    tr = read_route(path, geoid_undulation_m=40.0).trajectory
+    assert float(tr.h.min()) == pytest.approx(140.0, abs=1e-6) and float(tr.h.max()) == pytest.approx(200.0, abs=1e-6)
+    assert tr.metadata["geoid_undulation_m"] == 40.0
+
