@@ -296,3 +296,11 @@ def test_geoid_undulation_is_applied_to_msl_waypoints(tmp_path, no_geoid_grid):
     assert float(tr.h.min()) == pytest.approx(140.0, abs=1e-6) and float(tr.h.max()) == pytest.approx(200.0, abs=1e-6)
     assert tr.metadata["geoid_undulation_m"] == 40.0
 
+
+def test_power_w_on_a_trajectory_that_states_its_power_is_refused(tmp_path, card):
+    """--power-w replaces the power of a flight log without battery current; given with a flight CSV, whose power it
+    states, it is refused naming the field instead of being ignored."""
+    csv = _flight_csv(tmp_path)
+    refused(run("contour", csv, "--card", card, "--out", str(tmp_path / "m"), "--ground-height", "0", "--power-w",
+                "900"), "power_w")
+    assert not (tmp_path / "m").exists()

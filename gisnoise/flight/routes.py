@@ -80,10 +80,16 @@ def read_route(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
     ArduPilot ``.bin`` (any letter case, :func:`gisnoise.flight.logs.read_flight`), a
     GeoJSON LineString with times, or waypoints.  ``geoid_undulation_m`` (the site's geoid
     undulation) makes heights above mean sea level ellipsoidal: those of flight logs and of
-    ``msl`` waypoints or LineStrings, over a document's own value.  ``power_w`` applies to flight logs.
+    ``msl`` waypoints or LineStrings, over a document's own value.  ``power_w`` applies to flight
+    logs only; given with a source that states its power, it is refused (field ``power_w``).
     """
-    return _read(src, dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle, geoid_undulation_m=geoid_undulation_m,
-                 power_w=power_w)
+    route = _read(src, dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle, geoid_undulation_m=geoid_undulation_m,
+                  power_w=power_w)
+    tr = route.trajectory
+    if power_w is not None and not str(tr.metadata.get("power", "")).startswith("constant"):
+        raise TrajectoryError(f"{tr.source}: power_w applies to flight logs (.ulg, .bin) without battery current; "
+                              "this trajectory states its power", field="power_w")
+    return route
 
 
 def _read(src: Any, *, dem: Any, dem_offset_m: float, vehicle: VehicleModel | None,
