@@ -104,3 +104,19 @@ def test_the_python_of_the_scripts_imports_names_that_exist():
                         sub = hasattr(mod, "__path__") and importlib.util.find_spec(f"{node.module}.{alias.name}")
                         assert hasattr(mod, alias.name) or sub, (script.name, node.module, alias.name)
     assert seen >= 1
+
+
+def test_a_reader_that_stops_early_ends_the_command_quietly():
+    """`gisnoise card show CARD | head -1`: when the reader of stdout closes it, the command stops without an error
+    message (it said 'cannot read the input (BrokenPipeError ...)')."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen([sys.executable, "-c", "from gisnoise.cli.main import main; main()", "card", "show",
+                          "demo-horizontal"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    assert p.stdout is not None and p.stderr is not None
+    p.stdout.close()  # before the command writes: its first write meets a closed pipe
+    with p.stderr:
+        err = p.stderr.read().decode()
+    p.wait(timeout=120)
+    assert "Error" not in err and "Traceback" not in err and "Exception ignored" not in err, err
+    assert p.returncode == 141
