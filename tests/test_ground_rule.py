@@ -174,3 +174,26 @@ def test_an_unserved_phase_is_named_by_its_times_in_the_file(tmp_path):
             "--resolution", "50", "--margin", "100")
     assert r.exit_code == 2 and "phase 'climb'" in r.output
     assert "samples 1-19, t = 0.5-9.5 s" in r.output
+
+
+def test_a_grid_crs_that_scales_distances_at_the_map_is_flagged(tmp_path, files):
+    """Cells of --resolution metres in a CRS whose scale at the map is far from 1 are not that size on the ground:
+    Web Mercator scales by sec(latitude), 1.63 at 52.27 deg N, and the map says so; the local UTM zone (scale within
+    0.04 % of 1 in its zone) gives no such warning."""
+    import json
+    import math
+
+    csv, card = files
+    for crs, flagged in (("EPSG:3857", True), (None, False)):
+        out = tmp_path / (crs or "utm").replace(":", "_")
+        args = ["contour", csv, "--card", card, "--out", str(out), "--ground-height", "0", "--resolution", "50",
+                "--margin", "150", "--metrics", "LAmax"] + (["--crs", crs] if crs else [])
+        r = run(*args)
+        assert r.exit_code == 0, r.output
+        with rasterio.open(out / "levels.tif") as ds:
+            warnings = json.loads(ds.tags()["gisnoise"])["warnings"]
+        hit = [w for w in warnings if "on the ground" in w]
+        assert bool(hit) == flagged, warnings
+        if flagged:
+            k = 1.0 / math.cos(math.radians(FRAME.lat0))
+            assert f"scales distances by {k:.3f}" in hit[0] and f"{50.0 / k:.1f} m on the ground" in hit[0]

@@ -191,7 +191,8 @@ def make_map(
                                       background=background, sel="SEL" in metrics)
     else:
         warnings = []
-    warnings = [w for w in (below, unpowered) if w is not None] + power_warnings + warnings
+    scale = _crs_scale_warning(grid, traj)
+    warnings = [w for w in (below, unpowered, scale) if w is not None] + power_warnings + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir) if out_dir is not None else None
     if out is not None and out.exists() and not out.is_dir():
@@ -263,6 +264,28 @@ def _airborne_without_power(traj: Trajectory) -> str | None:
     return (f"{traj.source}: {int(silent.sum())} of {int(airborne.sum())} airborne samples draw no battery current "
             f"(first at t = {traj.t[i]:.2f} s; motors stopped while the land detector still says airborne, or a "
             f"current sensor dropout): silent on the map; --power-w W maps the whole flight at a constant power")
+
+
+CRS_SCALE_TOLERANCE = 0.01
+"""Largest departure of the grid CRS's scale factor from 1 at the map before the map says so (1 %)."""
+
+
+def _crs_scale_warning(grid: Any, traj: Trajectory) -> str | None:
+    """The warning for a grid CRS whose scale at the track is far from 1: its cells are not their size on the ground."""
+    from pyproj import Proj
+    from pyproj.exceptions import ProjError
+
+    try:
+        f = Proj(grid.crs).get_factors(float(np.mean(traj.lon)), float(np.mean(traj.lat)))
+    except (ProjError, TypeError, ValueError):  # no scale factors for this CRS: nothing to say
+        return None
+    k = float(np.sqrt(f.meridional_scale * f.parallel_scale))
+    if not np.isfinite(k) or abs(k - 1.0) <= CRS_SCALE_TOLERANCE:
+        return None
+    cell = abs(float(grid.transform.a))
+    name = grid.crs.to_string()
+    return (f"crs: {name} scales distances by {k:.3f} at the map: its {cell:g} m cells are {cell / k:.1f} m on "
+            f"the ground and the margin shrinks alike (a local UTM zone, the default, keeps them true)")
 
 
 GROUND_FROM_TRACK = "take-off or landing point of the track"
