@@ -516,6 +516,16 @@ def test_level_csv_problems(tmp_path):
         read_level_csv(p)
 
 
+def test_level_csv_separated_by_semicolons_or_tabs_is_named_as_such(tmp_path):
+    """A spreadsheet's export with ';' or tabs between fields is named as such, not reported as a missing column."""
+    p = tmp_path / "l.csv"
+    for sep, name in ((";", "';'"), ("\t", "tab")):
+        p.write_text(f"t{sep}LA\n0{sep}50,5\n0,125{sep}51\n")
+        with pytest.raises(CampaignError, match=f"separated by {name}") as err:
+            read_level_csv(p)
+        assert err.value.field == "csv"
+
+
 def test_level_csv_round_trip_with_bands(tmp_path):
     f = np.array([10 ** 1.5, 10 ** 2.2, 10 ** 3.0, 10 ** 4.3])  # 31.5, 160, 1000, 20000 Hz bands
     text = write_level_csv(tmp_path / "x.csv", [0.0625, 0.1875], [61.234, 62.0], f, [[1, 2, 3, 4], [5, 6, 7, 8]])
@@ -579,3 +589,22 @@ def test_microphone_height_above_ground_reaches_the_samples(tmp_path):
     h = mic_height_agl({**s.inputs(3000.0), "mic": s.mic})
     for mid, hm in stated.items():
         assert np.all(h[s.mic == mid] == hm)
+
+
+def test_a_byte_order_mark_in_campaign_json_is_accepted(tmp_path):
+    """campaign.json saved by an editor with a UTF-8 byte-order mark reads as without one, as every JSON input does
+    (the microphones' height_agl_m included, which the diagnosis takes from campaign.json)."""
+    from gisnoise.diagnose.samples import with_mic_heights
+
+    plain = make_campaign(tmp_path / "plain")
+    doc = json.loads((plain / "campaign.json").read_text())
+    doc["microphones"][0]["height_agl_m"] = 1.5
+    (plain / "campaign.json").write_text(json.dumps(doc))
+    bom = make_campaign(tmp_path / "bom")
+    (bom / "campaign.json").write_bytes(b"\xef\xbb\xbf" + (plain / "campaign.json").read_bytes())
+    assert check_campaign(bom) == []
+    a, b = read_campaign(plain).samples(), read_campaign(bom).samples()
+    np.testing.assert_array_equal(a.t_e, b.t_e)
+    np.testing.assert_array_equal(a.level, b.level)
+    hb = with_mic_heights(b, bom).meta["microphones"]
+    assert hb["m1"]["height_agl_m"] == 1.5

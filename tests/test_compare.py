@@ -125,3 +125,74 @@ def test_cli_compare(tmp_path):
     assert doc["ranking"][1]["people_above"]["55"] == pytest.approx(DENSITY * 200 * 200, rel=0.01)
     r = CliRunner().invoke(cli, ["-q", "compare", files[0], "--card", cp, "--out", str(tmp_path / "o2")])
     assert r.exit_code == 2 and "population" in r.output
+
+
+def test_samples_on_the_ground_make_no_noise_in_a_comparison():
+    """As on a map: a route that waits 60 s on its pad (landed flag) before flying north is scored by its flight
+    alone; LAmax and SEL at a cell beside the track equal those of the same flight without the wait."""
+    from gisnoise.planning import score_route
+
+    fly = northwards(0.0)
+    wait = np.arange(-60.0, 0.0)
+    lat0, lon0, h0 = FRAME.to_wgs84(0.0, -1000.0, 0.0)  # the pad under the start of the track
+    n = wait.size
+    parked = Trajectory(t=np.concatenate([wait, fly.t]), lat=np.concatenate([np.full(n, lat0), fly.lat]),
+                        lon=np.concatenate([np.full(n, lon0), fly.lon]), h=np.concatenate([np.full(n, h0), fly.h]),
+                        roll=np.zeros(n + len(fly)), pitch=np.zeros(n + len(fly)), yaw=np.zeros(n + len(fly)),
+                        power_w=np.full(n + len(fly), 3000.0), phase=np.full(n + len(fly), "horizontal"),
+                        on_ground=np.arange(n + len(fly)) < n, source="parked")
+    grid = GridSpec(TMERC, Affine(10.0, 0, -300.0, 0, -10.0, -900.0), 60, 20)  # around the pad
+    for metric in ("LAmax", "SEL"):
+        _, a = score_route(fly, [omni()], grid, metric=metric, ground_h=0.0)
+        _, b = score_route(parked, [omni()], grid, metric=metric, ground_h=0.0)
+        np.testing.assert_allclose(b, a, atol=1e-9, err_msg=metric)
+
+
+def test_without_a_ground_the_routes_take_off_point_is_the_ground_and_routes_in_the_air_are_refused(tmp_path):
+    """The ground rule of the maps: without --ground-height the ground is a route's take-off or landing point (not
+    its lowest logged height), and candidates that are all in the air throughout are refused: the receivers would
+    stand at flight altitude."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    with pytest.raises(InputError) as err:
+        compare_routes([northwards(0.0), northwards(400.0)], [omni()], population=pop)
+    assert err.value.field == "ground_h_m" and "ground_h_m" in str(err.value)
+    csvs = [tmp_path / f"r{e:g}.csv" for e in (0.0, 400.0)]
+    for e, p in zip((0.0, 400.0), csvs, strict=True):
+        northwards(e).to_csv(p)
+    r = CliRunner().invoke(cli, ["-q", "compare", *map(str, csvs), "--card", str(save(omni(), tmp_path / "o.json")),
+                                 "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "c")])
+    assert r.exit_code == 2 and "ground_h_m" in r.output and not (tmp_path / "c" / "comparison.json").exists()
+    fly = northwards(0.0)
+    up = fly.h.copy()
+    up[:25] = np.linspace(2.0, HEIGHT, 25)  # takes off at 2 m; its lowest logged height comes later (GPS drift)
+    up[-1] = 1.0
+    power = np.where(np.arange(up.size) == 0, 0.0, 3000.0)  # motors off on the pad at the first sample
+    hop = fly.with_(h=up, power_w=power)
+    cmp = compare_routes([hop, northwards(400.0)], [omni()], population=pop, grid=GridSpec(
+        TMERC, Affine(20.0, 0, -300.0, 0, -20.0, 150.0), 50, 15))
+    assert cmp.doc["ground_h_m"] == pytest.approx(2.0, abs=1e-6)
+
+
+def test_a_grid_that_cuts_a_level_flags_the_counts_above_it(tmp_path):
+    """People above a level whose zone the grid's edge cuts are undercounted (the people beyond the edge have no
+    level): the comparison says which route and levels, as a map flags clipped contours; a grid that holds every
+    level's zone says nothing."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    routes = [northwards(0.0), northwards(400.0)]
+    # 60 m high at 20 m/s: LAmax reaches 65 dB(A) out to 46 m from the track; a grid 300 m north-south cuts it
+    small = GridSpec(TMERC, Affine(10.0, 0, -300.0, 0, -10.0, 150.0), 100, 30)
+    cmp = compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=small)
+    flagged = {w.split(":")[0] for w in cmp.doc["warnings"]}
+    assert flagged == {"route1", "route2"}
+    assert all("45, 50, 55, 60, 65" in w for w in cmp.doc["warnings"])
+    # both tracks and the 45 dB(A) reach around them (40 m 10^(25/20) = 711 m slant, 708 m across)
+    wide = GridSpec(TMERC, Affine(20.0, 0, -800.0, 0, -20.0, 1800.0), 100, 180)
+    cmp = compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=wide)
+    assert cmp.doc["warnings"] == []
+    csvs = [tmp_path / f"r{k}.csv" for k in range(2)]
+    for r, p in zip(routes, csvs, strict=True):
+        r.to_csv(p)
+    r = CliRunner().invoke(cli, ["-q", "compare", *map(str, csvs), "--card", str(save(omni(), tmp_path / "o.json")),
+                                 "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "c"),
+                                 "--ground-height", "0", "--margin", "100"])
+    assert r.exit_code == 0 and "warning: r0: LAmax reaches" in r.output

@@ -248,6 +248,15 @@ def test_objective_falls_with_allowed_displacement_and_altitude_spread(model):
     assert val[((60.0, 60.0), 0.0)] == pytest.approx(evaluate(model).max_abs_corr)
 
 
+def test_an_exclusions_file_with_a_byte_order_mark_reads_as_the_object(tmp_path):
+    """An exclusions GeoJSON file saved with a UTF-8 byte-order mark gives the same polygons as the object itself."""
+    frame = load_plan(PLAN).frame
+    pond = geojson_polygon(frame, 100.0, -300.0, 140.0, -260.0)
+    f = tmp_path / "pond.geojson"
+    f.write_bytes(b"\xef\xbb\xbf" + json.dumps(pond).encode())
+    assert make_plan(exclusions=str(f)).exclusions == make_plan(exclusions=pond).exclusions
+
+
 def test_exclusions_are_respected(model):
     frame = model.plan.frame
     # the unconstrained optima move microphones east of the pattern's centre; forbid that area

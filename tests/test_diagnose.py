@@ -513,3 +513,15 @@ def test_absorption_in_the_band_levels_is_measured_as_a_multiple_of_iso_9613_1()
     band = absorption_band_holdout(s, s.inputs(1.0), fold, block)
     assert band["iso_multiple"] == pytest.approx(0.0, abs=0.05)
     assert band["p_value"] > 0.01
+
+
+def test_a_hemisphere_card_is_refused_naming_the_conversion():
+    """A measured hemisphere has no parameters to extend: diagnose refuses it naming the card and the way to a
+    parametric card (card fit-hemisphere), not 'all parameters are fixed'."""
+    from gisnoise.model import import_hemisphere
+
+    _, s = simulated(None)
+    hemi = import_hemisphere(ROOT / "tests" / "data" / "hemispheres" / "Hem_Ed_M3_10_F05_Y_W_dw_2.xlsx")
+    with pytest.raises(InputError, match="fit-hemisphere") as err:
+        diagnose(s, hemi)
+    assert err.value.field == "card"

@@ -229,3 +229,21 @@ def test_bad_layers_are_refused_in_one_line(tmp_path):
         read_buildings(q)
     with pytest.raises(InputError, match="dwellings"):
         read_buildings(q.with_name("neg.gpkg"), dwellings="flats")
+
+
+def test_facade_levels_leave_out_samples_on_the_ground():
+    """Façade levels follow the map's rule: a flight's samples on the ground (landed flag) make no noise.  60 s parked
+    at the pad, then 60 s hovering 60 m above it: at a point 4 m above ground 80 m away LAmax is the hover's level
+    and SEL that level plus 10 lg 60 s (the parked minute, 80 m off at 4 m height, was louder)."""
+    from gisnoise.exposure.facades import point_levels
+
+    t = np.arange(0.0, 121.0)
+    parked = t < 60.0
+    lat, lon, h = FRAME.to_wgs84(0 * t, 0 * t, np.where(parked, 0.0, HEIGHT))
+    traj = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t, power_w=np.full(t.size, 3000.0),
+                      phase=np.full(t.size, "hover"), on_ground=parked, source="pad")
+    plat, plon, _ = FRAME.to_wgs84(80.0, 0.0, 0.0)
+    lv = point_levels(traj, [omni_card("hover")], plon, plat, 4.0)
+    la = G0 - 20 * math.log10(math.hypot(80.0, HEIGHT - 4.0) / 40.0)
+    assert lv["LAmax"][0] == pytest.approx(la, abs=1e-3)  # the frames differ by the curvature over 80 m
+    assert lv["SEL"][0] == pytest.approx(la + 10 * math.log10(60.0), abs=1e-3)

@@ -123,6 +123,22 @@ def test_generic_csv_gives_the_same_card(card, sheets, tmp_path):
     np.testing.assert_array_equal(c2.measured, card.measured)
 
 
+def test_an_angle_beyond_the_horizon_is_refused_naming_its_line_and_column(tmp_path):
+    """Table angles lie within -90..90 deg (0 straight below, +-90 at the horizon): a row at phi 95 is refused naming
+    its line and column, not reported as some other node's missing level."""
+    p = tmp_path / "h.csv"
+    rows = [f"1000,{a},{b},60" for a in (-90, 0, 90) for b in (-90, 0, 90)]
+    p.write_text("band,phi_deg,theta_deg,level_db\n" + "\n".join(rows) + "\n")
+    assert import_hemisphere(p, atmosphere=dict(SALFORD_ATMOSPHERE)).levels_db.shape == (1, 3, 3)
+    for col, k in (("phi_deg", 1), ("theta_deg", 2)):
+        bad = [r.split(",") for r in rows]
+        bad[4][k] = "95"
+        p.write_text("band,phi_deg,theta_deg,level_db\n" + "\n".join(",".join(r) for r in bad) + "\n")
+        with pytest.raises(CardError, match=f"line 6: {col} 95 .*-90..90") as e:
+            import_hemisphere(p, atmosphere=dict(SALFORD_ATMOSPHERE))
+        assert e.value.field == col
+
+
 def test_bad_files_are_refused_naming_the_field(tmp_path):
     p = tmp_path / "h.csv"
     p.write_text("band,phi_deg,theta_deg,level_db\n1000,0,0,60\n1000,0,15,60\n1250,0,0,60\n")

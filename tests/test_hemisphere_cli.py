@@ -132,3 +132,14 @@ def test_contour_atmosphere_option(m300_json, tmp_path):
     par = run("contour", str(traj), "--card", "demo-horizontal", "--out", str(tmp_path / "z"), "--atmosphere",
               "20,50", *common)
     assert par.exit_code == 2 and "atmosphere" in par.output
+
+
+def test_an_existing_card_is_kept_and_the_refusal_names_force(m300_json, tmp_path):
+    """Writing a card over an existing file is refused in one line that names --force; the file is unchanged."""
+    out = tmp_path / "fit.json"
+    out.write_text("{}")
+    r = CliRunner().invoke(cli, ["-q", "card", "fit-hemisphere", str(m300_json), "--out", str(out)])
+    assert r.exit_code == 2 and "--force" in r.output and len(r.output.strip().splitlines()) == 1
+    assert out.read_text() == "{}"
+    r = run("card", "fit-hemisphere", str(m300_json), "--out", str(out), "--force")
+    assert r.exit_code == 0 and cards.load(out).ansatz == "paper-offset"

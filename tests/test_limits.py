@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -248,3 +249,58 @@ def test_waypoint_altitudes_out_of_range_are_refused_before_the_path_is_flown(al
     with pytest.raises(TrajectoryError) as err:
         routes.read_trajectory(doc)
     assert err.value.field == "alt" and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("sep, name", [(";", "';'"), ("\t", "tab")])
+def test_a_csv_separated_otherwise_than_by_commas_is_refused_naming_the_separator(tmp_path, card, sep, name):
+    """A spreadsheet's export with ';' or tabs between fields (and often decimal commas) is named as such, not
+    reported as missing columns or a field count."""
+    text = Path(_flight_csv(tmp_path)).read_text()
+    p = tmp_path / "sep.csv"
+    p.write_text("\n".join(ln.replace(",", sep).replace(".", ",") for ln in text.splitlines()) + "\n")
+    refused(run("contour", str(p), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", "0"),
+            "separated by " + name, "comma")
+    assert not (tmp_path / "m").exists()
+
+
+def test_an_unknown_phase_is_named_as_written(tmp_path, card):
+    """The refusal of an unknown phase quotes the value as the file has it."""
+    lines = Path(_flight_csv(tmp_path)).read_text().splitlines()
+    p = tmp_path / "phase.csv"
+    p.write_text("\n".join([lines[0] + ",phase"] + [ln + ",Hover" for ln in lines[1:]]) + "\n")
+    msg = refused(run("contour", str(p), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", "0"),
+                  "phase", "'Hover'")
+    assert "np." not in msg
+
+
+def _msl_waypoints(tmp_path):
+    """Waypoints with altitudes above mean sea level: take-off at 100 m MSL, cruise at 160 m MSL."""
+    lat0, lon0 = 52.27, 10.52
+    pts = [(0.0, 100.0), (0.0, 160.0), (0.01, 160.0), (0.01, 100.0)]
+    feats = [{"type": "Feature", "geometry": {"type": "Point", "coordinates": [lon0 + d, lat0, a]},
+              "properties": {"alt": a}} for d, a in pts]
+    p = tmp_path / "msl.geojson"
+    p.write_text(json.dumps({"type": "FeatureCollection", "route": {"altitude_reference": "msl"}, "features": feats}))
+    return str(p)
+
+
+def test_geoid_undulation_is_applied_to_msl_waypoints(tmp_path, no_geoid_grid):
+    """--geoid-undulation N makes heights above mean sea level ellipsoidal (h = alt + N) for msl waypoints as for a
+    log: without a geoid grid it is the way out the refusal names, and it is the N the map states."""
+    from gisnoise.flight import read_route
+
+    path = _msl_waypoints(tmp_path)
+    with pytest.raises(InputError, match="--geoid-undulation"):
+        read_route(path)
+    tr = read_route(path, geoid_undulation_m=40.0).trajectory
+    assert float(tr.h.min()) == pytest.approx(140.0, abs=1e-6) and float(tr.h.max()) == pytest.approx(200.0, abs=1e-6)
+    assert tr.metadata["geoid_undulation_m"] == 40.0
+
+
+def test_power_w_on_a_trajectory_that_states_its_power_is_refused(tmp_path, card):
+    """--power-w replaces the power of a flight log without battery current; given with a flight CSV, whose power it
+    states, it is refused naming the field instead of being ignored."""
+    csv = _flight_csv(tmp_path)
+    refused(run("contour", csv, "--card", card, "--out", str(tmp_path / "m"), "--ground-height", "0", "--power-w",
+                "900"), "power_w")
+    assert not (tmp_path / "m").exists()

@@ -234,3 +234,77 @@ def test_cli_runs_in_one_process_by_default(tmp_path, day, monkeypatch):
     r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "c"), "--single-process",
                                  "--workers", "2"])
     assert r.exit_code == 2 and "excludes" in r.output
+
+
+def test_thresholds_are_optional_in_a_schedule(tmp_path):
+    """thresholds_db may be left out (no N-above or time-above bands), as the schedule's documentation says."""
+    path = write_case(tmp_path)
+    doc = json.loads(path.read_text())
+    del doc["thresholds_db"]
+    sched = schedule_from_dict(doc, base_dir=tmp_path)
+    assert sched.thresholds_db == ()
+    res = evaluate_operations(sched, threads=1)
+    assert not [b for b in res.bands if b.startswith(("NA", "TA"))] and "Lden" in res.bands
+
+
+def test_schedule_without_ground_takes_the_take_off_point_and_refuses_a_track_in_the_air(tmp_path):
+    """The ground rule of the maps holds for a day of operations: without ground_h_m or a DEM the ground is a flight's
+    take-off or landing point (not the lowest logged height), and flights that are in the air throughout are refused
+    (the receivers would stand at flight altitude)."""
+    from gisnoise.cli.main import cli
+
+    (tmp_path / "routes").mkdir()
+    t = np.arange(0.0, 61.0)
+    lat, lon, h = FRAME.to_wgs84(10.0 * t - 300.0, np.zeros_like(t), np.full(t.size, 31.5))  # a flyover at 10 m/s
+    Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=np.full(t.size, 90.0),
+               power_w=np.full(t.size, 3000.0), phase=np.full(t.size, "horizontal"),
+               source="air").to_csv(tmp_path / "routes" / "air.csv")
+    up = np.interp(t, [0.0, 10.0, 50.0, 60.0], [2.0, 31.5, 31.5, 0.5])  # lands 1.5 m below its take-off point
+    lat, lon, h = FRAME.to_wgs84(np.zeros_like(t), np.zeros_like(t), up)
+    power = np.where(t == 0.0, 0.0, 3000.0)  # on the ground, motors off, at the first sample
+    Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t, power_w=power,
+               phase=np.full(t.size, "hover"), source="hop").to_csv(tmp_path / "routes" / "hop.csv")
+    save(omni(), tmp_path / "hover.json")
+    save(omni("horizontal"), tmp_path / "horizontal.json")
+
+    def write(*routes):
+        doc = {"schema": "gisnoise/operations/1", "cards": ["hover.json", "horizontal.json"],
+               "grid": {"crs": TMERC, "bounds": [-425, -425, 425, 425], "resolution_m": 50},
+               "flights": [{"id": r, "trajectory": f"routes/{r}.csv", "counts": {"day": 1}} for r in routes]}
+        path = tmp_path / f"{'-'.join(routes)}.json"
+        path.write_text(json.dumps(doc))
+        return path
+
+    with pytest.raises(InputError) as err:
+        load_schedule(write("air"))
+    assert err.value.field == "ground_h_m" and "ground_h_m" in str(err.value)
+    r = CliRunner().invoke(cli, ["-q", "operations", str(write("air")), "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1 and "ground_h_m" in r.output
+    assert not (tmp_path / "o" / "operations.tif").exists()
+    for routes in (("hop",), ("air", "hop")):
+        res = evaluate_operations(load_schedule(write(*routes)), threads=1)
+        assert res.metadata["ground_h_m"] == pytest.approx(float(h[0]), abs=1e-6)
+        assert res.metadata["ground_h_source"] == "take-off or landing point of a flight, or a route's stated ground"
+
+
+def test_samples_on_the_ground_make_no_noise_in_a_day_of_operations():
+    """As on a map, a flight's samples on the ground (landed flag) are silent: 60 s parked at the pad, then a hover
+    of 60 s at 31.5 m above it.  Lday is the hover alone (its constant level over 60 s, times the count, over the
+    12 h day), LAmax the hover's level, and N-above counts the flight once; the parked minute was loud at the pad."""
+    t = np.concatenate([np.arange(0.0, 60.0), np.arange(60.0, 121.0)])
+    parked = t < 60.0
+    up = np.where(parked, 0.0, 31.5)
+    lat, lon, h = FRAME.to_wgs84(np.zeros_like(t), np.zeros_like(t), up)
+    tr = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t, power_w=np.full(t.size, 3000.0),
+                    phase=np.full(t.size, "hover"), on_ground=parked, source="pad")
+    counts = {"day": 10, "evening": 0, "night": 0}
+    sched = Schedule(flights=(Flight("pad", tr, counts),), cards=[omni()], grid=grid(), ground_h_m=0.0,
+                     thresholds_db=(40.0,))
+    res = evaluate_operations(sched, threads=1)
+    g = sched.grid
+    for where in ((0.0, 0.0), (200.0, -150.0), (-400.0, 400.0)):
+        r, c = cell(g, *where)
+        la = level(g.xs[c], g.ys[r], 0.0, 0.0, 31.5)
+        assert res.bands["LAmax"][r, c] == pytest.approx(la, abs=1e-3)
+        assert res.bands["Lday"][r, c] == pytest.approx(la + 10 * np.log10(10 * 60.0 / (12 * HOUR)), abs=1e-3)
+        assert res.bands["NA40_day"][r, c] == 10

@@ -51,3 +51,72 @@ def test_lazy_help_lists_the_same_commands_and_lines_as_the_imported_ones():
 def test_unknown_command_is_a_usage_error():
     res = CliRunner().invoke(cli, ["nosuch"])
     assert res.exit_code == 2 and "No such command 'nosuch'" in res.output
+
+
+def test_files_the_help_texts_point_to_exist():
+    """Every help text that sends the reader to a file of the package ("see gisnoise/..." or "see x/y.py") names one
+    that exists."""
+    import re
+
+    runner = CliRunner()
+    load_all()
+    seen = 0
+    for name, cmd in cli.commands.items():
+        subs = getattr(cmd, "commands", {"": cmd})
+        for sub in subs:
+            out = runner.invoke(cli, [name, *([sub] if sub else []), "--help"]).output
+            for ref in re.findall(r"\bsee ([\w./-]+\.(?:py|md))", out):
+                seen += 1
+                assert (ROOT / ref).exists() or (ROOT / "gisnoise" / ref).exists(), (name, sub, ref)
+    assert seen >= 1
+
+
+def test_progress_goes_to_stderr_and_stdout_holds_the_results(tmp_path):
+    """Piped stdout carries the results alone (the progress bar writes to stderr): the first line of a map's output is
+    its grid, and a refused map writes nothing to stdout."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    route = ROOT / "gisnoise" / "data" / "routes" / "delivery_route.geojson"
+    cmd = [sys.executable, "-m", "gisnoise.cli.main", "contour", str(route), "--card", "demo-horizontal", "--card",
+           "demo-climb", "--card", "demo-sink", "--resolution", "200", "--metrics", "LAmax"]
+    ok = subprocess.run([*cmd, "--out", str(tmp_path / "m")], capture_output=True, text=True, env=env, timeout=300)
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.splitlines()[0].startswith("grid:"), ok.stdout
+    bad = subprocess.run([*cmd, "--out", str(tmp_path / "b"), "--levels", "x"], capture_output=True, text=True,
+                         env=env, timeout=300)
+    assert bad.returncode == 2 and bad.stdout == "" and "Error" in bad.stderr
+
+
+def test_the_python_of_the_scripts_imports_names_that_exist():
+    """A script with embedded Python (scripts/make_demo_cards) imports only names the package has."""
+    import ast
+    import importlib
+    import re
+
+    seen = 0
+    for script in sorted((ROOT / "scripts").iterdir()):
+        text = script.read_text(errors="replace") if script.is_file() else ""
+        for body in re.findall(r"<<'PY'\n(.*?)\nPY\n", text, flags=re.S):
+            for node in ast.walk(ast.parse(body)):
+                if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("gisnoise"):
+                    mod = importlib.import_module(node.module)
+                    for alias in node.names:
+                        seen += 1
+                        sub = hasattr(mod, "__path__") and importlib.util.find_spec(f"{node.module}.{alias.name}")
+                        assert hasattr(mod, alias.name) or sub, (script.name, node.module, alias.name)
+    assert seen >= 1
+
+
+def test_a_reader_that_stops_early_ends_the_command_quietly():
+    """`gisnoise card show CARD | head -1`: when the reader of stdout closes it, the command stops without an error
+    message (it said 'cannot read the input (BrokenPipeError ...)')."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen([sys.executable, "-c", "from gisnoise.cli.main import main; main()", "card", "show",
+                          "demo-horizontal"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    assert p.stdout is not None and p.stderr is not None
+    p.stdout.close()  # before the command writes: its first write meets a closed pipe
+    with p.stderr:
+        err = p.stderr.read().decode()
+    p.wait(timeout=120)
+    assert "Error" not in err and "Traceback" not in err and "Exception ignored" not in err, err
+    assert p.returncode == 141

@@ -35,7 +35,8 @@ def _floats(value: str, name: str) -> list[float]:
               help="Margin around all routes, m.")
 @click.option("--crs", "crs", default=None, help="Projected CRS of the grid [default: local UTM].")
 @click.option("--ground-height", "ground_h", type=float, default=None,
-              help="Ellipsoidal height of flat ground, m [default: stated by the routes, else their lowest point].")
+              help="Ellipsoidal height of flat ground, m [default: stated by the routes, else the take-off or "
+                   "landing point of those that start or end on the ground].")
 @click.option("--engine", "engine", type=click.Choice(["numpy", "fast"]), default="numpy", show_default=True,
               help="Evaluator engine.")
 def command(routes: tuple[str, ...], cards: tuple[str, ...], out: str, population: str | None,
@@ -59,5 +60,7 @@ def command(routes: tuple[str, ...], cards: tuple[str, ...], out: str, populatio
                          margin_m=margin, crs=crs, ground_h=ground_h, engine=engine)
     paths = write_comparison(cmp, out)
     click.echo(comparison_table(cmp.doc).rstrip())
+    for w in cmp.doc["warnings"]:
+        click.echo(f"warning: {w}", err=True)
     for p in paths.values():
         click.echo(f"wrote {p}")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import ast
 import importlib
 import logging
+import os
 import pkgutil
 import struct
 import sys
@@ -103,6 +104,10 @@ class GisnoiseGroup(click.Group):
             ctx.exit(2)
         except (click.exceptions.Exit, click.ClickException, click.Abort, KeyboardInterrupt, SystemExit):
             raise
+        except BrokenPipeError:
+            # the reader of stdout stopped (`| head`): end quietly, as a command killed by SIGPIPE
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            ctx.exit(141)
         except (UnicodeError, ValueError, OSError, EOFError, ArithmeticError, struct.error, zlib.error) as exc:
             # last resort: malformed input a reader did not name; one line, never a traceback
             fld = getattr(exc, "field", None) or getattr(exc, "filename", None)

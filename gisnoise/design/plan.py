@@ -467,7 +467,7 @@ def resolve_plan(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[str] | N
         if not p.is_absolute() and bdir is not None:
             p = bdir / p
         try:
-            ex = json.loads(p.read_text(encoding="utf-8"))
+            ex = json.loads(p.read_text(encoding="utf-8-sig"))
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise DesignError(f"plan: field 'exclusions': cannot read GeoJSON {p}: {exc}", field="exclusions") from None
     rings = [] if ex is None else _polygons(ex, "exclusions")

@@ -65,7 +65,7 @@ from gisnoise.diagnose.verdict import MIN_IMPROVEMENT_DB2, _judge, _rms
 from gisnoise.errors import Cancelled, FitError, InputError
 from gisnoise.jsonio import to_jsonable, write_json
 from gisnoise.measure import Samples, series_ids
-from gisnoise.model import ModelCard
+from gisnoise.model import HemisphereCard, ModelCard
 from gisnoise.model import effects as _effects
 
 __all__ = ["SCHEMA", "DIAGNOSIS_FILE", "Diagnosis", "diagnose", "run_diagnosis", "write_diagnosis"]
@@ -173,6 +173,9 @@ def run_diagnosis(
     """
     if not isinstance(card, ModelCard):
         raise InputError(f"card must be a ModelCard, got {type(card).__name__}", field="card")
+    if isinstance(card, HemisphereCard):
+        raise InputError(f"card {card.id!r} is a measured hemisphere: it has no parameters to extend; diagnose a "
+                         "parametric card (gisnoise card fit-hemisphere makes one from it)", field="card")
     if not (0.0 < alpha < 1.0):
         raise InputError(f"alpha must be in (0, 1), got {alpha!r}", field="alpha")
     for name, v in (("window_s", window_s), ("z", z), ("block_s", block_s), ("bias_z", bias_z),

@@ -67,7 +67,7 @@ def with_mic_heights(s: Samples, folder: str | os.PathLike[str]) -> Samples:
     """
     mics = (s.meta or {}).get("microphones")
     try:
-        doc = json.loads((Path(folder) / "campaign.json").read_text(encoding="utf-8"))
+        doc = json.loads((Path(folder) / "campaign.json").read_text(encoding="utf-8-sig"))
     except (OSError, ValueError):
         return s
     heights = {m.get("id"): m["height_agl_m"] for m in doc.get("microphones", [])

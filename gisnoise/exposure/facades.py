@@ -31,7 +31,7 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.exposure.layers import Buildings
-from gisnoise.flight import Trajectory
+from gisnoise.flight import Trajectory, flying_segments
 from gisnoise.geo import WGS84, LocalFrame, emission_angles, transformer
 from gisnoise.maps import CardSet
 from gisnoise.model import ModelCard
@@ -121,8 +121,10 @@ def point_levels(traj: Trajectory, cards: CardSet | Iterable[ModelCard] | ModelC
                  chunk: int = 2048) -> dict[str, np.ndarray]:
     """``LAmax``, ``LAeq``, ``SEL`` (dB(A), UAV alone) of a flight at points ``lon, lat`` (deg), ``h`` (m ellipsoidal).
 
-    Every trajectory sample is an evaluation instant.  Cards with ansatzes that need inputs
-    beyond distance, angles and power are refused (the map evaluator serves those).
+    Every trajectory sample is an evaluation instant; as on a map, only the flying stretches
+    sound (:func:`gisnoise.flight.flying_segments`: samples on the ground make no noise).  Cards
+    with ansatzes that need inputs beyond distance, angles and power are refused (the map
+    evaluator serves those).
     """
     cs = cards if isinstance(cards, CardSet) else CardSet(cards)
     idx = cs.assign(traj.phase, traj.t, source=traj.source)
@@ -138,7 +140,12 @@ def point_levels(traj: Trajectory, cards: CardSet | Iterable[ModelCard] | ModelC
     re, rn, ru = frame.to_enu(lat, lon, h)
     se, sn, su = frame.to_enu(traj.lat, traj.lon, traj.h)
     yaw, pitch, roll = (np.radians(a) for a in (traj.yaw, traj.pitch, traj.roll))
-    w = _trapezoid_weights(np.asarray(traj.t, dtype=float))
+    t = np.asarray(traj.t, dtype=float)
+    sounds = np.zeros(t.size, dtype=bool)
+    w = np.zeros(t.size)
+    for i0, i1 in flying_segments(traj):
+        sounds[i0:i1] = True
+        w[i0:i1] = _trapezoid_weights(t[i0:i1])
     period = traj.duration_s if period_s is None else float(period_s)
     if not period > 0:
         raise InputError(f"period must be > 0 s, got {period!r}", field="period")
@@ -157,6 +164,7 @@ def point_levels(traj: Trajectory, cards: CardSet | Iterable[ModelCard] | ModelC
             x = c.inputs(d[:, m], phi[:, m], theta[:, m], traj.power_w[None, m])
             x["meta"] = {}
             L[:, m] = c.level(x, background=False)
+        L[:, ~sounds] = -np.inf
         lmax[sl] = L.max(axis=1)
         energy[sl] = (10.0 ** (L / 10.0)) @ w
     with np.errstate(divide="ignore"):

@@ -78,14 +78,29 @@ def read_route(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
 
     The one reader of trajectories for every face: a flight CSV, a PX4 ``.ulg`` or an
     ArduPilot ``.bin`` (any letter case, :func:`gisnoise.flight.logs.read_flight`), a
-    GeoJSON LineString with times, or waypoints.
+    GeoJSON LineString with times, or waypoints.  ``geoid_undulation_m`` (the site's geoid
+    undulation) makes heights above mean sea level ellipsoidal: those of flight logs and of
+    ``msl`` waypoints or LineStrings, over a document's own value.  ``power_w`` applies to flight
+    logs only; given with a source that states its power, it is refused (field ``power_w``).
     """
+    route = _read(src, dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle, geoid_undulation_m=geoid_undulation_m,
+                  power_w=power_w)
+    tr = route.trajectory
+    if power_w is not None and not str(tr.metadata.get("power", "")).startswith("constant"):
+        raise TrajectoryError(f"{tr.source}: power_w applies to flight logs (.ulg, .bin) without battery current; "
+                              "this trajectory states its power", field="power_w")
+    return route
+
+
+def _read(src: Any, *, dem: Any, dem_offset_m: float, vehicle: VehicleModel | None,
+          geoid_undulation_m: float | None, power_w: float | None) -> Route:
     if isinstance(src, Trajectory):
         return Route(src)
     if isinstance(src, Route):
         return src
     if isinstance(src, Mapping):
-        return _from_json(src, source="route", dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle)
+        return _from_json(src, source="route", dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle,
+                          geoid_undulation_m=geoid_undulation_m)
     if isinstance(src, (str, os.PathLike)):
         p = Path(src)
         if not p.is_file():
@@ -107,15 +122,18 @@ def read_route(src: Any, *, dem: Any = None, dem_offset_m: float = 0.0,
             except json.JSONDecodeError as exc:
                 raise TrajectoryError(f"{p}: malformed JSON at line {exc.lineno} column {exc.colno}: {exc.msg}",
                                       field="json") from None
-            return _from_json(doc, source=str(p), dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle)
+            return _from_json(doc, source=str(p), dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle,
+                              geoid_undulation_m=geoid_undulation_m)
         return Route(read_flight_csv(io.StringIO(text), source=str(p)))
     raise TrajectoryError(f"trajectory: expected a file path, a JSON object or a Trajectory, got "
                           f"{type(src).__name__}", field="trajectory")
 
 
-def _from_json(doc: Any, *, source: str, dem: Any, dem_offset_m: float, vehicle: VehicleModel | None) -> Route:
+def _from_json(doc: Any, *, source: str, dem: Any, dem_offset_m: float, vehicle: VehicleModel | None,
+               geoid_undulation_m: float | None = None) -> Route:
     if not isinstance(doc, Mapping):
         raise TrajectoryError(f"{source}: expected a JSON object", field="trajectory")
+    given = {} if geoid_undulation_m is None else {"geoid_undulation_m": float(geoid_undulation_m)}  # overrides
     schema = doc.get("schema")
     if isinstance(schema, str) and schema.startswith(_WP_PREFIX):
         if schema != WAYPOINTS_SCHEMA:
@@ -124,7 +142,8 @@ def _from_json(doc: Any, *, source: str, dem: Any, dem_offset_m: float, vehicle:
         wps = doc.get("waypoints")
         if not isinstance(wps, list):
             raise TrajectoryError(f"{source}: field 'waypoints' must be a list", field="waypoints")
-        return route_from_waypoints(wps, doc, source=source, dem=dem, dem_offset_m=dem_offset_m, vehicle=vehicle)
+        return route_from_waypoints(wps, {**doc, **given}, source=source, dem=dem, dem_offset_m=dem_offset_m,
+                                    vehicle=vehicle)
     typ = doc.get("type")
     if typ == "FeatureCollection":
         feats = doc.get("features")
@@ -132,6 +151,9 @@ def _from_json(doc: Any, *, source: str, dem: Any, dem_offset_m: float, vehicle:
             raise TrajectoryError(f"{source}: the FeatureCollection has no features", field="features")
         types = [((f or {}).get("geometry") or {}).get("type") for f in feats]
         settings = doc.get("route") or {}
+        if not isinstance(settings, Mapping):
+            raise TrajectoryError(f"{source}: route settings must be an object", field="route")
+        settings = {**settings, **given}
         if all(t == "Point" for t in types):
             wps = []
             for i, f in enumerate(feats):
@@ -149,24 +171,24 @@ def _from_json(doc: Any, *, source: str, dem: Any, dem_offset_m: float, vehicle:
         lines = [f for f, t in zip(feats, types, strict=True) if t == "LineString"]
         if len(lines) == 1:
             return _from_linestring(lines[0], settings, source=source, dem=dem, dem_offset_m=dem_offset_m,
-                                    vehicle=vehicle)
+                                    vehicle=vehicle, given=given)
         raise TrajectoryError(f"{source}: a FeatureCollection must hold Point waypoints or one LineString, "
                               f"got {', '.join(sorted({str(t) for t in types}))}", field="features")
     if typ == "Feature":
         g = doc.get("geometry") or {}
         if g.get("type") == "LineString":
             return _from_linestring(doc, doc.get("route") or {}, source=source, dem=dem,
-                                    dem_offset_m=dem_offset_m, vehicle=vehicle)
+                                    dem_offset_m=dem_offset_m, vehicle=vehicle, given=given)
         raise TrajectoryError(f"{source}: a Feature must be a LineString, got {g.get('type')!r}", field="geometry")
     if typ == "LineString":
         return _from_linestring({"type": "Feature", "geometry": doc, "properties": {}}, {}, source=source, dem=dem,
-                                dem_offset_m=dem_offset_m, vehicle=vehicle)
+                                dem_offset_m=dem_offset_m, vehicle=vehicle, given=given)
     raise TrajectoryError(f"{source}: not a waypoints document ({WAYPOINTS_SCHEMA}) nor GeoJSON LineString/"
                           "Points", field="trajectory")
 
 
 def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, source: str, dem: Any,
-                     dem_offset_m: float, vehicle: VehicleModel | None) -> Route:
+                     dem_offset_m: float, vehicle: VehicleModel | None, given: Mapping[str, Any]) -> Route:
     coords = (feat.get("geometry") or {}).get("coordinates")
     props = dict(feat.get("properties") or {})
     if not isinstance(coords, list) or not coords:
@@ -179,7 +201,7 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
     if times is None and widths == {4}:
         times = [c[3] for c in coords]
     st_doc = {**settings, **{k: props[k] for k in ("altitude_reference", "ground_h_m", "geoid_undulation_m",
-                                                   "sample_dt_s", "vehicle") if k in props}}
+                                                   "sample_dt_s", "vehicle") if k in props}, **given}
     if "altitude_reference" not in st_doc and times is not None:
         st_doc["altitude_reference"] = "ellipsoid"  # RFC 7946: height above the WGS84 ellipsoid
     if times is None:
@@ -211,7 +233,7 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
                               field="coordinates") from None
     lon, lat, alt = arr[:, 0], arr[:, 1], arr[:, 2]
     h, ground, datum = _heights(alt, lon, lat, st, dem, dem_offset_m, source)
-    given: dict[str, Any] = {}
+    states: dict[str, Any] = {}
     for k in ("power_w", "phase", "roll", "pitch", "yaw", "rpm", "airspeed_m_s"):
         v = props.get(k)
         if v is None:
@@ -219,8 +241,8 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
         if not isinstance(v, list) or len(v) != len(coords):
             raise TrajectoryError(f"{source}: properties.{k} must list one value per vertex ({len(coords)})",
                                   field=k)
-        given[k] = np.asarray(v, dtype=str if k == "phase" else float)
-    traj = trajectory_from_path(t, lat, lon, h, vehicle=st["vehicle"], source=source, **given)
+        states[k] = np.asarray(v, dtype=str if k == "phase" else float)
+    traj = trajectory_from_path(t, lat, lon, h, vehicle=st["vehicle"], source=source, **states)
     traj.metadata.update(datum)
     return Route(traj, ground)
 

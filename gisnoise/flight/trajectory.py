@@ -124,7 +124,7 @@ class Trajectory:
                     error=TrajectoryError)  # the shared rule set (gisnoise.limits)
         bad = [p for p in np.unique(self.phase) if p not in PHASES]
         if bad:
-            raise TrajectoryError(f"{src}: field 'phase' has unknown value {bad[0]!r}; known: {', '.join(PHASES)}",
+            raise TrajectoryError(f"{src}: field 'phase' has unknown value {str(bad[0])!r}; known: {', '.join(PHASES)}",
                                   field="phase")
 
     def __len__(self) -> int:
@@ -248,7 +248,7 @@ def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str
             raise TrajectoryError(f"{src}: not a UTF-8 text CSV (byte {exc.start}: {exc.reason})", field="csv") from None
     else:
         src = source or "flight CSV"
-        text = path.read()
+        text = path.read().removeprefix("\ufeff")  # a byte-order mark, as a file read with utf-8-sig drops it
     reader = csv.reader(io.StringIO(text, newline=None))
     try:
         header = [h.strip() for h in next(reader)]
@@ -257,6 +257,10 @@ def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str
         raise TrajectoryError(f"{src}: the file is empty", field="t") from None
     except csv.Error as exc:
         raise TrajectoryError(f"{src}: malformed CSV at line {reader.line_num}: {exc}", field="csv") from None
+    for sep, name in ((";", "';'"), ("\t", "tab")):
+        if len(header) == 1 and sep in header[0]:  # a spreadsheet's export in a decimal-comma locale
+            raise TrajectoryError(f"{src}: fields are separated by {name}; a flight CSV separates them by a comma "
+                                  "and writes numbers with a decimal point", field="csv")
     cols: dict[str, list[str]] = {h: [] for h in header}
     for ln, r in enumerate(rows, start=2):
         if len(r) != len(header):

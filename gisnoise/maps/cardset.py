@@ -87,11 +87,12 @@ class CardSet:
             raise CardError(f"no model card serves phase {phase!r} (cards serve "
                             f"{', '.join(self.phases) or 'nothing'})", field="phase") from None
 
-    def assign(self, phase: Any, t: Any = None, *, source: str = "trajectory") -> np.ndarray:
+    def assign(self, phase: Any, t: Any = None, *, source: str = "trajectory", rows: Any = None) -> np.ndarray:
         """Index into :attr:`cards` of every sample's card.
 
         Raises :class:`~gisnoise.errors.CardError` naming the first unserved phase and
-        the range of samples (and times, when ``t`` is given) that have it.
+        the range of samples (and times, when ``t`` is given) that have it; ``rows`` are the
+        samples' indices in the whole track when ``phase`` holds a subset of it.
         """
         phase = np.asarray(phase).astype(str)
         out = np.empty(phase.shape, dtype=np.intp)
@@ -100,12 +101,13 @@ class CardSet:
             if ph not in self._index:
                 idx = np.flatnonzero(m)
                 i0, i1 = int(idx[0]), int(idx[-1])
+                r0, r1 = (i0, i1) if rows is None else (int(rows[i0]), int(rows[i1]))
                 when = ""
                 if t is not None:
                     tt = np.asarray(t, dtype=float)
                     when = f", t = {tt[i0]:g}-{tt[i1]:g} s"
                 raise CardError(
-                    f"{source}: no model card serves phase {ph!r} ({idx.size} samples, samples {i0}-{i1}{when}); "
+                    f"{source}: no model card serves phase {ph!r} ({idx.size} samples, samples {r0}-{r1}{when}); "
                     f"cards serve {', '.join(self.phases)}; add a card whose phase or phases include {ph!r}",
                     field="phase")
             out[m] = self._index[ph]

@@ -47,6 +47,7 @@ import numpy as np
 
 from gisnoise.errors import InputError, TrajectoryError
 from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
+from gisnoise.flight.ground import GROUND_TOLERANCE_M
 from gisnoise.geo import GridSpec
 from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
@@ -58,7 +59,7 @@ from gisnoise.maps.powers import check_power_ranges
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
-__all__ = ["make_map", "DEFAULT_LEVELS", "map_ground"]
+__all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground"]
 
 DEFAULT_LEVELS = (45.0, 50.0, 55.0, 60.0)
 
@@ -180,7 +181,9 @@ def make_map(
     # the shared rule set (gisnoise.limits): a ground the user gives lies below the flight; a ground taken from the
     # track's own take-off or landing point is within the log's height noise of it by construction
     check_receivers(receiver_height, ground_h, traj.h[traj.flying] if traj.flying.any() else traj.h)
+    from_track = ground_h is None and dem is None and route.ground_h_m is None and "ground_h_m" not in traj.metadata
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
+    below = _below_track_ground(traj, ground_h) if from_track else None
     unpowered = _airborne_without_power(traj)
     power_warnings, outside_range = check_power_ranges(traj, cardset)
     if grid is None:
@@ -188,7 +191,8 @@ def make_map(
                                       background=background, sel="SEL" in metrics)
     else:
         warnings = []
-    warnings = ([unpowered] if unpowered is not None else []) + power_warnings + warnings
+    scale = _crs_scale_warning(grid, traj)
+    warnings = [w for w in (below, unpowered, scale) if w is not None] + power_warnings + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir) if out_dir is not None else None
     if out is not None and out.exists() and not out.is_dir():
@@ -202,13 +206,12 @@ def make_map(
                               dem_offset_m=dem_offset_m, threshold_db=threshold_db, background=background,
                               substeps=substeps, uncertainty=uncertainty, engine=engine, cancel=cancel)
     t_eval = time.perf_counter()
-    if bool(np.all(traj.flying)):
-        result: MapResult = evaluate_grid(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t,
-                                          progress=eval_progress, **kw)
-    else:
-        result = _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, eval_progress, kw)
+    result = evaluate_flying(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t, progress=eval_progress,
+                             **kw)
     t_eval = time.perf_counter() - t_eval
     _check_cells(result, traj.source)
+    if from_track:
+        result.metadata["ground_h_source"] = GROUND_FROM_TRACK
     # the vertical datum of the track (flight logs: MSL + geoid undulation, and which)
     result.metadata.setdefault("trajectory", {}).update(
         {k: traj.metadata[k] for k in ("height_datum", "geoid_model", "geoid_undulation_m") if k in traj.metadata})
@@ -263,6 +266,50 @@ def _airborne_without_power(traj: Trajectory) -> str | None:
             f"current sensor dropout): silent on the map; --power-w W maps the whole flight at a constant power")
 
 
+CRS_SCALE_TOLERANCE = 0.01
+"""Largest departure of the grid CRS's scale factor from 1 at the map before the map says so (1 %)."""
+
+
+def _crs_scale_warning(grid: Any, traj: Trajectory) -> str | None:
+    """The warning for a grid CRS whose scale at the track is far from 1: its cells are not their size on the ground."""
+    from pyproj import Proj
+    from pyproj.exceptions import ProjError
+
+    try:
+        f = Proj(grid.crs).get_factors(float(np.mean(traj.lon)), float(np.mean(traj.lat)))
+    except (ProjError, TypeError, ValueError):  # no scale factors for this CRS: nothing to say
+        return None
+    k = float(np.sqrt(f.meridional_scale * f.parallel_scale))
+    if not np.isfinite(k) or abs(k - 1.0) <= CRS_SCALE_TOLERANCE:
+        return None
+    cell = abs(float(grid.transform.a))
+    name = grid.crs.to_string()
+    return (f"crs: {name} scales distances by {k:.3f} at the map: its {cell:g} m cells are {cell / k:.1f} m on "
+            f"the ground and the margin shrinks alike (a local UTM zone, the default, keeps them true)")
+
+
+GROUND_FROM_TRACK = "take-off or landing point of the track"
+"""The map metadata's ``ground_h_source`` when the ground is the track's own take-off or landing height."""
+
+
+def _below_track_ground(traj: Trajectory, ground_h: float | None) -> str | None:
+    """The warning for a track that flies lower than the ground taken from its own take-off or landing point.
+
+    Logged heights drift (GPS heights of a hovering vehicle wander by metres); more than
+    :data:`~gisnoise.flight.ground.GROUND_TOLERANCE_M` below that ground the UAV is put under the receivers.
+    """
+    fly = traj.flying
+    if ground_h is None or not fly.any():
+        return None
+    i = int(np.argmin(np.where(fly, traj.h, np.inf)))
+    depth = ground_h - float(traj.h[i])
+    if depth <= GROUND_TOLERANCE_M:
+        return None
+    return (f"{traj.source}: the track flies up to {depth:.1f} m below the ground taken from its take-off or landing "
+            f"point ({ground_h:.1f} m; at t = {traj.t[i]:.1f} s): its logged heights drift, and there the UAV is put "
+            f"under the receivers; give the ground with --ground-height M (field ground_h_m) or --dem DEM.tif")
+
+
 def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: float | None = None) -> float | None:
     """The flat ground's height for a map (m), by the ground rule of the module docstring.
 
@@ -305,6 +352,20 @@ def _part_progress(progress: Callable[[float], Any], k: int, n: int) -> Callable
     return update
 
 
+def evaluate_flying(traj: Trajectory, cards: Any, grid: Any, *, period_s: float | None = None,
+                    snapshot_t: float | None = None, progress: Callable[[float], Any] | None = None,
+                    **kw: Any) -> MapResult:
+    """:func:`~gisnoise.maps.evaluate.evaluate_grid` by the rule of every map: samples on the ground make no noise.
+
+    A track flying throughout is evaluated as it is; otherwise over its flying stretches, summed
+    in energy (see the module docstring).  ``kw`` are :func:`evaluate_grid`'s further arguments.
+    """
+    cardset = as_cardset(cards)
+    if bool(np.all(traj.flying)):
+        return evaluate_grid(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t, progress=progress, **kw)
+    return _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, progress or (lambda f: None), kw)
+
+
 def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: float | None,
                      snapshot_t: float | None, progress: Callable[[float], Any], kw: dict[str, Any]) -> MapResult:
     """Metrics over the flying stretches of ``traj`` summed in energy (see the module docstring)."""
@@ -315,6 +376,13 @@ def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: fl
     if kw.get("uncertainty") and len(segs) > 1:
         raise InputError(f"{traj.source}: uncertainty bands need one flying stretch; the track lands and takes "
                          f"off again ({len(segs)} stretches)", field="uncertainty")
+    if snapshot_t is not None and not traj.t[0] <= float(snapshot_t) <= traj.t[-1]:  # as evaluate_grid refuses it
+        raise InputError(f"snapshot_t={float(snapshot_t):g} s lies outside the trajectory "
+                         f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
+    if (period_s is not None and "LAeq" in kw.get("metrics", METRICS)
+            and float(period_s) < traj.duration_s * (1.0 - 1e-12)):  # the whole track's, as evaluate_grid asks
+        raise InputError(f"period_s ({float(period_s):g} s) must cover the trajectory's duration "
+                         f"({traj.duration_s:g} s)", field="period_s")
     period = traj.duration_s if period_s is None else period_s
     results: list[MapResult] = []
     for k, (i0, i1) in enumerate(segs):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
 from gisnoise.maps.cardset import CardSet
@@ -26,7 +28,7 @@ def check_power_ranges(traj: Trajectory, cardset: CardSet) -> tuple[list[str], d
     fly = traj.flying
     if not fly.any():
         return [], {}
-    idx = cardset.assign(traj.phase[fly], traj.t[fly], source=traj.source)
+    idx = cardset.assign(traj.phase[fly], traj.t[fly], source=traj.source, rows=np.flatnonzero(fly))
     pw = traj.power_w[fly]
     warnings: list[str] = []
     meta: dict[str, Any] = {}

@@ -46,7 +46,7 @@ def _read_document(cj: Path, col: _Collector) -> dict[str, Any] | None:
     cjs = str(cj)
     problem = None
     try:
-        doc = json.loads(cj.read_text(encoding="utf-8"))
+        doc = json.loads(cj.read_text(encoding="utf-8-sig"))  # a byte-order mark is accepted, as in every JSON input
     except FileNotFoundError:
         problem = f"{cjs}: missing campaign file"
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

@@ -54,6 +54,10 @@ def read_level_csv(path: str | os.PathLike[str], *, mic: str = "", flight: str =
     if not rows:
         raise CampaignError(f"{src}: the file is empty", field="t")
     header = [h.strip() for h in rows[0]]
+    for sep, name in ((";", "';'"), ("\t", "tab")):
+        if len(header) == 1 and sep in header[0]:  # a spreadsheet's export in a decimal-comma locale
+            raise CampaignError(f"{src}: fields are separated by {name}; a level CSV separates them by a comma and "
+                                "writes numbers with a decimal point", field="csv")
     for need in ("t", "LA"):
         if need not in header:
             raise CampaignError(f"{src}: missing column '{need}'", field=need)

@@ -287,10 +287,10 @@ def dump(card: ModelCard, fp: Any) -> None:
 
 
 def save(card: ModelCard, path: str | os.PathLike[str], *, overwrite: bool = True) -> Path:
-    """Write a card atomically (temp file + rename); refuses to overwrite unless asked."""
+    """Write a card atomically (temp file + rename); with ``overwrite=False`` an existing file is refused."""
     p = Path(path)
     if p.exists() and not overwrite:
-        raise CardError(f"{p}: exists; refusing to overwrite", field="card")
+        raise CardError(f"{p}: exists; refusing to overwrite (--force overwrites it)", field="force")
     p.parent.mkdir(parents=True, exist_ok=True)
     return jsonio.write_json(card.to_dict(), p, indent=2)
 

@@ -149,6 +149,10 @@ def read_hemisphere_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
             raise _err(path, f"line {n}: non-numeric angle or level", lvl) from None
         if not all(math.isfinite(x) for x in (*key, v)):
             raise _err(path, f"line {n}: non-finite value", lvl)
+        for col, a in (("phi_deg", key[1]), ("theta_deg", key[2])):
+            if abs(a) > 90.0:
+                raise _err(path, f"line {n}: {col} {a:g} lies beyond the horizon (table angles -90..90 deg, 0 "
+                                 "straight below)", col)
         if key in vals:
             raise _err(path, f"line {n}: node band {key[0]:g} Hz, phi {key[1]:g}, theta {key[2]:g} given twice", lvl)
         vals[key] = v

@@ -21,6 +21,10 @@ Schedule document (JSON, ``"schema": "gisnoise/operations/1"``; paths relative t
         {"id": "south", "trajectory": "routes/south.csv",
          "departures": ["07:30", "12:10", "19:45", "23:20"], "cards": ["cards/other.json"]}]}
 
+Without ``ground_h_m`` and ``dem`` the ground is the take-off or landing point of the flights that
+start or end on the ground (the lowest of them), as for a map; a schedule whose flights are all
+in the air throughout is refused (field ``ground_h_m``).
+
 ``grid`` may instead give ``"crs"``, ``"bounds": [left, bottom, right, top]`` (m) and
 ``"resolution_m"``; by default it covers every flight plus the margin in the local UTM zone.
 Counts may be fractional (averages over a year).
@@ -38,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.flight import Trajectory, read_route
+from gisnoise.flight import Trajectory, ground_from_track, read_route
 from gisnoise.geo import GridSpec, check_cell_limit, grid_for_points, parse_crs
 from gisnoise.jsonio import read_json_file
 from gisnoise.limits import check_count, current
@@ -63,7 +67,9 @@ class Flight:
     cards : sequence of ModelCard or CardSet, optional
         Cards for this flight; default the schedule's.
     ground_h_m : float, optional
-        Ground height the route states (waypoints with AGL altitudes).
+        Ground height the route states (waypoints with AGL altitudes); read from a schedule
+        without ``ground_h_m`` or ``dem``, else the track's take-off or landing point
+        (:func:`gisnoise.flight.ground_from_track`, the ground rule of the maps).
     """
 
     id: str
@@ -185,7 +191,7 @@ def _num(doc: Mapping[str, Any], key: str, default: Any, source: str, *, minimum
 
 def _levels(doc: Mapping[str, Any], key: str, default: Sequence[float], source: str) -> tuple[float, ...]:
     v = doc.get(key, default)
-    if v is None or (isinstance(v, list) and not v):
+    if v is None or (isinstance(v, (list, tuple)) and not v):  # left out (the default ()), null or []
         return ()
     try:
         return tuple(parse_levels(v, field=key))
@@ -236,6 +242,7 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
         left, bottom, right, top = (float(v) for v in b)
         grid = GridSpec.from_bounds(parse_crs(g["crs"]), left, bottom, right, top, resolution)
         check_cell_limit(grid.width, grid.height)
+    ground_h = _num(doc, "ground_h_m", None, source)
     flights_doc = doc.get("flights")
     if not isinstance(flights_doc, list) or not flights_doc:
         raise InputError(f"{source}: flights must be a non-empty list", field="flights")
@@ -264,11 +271,17 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
             counts[p] = float(counts[p]) + 1.0
         if given is None and not deps:
             raise InputError(f"{source}: flight {fid!r} needs 'counts' or 'departures'", field="counts")
-        flights.append(Flight(fid, route.trajectory, counts, cardset(fd.get("cards"), "cards"), route.ground_h_m))
+        ground = route.ground_h_m
+        if ground is None and ground_h is None and dem_path is None:
+            ground = ground_from_track(route.trajectory)
+        flights.append(Flight(fid, route.trajectory, counts, cardset(fd.get("cards"), "cards"), ground))
+    if ground_h is None and dem_path is None and all(f.ground_h_m is None for f in flights):
+        raise InputError(f"{source}: ground unknown: no flight starts or ends on the ground (a take-off or landing) "
+                         f"or states its ground; give ground_h_m or dem", field="ground_h_m")
     return Schedule(
         flights=tuple(flights), cards=cardset(doc.get("cards"), "cards"), grid=grid, resolution_m=resolution,
         margin_m=margin, crs=g.get("crs"), receiver_height_m=_num(doc, "receiver_height_m", 1.5, source),
-        ground_h_m=_num(doc, "ground_h_m", None, source), dem=dem_path, dem_offset_m=dem_offset,
+        ground_h_m=ground_h, dem=dem_path, dem_offset_m=dem_offset,
         thresholds_db=_levels(doc, "thresholds_db", (), source),
         levels_db=_levels(doc, "levels_db", (45.0, 50.0, 55.0, 60.0, 65.0), source),
         floor_db=_num(doc, "floor_db", None, source), substeps=int(_num(doc, "substeps", 1, source, minimum=1.0)),

@@ -14,16 +14,19 @@ import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 
 from gisnoise.errors import Cancelled, InputError
+from gisnoise.flight import Trajectory, flying_segments
 from gisnoise.geo import GridSpec
 from gisnoise.maps import (
     CardSet,
     FlightInstants,
     Receivers,
+    WindowResult,
     map_threads,
     prepare_flight,
     receivers_for,
@@ -34,7 +37,7 @@ from gisnoise.maps import (
 from gisnoise.ops.accumulate import accumulate, new_accumulators
 from gisnoise.ops.schedule import Schedule
 
-__all__ = ["DEFAULT_TILE_CELLS", "Plan", "make_plan", "run_local", "tile_windows"]
+__all__ = ["DEFAULT_TILE_CELLS", "FlightParts", "Plan", "make_plan", "run_local", "tile_windows"]
 
 log = logging.getLogger(__name__)
 
@@ -63,11 +66,43 @@ def tile_windows(shape: tuple[int, int], seg: int, tile_cells: int = DEFAULT_TIL
 
 
 @dataclass(frozen=True, eq=False)
+class FlightParts:
+    """One flight's instants: one part per flying stretch (samples on the ground make no noise, as on a map).
+
+    The parts' results on a tile combine into the flight's: the largest ``10^(L/10)``, the sums
+    of exposure and of time above; so N-above counts the flight once.
+    """
+
+    parts: tuple[FlightInstants, ...]
+
+    @property
+    def duration_s(self) -> float:
+        """Time the flight sounds (its flying stretches), s."""
+        return float(sum(p.duration_s for p in self.parts))
+
+    @property
+    def n(self) -> int:
+        """Evaluation instants."""
+        return int(sum(p.n for p in self.parts))
+
+
+def flight_parts(traj: Trajectory, prepare: Callable[[Trajectory], FlightInstants]) -> FlightParts:
+    """The flying stretches of ``traj`` (:func:`gisnoise.flight.flying_segments`), each prepared by ``prepare``."""
+    if bool(np.all(traj.flying)):
+        return FlightParts((prepare(traj),))
+    segs = flying_segments(traj)
+    if not segs:
+        raise InputError(f"{traj.source}: no two consecutive flying samples (all on the ground or without power): "
+                         "nothing makes noise", field="power_w")
+    return FlightParts(tuple(prepare(traj.select(np.arange(i0, i1))) for i0, i1 in segs))
+
+
+@dataclass(frozen=True, eq=False)
 class Plan:
     """What every tile needs: receivers and the flights' instants in their frame."""
 
     rc: Receivers
-    flights: tuple[FlightInstants, ...]  # schedule order, flights without counts left out
+    flights: tuple[FlightParts, ...]  # schedule order, flights without counts left out
     counts: tuple[dict[str, float], ...]
     ids: tuple[str, ...]
     thresholds: tuple[float, ...]
@@ -88,6 +123,8 @@ def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
             ground_h = min(stated)
     rc = receivers_for(grid, [f.trajectory for f in schedule.flights], receiver_height=schedule.receiver_height_m,
                        dem=schedule.dem, ground_h=ground_h, dem_offset_m=schedule.dem_offset_m)
+    if schedule.ground_h_m is None and schedule.dem is None and ground_h is not None and rc.ground is not None:
+        rc.ground["ground_h_source"] = "take-off or landing point of a flight, or a route's stated ground"
     frame = rc.frame
     flights, counts, ids = [], [], []
     for f in schedule.flights:
@@ -96,8 +133,10 @@ def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
             continue
         cards = f.cards if f.cards is not None else schedule.cards
         cards = cards if isinstance(cards, CardSet) else CardSet(cards)
-        flights.append(prepare_flight(f.trajectory, cards, frame, substeps=schedule.substeps,
-                                      min_distance_m=schedule.min_distance_m, floor_db=schedule.floor_db))
+        flights.append(flight_parts(f.trajectory, partial(prepare_flight, cards=cards, frame=frame,
+                                                          substeps=schedule.substeps,
+                                                          min_distance_m=schedule.min_distance_m,
+                                                          floor_db=schedule.floor_db)))
         counts.append(dict(f.counts))
         ids.append(f.id)
     if not flights:
@@ -105,7 +144,7 @@ def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
     return Plan(rc, tuple(flights), tuple(counts), tuple(ids), schedule.thresholds_db, schedule.floor_db)
 
 
-def _tile_step(acc: dict[str, np.ndarray] | None, fl: FlightInstants, counts: Mapping[str, float], rc: Receivers,
+def _tile_step(acc: dict[str, np.ndarray] | None, fl: FlightParts, counts: Mapping[str, float], rc: Receivers,
                window: tuple[int, ...], thresholds: Sequence[float], copy: bool = False,
                lattice: Any = None, floor_db: float | None = None) -> dict[str, np.ndarray]:
     """One flight on one tile, added to the tile's accumulators.
@@ -119,7 +158,11 @@ def _tile_step(acc: dict[str, np.ndarray] | None, fl: FlightInstants, counts: Ma
         acc = new_accumulators((r1 - r0, c1 - c0), len(thresholds))
     elif copy:
         acc = {k: v.copy() for k, v in acc.items()}
-    res = run_window(fl, rc, r0, r1, c0, c1, thresholds, lattice=lattice)
+    res = run_window(fl.parts[0], rc, r0, r1, c0, c1, thresholds, lattice=lattice)
+    for part in fl.parts[1:]:
+        more = run_window(part, rc, r0, r1, c0, c1, thresholds, lattice=lattice)
+        res = WindowResult(np.maximum(res.emax, more.emax), res.energy + more.energy, res.ta + more.ta,
+                           res.computed | more.computed)
     bound = 0.0 if floor_db is None else fl.duration_s * 10.0 ** (floor_db / 10.0)
     return accumulate(acc, res, counts, thresholds, bound)
 

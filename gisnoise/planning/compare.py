@@ -34,10 +34,10 @@ from gisnoise.exposure import (
     population_points,
     population_scores,
 )
-from gisnoise.flight import Trajectory, read_route
+from gisnoise.flight import Trajectory, ground_from_track, read_route
 from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
-from gisnoise.maps import CardSet, MapResult, evaluate_grid, write_geotiff
+from gisnoise.maps import CardSet, MapResult, evaluate_flying, write_geotiff
 
 __all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
 
@@ -94,8 +94,8 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
     (:func:`gisnoise.exposure.population_points`), computed once when several routes share the grid.
     """
     lv = [float(v) for v in levels]
-    res = evaluate_grid(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
-                        ground_h=ground_h, engine=engine)
+    res = evaluate_flying(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
+                          ground_h=ground_h, engine=engine)  # samples on the ground make no noise
     band = res.bands[metric]
     lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
                                                                "period_s": res.metadata.get("period_s")})
@@ -148,7 +148,8 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         The common grid and the evaluator, as ``gisnoise contour``.
     ground_h : float, optional
         Flat ground's ellipsoidal height, m; default the height the routes state (waypoints),
-        else the lowest point of all routes.
+        else the lowest take-off or landing point of the routes that start or end on the ground
+        (:func:`gisnoise.flight.ground_from_track`); routes all in the air throughout are refused.
     grid : GridSpec, optional
         A given common grid instead of one around the routes.
     """
@@ -167,9 +168,13 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     rs = [read_route(r) for r in routes]
     cardset = cards if isinstance(cards, CardSet) else CardSet(cards if isinstance(cards, (list, tuple)) else [cards])
     trajs = {n: r.trajectory for n, r in zip(nm, rs, strict=True)}
-    if ground_h is None:
+    if ground_h is None:  # the ground rule of the maps: stated by a route, else a take-off or landing point
         stated = [r.ground_h_m for r in rs if r.ground_h_m is not None]
-        ground_h = min(stated) if stated else min(float(np.min(t.h)) for t in trajs.values())
+        known = stated or [g for g in map(ground_from_track, trajs.values()) if g is not None]
+        if not known:
+            raise InputError("ground unknown: no route states its ground or starts or ends on the ground (a take-off "
+                             "or landing); give --ground-height M (field ground_h_m)", field="ground_h_m")
+        ground_h = min(known)
     if grid is None:
         lon = np.concatenate([t.lon for t in trajs.values()])
         lat = np.concatenate([t.lat for t in trajs.values()])
@@ -184,6 +189,7 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         row["route"] = n
         bands[n] = band
         rows.append(row)
+    warnings = [w for w in (_clipped(n, b, lv, metric) for n, b in bands.items()) if w is not None]
     key = f"{float(rank_level_db):g}"
 
     def score(r: dict[str, Any]) -> tuple[float, float, float]:
@@ -198,8 +204,22 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
            "ranking_rule": f"people above {rank_level_db:g} dB(A) {metric}, then person-dB above {lv[0]:g} dB(A), "
                            "then peak level at a dwelling; lower is better",
            "dose_metric": f"person-dB: sum over people of max({metric} - {lv[0]:g} dB, 0)",
-           "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked}
+           "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked,
+           "warnings": warnings}
     return Comparison(nm, grid, bands, metric, doc, trajs)
+
+
+def _clipped(name: str, band: np.ndarray, levels: Sequence[float], metric: str) -> str | None:
+    """The warning for a route whose band reaches a level at the grid's edge: the counts above it miss the people
+    beyond the edge (as a map flags its clipped contours)."""
+    edge = np.concatenate([band[0], band[-1], band[:, 0], band[:, -1]])
+    edge = edge[np.isfinite(edge)]
+    top = float(edge.max()) if edge.size else -np.inf
+    cut = [v for v in levels if top >= v]
+    if not cut:
+        return None
+    return (f"{name}: {metric} reaches {top:.1f} dB(A) at the grid's edge: the people, buildings and areas above "
+            f"{', '.join(f'{v:g}' for v in cut)} dB(A) are lower bounds (a wider margin counts them whole)")
 
 
 def _track_length(traj: Trajectory) -> float:

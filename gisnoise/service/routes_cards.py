@@ -9,7 +9,7 @@ from fastapi import APIRouter, Body, Path, Query, Request, Response
 from gisnoise.model import cards as gcards
 from gisnoise.service.cardstore import StoredCard
 from gisnoise.service.deps import WRITE, State, StateDep
-from gisnoise.service.models import CardDocument, CardInfo, CardList, CardVersions, MediaType, SafeId
+from gisnoise.service.models import CardDocument, CardInfo, CardList, CardVersions, MediaType, PhaseName, SafeId
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 
 router = APIRouter(prefix="/cards", tags=["cards"])
@@ -33,7 +33,8 @@ def _card_response(stored: StoredCard, status_code: int = 200) -> Response:
 
 @router.get("", response_model=CardList, summary="List the cards (latest versions)")
 def list_cards(request: Request, state: StateDep,
-               phase: str | None = Query(None, description="Only cards serving this phase.")) -> CardList:
+               phase: Annotated[PhaseName | None, Query(description="Only cards serving this phase.")] = None
+               ) -> CardList:
     out = []
     for cid in state.cards.ids():
         try:

@@ -148,3 +148,12 @@ def test_docs_and_page_are_served_without_any_network(client):
                   "/static/app.js", "/static/style.css"):
         assert client.get(asset).status_code == 200, asset
     assert client.get("/openapi.json").json()["info"]["title"] == "gisnoise"
+
+
+def test_listing_by_an_unknown_phase_is_refused_naming_the_field(client):
+    """GET /cards?phase= filters by one of the flight phases; a misspelt phase is a 422 naming 'phase', not an
+    empty list that looks like 'no card serves it'."""
+    hover = client.get("/cards?phase=hover")
+    assert hover.status_code == 200 and "demo-climb" in [c["id"] for c in hover.json()["cards"]]
+    assert_names_field(client.get("/cards?phase=Hover"), 422, "phase")
+    assert_names_field(client.get("/cards?phase=cruise"), 422, "phase")

@@ -153,6 +153,19 @@ def test_trajectory_formats_give_the_same_map(client):
         np.testing.assert_allclose(o, outs[0], atol=1e-3)
 
 
+def test_csv_text_with_a_byte_order_mark_or_crlf_gives_the_same_map(client):
+    """A flight CSV's text as an editor saves it (UTF-8 byte-order mark, CRLF line ends) is the same flight: the
+    command line reads such a file, and the service its text, to the same map."""
+    text = flyover_csv(length_m=300.0, dt=0.5)
+    outs = []
+    for variant in (text, "\ufeff" + text, text.replace("\n", "\r\n"), "\ufeff" + text.replace("\n", "\r\n")):
+        r = client.post("/contours", json=_request(trajectory={"format": "csv", "text": variant}, output="geotiff"))
+        assert r.status_code == 200, r.text
+        outs.append(_read_tif(r.content)[1])
+    for o in outs[1:]:
+        np.testing.assert_array_equal(o, outs[0])
+
+
 def test_waypoints_route(client):
     wps = {"type": "FeatureCollection", "route": {"altitude_reference": "agl"}, "features": [
         {"type": "Feature", "geometry": {"type": "Point", "coordinates": c}, "properties": {"alt": a, "speed": 20}}

@@ -80,6 +80,7 @@ class CompareRoutesAlgorithm(_PlanningBase):
     METRIC = "METRIC"
     RESOLUTION = "RESOLUTION"
     RANK_LEVEL = "RANK_LEVEL"
+    GROUND_HEIGHT = "GROUND_HEIGHT"
     BEST = "BEST"
 
     def name(self):
@@ -103,6 +104,9 @@ class CompareRoutesAlgorithm(_PlanningBase):
             self.RANK_LEVEL, "Rank by people above (dB(A))", QgsProcessingParameterNumber.Double, 55.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.RESOLUTION, "Grid cell (m)", QgsProcessingParameterNumber.Double, 20.0, minValue=0.5))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.GROUND_HEIGHT, "Flat ground height (m, ellipsoidal; empty: stated by the routes, else a take-off "
+            "or landing point; routes all in the air need it)", QgsProcessingParameterNumber.Double, optional=True))
         self.addParameter(QgsProcessingParameterFolderDestination(self.OUTPUT_FOLDER, "Output folder"))
         self.addOutput(QgsProcessingOutputString(self.BEST, "best route"))
 
@@ -116,10 +120,14 @@ class CompareRoutesAlgorithm(_PlanningBase):
                              buildings=_buildings(self, parameters, context),
                              metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
                              rank_level_db=self.parameterAsDouble(parameters, self.RANK_LEVEL, context),
-                             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context))
+                             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
+                             ground_h=(None if parameters.get(self.GROUND_HEIGHT) in (None, "")
+                                       else self.parameterAsDouble(parameters, self.GROUND_HEIGHT, context)))
         write_comparison(cmp, out)
         for r in cmp.doc["ranking"]:
             feedback.pushInfo(f"{r['rank']}. {r['route']}")
+        for w in cmp.doc["warnings"]:
+            feedback.reportError(f"warning: {w}", fatalError=False)
         return {self.OUTPUT_FOLDER: out, self.BEST: cmp.best}
 
 

@@ -83,3 +83,27 @@ def test_quieter_route_goes_around_the_block(plugin, town, tmp_path):
     assert summary["reduction_pct"] > 50.0
     assert summary["optimized_length_m"] <= 1.25 * summary["direct_length_m"] + 1e-6
     assert not math.isnan(summary["turn_radius_m"])
+
+
+def test_compare_takes_a_ground_height_for_routes_in_the_air(plugin, town, tmp_path):
+    """Candidate flight CSVs in the air throughout need the ground (as on the command line, --ground-height): without
+    it the algorithm stops naming ground_h_m; with GROUND_HEIGHT it ranks them."""
+    import processing
+    from qgis.core import QgsProcessingException
+
+    cards = ",".join(str(CARDS / f"demo_{p}.json") for p in ("horizontal", "climb", "sink"))
+    paths = []
+    for name, n in (("over", 0.0), ("around", 900.0)):
+        lines = ["t,lat,lon,h,roll,pitch,yaw,power_w,phase"]
+        for i in range(151):
+            lon, lat = _lonlat(-1500.0 + 20.0 * i, n)
+            lines.append(f"{i:.1f},{lat:.9f},{lon:.9f},60.0,0,0,90,3000,horizontal")
+        p = tmp_path / f"{name}.csv"
+        p.write_text("\n".join(lines) + "\n")
+        paths.append(str(p))
+    params = {"ROUTES": paths, "CARDS": cards, "POPULATION": str(town / "pop.tif"), "METRIC": 0, "RANK_LEVEL": 55.0,
+              "RESOLUTION": 40.0, "OUTPUT_FOLDER": str(tmp_path / "cmp")}
+    with pytest.raises(QgsProcessingException, match="ground_h_m"):
+        processing.run("gisnoise:compareroutes", params)
+    res = processing.run("gisnoise:compareroutes", {**params, "GROUND_HEIGHT": 0.0})
+    assert res["BEST"] == "around"
