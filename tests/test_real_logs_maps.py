@@ -153,8 +153,12 @@ def test_quad_airborne_samples_without_current_are_silent_and_named(tmp_path, ca
     r = CliRunner().invoke(cli, ["-q", "contour", str(QUAD), "--card", card, "--out", str(tmp_path / "m"),
                                  "--resolution", "20", "--margin", "100"])
     assert r.exit_code == 0, r.output
-    assert f"{int(unpowered.sum())} of {int(airborne.sum())} airborne samples draw no battery current" in r.stderr
+    named = f"{int(unpowered.sum())} of {int(airborne.sum())} airborne samples draw no battery current"
+    assert named in r.stderr
     np.testing.assert_array_equal(tr.flying, airborne & ~unpowered)
+    # the contours carry the map's warnings too (a service answering with GeoJSON alone shows them there)
+    doc = json.loads((tmp_path / "m" / "contours.geojson").read_text())
+    assert any(named in w for w in doc["gisnoise"]["warnings"])
 
 
 def test_track_without_current_in_flight_names_power_w(tmp_path, card):

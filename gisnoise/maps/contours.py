@@ -111,8 +111,17 @@ def clip_warnings(result: MapResult, levels: Any, *, metrics: Sequence[str] | No
         top = _edge_max(result.band(name))
         lv = ", ".join(f"{v:g}" for v in cut)
         out.append(f"{name} {lv} {unit} contours are clipped: the grid's edge reaches {top:.1f} {unit}; "
-                   "they carry \"clipped\": true (a wider margin shows them whole)")
+                   f"they carry \"clipped\": true{_CLIP_TAIL}")
     return out
+
+
+_CLIP_TAIL = " (a wider margin shows them whole)"  # how a line of clip_warnings ends
+
+
+def _warnings(result: MapResult, levels: Any, metrics: Sequence[str] | None) -> list[str]:
+    """``gisnoise.warnings``: the map's own (``metadata["warnings"]``) and the clip warnings of these levels."""
+    own = [w for w in result.metadata.get("warnings", []) if not str(w).endswith(_CLIP_TAIL)]
+    return own + clip_warnings(result, levels, metrics=metrics)
 
 
 def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
@@ -497,7 +506,7 @@ def contours_geojson(result: MapResult, levels: Any, *, metrics: Sequence[str] |
 def _collection(result: MapResult, levels: Any, metrics: Sequence[str] | None, feats: list[dict]) -> dict:
     return {"type": "FeatureCollection", "features": feats,
             "gisnoise": {"levels": parse_levels(levels),
-                         "warnings": clip_warnings(result, levels, metrics=metrics),
+                         "warnings": _warnings(result, levels, metrics),
                          "metrics": sorted({f["properties"]["metric"] for f in feats}),
                          "grid": result.grid.to_dict()}}
 
