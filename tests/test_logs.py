@@ -49,10 +49,16 @@ def test_ulog_positions_attitude_power_equal_pyulog(ulog_raw):
     keep = (t_boot >= lo) & (t_boot <= hi)
     assert len(tr) == keep.sum() >= 25
     tb = t_boot[keep]
-    # positions: 1e-7 deg integers, ellipsoidal height in mm
+    # positions: 1e-7 deg integers; the height: the estimator's -vehicle_local_position.z (valid throughout, no
+    # reset) plus its median offset to the ellipsoidal GPS height (mm) over the fixes inside its span
     np.testing.assert_allclose(tr.lat, gps["lat"][fix][keep] / 1e7, rtol=0, atol=1e-12)
     np.testing.assert_allclose(tr.lon, gps["lon"][fix][keep] / 1e7, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(tr.h, gps["alt_ellipsoid"][fix][keep] / 1e3, rtol=0, atol=1e-9)
+    lp = ulog_raw[("vehicle_local_position", 0)]
+    t_lp, up = lp["timestamp"] / 1e6, -lp["z"].astype(float)
+    assert lp["z_valid"].all() and not np.any(np.diff(lp["z_reset_counter"]))
+    inside = (t_boot >= t_lp[0]) & (t_boot <= t_lp[-1])
+    offset = np.median(gps["alt_ellipsoid"][fix][inside] / 1e3 - np.interp(t_boot[inside], t_lp, up))
+    np.testing.assert_allclose(tr.h, np.interp(tb, t_lp, up) + offset, rtol=0, atol=1e-9)
     # times: UTC of each fix, from the GPS clock (jitter of the publication stamps < 30 ms)
     utc = gps["time_utc_usec"][fix][keep] / 1e6
     np.testing.assert_allclose(tr.t + start.timestamp(), utc, rtol=0, atol=0.03)

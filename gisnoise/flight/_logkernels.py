@@ -106,6 +106,17 @@ def msl_height_datum(field: str, geoid_meta: Mapping[str, Any]) -> str:
     return f"mean sea level ({field}) + geoid undulation: {geoid_meta['geoid_model']}"
 
 
+def estimator_height_datum(field: str, anchor_datum: str) -> str:
+    """The ``height_datum`` of heights whose course is the estimator's height ``-field`` (NED ``z``, up = ``-z``)
+    and whose level is its median offset to heights in ``anchor_datum`` (a GNSS receiver's, over the time both
+    are logged).
+
+    >>> print(estimator_height_datum("vehicle_local_position.z", "ellipsoid (gps.alt_ellipsoid)"))
+    ellipsoid (gps.alt_ellipsoid), through the median offset of the estimator's height -vehicle_local_position.z to it
+    """
+    return f"{anchor_datum}, through the median offset of the estimator's height -{field} to it"
+
+
 def msl_to_ellipsoid_undulation(lat: np.ndarray, lon: np.ndarray, given: float | None,
                                 what: str) -> tuple[np.ndarray | float, dict[str, Any]]:
     """The geoid undulation N (m) that turns heights above mean sea level at ``lat``, ``lon`` (deg) into

@@ -8,7 +8,8 @@
 ``.ulg``
     PX4 ULog through pyulog (:func:`gisnoise.flight.ulog.read_ulog`).  Position from
     ``vehicle_global_position`` when logged, else from ``vehicle_gps_position`` /
-    ``sensor_gps`` (3D fixes only); attitude from the ``vehicle_attitude`` quaternion;
+    ``sensor_gps`` (3D fixes only) with the estimator's height (see Heights); attitude from
+    the ``vehicle_attitude`` quaternion;
     electric power as the sum over ``battery_status`` instances of voltage x current.
 ``.bin``
     ArduPilot DataFlash through pymavlink (:func:`gisnoise.flight.dataflash.read_dataflash`).
@@ -40,6 +41,16 @@ Heights
     per sample).  Without a grid the error names ``--geoid-undulation``; N is never guessed.
     The trajectory's metadata states the datum (``height_datum``), the model
     (``geoid_model``) and the mean undulation used (``geoid_undulation_m``).
+
+    A PX4 log without ``vehicle_global_position`` (the estimator's position) takes its
+    height from the estimator's ``vehicle_local_position.z`` where that is valid over its span:
+    ``-z`` (resets undone) plus its median offset to the GPS heights over the fixes inside that
+    span (:func:`gisnoise.flight.ulog.estimator_height`); a GNSS receiver's height wanders by
+    metres within seconds near the ground, the estimator's, which fuses the barometer, much less.
+    The horizontal position stays the GPS fixes' (the estimator's ``x``, ``y`` lie about an origin
+    that exists only with ``xy_valid``, and then they follow the GPS).  The metadata states the offset
+    (``height_anchor_m``), how far the GPS heights wandered about it (``height_anchor_range_m``)
+    and the resets undone (``height_resets``); where the GPS heights stay, ``height_note`` says why.
 
 Phase (see :func:`~gisnoise.flight.phases.phase_by_speed`)
     A PX4 VTOL's state (``vtol_vehicle_status``, else ``vehicle_status``) gives

@@ -1,7 +1,8 @@
 """PX4 ULog flight logs (through pyulog) as trajectories.
 
-Position from ``vehicle_global_position`` when logged, else from
-``vehicle_gps_position`` / ``sensor_gps`` (3D fixes only); attitude from the
+Position from ``vehicle_global_position`` when logged (the estimator's), else from
+``vehicle_gps_position`` / ``sensor_gps`` (3D fixes only) with the height from the
+estimator where it is logged (:func:`estimator_height`); attitude from the
 ``vehicle_attitude`` quaternion (Hamilton, body FRD -> NED) as Z-Y-X Euler angles;
 electric power as the sum over ``battery_status`` instances of voltage x current (the mean
 current over each log interval from the coulomb count ``discharged_mah`` where it is
@@ -31,17 +32,18 @@ from gisnoise.flight._logkernels import (
     _phase,
     _power,
     _time_base,
+    estimator_height_datum,
     msl_height_datum,
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
-__all__ = ["read_ulog", "quaternion_to_euler", "battery_power"]
+__all__ = ["read_ulog", "quaternion_to_euler", "battery_power", "estimator_height"]
 
 _ULOG_TOPICS = ("vehicle_global_position", "vehicle_gps_position", "sensor_gps", "vehicle_attitude",
                 "battery_status", "vtol_vehicle_status", "vehicle_status", "airspeed_validated", "airspeed",
-                "rpm", "esc_status", "vehicle_land_detected")
+                "rpm", "esc_status", "vehicle_land_detected", "vehicle_local_position")
 
 
 def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undulation_m: float | None = None,
@@ -92,6 +94,8 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
 
     # position
     geoid_meta: dict[str, Any] = {}
+    height_meta: dict[str, Any] = {}
+    h_series: tuple[np.ndarray, np.ndarray] | None = None   # (times, heights) when not at the position samples
     gps = first("vehicle_gps_position", "sensor_gps")
     gps_cols = _px4_gps_columns(*gps) if gps else None
     glob = first("vehicle_global_position")
@@ -119,6 +123,13 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
             n_und, geoid_meta = _undulation(src, None, geoid_undulation_m, lat, lon, f"{pos_name}.alt")
             h = h_msl + n_und
             datum = msl_height_datum(f"{pos_name}.alt", geoid_meta)
+        lp = topics["vehicle_local_position"][0] if "vehicle_local_position" in topics else None
+        est = estimator_height(lp, tb, h)
+        if isinstance(est, str):
+            height_meta["height_note"] = f"raw GPS heights ({pos_name}): {est}"
+        else:
+            h_series, height_meta = (est[0], est[1]), est[2]
+            datum = estimator_height_datum("vehicle_local_position.z", datum)
     else:
         raise MissingColumnError(f"{src}: topic 'vehicle_global_position' or 'vehicle_gps_position' missing "
                                  "(no position)", field="vehicle_global_position")
@@ -150,8 +161,12 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
                                      f"current; {POWER_WAY_OUT}", field="battery_status")
 
     spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
+    if h_series is not None:
+        spans.append((h_series[0][0], h_series[0][-1]))
     t = _time_base(src, tb, spans, rate_hz)
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
+    if h_series is not None:
+        h_i = np.interp(t, *h_series)
     roll, pitch, yaw = quaternion_to_euler(_interp_quaternion(t, t_att, q))
     power = _power(t, batteries, power_w)
 
@@ -180,8 +195,78 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     utc_offset = None
     if gps_cols is not None and gps_cols["utc_offset"] is not None:
         utc_offset = gps_cols["utc_offset"]
-    meta = {"height_datum": datum, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
+    meta = {"height_datum": datum, **height_meta, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
     return _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
+
+
+def estimator_height(lp: Mapping[str, np.ndarray] | None, t_gps: np.ndarray,
+                     h_gps: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, Any]] | str:
+    """Heights from the estimator's ``vehicle_local_position.z`` levelled on the GPS heights: (times s, heights m,
+    metadata), or the reason (a sentence) why the GPS heights stay.
+
+    The estimator (EKF2) fuses barometer, GPS, accelerometers and range finders into ``z`` (NED, m, about a local
+    origin); a GNSS receiver's height wanders by metres over seconds near the ground, while the estimator's course
+    holds to decimetres.  The height is ``-z + offset`` with ``offset`` the median over the GPS fixes inside the
+    estimator's span of ``h_gps - (-z)``; the metadata states it (``height_anchor_m``), how far the GPS heights
+    wander from the estimator's (``height_anchor_range_m``, GPS minus estimator height less ``offset``) and how many
+    height resets were undone (``height_resets``).
+
+    Samples count where ``z`` is finite and ``z_valid`` (when logged) is set; the estimator's span is its first to
+    its last valid sample, and an invalid one inside it keeps the GPS heights (a gap says the estimator lost its
+    height).  A reset (``z_reset_counter`` steps) shifts ``z`` by ``delta_z`` at once: it is undone, so the course
+    stays continuous.  When the counter steps by more than one between two logged samples, ``delta_z`` holds the
+    last reset only; the shift is then the step of ``z`` less the motion the vertical velocity ``vz`` gives
+    (trapezoid rule).  Fewer than 3 GPS fixes inside the span keep the GPS heights.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.arange(5.0)                      # a reset at t = 3 s shifts z by -2 m; the vehicle stands still
+    >>> lp = {"timestamp": t * 1e6, "z": np.array([-1.0, -1.0, -1.0, -3.0, -3.0]), "z_valid": np.ones(5),
+    ...       "z_reset_counter": np.array([7, 7, 7, 8, 8]), "delta_z": np.array([0.0, 0, 0, -2, -2])}
+    >>> th, h, meta = estimator_height(lp, t, np.array([100.0, 101.0, 102.0, 101.0, 100.0]))
+    >>> [float(v) for v in h], meta["height_anchor_m"], meta["height_resets"]
+    ([101.0, 101.0, 101.0, 101.0, 101.0], 100.0, 1)
+    """
+    if lp is None:
+        return "vehicle_local_position is not logged"
+    if "z" not in lp:
+        return "vehicle_local_position has no z"
+    t = lp["timestamp"].astype(float) / 1e6
+    z = lp["z"].astype(float)
+    ok = np.isfinite(z) & (lp["z_valid"].astype(bool) if "z_valid" in lp else True)
+    if not ok.any():
+        return "vehicle_local_position.z is never valid"
+    i0, i1 = int(np.argmax(ok)), len(ok) - 1 - int(np.argmax(ok[::-1]))
+    if not ok[i0:i1 + 1].all():
+        bad = int(np.sum(~ok[i0:i1 + 1]))
+        return f"vehicle_local_position.z is not valid at {bad} of its {i1 + 1 - i0} samples between valid ones"
+    t, z = t[i0:i1 + 1], z[i0:i1 + 1]
+    if len(t) < 2 or np.any(np.diff(t) <= 0):
+        return "vehicle_local_position has fewer than 2 valid samples in time order"
+    resets = 0
+    if "z_reset_counter" in lp:
+        steps = np.mod(np.diff(lp["z_reset_counter"][i0:i1 + 1].astype(np.int64)), 256)
+        resets = int(steps.sum())
+        shift = np.zeros(len(steps))
+        one = (steps == 1) & ("delta_z" in lp)
+        if one.any():
+            shift[one] = lp["delta_z"][i0 + 1:i1 + 1].astype(float)[one]
+        many = (steps > 0) & ~one
+        if many.any():
+            vz = lp["vz"][i0:i1 + 1].astype(float) if "vz" in lp else np.zeros(len(t))
+            motion = np.nan_to_num(0.5 * (vz[1:] + vz[:-1]) * np.diff(t))
+            shift[many] = (np.diff(z) - motion)[many]
+        z = z - np.concatenate([[0.0], np.cumsum(shift)])
+    inside = (t_gps >= t[0]) & (t_gps <= t[-1]) & np.isfinite(h_gps)
+    if inside.sum() < 3:
+        return f"only {int(inside.sum())} GPS fixes lie inside the span of vehicle_local_position (3 needed)"
+    gap = h_gps[inside] + np.interp(t_gps[inside], t, z)      # GPS height minus the estimator's (-z)
+    offset = float(np.median(gap))
+    meta = {"height_anchor_m": offset,
+            "height_anchor_range_m": [float(np.min(gap)) - offset, float(np.max(gap)) - offset],
+            "height_resets": resets}
+    return t, offset - z, meta
 
 
 def battery_power(b: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

@@ -212,9 +212,9 @@ def make_map(
     _check_cells(result, traj.source)
     if from_track:
         result.metadata["ground_h_source"] = GROUND_FROM_TRACK
-    # the vertical datum of the track (flight logs: MSL + geoid undulation, and which)
+    # the vertical datum of the track (flight logs: MSL + geoid undulation, and which; the estimator's height)
     result.metadata.setdefault("trajectory", {}).update(
-        {k: traj.metadata[k] for k in ("height_datum", "geoid_model", "geoid_undulation_m") if k in traj.metadata})
+        {k: traj.metadata[k] for k in TRACK_HEIGHT_KEYS if k in traj.metadata})
     if outside_range:
         result.metadata["power_outside_card_range"] = outside_range
     result.metadata["levels_db"] = lv
@@ -287,6 +287,10 @@ def _crs_scale_warning(grid: Any, traj: Trajectory) -> str | None:
     return (f"crs: {name} scales distances by {k:.3f} at the map: its {cell:g} m cells are {cell / k:.1f} m on "
             f"the ground and the margin shrinks alike (a local UTM zone, the default, keeps them true)")
 
+
+TRACK_HEIGHT_KEYS = ("height_datum", "height_note", "height_anchor_m", "height_anchor_range_m", "height_resets",
+                     "geoid_model", "geoid_undulation_m")
+"""The trajectory metadata on its heights that the map metadata repeats (see :mod:`gisnoise.flight.logs`)."""
 
 GROUND_FROM_TRACK = "take-off or landing point of the track"
 """The map metadata's ``ground_h_source`` when the ground is the track's own take-off or landing height."""
