@@ -513,3 +513,24 @@ def test_absorption_in_the_band_levels_is_measured_as_a_multiple_of_iso_9613_1()
     band = absorption_band_holdout(s, s.inputs(1.0), fold, block)
     assert band["iso_multiple"] == pytest.approx(0.0, abs=0.05)
     assert band["p_value"] > 0.01
+
+
+def test_the_clock_sentence_says_which_way_the_clock_is_off():
+    """``offset_s`` is the shift at which the model explains the level: level(t) = model(t + offset_s).
+    A positive offset relative to the other microphones means the level comes *earlier* than the
+    model: the microphone's clock runs behind theirs (the study's ``clock(.., +0.8)``); a negative one
+    means later, its clock runs ahead (its time stamps were written 0.8 s late)."""
+    from gisnoise.diagnose.metadata import clock_note
+
+    est = {"m1": {"offset_s": 0.02, "std_s": 0.04}, "m2": {"offset_s": 0.82, "std_s": 0.05},
+           "m3": {"offset_s": -0.02, "std_s": 0.04}, "m4": {"offset_s": 0.0, "std_s": 0.04}}
+    behind = clock_note("m2", est)
+    assert "m2" in behind and "0.82 s (+/- 0.05 s) earlier" in behind and "behind" in behind
+    assert "later" not in behind and "ahead" not in behind and "-0." not in behind
+    est["m2"]["offset_s"] = -0.78
+    ahead = clock_note("m2", est)
+    assert "0.78 s (+/- 0.05 s) later" in ahead and "ahead" in ahead
+    assert "earlier" not in ahead and "behind" not in ahead and "-0." not in ahead
+    est["m2"]["offset_s"] = 0.5  # relative to the median of the others (0.0), not to zero
+    est["m1"]["offset_s"] = est["m3"]["offset_s"] = est["m4"]["offset_s"] = 0.3
+    assert "0.20 s" in clock_note("m2", est)
