@@ -365,16 +365,21 @@ def test_position_radius_option_searches_or_takes_the_listed_positions(tmp_path)
     (camp / "campaign.json").write_text(json.dumps(meta))
     default = next(p for p in diagnose_command.params if p.name == "position_radius").default
     assert default == POSITION_RADIUS_M
-    docs = {}
+    docs, said = {}, {}
     for radius in (None, "0"):
         out = tmp_path / f"diag{radius}"
-        args = ["-q", "diagnose", str(camp), "--card", str(CARD), "--out", str(out), "--effect", "rpm", "--no-report"]
+        args = ["diagnose", str(camp), "--card", str(CARD), "--out", str(out), "--effect", "rpm", "--no-report"]
         run = CliRunner().invoke(cli, args + ([] if radius is None else ["--position-radius", radius]))
         assert run.exit_code == 0, run.output
         docs[radius] = json.loads((out / "diagnosis.json").read_text())
+        said[radius] = run.output
     est = docs[None]["metadata"]["microphone_positions"]["m1"]
     assert est["contradicts"] and abs(est["relative_n_m"] + 30.0) < 5.0 and abs(est["relative_e_m"]) < 5.0
     assert "microphone_positions" not in docs["0"]["metadata"]
+    # the command line says what the campaign got wrong, not only the verdict
+    sentences = docs[None]["metadata"]["contradictions"]
+    assert sentences and all(t in said[None] for t in sentences)
+    assert "not where the campaign lists it" not in said["0"]
 
 
 def test_two_ray_physics_of_the_study_simulator():

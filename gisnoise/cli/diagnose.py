@@ -54,6 +54,8 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
         with progress(ctx, "writing the report", 1.0) as update:
             write_report(diag, folder, progress=lambda done, total: update(done / max(total, 1)))
     if not quiet:
+        for sentence in (diag.result.get("metadata") or {}).get("contradictions") or []:
+            click.echo(f"campaign: {sentence}")
         v = diag.result["verdict"]
         if v["effect"]:
             click.echo(f"verdict: {v['effect']} (held-out rms {v['rms_db_holdout_baseline']:.2f} -> "
