@@ -85,3 +85,14 @@ def test_diagnose_job_finds_the_injected_effect(client, campaign_zip, tmp_path):
     assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
     for text in (page.text, client.get(info["result_url"]).text):
         assert str(tmp_path) not in text  # no server paths leak
+
+
+def test_diagnose_job_with_an_unknown_card_names_it_once(client, campaign_zip):
+    """A store card that is not there: 422 with the common body, the field named once at the head of the
+    message ('card_id: no card ...'), and no job queued."""
+    before = client.get("/jobs").json()
+    r = client.post("/jobs/diagnose", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
+                    data={"card_id": "no-such-card"})
+    body = assert_names_field(r, 422, "card_id")
+    assert body["detail"] == "card_id: no card with id 'no-such-card'", body
+    assert client.get("/jobs").json() == before
