@@ -51,3 +51,27 @@ def test_lazy_help_lists_the_same_commands_and_lines_as_the_imported_ones():
 def test_unknown_command_is_a_usage_error():
     res = CliRunner().invoke(cli, ["nosuch"])
     assert res.exit_code == 2 and "No such command 'nosuch'" in res.output
+
+
+def test_files_named_in_help_texts_exist():
+    """A help text that points to a file (``see x/y.py``, ``examples in sample_data/...``) points to one
+    that is there: in the repository or in the package."""
+    import re
+
+    import click
+
+    load_all()
+    missing = []
+
+    def walk(cmd: click.Command, path: list[str]) -> None:
+        text = CliRunner().invoke(cli, [*path, "--help"], terminal_width=200).output
+        for name in re.findall(r"[\w./-]+/[\w.-]+\.(?:py|md|json)\b", text):
+            if name.split("/")[0].isupper():  # OUT/diagnosis.json: a file the command writes
+                continue
+            if not ((ROOT / name).exists() or (ROOT / "gisnoise" / name).exists()):
+                missing.append((" ".join(path), name))
+        for sub in sorted(getattr(cmd, "commands", {})):
+            walk(cmd.commands[sub], [*path, sub])  # type: ignore[attr-defined]
+
+    walk(cli, [])
+    assert not missing, missing

@@ -32,7 +32,7 @@ def command(host: str, port: int, data_dir: str | None, workers: int | None, log
 
     \b
     OpenAPI documentation at http://HOST:PORT/docs, the map page at /.
-    Settings come from GISNOISE_* environment variables (see api/settings.py):
+    Settings come from GISNOISE_* environment variables (see gisnoise/service/README.md):
     GISNOISE_DATA_DIR, GISNOISE_API_KEYS (comma-separated; writes then need
     X-API-Key), GISNOISE_WORKERS, GISNOISE_MAX_REQUEST_BYTES, GISNOISE_MAX_CELLS, ...
     """
