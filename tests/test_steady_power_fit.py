@@ -92,6 +92,23 @@ def test_fit_writes_the_identifiable_form_and_its_level_below_the_track(tmp_path
         assert float(card.level_uav(x)) == pytest.approx(float(_truth_level(d, 0.0, -np.pi / 2)), abs=0.3)
 
 
+def test_the_command_line_says_which_parameters_the_data_could_not_support_and_why(tmp_path, campaign):
+    """A parameter the fit held by itself (p1 at steady power) is shown as held with the card's reason, not as
+    'fixed' (which the user did not ask for); a parameter the user fixes stays 'fixed'."""
+    out = tmp_path / "card.json"
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out)],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    reason = load(out).provenance["held_parameters"]["p1"]
+    p1_row = next(line for line in r.output.splitlines() if line.startswith("p1 "))
+    assert p1_row.rstrip().endswith("held") and "fixed" not in p1_row
+    assert f"held p1: {reason}" in r.output
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--fix", "p6=1"],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    assert next(line for line in r.output.splitlines() if line.startswith("p6 ")).rstrip().endswith("fixed")
+
+
 def test_p7_is_held_at_the_stated_background_without_background_dominated_rows(tmp_path):
     """Passes of +-120 m: the UAV stays more than 3 dB above the 40 dB(A) background at every microphone (no
     background-dominated row); a free fit gives p7 = 41.5 +- 2.4 dB(A), no better than the stated background, so

@@ -155,10 +155,12 @@ class FitResult:
                  f"cost (neg. log-likelihood) {self.cost:.3f}, AIC {self.aic:.1f}, BIC {self.bic:.1f}, "
                  f"rms {self.rms_db:.2f} dB",
                  "param       value     std(CR)  std(corr.)"]
+        held = self.info.get("held_parameters") or {}   # held by the fit itself, with the reason
         for k, v, s, sc in zip(self.param_names, self.p, self.std_array, self.std_corrected_array, strict=True):
-            tag = " fixed" if k in self.fixed else (" at bound" if k in self.at_bounds else "")
+            tag = " held" if k in held else " fixed" if k in self.fixed else (" at bound" if k in self.at_bounds else "")
             lines.append(f"{k:<6} {v:>11.4f} {s:>11.4f} {sc:>11.4f}{tag}")
         lines.append("noise std (dB): " + ", ".join(f"{m} {s:.2f}" for m, s in self.noise_std.items()))
+        lines += [f"held {k}: {why}" for k, why in held.items()]
         return "\n".join(lines)
 
     def statistics(self) -> dict[str, Any]:
