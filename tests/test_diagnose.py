@@ -542,3 +542,27 @@ def test_the_clock_sentence_says_which_way_the_clock_is_off():
     est["m2"]["offset_s"] = 0.5  # relative to the median of the others (0.0), not to zero
     est["m1"]["offset_s"] = est["m3"]["offset_s"] = est["m4"]["offset_s"] = 0.3
     assert "0.20 s" in clock_note("m2", est)
+
+
+def test_cli_says_how_far_the_card_itself_misses(tmp_path):
+    """A card whose reference power is 10 x the campaign's flown power scale predicts every level
+    p1 log10(10) = p1 dB too low (Eq. 9 at P_el / 10; less near the background, Eq. 8): the command line
+    states the card's RMS miss and the refit's level offset p0 moving by p1, not only 'no effect'."""
+    scenario = {**wav_scenario(), "effects": {}}  # the card's model itself: the refit is unbiased
+    camp = simulate.simulate(scenario, tmp_path / "camp", base_dir=SCENARIO.parent)
+    doc = json.loads(CARD.read_text())
+    doc["reference_power_w"] *= 10.0
+    doc["id"] = "demo-horizontal-tenfold"
+    card = tmp_path / "card.json"
+    card.write_text(json.dumps(doc))
+    out = tmp_path / "diag"
+    run = CliRunner().invoke(cli, ["diagnose", str(camp), "--card", str(card), "--out", str(out), "--effect", "rpm",
+                                   "--no-report", "--position-radius", "0"])
+    assert run.exit_code == 0, run.output
+    base = json.loads((out / "diagnosis.json").read_text())["baseline"]
+    assert base["rms_db_card"] > 5.0 > base["rms_db_fit"]  # the background term caps the miss near 40 dB(A)
+    line = next(t for t in run.output.splitlines() if t.startswith("card: "))
+    assert f"rms {base['rms_db_card']:.2f} dB" in line and f"refitted {base['rms_db_fit']:.2f} dB" in line
+    moved = base["parameters"]["p0"] - doc["parameters"]["p0"]
+    assert moved == pytest.approx(doc["parameters"]["p1"], abs=1.0)
+    assert f"p0 {moved:+.3g}" in line

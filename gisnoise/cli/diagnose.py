@@ -56,6 +56,7 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     if not quiet:
         for sentence in (diag.result.get("metadata") or {}).get("contradictions") or []:
             click.echo(f"campaign: {sentence}")
+        click.echo(_card_line(card.parameters, diag.result.get("baseline") or {}))
         v = diag.result["verdict"]
         if v["effect"]:
             click.echo(f"verdict: {v['effect']} (held-out rms {v['rms_db_holdout_baseline']:.2f} -> "
@@ -64,3 +65,21 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
             click.echo(f"verdict: no effect ({v['reason']})")
         click.echo(f"{len(diag.result['segments'])} segment(s) where the card misses; wrote {path}"
                    + ("" if no_report else f" and {folder / 'report.html'}"))
+
+
+def _card_line(card_params: dict[str, float], base: dict[str, object]) -> str:
+    """How far the card itself misses: its RMS residual, the refit's, and the parameters the refit moves by
+    more than 3 of its corrected standard deviations (largest first)."""
+    refit = base.get("parameters") or {}
+    std = base.get("std_corrected") or {}
+    assert isinstance(refit, dict) and isinstance(std, dict)
+    moved = []
+    for k, v in refit.items():
+        sd = std.get(k)
+        if k in card_params and isinstance(sd, (int, float)) and sd > 0:
+            z = (float(v) - float(card_params[k])) / float(sd)
+            if abs(z) > 3.0:
+                moved.append((abs(z), f"{k} {float(v) - float(card_params[k]):+.3g} ({abs(z):.0f} std)"))
+    moved.sort(reverse=True)
+    line = f"card: rms {base.get('rms_db_card', float('nan')):.2f} dB against these data, refitted {base.get('rms_db_fit', float('nan')):.2f} dB"
+    return line + ("; the refit moves " + ", ".join(t for _, t in moved[:4]) if moved else "")
