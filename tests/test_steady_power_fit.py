@@ -109,6 +109,20 @@ def test_the_command_line_says_which_parameters_the_data_could_not_support_and_w
     assert next(line for line in r.output.splitlines() if line.startswith("p6 ")).rstrip().endswith("fixed")
 
 
+def test_card_show_says_held_and_fixed_parameters_have_no_uncertainty_of_their_own(tmp_path, campaign):
+    """A parameter held by the fit or fixed by the user has a zero row in the covariance: not a value known
+    exactly, but one that was not estimated. card show says which and why instead of '+- 0'."""
+    out = tmp_path / "card.json"
+    assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--fix", "p6=1").exit_code == 0
+    card = load(out)
+    assert card.std["p1"] == 0.0 and card.std["p6"] == 0.0
+    shown = {line.split("=")[0].strip(): line for line in run("card", "show", str(out)).output.splitlines()
+             if line.startswith("  ") and "=" in line}
+    assert "+- 0" not in shown["p1"] and "held: " + card.provenance["held_parameters"]["p1"] in shown["p1"]
+    assert "+- 0" not in shown["p6"] and shown["p6"].rstrip().endswith("fixed")
+    assert "+- " in shown["p0"]
+
+
 def test_p7_is_held_at_the_stated_background_without_background_dominated_rows(tmp_path):
     """Passes of +-120 m: the UAV stays more than 3 dB above the 40 dB(A) background at every microphone (no
     background-dominated row); a free fit gives p7 = 41.5 +- 2.4 dB(A), no better than the stated background, so
