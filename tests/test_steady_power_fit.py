@@ -123,6 +123,21 @@ def test_card_show_says_held_and_fixed_parameters_have_no_uncertainty_of_their_o
     assert "+- " in shown["p0"]
 
 
+def test_fit_never_writes_its_card_over_a_file_that_is_not_a_card(tmp_path, campaign):
+    """--out naming the campaign's own campaign.json (or any file that is not a model card) is refused before
+    the fit, naming --out, and the file is left byte for byte; an existing card is replaced by the new fit."""
+    cj = campaign / "campaign.json"
+    before = cj.read_bytes()
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(cj)])
+    assert r.exit_code == 2 and cj.read_bytes() == before
+    errors = [ln for ln in r.output.splitlines() if ln.startswith("Error: ")]
+    assert len(errors) == 1 and "--out" in errors[0] and str(cj) in errors[0], r.output
+    card = tmp_path / "card.json"
+    assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(card)).exit_code == 0
+    assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(card), "--fix", "p6=1").exit_code == 0
+    assert load(card).parameters["p6"] == 1.0
+
+
 def test_p7_is_held_at_the_stated_background_without_background_dominated_rows(tmp_path):
     """Passes of +-120 m: the UAV stays more than 3 dB above the 40 dB(A) background at every microphone (no
     background-dominated row); a free fit gives p7 = 41.5 +- 2.4 dB(A), no better than the stated background, so
