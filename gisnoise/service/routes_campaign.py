@@ -184,6 +184,9 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
         v = getattr(result, k, None)
         if isinstance(v, (bool, int, float, str)):
             summary[k] = v
+    held = result.info.get("held_parameters")
+    if held:  # their std of 0 means 'not estimated': say why, as the card does
+        summary["held_parameters"] = dict(held)
     if p.get("report"):
         ctx.progress(0.96, "writing the report")
         summary["report"] = _report("gisnoise.identify.report", result, ctx.output_dir / "report")

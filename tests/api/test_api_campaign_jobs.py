@@ -96,3 +96,17 @@ def test_diagnose_job_with_an_unknown_card_names_it_once(client, campaign_zip):
     body = assert_names_field(r, 422, "card_id")
     assert body["detail"] == "card_id: no card with id 'no-such-card'", body
     assert client.get("/jobs").json() == before
+
+
+def test_fit_job_summary_says_which_parameters_were_held_and_why(client):
+    """Sink rows never come within 3 dB of the background: p7 is held at the campaign's background. Its std of 0
+    in the summary is 'not estimated', and the summary says so with the card's reason."""
+    both = _campaign_zip(("f1", "f2"))  # one flight's sink rows cannot identify the rest either
+    r = client.post("/jobs/fit", files={"campaign": ("c.zip", both, "application/zip")},
+                    data={"phase": "sink"})
+    info = wait_job(client, r.json()["id"], timeout=120)
+    assert info["status"] == "succeeded", info["error"]
+    card = client.get(info["result_url"]).json()
+    held = card["provenance"]["held_parameters"]
+    assert "p7" in held and info["summary"]["std"]["p7"] == 0.0
+    assert info["summary"]["held_parameters"] == held
