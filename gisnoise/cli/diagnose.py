@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import click
@@ -67,7 +68,7 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
                    + ("" if no_report else f" and {folder / 'report.html'}"))
 
 
-def _card_line(card_params: dict[str, float], base: dict[str, object]) -> str:
+def _card_line(card_params: Mapping[str, float], base: Mapping[str, object]) -> str:
     """How far the card itself misses: its RMS residual, the refit's, and the parameters the refit moves by
     more than 3 of its corrected standard deviations (largest first)."""
     refit = base.get("parameters") or {}
