@@ -138,6 +138,17 @@ def test_fit_never_writes_its_card_over_a_file_that_is_not_a_card(tmp_path, camp
     assert load(card).parameters["p6"] == 1.0
 
 
+@pytest.mark.parametrize("bad", ["my card", "cards/horizontal", ".hidden", "nul"])
+def test_fit_refuses_a_card_id_the_card_store_cannot_hold(tmp_path, campaign, bad):
+    """--id follows the identifier rule every face shares (gisnoise.limits.SAFE_ID_PATTERN): refused before the
+    fit in one line naming --id, no card written."""
+    out = tmp_path / "card.json"
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--id", bad])
+    assert r.exit_code == 2 and not out.exists()
+    errors = [ln for ln in r.output.splitlines() if ln.startswith("Error: ")]
+    assert len(errors) == 1 and "--id" in errors[0] and repr(bad) in errors[0], r.output
+
+
 def test_p7_is_held_at_the_stated_background_without_background_dominated_rows(tmp_path):
     """Passes of +-120 m: the UAV stays more than 3 dB above the 40 dB(A) background at every microphone (no
     background-dominated row); a free fit gives p7 = 41.5 +- 2.4 dB(A), no better than the stated background, so

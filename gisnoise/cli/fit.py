@@ -83,6 +83,10 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     _check_out(out)
+    if card_id is not None:
+        from gisnoise.limits import check_id
+
+        check_id(card_id, field="--id")
     template = load(start) if start else None
     name = ansatz or (template.ansatz if template else "paper-offset")
     fixed = _parse_fix(fix)
