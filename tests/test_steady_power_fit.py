@@ -149,6 +149,26 @@ def test_fit_refuses_a_card_id_the_card_store_cannot_hold(tmp_path, campaign, ba
     assert len(errors) == 1 and "--id" in errors[0] and repr(bad) in errors[0], r.output
 
 
+@pytest.mark.parametrize("vehicle, expected", [("Drohne \u00c4/1 (Gr\u00fcn)", "drohne-a-1-grun-horizontal"),
+                                               ("x" * 300, "x" * 100 + "-horizontal")])
+def test_the_default_card_id_from_the_vehicle_name_is_a_valid_identifier(tmp_path, campaign, vehicle, expected):
+    """Without --id the card is named <vehicle>-<phase>: letters folded to ASCII, other characters to '-', the
+    vehicle part at most 100 characters, so the id meets the rule every face shares (SAFE_ID_PATTERN)."""
+    import shutil
+
+    from gisnoise.limits import check_id
+
+    camp = tmp_path / "camp"
+    shutil.copytree(campaign, camp)
+    doc = json.loads((camp / "campaign.json").read_text())
+    doc["vehicle"]["name"] = vehicle
+    (camp / "campaign.json").write_text(json.dumps(doc))
+    out = tmp_path / "card.json"
+    assert run("fit", str(camp), "--phase", "horizontal", "--out", str(out)).exit_code == 0
+    card = load(out)
+    assert card.id == expected and check_id(card.id) == card.id and card.vehicle == vehicle
+
+
 def test_p7_is_held_at_the_stated_background_without_background_dominated_rows(tmp_path):
     """Passes of +-120 m: the UAV stays more than 3 dB above the 40 dB(A) background at every microphone (no
     background-dominated row); a free fit gives p7 = 41.5 +- 2.4 dB(A), no better than the stated background, so

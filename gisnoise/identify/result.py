@@ -267,8 +267,13 @@ class FitResult:
 
 
 def _slug(s: str) -> str:
-    out = "".join(c.lower() if c.isalnum() else "-" for c in s).strip("-")
+    """A name as the vehicle part of a card id: letters folded to ASCII (Ä -> a), other characters to '-',
+    at most 100 characters, so ``<slug>-<phase>`` meets :data:`gisnoise.limits.SAFE_ID_PATTERN`."""
+    import unicodedata
+
+    ascii_ = unicodedata.normalize("NFKD", s).encode("ascii", "ignore").decode("ascii")
+    out = "".join(c.lower() if c.isalnum() else "-" for c in ascii_).strip("-")
     while "--" in out:
         out = out.replace("--", "-")
-    return out or "vehicle"
+    return out[:100].strip("-") or "vehicle"
 
