@@ -285,3 +285,29 @@ def test_no_traceback_from_any_effect_missing_its_inputs(tmp_path, campaign):
                 assert r.exit_code == 2 and "rpm" in r.output
             if eff == "ground_reflection":   # a ground plate rules the reflection out, and the message says why
                 assert r.exit_code == 2 and "on the ground" in r.output
+
+
+def test_parameters_are_printed_with_their_units(tmp_path, campaign):
+    """Units follow from Eq. 8-11: p0, p7 are levels (dB(A)); p1 multiplies log10(P_el) (dB(A) per decade of
+    power); p3, p5 are subtracted from angles in radians (rad); p2 multiplies (theta + pi/2) in radians (1/rad);
+    p4 and p6 multiply pure numbers (-). Extension parameters carry their effect's units (k_bank: dB)."""
+    from gisnoise.model import get_ansatz
+
+    expected = {"p0": "dB(A)", "p1": "dB(A)/decade", "p2": "1/rad", "p3": "rad", "p4": "-", "p5": "rad", "p6": "-",
+                "p7": "dB(A)"}
+    m = get_ansatz("paper-offset")
+    assert dict(zip(m.params, m.units, strict=True)) == expected
+    assert get_ansatz("paper").units == tuple(expected[k] for k in get_ansatz("paper").params)
+    ext = get_ansatz("paper-offset+bank_angle")
+    assert dict(zip(ext.params, ext.units, strict=True)) == {**expected, "k_bank": "dB"}
+    out = tmp_path / "card.json"
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--report",
+                                 str(tmp_path / "report")], catch_exceptions=False)
+    table = json.loads((tmp_path / "report" / "parameters.json").read_text())["parameters"]
+    assert {row["name"]: row["unit"] for row in table} == expected
+    rows = {ln.split()[0]: ln.split() for ln in r.output.splitlines() if ln.split() and ln.split()[0] in expected}
+    assert {k: v[4] for k, v in rows.items()} == expected
+    shown = {ln.split("=")[0].strip(): ln for ln in run("card", "show", str(out)).output.splitlines()
+             if ln.startswith("  ") and "=" in ln}
+    for k, unit in expected.items():
+        assert shown[k].split("=")[1].split()[1] == f"[{unit}]", shown[k]

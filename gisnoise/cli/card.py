@@ -60,7 +60,7 @@ def show(card: str, as_json: bool, p_el: float, force: bool = False) -> None:
             s = f"  held: {held[k]}"
         elif k in fixed and std and std[k] == 0.0:
             s = "  fixed"
-        click.echo(f"  {k:>4} = {v: .6g}{s}")
+        click.echo(f"  {k:>4} = {v: .6g} [{model.unit(k) or '?'}]{s}")
     cov = c.cov
     if cov is not None:
         d = np.sqrt(np.clip(np.diag(cov), 0, None))

@@ -13,7 +13,7 @@ import numpy as np
 from gisnoise import __version__
 from gisnoise.errors import FitError, InputError
 from gisnoise.measure import Samples
-from gisnoise.model import ModelCard, check_card
+from gisnoise.model import ModelCard, check_card, get_ansatz
 
 __all__ = ["FitResult"]
 
@@ -156,9 +156,14 @@ class FitResult:
                  f"rms {self.rms_db:.2f} dB",
                  "param       value     std(CR)  std(corr.)"]
         held = self.info.get("held_parameters") or {}   # held by the fit itself, with the reason
+        try:
+            units = dict(zip(self.param_names, get_ansatz(self.ansatz).units, strict=False))
+        except InputError:  # an ansatz passed as an object, not in the registry: units not stated
+            units = {}
+        lines[-1] += "  unit"
         for k, v, s, sc in zip(self.param_names, self.p, self.std_array, self.std_corrected_array, strict=True):
             tag = " held" if k in held else " fixed" if k in self.fixed else (" at bound" if k in self.at_bounds else "")
-            lines.append(f"{k:<6} {v:>11.4f} {s:>11.4f} {sc:>11.4f}{tag}")
+            lines.append(f"{k:<6} {v:>11.4f} {s:>11.4f} {sc:>11.4f}  {units.get(k) or '?':<12}{tag}".rstrip())
         lines.append("noise std (dB): " + ", ".join(f"{m} {s:.2f}" for m, s in self.noise_std.items()))
         lines += [f"held {k}: {why}" for k, why in held.items()]
         return "\n".join(lines)
