@@ -21,7 +21,7 @@ from gisnoise.model import load
               help="Candidate effect to test (repeat; default: the whole library).")
 @click.option("--alpha", default=0.01, show_default=True, type=click.FloatRange(0.0, 1.0, min_open=True, max_open=True),
               help="Family-wise significance level of the extension tests.")
-@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading.")
+@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading (needs band levels in every microphone file).")
 @click.option("--position-radius", "position_radius", default=50.0, show_default=True, type=click.FloatRange(0.0, 500.0),
               help="Search each microphone's position within this horizontal radius, m, of where the campaign puts "
                    "it (a wrong position is reported, not believed); 0: take the stated positions as they are.")

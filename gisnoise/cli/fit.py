@@ -62,7 +62,7 @@ def _parse_fix(items: tuple[str, ...]) -> dict[str, float]:
 @click.option("--serves", multiple=True, type=click.Choice(PHASES),
               help="Further phase the card serves (repeat), e.g. --serves transition.")
 @click.option("--fix", multiple=True, metavar="NAME=VALUE", help="Hold a parameter at a value (repeat).")
-@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading.")
+@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading (needs band levels in every microphone file).")
 @click.option("--max-iter", default=100, show_default=True, type=click.IntRange(1, 100000),
               help="Maximum Gauss-Newton iterations.")
 @click.option("--covariance", type=click.Choice(["corrected", "cramer-rao"]), default="corrected", show_default=True,
