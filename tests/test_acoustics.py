@@ -459,3 +459,36 @@ def test_progress_reports_fractions_and_can_cancel():
 
     with pytest.raises(Cancelled):
         acoustics.band_levels(x, fs, progress=stop)
+
+
+@pytest.mark.parametrize("dtype", ["int16", "int32", "float32"])
+def test_a_clipped_recording_is_refused_not_read_too_quiet(tmp_path, dtype):
+    """A recorder driven past digital full scale flattens its peaks: the band levels of such a
+    block are too low (a 1 kHz sine of peak 1.5 x full scale keeps a fundamental 20 log10(a1 / 1.5) =
+    -2.2 dB below the true one, a1 its Fourier amplitude),
+    so a clipped file must be refused naming the file, the field and the time, never read."""
+    from scipy.io import wavfile
+
+    fs = 48000
+    t = np.arange(int(2.0 * fs)) / fs
+    v = 0.05 * np.sin(2 * np.pi * 1000.0 * t)
+    v[fs:fs + fs // 2] *= 30.0  # 1.5 x full scale for 0.5 s from t = 1 s
+    v = np.clip(v, -1.0, 1.0)
+    if dtype == "float32":
+        data = v.astype(np.float32)
+    else:
+        full = 2 ** (8 * np.dtype(dtype).itemsize - 1)
+        data = np.clip(np.round(v * full), -full, full - 1).astype(dtype)
+    path = tmp_path / "clipped.wav"
+    wavfile.write(path, fs, data)
+    for call in (lambda: acoustics.read_wav(path, 0.05), lambda: acoustics.wav_band_levels(path, 0.05)):
+        with pytest.raises(InputError) as err:
+            call()
+        msg = str(err.value)
+        assert err.value.field == "samples"
+        assert "clipped.wav" in msg and "full scale" in msg and "\n" not in msg
+        assert "1.000 s" in msg  # the first clipped sample
+    # the same signal below full scale reads
+    wavfile.write(path, fs, (0.5 * v).astype(np.float32))
+    acoustics.read_wav(path, 0.05)
+    acoustics.wav_band_levels(path, 0.05)

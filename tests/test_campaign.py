@@ -346,6 +346,21 @@ def test_absorption_needs_humidity(tmp_path):
         read_campaign(root, absorption=True)
 
 
+def test_absorption_without_band_levels_is_refused_not_skipped(tmp_path):
+    """Absorption is a per-band correction (SPEC 2): a level file without band columns cannot be corrected. Asked
+    for, it is refused naming the file and the field, never read uncorrected beside corrected ones."""
+    from gisnoise.measure import check_campaign
+
+    root = make_campaign(tmp_path / "c")   # t and LA only
+    with pytest.raises(CampaignError, match=r"mics/m1/f1\.csv: .*absorption.*band") as e:
+        read_campaign(root, absorption=True)
+    assert e.value.field == "bands" and "\n" not in str(e.value)
+    problems = check_campaign(root, absorption=True)
+    assert sorted(str(p.file).split("/mics/")[1] for p in problems if p.field == "bands") == [
+        "m1/f1.csv", "m2/f1.csv", "m3/f1.csv"]
+    read_campaign(root)   # without the correction the same files read
+
+
 # ----------------------------------------------------------------------------- flight logs
 DATA = Path(__file__).parent / "data"
 

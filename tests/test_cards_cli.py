@@ -39,7 +39,7 @@ def test_card_show_standard_deviations_from_the_covariance(tmp_path):
     fitted = cards.with_parameters(card, card.p, covariance=tuple(map(tuple, np.diag(std ** 2))))
     path = cards.save(fitted, tmp_path / "c.json")
     r = run("card", "show", str(path))
-    assert "p4 = -0.365  +- 0.03" in r.output and "(no covariance)" not in r.output
+    assert "p4 = -0.365 [-]  +- 0.03" in r.output and "(no covariance)" not in r.output
 
 
 def test_directivity_numbers_peak_at_74_deg_and_fall_towards_below():

@@ -95,3 +95,19 @@ def test_levels_without_wav_is_an_error(tmp_path):
     res = run("campaign", "levels", str(root))
     assert res.exit_code == 2
     assert "no WAV file" in res.stderr
+
+
+def test_levels_writes_nothing_when_one_recording_is_refused(tmp_path):
+    """m2's recording is clipped (refused): campaign levels exits 2 naming it and writes no level CSV at all,
+    so the campaign is left as it was (not half converted, no stale CSV for the next run to refuse)."""
+    from scipy.io import wavfile
+
+    root = make_wav_campaign(tmp_path / "c", fs={"m1": 48000, "m2": 48000}, seconds=1.0)
+    fs, data = wavfile.read(root / "mics" / "m2" / "f1.wav")
+    full = np.iinfo(np.int16).max if data.dtype == np.int16 else 1.0
+    data = np.clip(data.astype(float) * 1e6, -full, full).astype(data.dtype)
+    wavfile.write(root / "mics" / "m2" / "f1.wav", fs, data)
+    res = run("campaign", "levels", str(root))
+    assert res.exit_code == 2
+    assert "mics/m2/f1.wav" in res.stderr and "clipped" in res.stderr
+    assert sorted(p.name for p in (root / "mics").rglob("*.csv")) == []

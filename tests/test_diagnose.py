@@ -365,16 +365,24 @@ def test_position_radius_option_searches_or_takes_the_listed_positions(tmp_path)
     (camp / "campaign.json").write_text(json.dumps(meta))
     default = next(p for p in diagnose_command.params if p.name == "position_radius").default
     assert default == POSITION_RADIUS_M
-    docs = {}
+    docs, said = {}, {}
     for radius in (None, "0"):
         out = tmp_path / f"diag{radius}"
-        args = ["-q", "diagnose", str(camp), "--card", str(CARD), "--out", str(out), "--effect", "rpm", "--no-report"]
+        args = ["diagnose", str(camp), "--card", str(CARD), "--out", str(out), "--effect", "rpm", "--no-report"]
         run = CliRunner().invoke(cli, args + ([] if radius is None else ["--position-radius", radius]))
         assert run.exit_code == 0, run.output
         docs[radius] = json.loads((out / "diagnosis.json").read_text())
+        said[radius] = run.output
     est = docs[None]["metadata"]["microphone_positions"]["m1"]
     assert est["contradicts"] and abs(est["relative_n_m"] + 30.0) < 5.0 and abs(est["relative_e_m"]) < 5.0
     assert "microphone_positions" not in docs["0"]["metadata"]
+    # m2 stood where it is listed: its own level puts it there, so it is not moved, although with two
+    # microphones its offset against the other one's is as large as m1's
+    assert [m for m, e in docs[None]["metadata"]["microphone_positions"].items() if e["contradicts"]] == ["m1"]
+    # the command line says what the campaign got wrong, not only the verdict
+    sentences = docs[None]["metadata"]["contradictions"]
+    assert sentences and all(t in said[None] for t in sentences)
+    assert "not where the campaign lists it" not in said["0"]
 
 
 def test_two_ray_physics_of_the_study_simulator():
@@ -525,3 +533,48 @@ def test_a_hemisphere_card_is_refused_naming_the_conversion():
     with pytest.raises(InputError, match="fit-hemisphere") as err:
         diagnose(s, hemi)
     assert err.value.field == "card"
+
+
+def test_the_clock_sentence_says_which_way_the_clock_is_off():
+    """``offset_s`` is the shift at which the model explains the level: level(t) = model(t + offset_s).
+    A positive offset relative to the other microphones means the level comes *earlier* than the
+    model: the microphone's clock runs behind theirs (the study's ``clock(.., +0.8)``); a negative one
+    means later, its clock runs ahead (its time stamps were written 0.8 s late)."""
+    from gisnoise.diagnose.metadata import clock_note
+
+    est = {"m1": {"offset_s": 0.02, "std_s": 0.04}, "m2": {"offset_s": 0.82, "std_s": 0.05},
+           "m3": {"offset_s": -0.02, "std_s": 0.04}, "m4": {"offset_s": 0.0, "std_s": 0.04}}
+    behind = clock_note("m2", est)
+    assert "m2" in behind and "0.82 s (+/- 0.05 s) earlier" in behind and "behind" in behind
+    assert "later" not in behind and "ahead" not in behind and "-0." not in behind
+    est["m2"]["offset_s"] = -0.78
+    ahead = clock_note("m2", est)
+    assert "0.78 s (+/- 0.05 s) later" in ahead and "ahead" in ahead
+    assert "earlier" not in ahead and "behind" not in ahead and "-0." not in ahead
+    est["m2"]["offset_s"] = 0.5  # relative to the median of the others (0.0), not to zero
+    est["m1"]["offset_s"] = est["m3"]["offset_s"] = est["m4"]["offset_s"] = 0.3
+    assert "0.20 s" in clock_note("m2", est)
+
+
+def test_cli_says_how_far_the_card_itself_misses(tmp_path):
+    """A card whose reference power is 10 x the campaign's flown power scale predicts every level
+    p1 log10(10) = p1 dB too low (Eq. 9 at P_el / 10; less near the background, Eq. 8): the command line
+    states the card's RMS miss and the refit's level offset p0 moving by p1, not only 'no effect'."""
+    scenario = {**wav_scenario(), "effects": {}}  # the card's model itself: the refit is unbiased
+    camp = simulate.simulate(scenario, tmp_path / "camp", base_dir=SCENARIO.parent)
+    doc = json.loads(CARD.read_text())
+    doc["reference_power_w"] *= 10.0
+    doc["id"] = "demo-horizontal-tenfold"
+    card = tmp_path / "card.json"
+    card.write_text(json.dumps(doc))
+    out = tmp_path / "diag"
+    run = CliRunner().invoke(cli, ["diagnose", str(camp), "--card", str(card), "--out", str(out), "--effect", "rpm",
+                                   "--no-report", "--position-radius", "0"])
+    assert run.exit_code == 0, run.output
+    base = json.loads((out / "diagnosis.json").read_text())["baseline"]
+    assert base["rms_db_card"] > 5.0 > base["rms_db_fit"]  # the background term caps the miss near 40 dB(A)
+    line = next(t for t in run.output.splitlines() if t.startswith("card: "))
+    assert f"rms {base['rms_db_card']:.2f} dB" in line and f"refitted {base['rms_db_fit']:.2f} dB" in line
+    moved = base["parameters"]["p0"] - doc["parameters"]["p0"]
+    assert moved == pytest.approx(doc["parameters"]["p1"], abs=1.0)
+    assert f"p0 {moved:+.3g}" in line

@@ -92,6 +92,83 @@ def test_fit_writes_the_identifiable_form_and_its_level_below_the_track(tmp_path
         assert float(card.level_uav(x)) == pytest.approx(float(_truth_level(d, 0.0, -np.pi / 2)), abs=0.3)
 
 
+def test_the_command_line_says_which_parameters_the_data_could_not_support_and_why(tmp_path, campaign):
+    """A parameter the fit held by itself (p1 at steady power) is shown as held with the card's reason, not as
+    'fixed' (which the user did not ask for); a parameter the user fixes stays 'fixed'."""
+    out = tmp_path / "card.json"
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out)],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    reason = load(out).provenance["held_parameters"]["p1"]
+    p1_row = next(line for line in r.output.splitlines() if line.startswith("p1 "))
+    assert p1_row.rstrip().endswith("held") and "fixed" not in p1_row
+    assert f"held p1: {reason}" in r.output
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--fix", "p6=1"],
+                           catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    assert next(line for line in r.output.splitlines() if line.startswith("p6 ")).rstrip().endswith("fixed")
+
+
+def test_card_show_says_held_and_fixed_parameters_have_no_uncertainty_of_their_own(tmp_path, campaign):
+    """A parameter held by the fit or fixed by the user has a zero row in the covariance: not a value known
+    exactly, but one that was not estimated. card show says which and why instead of '+- 0'."""
+    out = tmp_path / "card.json"
+    assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--fix", "p6=1").exit_code == 0
+    card = load(out)
+    assert card.std["p1"] == 0.0 and card.std["p6"] == 0.0
+    shown = {line.split("=")[0].strip(): line for line in run("card", "show", str(out)).output.splitlines()
+             if line.startswith("  ") and "=" in line}
+    assert "+- 0" not in shown["p1"] and "held: " + card.provenance["held_parameters"]["p1"] in shown["p1"]
+    assert "+- 0" not in shown["p6"] and shown["p6"].rstrip().endswith("fixed")
+    assert "+- " in shown["p0"]
+
+
+def test_fit_never_writes_its_card_over_a_file_that_is_not_a_card(tmp_path, campaign):
+    """--out naming the campaign's own campaign.json (or any file that is not a model card) is refused before
+    the fit, naming --out, and the file is left byte for byte; an existing card is replaced by the new fit."""
+    cj = campaign / "campaign.json"
+    before = cj.read_bytes()
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(cj)])
+    assert r.exit_code == 2 and cj.read_bytes() == before
+    errors = [ln for ln in r.output.splitlines() if ln.startswith("Error: ")]
+    assert len(errors) == 1 and "--out" in errors[0] and str(cj) in errors[0], r.output
+    card = tmp_path / "card.json"
+    assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(card)).exit_code == 0
+    assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(card), "--fix", "p6=1").exit_code == 0
+    assert load(card).parameters["p6"] == 1.0
+
+
+@pytest.mark.parametrize("bad", ["my card", "cards/horizontal", ".hidden", "nul"])
+def test_fit_refuses_a_card_id_the_card_store_cannot_hold(tmp_path, campaign, bad):
+    """--id follows the identifier rule every face shares (gisnoise.limits.SAFE_ID_PATTERN): refused before the
+    fit in one line naming --id, no card written."""
+    out = tmp_path / "card.json"
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--id", bad])
+    assert r.exit_code == 2 and not out.exists()
+    errors = [ln for ln in r.output.splitlines() if ln.startswith("Error: ")]
+    assert len(errors) == 1 and "--id" in errors[0] and repr(bad) in errors[0], r.output
+
+
+@pytest.mark.parametrize("vehicle, expected", [("Drohne \u00c4/1 (Gr\u00fcn)", "drohne-a-1-grun-horizontal"),
+                                               ("x" * 300, "x" * 100 + "-horizontal")])
+def test_the_default_card_id_from_the_vehicle_name_is_a_valid_identifier(tmp_path, campaign, vehicle, expected):
+    """Without --id the card is named <vehicle>-<phase>: letters folded to ASCII, other characters to '-', the
+    vehicle part at most 100 characters, so the id meets the rule every face shares (SAFE_ID_PATTERN)."""
+    import shutil
+
+    from gisnoise.limits import check_id
+
+    camp = tmp_path / "camp"
+    shutil.copytree(campaign, camp)
+    doc = json.loads((camp / "campaign.json").read_text())
+    doc["vehicle"]["name"] = vehicle
+    (camp / "campaign.json").write_text(json.dumps(doc))
+    out = tmp_path / "card.json"
+    assert run("fit", str(camp), "--phase", "horizontal", "--out", str(out)).exit_code == 0
+    card = load(out)
+    assert card.id == expected and check_id(card.id) == card.id and card.vehicle == vehicle
+
+
 def test_p7_is_held_at_the_stated_background_without_background_dominated_rows(tmp_path):
     """Passes of +-120 m: the UAV stays more than 3 dB above the 40 dB(A) background at every microphone (no
     background-dominated row); a free fit gives p7 = 41.5 +- 2.4 dB(A), no better than the stated background, so
@@ -208,3 +285,29 @@ def test_no_traceback_from_any_effect_missing_its_inputs(tmp_path, campaign):
                 assert r.exit_code == 2 and "rpm" in r.output
             if eff == "ground_reflection":   # a ground plate rules the reflection out, and the message says why
                 assert r.exit_code == 2 and "on the ground" in r.output
+
+
+def test_parameters_are_printed_with_their_units(tmp_path, campaign):
+    """Units follow from Eq. 8-11: p0, p7 are levels (dB(A)); p1 multiplies log10(P_el) (dB(A) per decade of
+    power); p3, p5 are subtracted from angles in radians (rad); p2 multiplies (theta + pi/2) in radians (1/rad);
+    p4 and p6 multiply pure numbers (-). Extension parameters carry their effect's units (k_bank: dB)."""
+    from gisnoise.model import get_ansatz
+
+    expected = {"p0": "dB(A)", "p1": "dB(A)/decade", "p2": "1/rad", "p3": "rad", "p4": "-", "p5": "rad", "p6": "-",
+                "p7": "dB(A)"}
+    m = get_ansatz("paper-offset")
+    assert dict(zip(m.params, m.units, strict=True)) == expected
+    assert get_ansatz("paper").units == tuple(expected[k] for k in get_ansatz("paper").params)
+    ext = get_ansatz("paper-offset+bank_angle")
+    assert dict(zip(ext.params, ext.units, strict=True)) == {**expected, "k_bank": "dB"}
+    out = tmp_path / "card.json"
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--report",
+                                 str(tmp_path / "report")], catch_exceptions=False)
+    table = json.loads((tmp_path / "report" / "parameters.json").read_text())["parameters"]
+    assert {row["name"]: row["unit"] for row in table} == expected
+    rows = {ln.split()[0]: ln.split() for ln in r.output.splitlines() if ln.split() and ln.split()[0] in expected}
+    assert {k: v[4] for k, v in rows.items()} == expected
+    shown = {ln.split("=")[0].strip(): ln for ln in run("card", "show", str(out)).output.splitlines()
+             if ln.startswith("  ") and "=" in ln}
+    for k, unit in expected.items():
+        assert shown[k].split("=")[1].split()[1] == f"[{unit}]", shown[k]

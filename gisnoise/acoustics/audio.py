@@ -27,7 +27,7 @@ import numpy as np
 from gisnoise.acoustics import _filterbank
 from gisnoise.acoustics._checks import _array, _positive_scalar, _scalar
 from gisnoise.acoustics.bands import third_octave_centres
-from gisnoise.acoustics.wav import _check_rate, _wav_open, _wav_scale
+from gisnoise.acoustics.wav import _check_clipping, _check_rate, _wav_open, _wav_scale
 from gisnoise.errors import InputError
 
 __all__ = ["P_REF", "band_levels", "wav_band_levels"]
@@ -192,5 +192,6 @@ def wav_band_levels(
         if not np.all(np.isfinite(chunk)):
             bad = start + int(np.argmin(np.isfinite(chunk)))
             raise InputError(f"{name}: non-finite sample at index {bad}", field="samples")
+        _check_clipping(chunk, start, fs, data.dtype, name)
 
     return _filtered_levels(data, fs, blk, f_min, f_max, progress, scale=scale, check=check)

@@ -124,6 +124,31 @@ def _wav_scale(data: np.ndarray, name: str) -> float:
     raise InputError(f"{name}: unsupported WAV sample type {data.dtype}", field="sample_format")
 
 
+def _at_full_scale(chunk: np.ndarray, dtype: np.dtype[Any]) -> np.ndarray:
+    """Stored values at digital full scale: integer PCM at or beyond its largest positive code
+    (24-bit PCM is read left-justified in int32, so its largest code is 2^31 - 256); float samples
+    exactly at +-1.0 (float has no full scale of its own, but a recorder that clips writes 1.0)."""
+    if dtype.kind == "i":
+        bits = 8 * dtype.itemsize
+        return np.abs(chunk) >= float(2 ** (bits - 1) - max(1, 2 ** (bits - 24)))
+    return np.abs(chunk) == 1.0
+
+
+def _check_clipping(chunk: np.ndarray, start: int, fs_hz: float, dtype: np.dtype[Any], name: str) -> None:
+    """Refuse a recording that reached digital full scale in two consecutive samples (clipped).
+
+    A recorder driven past full scale flattens the peaks: the levels of those blocks would be too
+    low, silently.  ``chunk`` holds stored values (before calibration) from sample ``start``.
+    """
+    at = _at_full_scale(chunk, dtype)
+    run = at[1:] & at[:-1]
+    if run.any():
+        i = start + int(np.argmax(run))
+        raise InputError(f"{name}: clipped recording: samples at digital full scale from {i / fs_hz:.3f} s "
+                         f"(sample {i}); its levels would be too low, re-record with less gain or cut the "
+                         "clipped part out", field="samples")
+
+
 def _check_rate(fs: float, expected: float | None, name: str) -> None:
     if expected is not None and abs(fs - float(expected)) > 1e-6 * float(expected):
         raise InputError(f"{name}: sample rate {fs:g} Hz, expected {float(expected):g} Hz", field="sample_rate")
@@ -159,10 +184,12 @@ def read_wav(
     name = os.fspath(path)
     fs, data = _wav_open(name, mmap=False)
     _check_rate(fs, expected_fs_hz, name)
-    v = data.astype(np.float64) * _wav_scale(data, name)
+    raw = data.astype(np.float64)
+    v = raw * _wav_scale(data, name)
     bad = ~np.isfinite(v)
     if bad.any():  # float WAV holding NaN or infinity: not a recording
         raise InputError(f"{name}: non-finite sample at index {int(np.argmax(bad))}", field="samples")
+    _check_clipping(raw, 0, fs, data.dtype, name)
     if sensitivity_v_per_pa is not None:
         v = calibrate(v, sensitivity_v_per_pa)
     return v, fs

@@ -51,10 +51,16 @@ def show(card: str, as_json: bool, p_el: float, force: bool = False) -> None:
     click.echo(f"reference power {c.reference_power_w:g} W, reference distance {c.reference_distance_m:g} m")
     std = c.std
     click.echo("parameters" + ("" if std else " (no covariance)"))
+    held = (c.provenance or {}).get("held_parameters") or {}
+    fixed = (c.statistics or {}).get("fixed") or {}
     for k in model.params:
         v = c.parameters[k]
         s = f"  +- {std[k]:.4g}" if std else ""
-        click.echo(f"  {k:>4} = {v: .6g}{s}")
+        if k in held:  # not estimated: a zero row of the covariance, not a value known exactly
+            s = f"  held: {held[k]}"
+        elif k in fixed and std and std[k] == 0.0:
+            s = "  fixed"
+        click.echo(f"  {k:>4} = {v: .6g} [{model.unit(k) or '?'}]{s}")
     cov = c.cov
     if cov is not None:
         d = np.sqrt(np.clip(np.diag(cov), 0, None))

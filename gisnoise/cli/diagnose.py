@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import click
@@ -20,7 +21,7 @@ from gisnoise.model import load
               help="Candidate effect to test (repeat; default: the whole library).")
 @click.option("--alpha", default=0.01, show_default=True, type=click.FloatRange(0.0, 1.0, min_open=True, max_open=True),
               help="Family-wise significance level of the extension tests.")
-@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading.")
+@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading (needs band levels in every microphone file).")
 @click.option("--position-radius", "position_radius", default=50.0, show_default=True, type=click.FloatRange(0.0, 500.0),
               help="Search each microphone's position within this horizontal radius, m, of where the campaign puts "
                    "it (a wrong position is reported, not believed); 0: take the stated positions as they are.")
@@ -54,6 +55,9 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
         with progress(ctx, "writing the report", 1.0) as update:
             write_report(diag, folder, progress=lambda done, total: update(done / max(total, 1)))
     if not quiet:
+        for sentence in (diag.result.get("metadata") or {}).get("contradictions") or []:
+            click.echo(f"campaign: {sentence}")
+        click.echo(_card_line(card.parameters, diag.result.get("baseline") or {}))
         v = diag.result["verdict"]
         if v["effect"]:
             click.echo(f"verdict: {v['effect']} (held-out rms {v['rms_db_holdout_baseline']:.2f} -> "
@@ -62,3 +66,21 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
             click.echo(f"verdict: no effect ({v['reason']})")
         click.echo(f"{len(diag.result['segments'])} segment(s) where the card misses; wrote {path}"
                    + ("" if no_report else f" and {folder / 'report.html'}"))
+
+
+def _card_line(card_params: Mapping[str, float], base: Mapping[str, object]) -> str:
+    """How far the card itself misses: its RMS residual, the refit's, and the parameters the refit moves by
+    more than 3 of its corrected standard deviations (largest first)."""
+    refit = base.get("parameters") or {}
+    std = base.get("std_corrected") or {}
+    assert isinstance(refit, dict) and isinstance(std, dict)
+    moved = []
+    for k, v in refit.items():
+        sd = std.get(k)
+        if k in card_params and isinstance(sd, (int, float)) and sd > 0:
+            z = (float(v) - float(card_params[k])) / float(sd)
+            if abs(z) > 3.0:
+                moved.append((abs(z), f"{k} {float(v) - float(card_params[k]):+.3g} ({abs(z):.0f} std)"))
+    moved.sort(reverse=True)
+    line = f"card: rms {base.get('rms_db_card', float('nan')):.2f} dB against these data, refitted {base.get('rms_db_fit', float('nan')):.2f} dB"
+    return line + ("; the refit moves " + ", ".join(t for _, t in moved[:4]) if moved else "")

@@ -9,6 +9,29 @@ import click
 from gisnoise.cli.options import progress
 from gisnoise.errors import InputError
 from gisnoise.model import PHASES, load, save
+from gisnoise.model.cards import SCHEMA_PREFIX
+
+
+def _check_out(out: str) -> None:
+    """Refuse an --out that exists and is not a model card (the campaign's campaign.json, say): the card
+    replaces an older card, never another file."""
+    import json
+    from pathlib import Path
+
+    p = Path(out)
+    if not p.exists():
+        return
+    what = "a folder" if p.is_dir() else "not a model card"
+    if p.is_file():
+        try:
+            doc = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError):
+            doc = None
+        if isinstance(doc, dict) and str(doc.get("schema", "")).startswith(SCHEMA_PREFIX):
+            return
+        if isinstance(doc, dict) and doc.get("schema"):
+            what = f"a {doc['schema']} document, not a model card"
+    raise InputError(f"--out {out}: exists and is {what}; refusing to write the card over it", field="out")
 
 
 def _parse_fix(items: tuple[str, ...]) -> dict[str, float]:
@@ -39,7 +62,7 @@ def _parse_fix(items: tuple[str, ...]) -> dict[str, float]:
 @click.option("--serves", multiple=True, type=click.Choice(PHASES),
               help="Further phase the card serves (repeat), e.g. --serves transition.")
 @click.option("--fix", multiple=True, metavar="NAME=VALUE", help="Hold a parameter at a value (repeat).")
-@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading.")
+@click.option("--absorption", is_flag=True, help="Correct levels for atmospheric absorption when reading (needs band levels in every microphone file).")
 @click.option("--max-iter", default=100, show_default=True, type=click.IntRange(1, 100000),
               help="Maximum Gauss-Newton iterations.")
 @click.option("--covariance", type=click.Choice(["corrected", "cramer-rao"]), default="corrected", show_default=True,
@@ -59,6 +82,11 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
     from gisnoise.identify import fit_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
+    _check_out(out)
+    if card_id is not None:
+        from gisnoise.limits import check_id
+
+        check_id(card_id, field="--id")
     template = load(start) if start else None
     name = ansatz or (template.ansatz if template else "paper-offset")
     fixed = _parse_fix(fix)

@@ -42,7 +42,7 @@ from gisnoise.measure import Samples, series_ids
 from gisnoise.model import Ansatz, Effect, emission_covariates, mic_height_agl, shifted_inputs, speed_of_sound
 
 __all__ = ["CLOCK_RANGE_S", "HEIGHT_RANGE_M", "estimate_clock_offsets", "estimate_mic_heights", "clocks_disagree",
-           "mic_clock_effect", "shift_inputs"]
+           "clock_note", "mic_clock_effect", "shift_inputs"]
 
 HEIGHT_RANGE_M = (0.3, 3.0)
 """Heights above a reflecting ground a microphone may have, m (below: a ground plate)."""
@@ -252,6 +252,20 @@ def clocks_disagree(est: Mapping[str, Mapping[str, Any]]) -> list[str]:
         if abs(e["offset_s"] - ref) > _CONTRA_Z * max(e["std_s"], 0.02) and e["gain"] >= _MIN_CLOCK_GAIN:
             odd.append(m)
     return odd
+
+
+def clock_note(mic: str, est: Mapping[str, Mapping[str, Any]]) -> str:
+    """The report's sentence on microphone ``mic``'s clock, relative to the median of the others.
+
+    ``offset_s`` > 0 means level(t) = model(t + offset_s): the level comes earlier than the model
+    expects, so the microphone's clock runs behind; < 0: later, its clock runs ahead.
+    """
+    others = [float(v["offset_s"]) for k, v in est.items() if k != mic]
+    rel = float(est[mic]["offset_s"]) - (float(np.median(others)) if others else 0.0)
+    way, clock = ("earlier", "behind") if rel > 0 else ("later", "ahead of")
+    return (f"the level of {mic} follows the model {abs(rel):.2f} s (+/- {float(est[mic]['std_s']):.2f} s) {way} "
+            f"than the other microphones': its clock runs that much {clock} theirs, which the campaign does not "
+            "state")
 
 
 def mic_clock_effect(s: Samples, x: Mapping[str, Any], mics: Sequence[str], start: Mapping[str, float],

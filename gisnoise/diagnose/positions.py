@@ -14,7 +14,9 @@ A microphone's listed position is contradicted when its offset, taken against th
 median offset of the other microphones (a shift all microphones share is a property
 of the sound field, e.g. wind, not of one microphone), lies more than 3 standard
 deviations from it, at least :data:`MIN_POSITION_OFFSET_M` away, and lowers its
-residual variance against that shared shift by :data:`MIN_POSITION_GAIN` or more.  The diagnosis
+residual variance against that shared shift by :data:`MIN_POSITION_GAIN` or more, and when its
+offset from the listed position itself passes the same distance and 3-deviation tests (a
+microphone whose own level places it where it is listed stays there).  The diagnosis
 then moves it (:func:`relocate`) before any effect is tested: a wrong position
 is a fact about the campaign, not a physical effect to be named.
 """
@@ -89,7 +91,7 @@ def estimate_mic_positions(s: Samples, x: Mapping[str, Any], model: Ansatz, p: n
     Returns
     -------
     dict
-        Per microphone: ``offset_e_m``, ``offset_n_m``, ``offset_m``, ``std_m`` (along the offset),
+        Per microphone: ``offset_e_m``, ``offset_n_m``, ``offset_m``, ``std_offset_m`` (along the offset),
         ``std_e_m``, ``std_n_m``, ``gain`` (relative reduction of its centred residual variance),
         ``radius_m``, ``at_radius`` (the minimum lies on the search radius: the true offset may be larger),
         and against the median offset of the other microphones (what one microphone's position can
@@ -152,22 +154,36 @@ def estimate_mic_positions(s: Samples, x: Mapping[str, Any], model: Ansatz, p: n
         cov = e.pop("_cov")
         rows = e.pop("_rows")
         y_min = e.pop("_ss")
-        if dist > 0 and np.all(np.isfinite(cov)):
-            uvec = np.array([re_, rn]) / dist
-            std = float(math.sqrt(max(float(uvec @ cov @ uvec), 0.0)))
-        else:
-            std = float(math.sqrt(max(float(np.max(np.diag(cov))), 0.0))) if np.all(np.isfinite(cov)) else float("inf")
+        std = _std_along(cov, re_, rn)
         y_c = float(_ss(s, x, model, p, rows, np.array([[ce, cn]]))[0])
         e.update(relative_e_m=re_, relative_n_m=rn, relative_m=dist, std_m=std,
+                 std_offset_m=_std_along(cov, e["offset_e_m"], e["offset_n_m"]),
                  gain_vs_others=float(1.0 - y_min / y_c) if y_c > 0 else 0.0)
     return out
 
 
+def _std_along(cov: np.ndarray, de: float, dn: float) -> float:
+    """Standard deviation of the estimate along the direction (de, dn), m (the largest one for no direction)."""
+    if not np.all(np.isfinite(cov)):
+        return float("inf")
+    dist = math.hypot(de, dn)
+    if dist > 0:
+        uvec = np.array([de, dn]) / dist
+        return float(math.sqrt(max(float(uvec @ cov @ uvec), 0.0)))
+    return float(math.sqrt(max(float(np.max(np.diag(cov))), 0.0)))
+
+
 def positions_disagree(est: Mapping[str, Mapping[str, Any]]) -> list[str]:
-    """Microphones whose estimated position contradicts the listed one (see the module's rule)."""
+    """Microphones whose estimated position contradicts the listed one (see the module's rule).
+
+    The offset from the listed position itself must be as clear as the offset against the others':
+    a microphone whose own level places it where it is listed is not moved (with two microphones,
+    one listed 30 m off, the other's offset against it is 30 m too).
+    """
     return [m for m, e in est.items()
             if e["relative_m"] >= MIN_POSITION_OFFSET_M and e["relative_m"] > _CONTRA_Z * e["std_m"]
-            and e["gain_vs_others"] >= MIN_POSITION_GAIN]
+            and e["gain_vs_others"] >= MIN_POSITION_GAIN
+            and e["offset_m"] >= MIN_POSITION_OFFSET_M and e["offset_m"] > _CONTRA_Z * e["std_offset_m"]]
 
 
 def position_sentence(m: str, e: Mapping[str, Any]) -> str:

@@ -23,6 +23,7 @@ from gisnoise.diagnose.bandtests import absorption_band_holdout
 from gisnoise.diagnose.candidates import CancelFn, _Candidate, _Context, _fit_candidates
 from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.metadata import (
+    clock_note,
     clocks_disagree,
     estimate_clock_offsets,
     estimate_mic_heights,
@@ -93,9 +94,7 @@ def metadata_overrides(s: Samples, x: Mapping[str, Any], base: Ansatz, p_base: n
         doc["clock_offsets"] = clocks
         odd = clocks_disagree(clocks)
         if odd:
-            notes = [f"the level of {m} follows the model {clocks[m]['offset_s']:+.2f} s (+/- "
-                     f"{clocks[m]['std_s']:.2f} s) later than the other microphones': its clock is off by that much, "
-                     "which the campaign does not state" for m in odd]
+            notes = [clock_note(m, clocks) for m in odd]
             start = {m: float(v["offset_s"]) for m, v in clocks.items()}
             eff = mic_clock_effect(s, x, sorted(clocks), start, base)
             overrides["emission_time"] = (eff, {}, notes, {})

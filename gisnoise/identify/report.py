@@ -216,8 +216,13 @@ def residual_data(result: FitResult) -> dict[str, Any]:
 def parameter_table(result: FitResult) -> dict[str, Any]:
     """Parameters with Cramer-Rao and autocorrelation-corrected standard deviations, plus fit statistics."""
     rows = []
+    try:
+        units = dict(zip(result.param_names, get_ansatz(result.ansatz).units, strict=False))
+    except InputError:  # an ansatz passed as an object, not in the registry: units not stated
+        units = {}
     for i, k in enumerate(result.param_names):
-        rows.append({"name": k, "value": float(result.p[i]), "std_cramer_rao": float(result.std_array[i]),
+        rows.append({"name": k, "unit": units.get(k, ""), "value": float(result.p[i]),
+                     "std_cramer_rao": float(result.std_array[i]),
                      "std_corrected": float(result.std_corrected_array[i]),
                      "fixed": k in result.fixed, "at_bound": k in result.at_bounds})
     return {
@@ -380,7 +385,8 @@ def _html(result: FitResult, pt: dict[str, Any], cr: dict[str, Any], dr: dict[st
     e = html.escape
     title = title or f"Fit report: {result.ansatz}, phase {result.phase or 'mixed'}"
     rows = "\n".join(
-        f"<tr><td>{e(r['name'])}</td><td>{r['value']:.5g}</td><td>{r['std_cramer_rao']:.3g}</td>"
+        f"<tr><td>{e(r['name'])}</td><td>{e(r['unit'] or '?')}</td><td>{r['value']:.5g}</td>"
+        f"<td>{r['std_cramer_rao']:.3g}</td>"
         f"<td>{r['std_corrected']:.3g}</td><td>{'fixed' if r['fixed'] else ('at bound' if r['at_bound'] else '')}"
         f"</td></tr>" for r in pt["parameters"])
     noise = ", ".join(f"{e(m)}: {s:.2f} dB" for m, s in result.noise_std.items())
@@ -398,7 +404,7 @@ th{{background:#eee}}img{{max-width:100%}}</style></head><body>
 rms residual {result.rms_db:.2f} dB, reference power {result.reference_power_w:g} W.</p>
 <p>Measurement noise (standard deviation per microphone): {noise}.</p>
 <h2>Parameters</h2>
-<table><tr><th>parameter</th><th>value</th><th>std (Cramer-Rao)</th><th>std (corrected for residual
+<table><tr><th>parameter</th><th>unit</th><th>value</th><th>std (Cramer-Rao)</th><th>std (corrected for residual
 autocorrelation)</th><th></th></tr>
 {rows}</table>
 <p>Corrected: Morelli &amp; Klein sandwich with the residual autocorrelation up to lag

@@ -13,7 +13,7 @@ import numpy as np
 from gisnoise import __version__
 from gisnoise.errors import FitError, InputError
 from gisnoise.measure import Samples
-from gisnoise.model import ModelCard, check_card
+from gisnoise.model import ModelCard, check_card, get_ansatz
 
 __all__ = ["FitResult"]
 
@@ -155,10 +155,17 @@ class FitResult:
                  f"cost (neg. log-likelihood) {self.cost:.3f}, AIC {self.aic:.1f}, BIC {self.bic:.1f}, "
                  f"rms {self.rms_db:.2f} dB",
                  "param       value     std(CR)  std(corr.)"]
+        held = self.info.get("held_parameters") or {}   # held by the fit itself, with the reason
+        try:
+            units = dict(zip(self.param_names, get_ansatz(self.ansatz).units, strict=False))
+        except InputError:  # an ansatz passed as an object, not in the registry: units not stated
+            units = {}
+        lines[-1] += "  unit"
         for k, v, s, sc in zip(self.param_names, self.p, self.std_array, self.std_corrected_array, strict=True):
-            tag = " fixed" if k in self.fixed else (" at bound" if k in self.at_bounds else "")
-            lines.append(f"{k:<6} {v:>11.4f} {s:>11.4f} {sc:>11.4f}{tag}")
+            tag = " held" if k in held else " fixed" if k in self.fixed else (" at bound" if k in self.at_bounds else "")
+            lines.append(f"{k:<6} {v:>11.4f} {s:>11.4f} {sc:>11.4f}  {units.get(k) or '?':<12}{tag}".rstrip())
         lines.append("noise std (dB): " + ", ".join(f"{m} {s:.2f}" for m, s in self.noise_std.items()))
+        lines += [f"held {k}: {why}" for k, why in held.items()]
         return "\n".join(lines)
 
     def statistics(self) -> dict[str, Any]:
@@ -265,8 +272,13 @@ class FitResult:
 
 
 def _slug(s: str) -> str:
-    out = "".join(c.lower() if c.isalnum() else "-" for c in s).strip("-")
+    """A name as the vehicle part of a card id: letters folded to ASCII (Ä -> a), other characters to '-',
+    at most 100 characters, so ``<slug>-<phase>`` meets :data:`gisnoise.limits.SAFE_ID_PATTERN`."""
+    import unicodedata
+
+    ascii_ = unicodedata.normalize("NFKD", s).encode("ascii", "ignore").decode("ascii")
+    out = "".join(c.lower() if c.isalnum() else "-" for c in ascii_).strip("-")
     while "--" in out:
         out = out.replace("--", "-")
-    return out or "vehicle"
+    return out[:100].strip("-") or "vehicle"
 

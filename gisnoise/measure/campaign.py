@@ -217,6 +217,11 @@ def _load(folder: str | os.PathLike[str], *, strict: bool, exclusions: Iterable[
                 levels.append(wav_levels(p, m, block_s=float(block_s), flight=f.id))
         except GisnoiseError as exc:
             col.error(str(p), exc)
+        else:
+            if absorption and (levels[-1].bands is None or levels[-1].band_f is None or not levels[-1].band_f.size):
+                # the correction is per band: without bands this file would stay uncorrected beside corrected ones
+                col.add(str(p), "bands", f"{p}: the absorption correction needs one-third-octave band levels "
+                        "(columns L_<nominal Hz>); this file has none")
         if progress is not None:
             progress(k + 1.0, total)
     camp = Campaign(folder=root, origin=origin, weather=weather, vehicle=vehicle, speed_of_sound_m_s=c,

@@ -261,13 +261,15 @@ def write_levels(folder: str | os.PathLike[str], *, block_s: float | None = None
     durations = {wav: max(wav.stat().st_size, 1) / fs for wav, fs in info.items()}  # proportional to seconds
     total = float(sum(durations.values()))
     done = 0.0
-    written = []
+    series = []  # every recording is read before any file is written: a refused one leaves the campaign as it was
     for m, fid, wav in jobs:
-        lv = wav_levels(wav, m, block_s=float(block_s), flight=fid, sample_rate_hz=common)
-        target = wav.with_suffix(".csv")
-        write_level_csv(target, lv.t, lv.la, lv.band_f, lv.bands)
-        written.append(target)
+        series.append((wav, wav_levels(wav, m, block_s=float(block_s), flight=fid, sample_rate_hz=common)))
         done += durations[wav]
         if progress is not None:
             progress(done, total)
+    written = []
+    for wav, lv in series:
+        target = wav.with_suffix(".csv")
+        write_level_csv(target, lv.t, lv.la, lv.band_f, lv.bands)
+        written.append(target)
     return written

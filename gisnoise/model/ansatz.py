@@ -99,6 +99,8 @@ class Ansatz:
         Name of the background-level parameter (Eq. 11), if any.
     description : str
         One line for listings.
+    units : tuple of str
+        Unit of each parameter (``-`` for a pure number), same order; empty when not stated.
     """
 
     name: str
@@ -107,6 +109,11 @@ class Ansatz:
     kernel: Kernel = field(repr=False)
     background: str | None = "p7"
     description: str = ""
+    units: tuple[str, ...] = ()
+
+    def unit(self, name: str) -> str:
+        """The unit of parameter ``name`` ('' when the ansatz does not state it)."""
+        return self.units[self.params.index(name)] if len(self.units) == len(self.params) else ""
 
     @property
     def n_params(self) -> int:
@@ -244,6 +251,7 @@ PAPER = register_ansatz(
         kernel=_paper_kernel,
         background="p7",
         description="Eq. 8-11 as printed: p1 log10(P_el) directivity, p6 spreading, p7 background",
+        units=("dB(A)/decade", "1/rad", "rad", "-", "rad", "-", "dB(A)"),
     )
 )
 
@@ -256,5 +264,6 @@ PAPER_OFFSET = register_ansatz(
         background="p7",
         description="Eq. 8-11 with a level offset: (p0 + p1 log10(P_el)) in place of p1 log10(P_el), "
         "so the offset is shaped by the directivity factors like the power term",
+        units=("dB(A)", "dB(A)/decade", "1/rad", "rad", "-", "rad", "-", "dB(A)"),
     )
 )

@@ -142,6 +142,7 @@ def _extended(base: Ansatz, eff: Effect) -> Ansatz:
         kernel=_extended_kernel(base, eff),
         background=base.background,
         description=f"{base.description or base.name}; + {eff.description}",
+        units=base.units + tuple(u or "-" for u in eff.units) if len(base.units) == base.n_params else (),
     )
 
 

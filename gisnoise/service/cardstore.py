@@ -119,8 +119,9 @@ class CardStore:
         try:
             return self.get(card_id, version, field=field).card
         except ApiError as exc:
-            if exc.status == 404:
-                raise ApiError(422, f"{field}: {exc}", field=field) from None
+            if exc.status == 404:  # the reference is the field: named once, at the head of the message
+                what = str(exc).removeprefix(f"{exc.field}: ") if exc.field else str(exc)
+                raise ApiError(422, f"{field}: {what}", field=field) from None
             raise
 
     def put(self, card: ModelCard, *, new_version: bool = False) -> tuple[StoredCard, bool]:

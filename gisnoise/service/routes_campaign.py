@@ -184,6 +184,9 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
         v = getattr(result, k, None)
         if isinstance(v, (bool, int, float, str)):
             summary[k] = v
+    held = result.info.get("held_parameters")
+    if held:  # their std of 0 means 'not estimated': say why, as the card does
+        summary["held_parameters"] = dict(held)
     if p.get("report"):
         ctx.progress(0.96, "writing the report")
         summary["report"] = _report("gisnoise.identify.report", result, ctx.output_dir / "report")
@@ -217,7 +220,9 @@ def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
     ctx.check_cancel()
     _strip_server_paths(diag.result, str(ctx.input_dir))  # the server's folder means nothing to the client
     write_diagnosis(diag, ctx.output_dir, campaign=f"uploaded campaign (job {ctx.job.id})")
-    summary = {"card": card.id, "verdict": diag.result.get("verdict"), "baseline": diag.result.get("baseline")}
+    summary = {"card": card.id, "verdict": diag.result.get("verdict"), "baseline": diag.result.get("baseline"),
+               # what the diagnosis found wrong in campaign.json (a position, a height, a clock), as the CLI says it
+               "contradictions": list((diag.result.get("metadata") or {}).get("contradictions") or [])}
     if ctx.params.get("report", True):
         ctx.progress(0.9, "writing the report")
         summary["report"] = _report("gisnoise.diagnose.report", diag, ctx.output_dir,

@@ -85,3 +85,53 @@ def test_diagnose_job_finds_the_injected_effect(client, campaign_zip, tmp_path):
     assert page.status_code == 200 and page.headers["content-type"].startswith("text/html")
     for text in (page.text, client.get(info["result_url"]).text):
         assert str(tmp_path) not in text  # no server paths leak
+
+
+def test_diagnose_job_with_an_unknown_card_names_it_once(client, campaign_zip):
+    """A store card that is not there: 422 with the common body, the field named once at the head of the
+    message ('card_id: no card ...'), and no job queued."""
+    before = client.get("/jobs").json()
+    r = client.post("/jobs/diagnose", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
+                    data={"card_id": "no-such-card"})
+    body = assert_names_field(r, 422, "card_id")
+    assert body["detail"] == "card_id: no card with id 'no-such-card'", body
+    assert client.get("/jobs").json() == before
+
+
+def test_fit_job_summary_says_which_parameters_were_held_and_why(client):
+    """Sink rows never come within 3 dB of the background: p7 is held at the campaign's background. Its std of 0
+    in the summary is 'not estimated', and the summary says so with the card's reason."""
+    both = _campaign_zip(("f1", "f2"))  # one flight's sink rows cannot identify the rest either
+    r = client.post("/jobs/fit", files={"campaign": ("c.zip", both, "application/zip")},
+                    data={"phase": "sink"})
+    info = wait_job(client, r.json()["id"], timeout=120)
+    assert info["status"] == "succeeded", info["error"]
+    card = client.get(info["result_url"]).json()
+    held = card["provenance"]["held_parameters"]
+    assert "p7" in held and info["summary"]["std"]["p7"] == 0.0
+    assert info["summary"]["held_parameters"] == held
+
+
+def test_diagnose_job_summary_says_what_the_campaign_got_wrong(client, tmp_path):
+    """The diagnosis base scenario (no effect injected) with m3 listed 30 m north of where it stood: the job's
+    summary carries the diagnosis' sentence about it (as the command line prints it), not only the verdict."""
+    from gisnoise import simulate
+
+    scenario = REPO / "sample_data" / "scenarios" / "diagnosis_base.json"
+    camp = simulate.simulate(json.loads(scenario.read_text()), tmp_path / "camp", base_dir=scenario.parent)
+    doc = json.loads((camp / "campaign.json").read_text())
+    m3 = next(m for m in doc["microphones"] if m["id"] == "m3")
+    m3["lat"] += 30.0 / 111_200.0  # about 30 m north
+    (camp / "campaign.json").write_text(json.dumps(doc))
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        for p in sorted(camp.rglob("*")):
+            if p.is_file() and p.name != "truth.json":
+                z.write(p, str(p.relative_to(camp)))
+    r = client.post("/jobs/diagnose", files={"campaign": ("c.zip", buf.getvalue(), "application/zip")},
+                    data={"card_id": "demo-horizontal", "report": "false"})
+    info = wait_job(client, r.json()["id"], timeout=300)
+    assert info["status"] == "succeeded", info["error"]
+    said = client.get(info["result_url"]).json()["metadata"]["contradictions"]
+    assert any("m3" in t and "not where the campaign lists it" in t for t in said), said
+    assert info["summary"]["contradictions"] == said
