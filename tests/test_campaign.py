@@ -574,6 +574,36 @@ def test_check_campaign_clean(tmp_path):
     assert check_campaign(make_campaign(tmp_path / "c")) == []
 
 
+def test_spreading_puts_every_microphone_at_one_source_level(tmp_path):
+    """Levels by spherical spreading: L + 20 lg d at each microphone's loudest sample is the same source level
+    (the background, 30 dB below the peaks, moves it by less than 0.01 dB)."""
+    from gisnoise.measure import read_campaign, spreading_outliers
+
+    s = read_campaign(make_campaign(tmp_path / "c")).samples()
+    assert spreading_outliers(s, limit_db=0.01) == []
+
+
+def test_a_microphone_listed_km_off_is_named(tmp_path):
+    """m3's levels were made at its true position; campaign.json lists it 0.05 deg (5.6 km) north. Its loudest
+    level from the listed position implies a source 20 lg(d_listed / d_true) louder than the others hear."""
+    from gisnoise.measure import inspect_campaign
+
+    root = make_campaign(tmp_path / "c")
+    doc = json.loads((root / "campaign.json").read_text())
+    doc["microphones"][2]["lat"] += 0.05
+    (root / "campaign.json").write_text(json.dumps(doc))
+    camp, problems = inspect_campaign(root)
+    named = [p for p in problems if p.field == "microphones"]
+    assert len(named) == 1 and "microphone 'm3'" in named[0].message and named[0].file in named[0].message
+    s = camp.samples()
+    rows = np.flatnonzero((s.mic == "m3") & s.valid)
+    d_listed = s.d[rows[np.argmax(s.level[rows])]]
+    off = float(named[0].message.split("puts the source ")[1].split(" dB")[0])
+    # the others' source level is L40 + 20 lg 40 (spreading); m3's is its peak level + 20 lg of its listed distance
+    assert off > 20.0
+    assert off == pytest.approx(s.level[rows].max() + 20 * np.log10(d_listed) - L40 - 20 * np.log10(40.0), abs=0.5)
+
+
 def test_unknown_schema_and_missing_files(tmp_path):
     root = make_campaign(tmp_path / "c", doc_changes={"schema": "gisnoise/campaign/9"})
     with pytest.raises(CampaignError, match="unknown version 'gisnoise/campaign/9'"):

@@ -109,7 +109,46 @@ def inspect_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> tuple[Cam
                 if m.any() and np.all(s.mask_reason[m] == "outside_flight"):
                     collector.add(lv.source, "t", f"{lv.source}: no block falls within the flight log of "
                                   f"'{lv.flight}' (check start_utc)")
+            cjs = str(Path(folder) / "campaign.json")
+            for mic, flight, level, dist, off in spreading_outliers(s):
+                collector.add(cjs, "microphones",
+                              f"{cjs}: microphone '{mic}': its loudest level in flight '{flight}', {level:.1f} dB(A) at "
+                              f"{dist:.0f} m from its listed position, puts the source {off:+.0f} dB off what the "
+                              "microphones' median hears from theirs (spherical spreading); check its position")
     return camp, collector.problems
+
+
+OUTLIER_DB = 20.0
+"""How far (dB) a microphone's source level from its listed position may lie from the others' before it is named."""
+
+
+def spreading_outliers(s: Any, limit_db: float = OUTLIER_DB) -> list[tuple[str, str, float, float, float]]:
+    """Microphones whose listed position their levels contradict: ``(mic, flight, level, distance, offset)``.
+
+    Per flight, each microphone's loudest valid sample gives the source's level at 1 m from the
+    listed position, ``L + 20 lg d`` (spherical spreading; no absorption or directivity).  Against
+    the median over the microphones (three or more: one misplaced microphone does not move it), an
+    offset beyond ``limit_db``
+    (20 dB: ten times the distance, far more than a drone's directivity or the ground change) means
+    the listed position cannot be where the levels were measured.
+    """
+    out = []
+    for flight in np.unique(s.flight):
+        src: dict[str, tuple[float, float, float]] = {}
+        for mic in np.unique(s.mic):
+            rows = np.flatnonzero((s.flight == flight) & (s.mic == mic) & s.valid & np.isfinite(s.level))
+            if rows.size >= 3:
+                i = rows[int(np.argmax(s.level[rows]))]
+                d = max(float(s.d[i]), 1.0)
+                src[str(mic)] = (float(s.level[i]) + 20.0 * np.log10(d), float(s.level[i]), d)
+        if len(src) < 3:
+            continue
+        mid = float(np.median([v[0] for v in src.values()]))
+        for mic, (lw, level, d) in src.items():
+            off = lw - mid
+            if abs(off) > limit_db:
+                out.append((mic, str(flight), level, d, off))
+    return out
 
 
 def check_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> list[Problem]:
