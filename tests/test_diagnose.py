@@ -578,3 +578,25 @@ def test_cli_says_how_far_the_card_itself_misses(tmp_path):
     moved = base["parameters"]["p0"] - doc["parameters"]["p0"]
     assert moved == pytest.approx(doc["parameters"]["p1"], abs=1.0)
     assert f"p0 {moved:+.3g}" in line
+
+
+def test_a_microphone_listed_km_off_is_among_the_contradictions(tmp_path):
+    """One microphone of the base scenario listed 0.05 deg (5.6 km) north of where its levels were made: beyond the
+    position search, but its loudest level against spherical spreading contradicts the listed position (the rule of
+    campaign check), and the diagnosis says so first."""
+    from gisnoise.measure import read_campaign, spreading_notes
+
+    camp = simulate.simulate(json.loads(SCENARIO.read_text()), tmp_path / "camp", base_dir=SCENARIO.parent)
+    cj = camp / "campaign.json"
+    doc = json.loads(cj.read_text())
+    doc["microphones"][0]["lat"] += 0.05
+    cj.write_text(json.dumps(doc))
+    notes = spreading_notes(read_campaign(camp).samples())
+    assert notes and all(f"microphone '{doc['microphones'][0]['id']}'" in n for n in notes)
+    out = tmp_path / "diag"
+    run = CliRunner().invoke(cli, ["diagnose", str(camp), "--card", str(CARD), "--out", str(out), "--effect", "rpm",
+                                   "--no-report", "--position-radius", "0"])
+    assert run.exit_code == 0, run.output
+    said = [t.removeprefix("campaign: ") for t in run.output.splitlines() if t.startswith("campaign: ")]
+    assert said[:len(notes)] == notes
+    assert json.loads((out / "diagnosis.json").read_text())["metadata"]["contradictions"][:len(notes)] == notes

@@ -64,7 +64,7 @@ from gisnoise.diagnose.selection import forward_selection, metadata_overrides
 from gisnoise.diagnose.verdict import MIN_IMPROVEMENT_DB2, _judge, _rms
 from gisnoise.errors import Cancelled, FitError, InputError
 from gisnoise.jsonio import to_jsonable, write_json
-from gisnoise.measure import Samples, series_ids
+from gisnoise.measure import Samples, series_ids, spreading_notes
 from gisnoise.model import HemisphereCard, ModelCard
 from gisnoise.model import effects as _effects
 
@@ -282,6 +282,8 @@ def run_diagnosis(
     if positions:
         metadata["microphone_positions"] = positions
         metadata["contradictions"] = position_notes + metadata["contradictions"]
+    # positions off by far more than the search radius: the levels against spherical spreading (as campaign check)
+    metadata["contradictions"] = spreading_notes(s) + metadata["contradictions"]
     cands = _fit_candidates(names, ctx, level, x, x_ev, base_fit, oof_base, fold, cancel=cancel, bias_z=bias_z,
                             tick=tick, overrides=overrides)
 

@@ -8,6 +8,7 @@ from gisnoise.measure.campaign import (
     check_campaign,
     inspect_campaign,
     read_campaign,
+    spreading_notes,
     spreading_outliers,
 )
 from gisnoise.measure.document import (
@@ -48,4 +49,4 @@ from gisnoise.measure.table import (
     build_samples,
 )
 
-__all__ = ['DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'OUTLIER_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'build_samples', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'spreading_outliers', 'wav_levels', 'write_level_csv', 'write_levels']
+__all__ = ['DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'OUTLIER_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'build_samples', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'spreading_notes', 'spreading_outliers', 'wav_levels', 'write_level_csv', 'write_levels']

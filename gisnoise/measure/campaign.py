@@ -110,12 +110,16 @@ def inspect_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> tuple[Cam
                     collector.add(lv.source, "t", f"{lv.source}: no block falls within the flight log of "
                                   f"'{lv.flight}' (check start_utc)")
             cjs = str(Path(folder) / "campaign.json")
-            for mic, flight, level, dist, off in spreading_outliers(s):
-                collector.add(cjs, "microphones",
-                              f"{cjs}: microphone '{mic}': its loudest level in flight '{flight}', {level:.1f} dB(A) at "
-                              f"{dist:.0f} m from its listed position, puts the source {off:+.0f} dB off what the "
-                              "microphones' median hears from theirs (spherical spreading); check its position")
+            for note in spreading_notes(s):
+                collector.add(cjs, "microphones", f"{cjs}: {note}")
     return camp, collector.problems
+
+
+def spreading_notes(s: Any) -> list[str]:
+    """One sentence per :func:`spreading_outliers` finding (``campaign check``, the diagnosis' contradictions)."""
+    return [f"microphone '{mic}': its loudest level in flight '{flight}', {level:.1f} dB(A) at {dist:.0f} m from its "
+            f"listed position, puts the source {off:+.0f} dB off what the microphones' median hears from theirs "
+            "(spherical spreading); check its position" for mic, flight, level, dist, off in spreading_outliers(s)]
 
 
 OUTLIER_DB = 20.0
