@@ -43,10 +43,9 @@ import numpy as np
 from shapely.geometry import LineString, Polygon
 from shapely.geometry.polygon import orient
 
-from gisnoise.errors import InputError
 from gisnoise.geo import WGS84, transformer
 from gisnoise.geo import shapes as shapely
-from gisnoise.maps._checks import as_float
+from gisnoise.maps.clipping import clip_warnings, clipped_levels, edge_max, geojson_warnings, parse_levels
 from gisnoise.maps.sel import metric_levels
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -57,71 +56,6 @@ __all__ = ["isobands", "isolines", "contour_features", "contours_geojson", "writ
 
 PRECISION_DEG = 1e-8
 """Coordinates are snapped to this grid (deg, about 1 mm)."""
-
-
-def parse_levels(levels: Any, *, field: str = "levels") -> list[float]:
-    """Sorted unique finite levels from a sequence or a comma-separated string (dB).
-
-    >>> parse_levels("60, 45,50")
-    [45.0, 50.0, 60.0]
-    """
-    if isinstance(levels, str):
-        parts = [p.strip() for p in levels.split(",") if p.strip()]
-    elif np.ndim(levels) == 0:
-        parts = [levels]
-    else:
-        parts = list(levels)
-    out = [as_float(p, field) for p in parts]
-    if not out:
-        raise InputError(f"{field}: give at least one level", field=field)
-    return sorted(set(out))
-
-
-def _edge_max(z: np.ndarray) -> float:
-    a = np.asarray(z, dtype=float)
-    if a.ndim != 2 or a.size == 0:
-        return float("nan")
-    edge = np.concatenate([a[0], a[-1], a[:, 0], a[:, -1]])
-    edge = edge[np.isfinite(edge)]
-    return float(edge.max()) if edge.size else float("nan")
-
-
-def clipped_levels(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> dict[str, list[float]]:
-    """Metric -> the levels whose contours the grid's edge cuts (some outer cell at or above them).
-
-    Only metrics with at least one such level are listed; ``metrics`` defaults to the level bands.
-    """
-    lv = parse_levels(levels)
-    names = result.level_bands() if metrics is None else list(metrics)
-    out: dict[str, list[float]] = {}
-    for name in names:
-        top = _edge_max(result.band(name))
-        cut = [lo for lo in metric_levels(name, lv) if top >= lo]
-        if cut:
-            out[name] = cut
-    return out
-
-
-def clip_warnings(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[str]:
-    """One line per metric whose contours the grid's edge cuts, naming the metric, levels and edge maximum."""
-    out = []
-    units = result.units
-    for name, cut in clipped_levels(result, levels, metrics=metrics).items():
-        unit = units.get(name, "dB(A)")
-        top = _edge_max(result.band(name))
-        lv = ", ".join(f"{v:g}" for v in cut)
-        out.append(f"{name} {lv} {unit} contours are clipped: the grid's edge reaches {top:.1f} {unit}; "
-                   f"they carry \"clipped\": true{_CLIP_TAIL}")
-    return out
-
-
-_CLIP_TAIL = " (a wider margin shows them whole)"  # how a line of clip_warnings ends
-
-
-def _warnings(result: MapResult, levels: Any, metrics: Sequence[str] | None) -> list[str]:
-    """``gisnoise.warnings``: the map's own (``metadata["warnings"]``) and the clip warnings of these levels."""
-    own = [w for w in result.metadata.get("warnings", []) if not str(w).endswith(_CLIP_TAIL)]
-    return own + clip_warnings(result, levels, metrics=metrics)
 
 
 def _generator(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> Any:
@@ -470,7 +404,7 @@ def _features(result: MapResult, levels: Any, metrics: Sequence[str] | None, *, 
     for name in names:
         z = np.asarray(result.band(name), dtype=float)
         unit = units.get(name, "dB(A)")
-        top = _edge_max(z)
+        top = edge_max(z)
         mlv = metric_levels(name, lv)
         bounds = [(mlv[i], mlv[i + 1] if i + 1 < len(mlv) else None) for i in range(len(mlv))]
         bands, lines = _band_geometries(x, y, z, bounds, mlv, tr)
@@ -506,7 +440,7 @@ def contours_geojson(result: MapResult, levels: Any, *, metrics: Sequence[str] |
 def _collection(result: MapResult, levels: Any, metrics: Sequence[str] | None, feats: list[dict]) -> dict:
     return {"type": "FeatureCollection", "features": feats,
             "gisnoise": {"levels": parse_levels(levels),
-                         "warnings": _warnings(result, levels, metrics),
+                         "warnings": geojson_warnings(result, levels, metrics),
                          "metrics": sorted({f["properties"]["metric"] for f in feats}),
                          "grid": result.grid.to_dict()}}
 

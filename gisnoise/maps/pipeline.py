@@ -51,7 +51,8 @@ from gisnoise.flight.ground import GROUND_TOLERANCE_M
 from gisnoise.geo import GridSpec
 from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
-from gisnoise.maps.contours import clip_warnings, contours_text, parse_levels, write_geojson
+from gisnoise.maps.clipping import clip_warnings, parse_levels
+from gisnoise.maps.contours import contours_text, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map
