@@ -580,23 +580,64 @@ def test_cli_says_how_far_the_card_itself_misses(tmp_path):
     assert f"p0 {moved:+.3g}" in line
 
 
-def test_a_microphone_listed_km_off_is_among_the_contradictions(tmp_path):
-    """One microphone of the base scenario listed 0.05 deg (5.6 km) north of where its levels were made: beyond the
-    position search, but its loudest level against spherical spreading contradicts the listed position (the rule of
-    campaign check), and the diagnosis says so first."""
-    from gisnoise.measure import read_campaign, spreading_notes
+def test_a_microphone_listed_km_off_is_left_out_and_the_verdict_is_the_controls(tmp_path):
+    """One microphone of the base scenario (no effect injected) listed 0.05 deg (5.6 km) north of where its levels
+    were made: beyond the position search, its loudest level from the listed position puts the source more than
+    20 dB off the others' (the rule of campaign check) in both flights.  The diagnosis leaves it out, says so first,
+    and finds what the scenario holds: no effect (with it, the far microphone's residuals were a background event)."""
+    from gisnoise.diagnose.positions import far_off_microphones
+    from gisnoise.measure import read_campaign
 
     camp = simulate.simulate(json.loads(SCENARIO.read_text()), tmp_path / "camp", base_dir=SCENARIO.parent)
+    assert far_off_microphones(read_campaign(camp).samples()) == ({}, [])  # the unmoved campaign: nothing named
     cj = camp / "campaign.json"
     doc = json.loads(cj.read_text())
     doc["microphones"][0]["lat"] += 0.05
     cj.write_text(json.dumps(doc))
-    notes = spreading_notes(read_campaign(camp).samples())
-    assert notes and all(f"microphone '{doc['microphones'][0]['id']}'" in n for n in notes)
     out = tmp_path / "diag"
-    run = CliRunner().invoke(cli, ["diagnose", str(camp), "--card", str(CARD), "--out", str(out), "--effect", "rpm",
-                                   "--no-report", "--position-radius", "0"])
+    run = CliRunner().invoke(cli, ["diagnose", str(camp), "--card", str(CARD), "--out", str(out), "--no-report"])
     assert run.exit_code == 0, run.output
-    said = [t.removeprefix("campaign: ") for t in run.output.splitlines() if t.startswith("campaign: ")]
-    assert said[:len(notes)] == notes
-    assert json.loads((out / "diagnosis.json").read_text())["metadata"]["contradictions"][:len(notes)] == notes
+    r = json.loads((out / "diagnosis.json").read_text())
+    far = r["data"]["excluded_microphones"]
+    assert list(far) == ["m1"] and sorted(e["flight"] for e in far["m1"]) == ["f1", "f2"]
+    assert all(e["offset_db"] > 20.0 and e["listed_distance_m"] > 5000.0 for e in far["m1"])
+    assert r["data"]["microphones"] == ["m2", "m3", "m4"]
+    sentence = r["metadata"]["contradictions"][0]
+    assert sentence.startswith("microphone 'm1' (") and "left out of the diagnosis" in sentence
+    assert all(f"{e['offset_db']:+.0f} dB in '{e['flight']}'" in sentence for e in far["m1"])
+    assert [ln for ln in run.output.splitlines() if ln.startswith("campaign: ")][0] == f"campaign: {sentence}"
+    assert r["verdict"]["effect"] is None, r["verdict"]
+
+
+def _spread_table(offsets_db):
+    """Three microphones a, b, c per flight, each hearing 70 dB(A) at a listed distance 10^(offset/20) x 40 m: their
+    source levels from the listed positions lie ``offsets_db[flight][mic]`` dB apart (spherical spreading)."""
+    cols: dict[str, list[np.ndarray]] = {"t": [], "mic": [], "flight": [], "d": []}
+    for k, (flight, offs) in enumerate(offsets_db.items()):
+        for mic, off in offs.items():
+            t = 1000.0 * k + np.arange(0.0, 120.0, 0.125)
+            cols["t"].append(t)
+            cols["mic"].append(np.full(t.size, mic))
+            cols["flight"].append(np.full(t.size, flight))
+            cols["d"].append(np.full(t.size, 40.0 * 10.0 ** (off / 20.0)))
+    t, mic, flight, d = (np.concatenate(cols[k]) for k in ("t", "mic", "flight", "d"))
+    return table(t, mic, 70.0 - 10.0 * np.cos(t / 20.0) ** 2, flight=flight, d=d)
+
+
+def test_a_microphone_far_off_in_one_flight_only_is_kept_with_a_note():
+    """A listed position is the same in every flight: c beyond 20 dB in f1 but agreeing in f2 is not left out, the
+    note names it; b, 30 dB off in both flights, is."""
+    from gisnoise.diagnose.positions import far_off_microphones
+
+    s = _spread_table({"f1": {"a": 0.0, "b": 30.0, "c": -25.0}, "f2": {"a": 0.0, "b": 30.0, "c": 2.0}})
+    far, notes = far_off_microphones(s)
+    # against the median: a in f1 (0 dB), c in f2 (2 dB)
+    assert list(far) == ["b"] and [e["offset_db"] for e in far["b"]] == [pytest.approx(30.0), pytest.approx(28.0)]
+    assert len(notes) == 1 and notes[0].startswith("microphone 'c'") and "-25 dB in 'f1'" in notes[0]
+
+
+def test_a_diagnosis_left_with_one_microphone_is_refused_naming_the_far_ones():
+    """b 30 dB above and c 30 dB below a's source level: the rule names both, and a alone is vouched for by none."""
+    s = _spread_table({"f1": {"a": 0.0, "b": 30.0, "c": -30.0}})
+    with pytest.raises(InputError, match=r"^microphones: 'b', 'c' contradict .* leaving 'a'; the diagnosis needs 2"):
+        run_diagnosis(s, cards.load(CARD))

@@ -58,13 +58,19 @@ import numpy as np
 from gisnoise.diagnose.candidates import CancelFn, _Context, _fit, _fit_candidates, _predict, fold_labels
 from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.localization import _statistics, localize, measurement_noise, sample_regimes
-from gisnoise.diagnose.positions import POSITION_RADIUS_M, correct_positions
+from gisnoise.diagnose.positions import (
+    POSITION_RADIUS_M,
+    correct_positions,
+    exclusion_sentence,
+    far_off_microphones,
+    refuse_too_few,
+)
 from gisnoise.diagnose.samples import load_samples
 from gisnoise.diagnose.selection import forward_selection, metadata_overrides
 from gisnoise.diagnose.verdict import MIN_IMPROVEMENT_DB2, _judge, _rms
 from gisnoise.errors import Cancelled, FitError, InputError
 from gisnoise.jsonio import to_jsonable, write_json
-from gisnoise.measure import Samples, series_ids, spreading_notes
+from gisnoise.measure import Samples, series_ids
 from gisnoise.model import HemisphereCard, ModelCard
 from gisnoise.model import effects as _effects
 
@@ -205,9 +211,14 @@ def run_diagnosis(
         check_cancel()
 
     all_s = load_samples(campaign_or_samples)
+    # a microphone listed far beyond the position search (its levels against spherical spreading, the rule of
+    # campaign check, every phase): no effect explains it, so it is left out, and said so
+    far, far_notes = far_off_microphones(all_s)
+    if far:
+        refuse_too_few(far, sorted(set(all_s.mic.astype(str).tolist())))
     use = np.isin(all_s.phase.astype(str), list(card.served_phases))
     keep = all_s.valid | (all_s.mask_reason.astype(str) == "event") if include_events else all_s.valid.copy()
-    s = all_s.select(use & keep)
+    s = all_s.select(use & keep & ~np.isin(all_s.mic.astype(str), list(far)))
     if len(s) < 20:
         have = sorted(set(all_s.phase[all_s.valid].astype(str).tolist()))
         raise InputError(f"diagnosis needs usable samples of the card's phase(s) {', '.join(card.served_phases)}; "
@@ -282,8 +293,7 @@ def run_diagnosis(
     if positions:
         metadata["microphone_positions"] = positions
         metadata["contradictions"] = position_notes + metadata["contradictions"]
-    # positions off by far more than the search radius: the levels against spherical spreading (as campaign check)
-    metadata["contradictions"] = spreading_notes(s) + metadata["contradictions"]
+    metadata["contradictions"] = ([exclusion_sentence(far)] if far else []) + far_notes + metadata["contradictions"]
     cands = _fit_candidates(names, ctx, level, x, x_ev, base_fit, oof_base, fold, cancel=cancel, bias_z=bias_z,
                             tick=tick, overrides=overrides)
 
@@ -302,6 +312,7 @@ def run_diagnosis(
         "card": {"id": card.id, "ansatz": card.ansatz, "phase": card.phase, "phases": list(card.served_phases)},
         "data": {"n_samples": n, "flights": sorted(set(s.flight.astype(str).tolist())),
                  "microphones": sorted(set(s.mic.astype(str).tolist())),
+                 "excluded_microphones": far,
                  "n_reader_events": int(np.sum(s.mask_reason.astype(str) == "event")),
                  "holdout": how, "block_s": block_s, "window_s": window_s},
         "noise_std_db": noise,

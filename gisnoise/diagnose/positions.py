@@ -19,24 +19,34 @@ offset from the listed position itself passes the same distance and 3-deviation 
 microphone whose own level places it where it is listed stays there).  The diagnosis
 then moves it (:func:`relocate`) before any effect is tested: a wrong position
 is a fact about the campaign, not a physical effect to be named.
+
+A microphone listed far beyond any search radius (kilometres off) is found by the
+rule of ``campaign check`` instead (:func:`gisnoise.measure.spreading_outliers`): its
+loudest level plus ``20 lg`` of its listed distance lies more than
+:data:`~gisnoise.measure.OUTLIER_DB` (20 dB, a tenfold distance) from the microphones'
+median.  No effect of a drone explains that, so :func:`far_off_microphones` names it
+and the diagnosis leaves it out (:func:`exclusion_sentence` says so); with fewer than
+:data:`MIN_MICROPHONES` left it refuses.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from gisnoise.diagnose._rows import _effective_samples, _rows_of
+from gisnoise.errors import InputError
 from gisnoise.geo import emission_angles
-from gisnoise.measure import Samples
+from gisnoise.measure import OUTLIER_DB, Samples, spreading_outliers
 from gisnoise.model import Ansatz
 
-__all__ = ["MIN_POSITION_GAIN", "MIN_POSITION_OFFSET_M", "POSITION_RADIUS_M", "correct_positions",
-           "estimate_mic_positions", "position_sentence", "positions_disagree", "relocate"]
+__all__ = ["MIN_MICROPHONES", "MIN_POSITION_GAIN", "MIN_POSITION_OFFSET_M", "POSITION_RADIUS_M",
+           "correct_positions", "estimate_mic_positions", "exclusion_sentence", "far_off_microphones",
+           "position_sentence", "positions_disagree", "refuse_too_few", "relocate"]
 
 POSITION_RADIUS_M = 50.0
 """Default radius around its listed position within which a microphone's position is searched, m."""
@@ -46,6 +56,9 @@ MIN_POSITION_GAIN = 0.2
 """Relative reduction of a microphone's residual variance a position offset must bring (beyond the shift the
 others share): a fifth.  A microphone listed 30 m off loses about half; an unmodelled effect such as louder
 turns lets a position offset take up to about a tenth."""
+MIN_MICROPHONES = 2
+"""Fewest microphones a diagnosis keeps after leaving out those listed far off: the spreading rule keeps a
+microphone for lying near the microphones' median, and one left alone is vouched for by no other."""
 _CONTRA_Z = 3.0
 _COARSE_M = 5.0
 _FINE_M = 1.0
@@ -229,3 +242,67 @@ def correct_positions(s: Samples, x: Mapping[str, Any], model: Ansatz, p: np.nda
     if not odd:
         return s, est, notes
     return relocate(s, {m: (est[m]["relative_e_m"], est[m]["relative_n_m"]) for m in odd}), est, notes
+
+
+def far_off_microphones(s: Samples) -> tuple[dict[str, list[dict[str, Any]]], list[str]]:
+    """Microphones whose levels contradict their listed position by spherical spreading in every flight.
+
+    The rule of ``campaign check`` (:func:`gisnoise.measure.spreading_outliers`, beyond
+    :data:`~gisnoise.measure.OUTLIER_DB`), judged per flight.  A listed position is the same in every
+    flight, so a wrong one shows in every flight the rule can judge (three or more microphones); a
+    microphone named in some of them only (a loud sound the reader did not mask can make one flight's
+    loudest level misleading) is kept, with a sentence.
+
+    Parameters
+    ----------
+    s : Samples
+        The samples, every phase.
+
+    Returns
+    -------
+    far : dict
+        Per microphone named in every flight judged, one entry per flight: ``flight``, ``level_dba`` (its
+        loudest valid level, dB(A)), ``listed_distance_m`` (from the listed position at that sample, m) and
+        ``offset_db`` (its source level from the listed position minus the microphones' median, dB).
+    notes : list of str
+        One sentence per microphone named in some flights only.
+    """
+    judged: dict[str, list[dict[str, Any]]] = {}
+    for mic, flight, level, dist, off in spreading_outliers(s, limit_db=-math.inf):
+        judged.setdefault(mic, []).append({"flight": flight, "level_dba": level, "listed_distance_m": dist,
+                                           "offset_db": off})
+    far: dict[str, list[dict[str, Any]]] = {}
+    notes: list[str] = []
+    for mic, entries in sorted(judged.items()):
+        named = [e for e in entries if abs(e["offset_db"]) > OUTLIER_DB]
+        if named and len(named) == len(entries):
+            far[mic] = entries
+        elif named:
+            notes.append(f"microphone '{mic}': its loudest level puts the source " + ", ".join(
+                f"{e['offset_db']:+.0f} dB in '{e['flight']}'" for e in entries) + " off what the microphones' "
+                f"median hears (spherical spreading); beyond {OUTLIER_DB:.0f} dB in some flights only, which a "
+                "listed position, the same in every flight, does not explain: it is kept; check its position and "
+                "the loudest sound it recorded")
+    return far, notes
+
+
+def exclusion_sentence(far: Mapping[str, Sequence[Mapping[str, Any]]]) -> str:
+    """The one sentence that names the microphones :func:`far_off_microphones` found and leaves them out."""
+    parts = [f"'{m}' (" + ", ".join(f"{e['offset_db']:+.0f} dB in '{e['flight']}'" for e in far[m]) + ")"
+             for m in sorted(far)]
+    one = len(parts) == 1
+    return (f"microphone{'' if one else 's'} {', '.join(parts)} {'is' if one else 'are'} left out of the diagnosis: "
+            f"{'its' if one else 'their'} loudest level from the listed position puts the source that far from "
+            f"what the microphones' median hears (spherical spreading); more than {OUTLIER_DB:.0f} dB is ten times "
+            f"the distance, which no effect of the drone explains: check {'its position' if one else 'their positions'}")
+
+
+def refuse_too_few(far: Mapping[str, Any], mics: Sequence[str]) -> None:
+    """Refuse (:class:`~gisnoise.errors.InputError`, one line) when fewer than :data:`MIN_MICROPHONES` remain."""
+    left = sorted(set(mics) - set(far))
+    if len(left) < MIN_MICROPHONES:
+        named = ", ".join(f"'{m}'" for m in sorted(far))
+        rest = ", ".join(f"'{m}'" for m in left) or "none"
+        raise InputError(f"microphones: {named} contradict their listed positions by more than {OUTLIER_DB:.0f} dB "
+                         f"(spherical spreading), leaving {rest}; the diagnosis needs {MIN_MICROPHONES} or more "
+                         "microphones that agree: check the positions in campaign.json", field="microphones")
