@@ -233,6 +233,51 @@ def test_receivers_on_a_dem(tmp_path, card_path):
 
 
 
+def test_receivers_beyond_the_dem_are_a_map_warning_said_once(tmp_path, card_path):
+    """A grid reaching past the DEM: the count of receivers without ground is a map warning (metadata, GeoJSON,
+    one stderr line), not a log line."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from affine import Affine
+
+    from gisnoise.maps import grid_for_trajectory, make_map
+
+    traj = flyover()
+    grid = grid_for_trajectory(traj, 20.0, 100.0)  # the grid `contour --resolution 20 --margin 100` makes
+    t = grid.transform
+    keep = grid.width // 2  # the DEM covers the western columns 0..keep-1 and 5 cells beyond the other sides
+    dem = tmp_path / "dem.tif"
+    with rasterio.open(dem, "w", driver="GTiff", width=keep + 5, height=grid.height + 10, count=1,
+                       dtype="float32", crs=grid.crs.to_wkt(),
+                       transform=Affine(t.a, 0, t.c - 5 * t.a, 0, t.e, t.f - 5 * t.e)) as ds:
+        ds.write(np.full((grid.height + 10, keep + 5), 100.0, dtype=np.float32), 1)
+    missing = (grid.width - keep) * grid.height
+    expected = (f"dem: {missing} of {grid.width * grid.height} receivers lie outside the DEM or on its nodata; "
+                f"they get nodata (no level) on the map")
+
+    paths = make_map(str(write_csv(tmp_path / "flight.csv", traj)), [card_path], tmp_path / "lib",
+                     resolution_m=20.0, margin_m=100.0, dem=str(dem), metrics=("LAmax",), levels=(55.0, 60.0))
+    res = paths["result"]
+    assert res.grid.shape == grid.shape and res.metadata["dem_nodata_receivers"] == missing
+    assert int(np.isnan(res.bands["LAmax"]).sum()) == missing  # the cells the warning counts are the nodata ones
+    assert res.metadata["warnings"].count(expected) == 1 and paths["warnings"].count(expected) == 1
+    doc = json.loads((tmp_path / "lib" / "contours.geojson").read_text())
+    assert doc["gisnoise"]["warnings"].count(expected) == 1
+
+    out = tmp_path / "cli"
+    r = subprocess.run([sys.executable, "-m", "gisnoise.cli.main", "contour", str(tmp_path / "flight.csv"), "--card",
+                        card_path, "--out", str(out), "--resolution", "20", "--margin", "100", "--dem", str(dem),
+                        "--metrics", "LAmax", "--levels", "55,60"], capture_output=True, text=True, timeout=600,
+                       env=dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1])))
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.count("outside the DEM") == 1, r.stderr
+    assert f"warning: {expected}" in r.stderr.splitlines()
+    assert json.loads((out / "contours.geojson").read_text())["gisnoise"]["warnings"].count(expected) == 1
+
+
 def test_fast_engine_map_equals_the_reference_within_0_01_db(tmp_path):
     """`gisnoise contour --engine fast` writes the same LAmax/LAeq/SEL as the NumPy reference (issue 9: 0.01 dB)."""
     root = __import__("pathlib").Path(__file__).resolve().parents[1]

@@ -191,8 +191,11 @@ def test_receivers_stand_on_the_dem(flyover):
     assert res.bands["LAmax"][10, col] == pytest.approx(G0 - 20 * np.log10((50.0 - 21.5) / 40.0), abs=0.01)
     holes = np.full(grid.shape, 20.0)
     holes[:, :3] = np.nan  # outside the DEM: nodata, not a guess
-    res = evaluate_grid(flyover["traj"], [omni_card()], grid, dem=holes, metrics=("LAmax",))
-    assert np.isnan(res.bands["LAmax"][:, :3]).all() and np.isfinite(res.bands["LAmax"][:, 3:]).all()
+    assert res.metadata["dem_nodata_receivers"] == 0
+    for engine in ("numpy", "fast"):
+        res = evaluate_grid(flyover["traj"], [omni_card()], grid, dem=holes, metrics=("LAmax",), engine=engine)
+        assert np.isnan(res.bands["LAmax"][:, :3]).all() and np.isfinite(res.bands["LAmax"][:, 3:]).all()
+        assert res.metadata["dem_nodata_receivers"] == 3 * grid.height  # counted for the map's warning
 
 
 def test_progress_reaches_one_and_cancel_stops(flyover):

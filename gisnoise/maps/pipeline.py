@@ -57,6 +57,7 @@ from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map
 from gisnoise.maps.powers import check_power_ranges
+from gisnoise.maps.prepare import dem_nodata_warning
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
@@ -158,7 +159,7 @@ def make_map(
         (without ``out_dir``: ``contours_text``, the GeoJSON text),
         ``map`` (Path of map.png, with ``plot``), ``result`` (:class:`MapResult`),
         ``trajectory`` (:class:`Trajectory`), ``warnings`` (list of str: extent cut by the cell
-        limit, clipped contours), ``timing_s`` (seconds: ``evaluate``, the evaluator; ``total``).
+        limit, receivers outside the DEM, clipped contours), ``timing_s`` (seconds: ``evaluate``, the evaluator; ``total``).
     """
     t_start = time.perf_counter()
     lv = parse_levels(levels)
@@ -219,7 +220,8 @@ def make_map(
     if outside_range:
         result.metadata["power_outside_card_range"] = outside_range
     result.metadata["levels_db"] = lv
-    warnings = warnings + clip_warnings(result, lv)
+    dem_gap = dem_nodata_warning(result.metadata)
+    warnings = warnings + ([dem_gap] if dem_gap is not None else []) + clip_warnings(result, lv)
     result.metadata["warnings"] = warnings
     paths: dict[str, Any] = {}
     if out is None:  # levels and plot were refused above

@@ -40,6 +40,7 @@ __all__ = [
     "MapRequest",
     "band_order",
     "check_request",
+    "dem_nodata_warning",
     "dem_on_grid",
     "eval_states",
     "ground_on_grid",
@@ -290,17 +291,17 @@ def ground_on_grid(grid: GridSpec, trajectories: Iterable[Trajectory] = (), *, d
     """The ground of a map: from the DEM when given, else flat at ``ground_h``.
 
     Without ``ground_h`` flat ground lies at the lowest height of the trajectories (a
-    warning when that point is in horizontal flight: the ground is then a guess).
+    warning when that point is in horizontal flight: the ground is then a guess).  With a
+    DEM the description counts the receivers outside it or on its nodata
+    (``dem_nodata_receivers``; they get nodata, and :func:`dem_nodata_warning` says so).
     """
     if dem is not None:
         heights = dem_on_grid(dem, grid) + as_float(dem_offset_m, "dem_offset_m")
         finite = np.isfinite(heights)
         if not finite.any():
             raise InputError("dem: the DEM does not cover the grid", field="dem")
-        if not finite.all():
-            log.warning("dem: %d of %d receivers lie outside the DEM or on nodata; they get nodata",
-                        int((~finite).sum()), finite.size)
-        return Ground(heights, float(np.nanmean(heights)), {"ground": "dem", "dem_offset_m": float(dem_offset_m)})
+        return Ground(heights, float(np.nanmean(heights)), {"ground": "dem", "dem_offset_m": float(dem_offset_m),
+                                                            "dem_nodata_receivers": int((~finite).sum())})
     if ground_h is not None:
         g = as_float(ground_h, "ground_h")
         return Ground(None, g, {"ground": "flat", "ground_h_m": g, "ground_h_source": "given"})
@@ -312,6 +313,20 @@ def ground_on_grid(grid: GridSpec, trajectories: Iterable[Trajectory] = (), *, d
         log.warning("ground height taken as the trajectory's lowest point (%.1f m) although it is in "
                     "horizontal flight there; state the ground height", g)
     return Ground(None, g, {"ground": "flat", "ground_h_m": g, "ground_h_source": "lowest trajectory point"})
+
+
+def dem_nodata_warning(metadata: Mapping[str, Any]) -> str | None:
+    """The warning of a map whose receivers partly lie outside its DEM or on its nodata, or None.
+
+    From the map metadata (``dem_nodata_receivers`` of :func:`ground_on_grid` and the grid's size).
+    """
+    n = int(metadata.get("dem_nodata_receivers") or 0)
+    if n <= 0:
+        return None
+    grid = metadata.get("grid") or {}
+    total = int(grid.get("width", 0)) * int(grid.get("height", 0))
+    of = f" of {total}" if total else ""
+    return f"dem: {n}{of} receivers lie outside the DEM or on its nodata; they get nodata (no level) on the map"
 
 
 # --------------------------------------------------------------------------- the result
