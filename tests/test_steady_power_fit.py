@@ -103,8 +103,8 @@ def test_the_command_line_says_which_parameters_the_data_could_not_support_and_w
     p1_row = next(line for line in r.output.splitlines() if line.startswith("p1 "))
     assert p1_row.rstrip().endswith("held") and "fixed" not in p1_row
     assert f"held p1: {reason}" in r.output
-    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--fix", "p6=1"],
-                           catch_exceptions=False)
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(out), "--fix", "p6=1",
+                                 "--force"], catch_exceptions=False)
     assert r.exit_code == 0, r.output
     assert next(line for line in r.output.splitlines() if line.startswith("p6 ")).rstrip().endswith("fixed")
 
@@ -125,17 +125,26 @@ def test_card_show_says_held_and_fixed_parameters_have_no_uncertainty_of_their_o
 
 def test_fit_never_writes_its_card_over_a_file_that_is_not_a_card(tmp_path, campaign):
     """--out naming the campaign's own campaign.json (or any file that is not a model card) is refused before
-    the fit, naming --out, and the file is left byte for byte; an existing card is replaced by the new fit."""
+    the fit, naming --out, and the file is left byte for byte, --force or not; an existing card is replaced by
+    the new fit only with --force (as the card commands)."""
     cj = campaign / "campaign.json"
     before = cj.read_bytes()
     r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(cj)])
     assert r.exit_code == 2 and cj.read_bytes() == before
     errors = [ln for ln in r.output.splitlines() if ln.startswith("Error: ")]
     assert len(errors) == 1 and "--out" in errors[0] and str(cj) in errors[0], r.output
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(cj), "--force"])
+    assert r.exit_code == 2 and cj.read_bytes() == before and "not a model card" in r.output, r.output
     card = tmp_path / "card.json"
     assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(card)).exit_code == 0
-    assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(card), "--fix", "p6=1").exit_code == 0
-    assert load(card).parameters["p6"] == 1.0
+    first = card.read_bytes()
+    r = CliRunner().invoke(cli, ["fit", str(campaign), "--phase", "horizontal", "--out", str(card), "--fix", "p6=1"])
+    assert r.exit_code == 2 and card.read_bytes() == first, r.output
+    errors = [ln for ln in r.output.splitlines() if ln.startswith("Error: ")]
+    assert errors == [f"Error: --out {card}: exists; refusing to overwrite (--force overwrites it)"], r.output
+    assert run("fit", str(campaign), "--phase", "horizontal", "--out", str(card), "--fix", "p6=1",
+               "--force").exit_code == 0
+    assert json.loads(first)["parameters"]["p6"] != 1.0 and load(card).parameters["p6"] == 1.0
 
 
 @pytest.mark.parametrize("bad", ["my card", "cards/horizontal", ".hidden", "nul"])
@@ -276,7 +285,7 @@ def test_no_traceback_from_any_effect_missing_its_inputs(tmp_path, campaign):
     for eff in effect_names():
         for base in ("paper-offset", "paper"):
             r = CliRunner().invoke(cli, ["-q", "fit", str(plate), "--phase", "horizontal", "--ansatz",
-                                         f"{base}+{eff}", "--out", str(tmp_path / "c.json")])
+                                         f"{base}+{eff}", "--out", str(tmp_path / f"{base}+{eff}.json")])
             assert not (r.exception and not isinstance(r.exception, SystemExit)), (eff, r.exception)
             assert r.exit_code in (0, 2), (eff, r.output)
             if r.exit_code == 2:

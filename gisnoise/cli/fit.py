@@ -12,9 +12,10 @@ from gisnoise.model import PHASES, load, save
 from gisnoise.model.cards import SCHEMA_PREFIX
 
 
-def _check_out(out: str) -> None:
-    """Refuse an --out that exists and is not a model card (the campaign's campaign.json, say): the card
-    replaces an older card, never another file."""
+def _check_out(out: str, force: bool) -> None:
+    """Refuse an --out that exists, before the fit: a model card unless ``force`` (as the ``card``
+    commands), anything else (the campaign's campaign.json, say) always: the card replaces an older
+    card, never another file."""
     import json
     from pathlib import Path
 
@@ -28,7 +29,9 @@ def _check_out(out: str) -> None:
         except (OSError, UnicodeDecodeError, ValueError):
             doc = None
         if isinstance(doc, dict) and str(doc.get("schema", "")).startswith(SCHEMA_PREFIX):
-            return
+            if force:
+                return
+            raise InputError(f"--out {out}: exists; refusing to overwrite (--force overwrites it)", field="out")
         if isinstance(doc, dict) and doc.get("schema"):
             what = f"a {doc['schema']} document, not a model card"
     raise InputError(f"--out {out}: exists and is {what}; refusing to write the card over it", field="out")
@@ -54,6 +57,7 @@ def _parse_fix(items: tuple[str, ...]) -> dict[str, float]:
 @click.option("--ansatz", default=None,
               help="Ansatz to fit (default: the --start card's, else paper-offset).")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="Model card JSON to write.")
+@click.option("--force", is_flag=True, help="Overwrite --out when it is a model card.")
 @click.option("--report", "report", type=click.Path(file_okay=False), default=None,
               help="Folder for the fit report (PNG, JSON numbers, report.html).")
 @click.option("--start", "start", type=click.Path(dir_okay=False), default=None,
@@ -70,19 +74,19 @@ def _parse_fix(items: tuple[str, ...]) -> dict[str, float]:
 @click.pass_context
 def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, out: str, report: str | None,
             start: str | None, card_id: str | None, serves: tuple[str, ...], fix: tuple[str, ...], absorption: bool,
-            max_iter: int, covariance: str) -> None:
+            max_iter: int, covariance: str, force: bool) -> None:
     """Fit a model card to a measurement campaign (output-error maximum likelihood).
 
     CAMPAIGN is a campaign folder (campaign.json, flights/, mics/).  The usable samples
     of --phase are fitted with one noise variance per microphone; the card gets the
     parameters, their covariance, fit statistics and provenance.  A fit that does not
     converge, or whose parameters the data cannot tell apart, writes no card and
-    says why.
+    says why.  An existing --out is refused unless it is a model card and --force is given.
     """
     from gisnoise.identify import fit_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
-    _check_out(out)
+    _check_out(out, force)
     if card_id is not None:
         from gisnoise.limits import check_id
 
@@ -95,7 +99,7 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
                            progress=lambda i, cost: update(float(i)), read_kw={"absorption": absorption})
     card = res.to_card(template, id=card_id, phase=phase, phases=list(serves) if serves else None,
                        covariance=covariance)
-    path = save(card, out)
+    path = save(card, out, overwrite=force)  # a card written there during the fit is not replaced either
     if report:
         from gisnoise.identify import write_report
 
