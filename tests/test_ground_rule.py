@@ -52,6 +52,11 @@ def test_with_ground_height_the_map_equals_the_closed_form_flyover(tmp_path, fil
     r = run("contour", csv, "--card", card, "--out", str(out), "--ground-height", "0", "--resolution", "25",
             "--margin", "150", "--metrics", "LAmax,SEL")
     assert r.exit_code == 0, r.output
+    _assert_closed_form_flyover(out)
+
+
+def _assert_closed_form_flyover(out):
+    """LAmax and SEL of the map in ``out`` equal the closed form of the flyover (receivers 1.5 m above h = 0)."""
     with rasterio.open(out / "levels.tif") as ds:
         bands = {n: ds.read(i + 1) for i, n in enumerate(ds.descriptions)}
         rows, cols = np.mgrid[0:ds.height, 0:ds.width]
@@ -69,6 +74,31 @@ def test_with_ground_height_the_map_equals_the_closed_form_flyover(tmp_path, fil
     np.testing.assert_allclose(bands["LAmax"].ravel()[inside], lamax[inside], atol=0.1)
     np.testing.assert_allclose(bands["SEL"].ravel(), sel, atol=0.1)
     assert inside.sum() > 100
+
+
+def test_a_vehicle_lying_upside_down_after_the_flyover_is_silent_and_named(tmp_path, files):
+    """The log resumes 30 s after the flyover with the vehicle upside down at rest on the ground below the track's end
+    (roll 178 deg), motors still at 3000 W, no landing flag: it cannot hover inverted, so those 20 s make no sound,
+    the map stays the closed-form flyover, and a warning names the samples."""
+    _, card = files
+    tr = flyover()
+    tail = tr.t[-1] + 30.0 + np.arange(0.0, 20.0, 0.1)
+    lat, lon, h = FRAME.to_wgs84(np.full_like(tail, X1), 0 * tail, 0 * tail)
+    z = np.zeros_like(tail)
+    crashed = Trajectory(t=np.concatenate([tr.t, tail]), lat=np.concatenate([tr.lat, lat]),
+                         lon=np.concatenate([tr.lon, lon]), h=np.concatenate([tr.h, h]),
+                         roll=np.concatenate([tr.roll, z + 178.0]), pitch=np.concatenate([tr.pitch, z - 3.0]),
+                         yaw=np.concatenate([tr.yaw, z + 90.0]), power_w=np.concatenate([tr.power_w, z + 3000.0]),
+                         phase=np.full(len(tr) + tail.size, "horizontal"))
+    csv = tmp_path / "crashed.csv"
+    crashed.to_csv(csv)
+    out = tmp_path / "m"
+    r = run("contour", str(csv), "--card", card, "--out", str(out), "--ground-height", "0", "--resolution", "25",
+            "--margin", "150", "--metrics", "LAmax,SEL")
+    assert r.exit_code == 0, r.output
+    _assert_closed_form_flyover(out)
+    named = f"{tail.size} samples from t = {tail[0]:.1f} s to {tail[-1]:.1f} s lie upside down at rest"
+    assert named in r.output and named in " ".join(_map_meta(out)["warnings"])
 
 
 def test_ground_from_track_takes_a_take_off_or_landing_only():

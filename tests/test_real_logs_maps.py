@@ -13,7 +13,7 @@ import rasterio
 from click.testing import CliRunner
 
 from gisnoise.cli.main import cli
-from gisnoise.flight import LOG_MAP_RATE_HZ, read_route
+from gisnoise.flight import LOG_MAP_RATE_HZ, flying_segments, read_route
 from gisnoise.model import ModelCard, save
 
 pyulog = pytest.importorskip("pyulog")
@@ -118,6 +118,73 @@ def test_dataflash_on_ground_until_not_landed_event_and_power_equal_pymavlink():
     np.testing.assert_allclose(tr.power_w, np.interp(t_abs, c[:, 0], c[:, 1]), rtol=1e-6)
     np.testing.assert_array_equal(tr.on_ground, t_abs < not_landed)
     assert tr.metadata["geoid_undulation_m"] == N_SITE and "mean sea level" in tr.metadata["height_datum"]
+
+
+def _copter_end_raw():
+    """log171 as pymavlink reads it (boot time, s): the trajectory's first sample (GPS 3D fix, ATT and CURR all
+    logged), the take-off (the message before EV NOT_LANDED, 28), and the instant from which on the copter lies
+    upside down at rest until the log ends: ATT inverted (cos(Roll) cos(Pitch) < 0) and the GPS receiver's own
+    speed, horizontal Spd and vertical VZ, below 0.3 m/s at every fix."""
+    r = DFReader.DFReader_binary(str(COPTER), zero_time_base=True)
+    last, take_off, gps, att, curr0 = 0.0, None, [], [], None
+    while (m := r.recv_match(type=["GPS", "ATT", "CURR", "EV"])) is not None:
+        kind = m.get_type()
+        if kind == "EV":
+            if m.Id == 28 and take_off is None:
+                take_off = last
+        elif kind == "GPS":
+            if m.Status >= 3:
+                gps.append((m.T / 1e3, float(np.hypot(m.Spd, m.VZ))))
+        else:
+            last = m.TimeMS / 1e3
+            if kind == "ATT":
+                att.append((last, m.Roll, m.Pitch))
+            elif curr0 is None:
+                curr0 = last
+    r.close()
+    g, a = np.array(gps), np.array(att)
+    up = np.cos(np.radians(a[:, 1])) * np.cos(np.radians(a[:, 2])) >= 0
+    upright_near = np.interp(g[:, 0], a[:, 0], up.astype(float)) > 0     # an upright ATT sample at or next to the fix
+    moving = upright_near | (g[:, 1] >= 0.3)
+    t_rest = float(g[np.flatnonzero(moving)[-1] + 1, 0])
+    return {"t0": max(g[0, 0], a[0, 0], curr0), "take_off": take_off, "t_rest": t_rest,
+            "first_inverted": float(a[~up, 0][0])}
+
+
+def test_copter_lying_upside_down_at_the_end_does_not_fly():
+    """log171 ends with the quad upside down on the ground (ATT roll about 179 deg) for 12 s, drawing about 320 W, no
+    landing or disarming logged (ACRO mode: ArduCopter 3.3 runs no crash check there).  It flies from the take-off
+    event until it comes to rest inverted, 159.2 s by the log's own messages, and not after."""
+    raw = _copter_end_raw()
+    assert 238.0 < raw["first_inverted"] < raw["t_rest"] < 243.0      # tumbles at 239 s, at rest from 242 s
+    tr = read_route(COPTER, geoid_undulation_m=N_SITE).trajectory
+    t_abs = raw["t0"] + tr.t
+    segs = flying_segments(tr)
+    assert len(segs) == 1
+    (i0, i1), = segs
+    assert abs(t_abs[i0] - raw["take_off"]) <= 0.1 + 1e-6           # the sample at or after the event
+    assert abs(t_abs[i1 - 1] - raw["t_rest"]) <= 0.5                 # the 1 s mean speed: half a window
+    assert abs((tr.t[i1 - 1] - tr.t[i0]) - (raw["t_rest"] - raw["take_off"])) <= 0.5
+    end = t_abs >= raw["t_rest"] + 0.5
+    assert end.sum() >= 110 and not tr.flying[end].any() and tr.lying[end].all()
+    assert np.all(np.abs(tr.roll[end]) > 170.0) and tr.power_w[end].min() > 250.0 and not tr.on_ground[end].any()
+    assert not tr.lying[t_abs < raw["first_inverted"]].any()
+
+
+def test_copter_map_names_the_upside_down_samples_and_is_silent_there(tmp_path, card):
+    raw = _copter_end_raw()
+    out = tmp_path / "m"
+    r = CliRunner().invoke(cli, ["-q", "contour", str(COPTER), "--card", card, "--out", str(out), "--resolution", "20",
+                                 "--margin", "100", "--geoid-undulation", str(N_SITE)])
+    assert r.exit_code == 0, r.output
+    tr = read_route(COPTER, geoid_undulation_m=N_SITE).trajectory
+    with rasterio.open(out / "levels.tif") as ds:
+        meta = json.loads(ds.tags()["gisnoise"])
+    named = f"{int(tr.lying.sum())} samples from t = {tr.t[tr.lying][0]:.1f} s"
+    assert named in r.stderr and "lie upside down" in r.stderr
+    assert any(named in w for w in meta["warnings"])
+    (t_a, t_b), = meta["flying_stretches"]
+    assert abs(t_b - (raw["t_rest"] - raw["t0"])) <= 0.5 and t_b < tr.t[-1] - 11.0
 
 
 @pytest.mark.parametrize("name,extra", [(VTOL, ()), (QUAD, ()), (COPTER, ("--geoid-undulation", str(N_SITE)))])

@@ -37,6 +37,10 @@ from gisnoise.flight.phases import (
     VERTICAL_MIN_SPEED_M_S,
     phase_by_speed,
 )
+from gisnoise.flight.rest import (
+    LYING_MIN_S,
+    lying_inverted,
+)
 from gisnoise.flight.routes import (
     LOG_MAP_RATE_HZ,
     read_route,
@@ -64,4 +68,4 @@ from gisnoise.flight.waypoints import (
     route_from_waypoints,
 )
 
-__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'GROUND_RULE', 'GROUND_TOLERANCE_M', 'flying_segments', 'ground_from_track', 'HOVER_MAX_SPEED_M_S', 'LOG_MAP_RATE_HZ', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'trajectory_from_path', 'trajectory_to_geojson']
+__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'GROUND_RULE', 'GROUND_TOLERANCE_M', 'flying_segments', 'ground_from_track', 'HOVER_MAX_SPEED_M_S', 'LOG_MAP_RATE_HZ', 'LYING_MIN_S', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'lying_inverted', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'trajectory_from_path', 'trajectory_to_geojson']

@@ -13,6 +13,7 @@ from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
 from gisnoise.flight.clock import as_unix_time
 from gisnoise.flight.ground import GROUND_TOLERANCE_M, REST_SPEED_M_S
 from gisnoise.flight.phases import phase_by_speed
+from gisnoise.flight.rest import smoothed_speed
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import LocalFrame, geoid_undulation
 
@@ -37,14 +38,7 @@ def _power(t: np.ndarray, batteries: Sequence[tuple[np.ndarray, np.ndarray]], po
 def _at_rest_low(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray) -> np.ndarray:
     """On the ground where no landed flag tells: at rest (speed below REST_SPEED_M_S, smoothed over 1 s)
     within GROUND_TOLERANCE_M of the track's lowest point."""
-    frame = LocalFrame(float(lat[0]), float(lon[0]), float(h[0]))
-    enu = np.stack(frame.to_enu(lat, lon, h), axis=-1)
-    vel = np.gradient(enu, t, axis=0)
-    c = np.vstack([np.zeros((1, 3)), np.cumsum(vel, axis=0)])
-    lo = np.searchsorted(t, t - 0.5, side="left")
-    hi = np.searchsorted(t, t + 0.5, side="right")
-    vs = (c[hi] - c[lo]) / (hi - lo)[:, None]
-    return (np.linalg.norm(vs, axis=1) < REST_SPEED_M_S) & (h - np.min(h) <= GROUND_TOLERANCE_M)
+    return (smoothed_speed(t, lat, lon, h) < REST_SPEED_M_S) & (h - np.min(h) <= GROUND_TOLERANCE_M)
 
 
 def _time_base(src: str, tb: np.ndarray, spans: Sequence[tuple[float, float]], rate_hz: float | None) -> np.ndarray:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gisnoise.flight.rest import REST_SPEED_M_S
 from gisnoise.flight.trajectory import Trajectory
 
 __all__ = ["ground_from_track", "flying_segments", "GROUND_TOLERANCE_M", "REST_SPEED_M_S", "GROUND_RULE"]
@@ -26,8 +27,6 @@ __all__ = ["ground_from_track", "flying_segments", "GROUND_TOLERANCE_M", "REST_S
 GROUND_TOLERANCE_M = 1.0
 """How close to the track's lowest point a sample must lie to stand on the ground, m (GPS heights
 of a vehicle standing still wander by some decimetres)."""
-REST_SPEED_M_S = 0.3
-"""Speed below which an end sample at the lowest point is at rest, m/s."""
 GROUND_RULE = ("without --dem or --ground-height, the ground is taken from the track only when it starts or "
                "ends on the ground (take-off or landing)")
 

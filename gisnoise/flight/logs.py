@@ -28,8 +28,11 @@ On the ground
     Samples while landed (PX4 ``vehicle_land_detected.landed``) are marked
     ``on_ground``; without a landed flag (ArduPilot), samples at rest (below 0.3 m/s,
     smoothed over 1 s) within 1 m of the track's lowest point are.  Samples with zero
-    battery current are not flying either
-    (:attr:`~gisnoise.flight.trajectory.Trajectory.flying`).  A log is never refused for its
+    battery current are not flying either, nor are samples where the vehicle lies upside
+    down: inverted (``cos(roll) cos(pitch) < 0``) and at rest for 1 s or longer, which no
+    vehicle can be in the air (a crash the log does not mark, motors still drawing power; e.g. in
+    ArduCopter's ACRO mode, which runs no crash check: :mod:`gisnoise.flight.rest`,
+    :attr:`~gisnoise.flight.trajectory.Trajectory.flying`).  A log is never refused for its
     on-ground samples.
 
 Heights

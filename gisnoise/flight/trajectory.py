@@ -7,9 +7,12 @@ The flight CSV (one row per log sample, sorted by time) has the columns
 
 Samples on the ground (a disarmed or landed vehicle) are part of a real log and are
 kept, marked as not flying: a sample is *not flying* when its ``on_ground`` flag is
-set or its electric power is zero or negative (no current drawn, or a current sensor's
-offset at rest).  Not-flying samples make no noise on a map and are masked in fits;
-:attr:`Trajectory.flying` is the one definition of the rule.  :class:`Trajectory` keeps angles in degrees as in the file; use
+set, or its electric power is zero or negative (no current drawn, or a current sensor's
+offset at rest), or it lies upside down: inverted (``cos(roll) cos(pitch) < 0``) and at rest
+for 1 s or longer, which no vehicle can be in the air, since neither its rotors nor anything
+else hold it up (:func:`gisnoise.flight.rest.lying_inverted`; a crashed vehicle whose motors
+still draw power and whose land detector never fired).  Not-flying samples make no noise on a map
+and are masked in fits; :attr:`Trajectory.flying` is the one definition of the rule.  :class:`Trajectory` keeps angles in degrees as in the file; use
 :meth:`Trajectory.enu` and :meth:`Trajectory.attitude_rad` for the model.
 """
 
@@ -27,6 +30,7 @@ import numpy as np
 
 from gisnoise.errors import MissingColumnError, TrajectoryError
 from gisnoise.flight.phases import PHASES
+from gisnoise.flight.rest import lying_inverted
 from gisnoise.geo import LocalFrame, wrap_angle, wrap_deg
 from gisnoise.limits import check_track
 
@@ -136,11 +140,17 @@ class Trajectory:
 
     @property
     def flying(self) -> np.ndarray:
-        """True on samples that fly: not marked ``on_ground`` and with positive electric power."""
+        """True on samples that fly: not marked ``on_ground``, with positive electric power, not :attr:`lying`."""
         fly = self.power_w > 0
         if self.on_ground is not None:
             fly &= ~self.on_ground
-        return fly
+        return fly & ~self.lying
+
+    @property
+    def lying(self) -> np.ndarray:
+        """True on samples where the vehicle lies upside down: inverted and at rest for 1 s or longer
+        (:func:`gisnoise.flight.rest.lying_inverted`)."""
+        return lying_inverted(self.t, self.lat, self.lon, self.h, self.roll, self.pitch)
 
     def origin(self) -> LocalFrame:
         """A local frame at the first sample's ground point (h0 = min height)."""

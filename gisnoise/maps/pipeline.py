@@ -30,6 +30,9 @@ Two rules hold for every face:
   unpowered ones are silent (motors stopped while the land detector, which lags a
   touchdown by about a second, still says airborne; or a sensor dropout) and a warning
   names how many (``metadata["warnings"]``, printed by the command line);
+* samples where the vehicle lies upside down (inverted and at rest for 1 s or longer, which it
+  cannot be in the air: :attr:`gisnoise.flight.Trajectory.lying`), motors still drawing power
+  after a crash, are silent, and a warning names them (how many, when, attitude and power);
 * powers against the cards' stated power ranges (:mod:`gisnoise.model.power_range`): a card
   without power term used at other powers is refused (``power_w``); a card with one used
   outside the powers it was fitted at gives a warning and ``metadata["power_outside_card_range"]``.
@@ -187,6 +190,7 @@ def make_map(
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
     below = _below_track_ground(traj, ground_h) if from_track else None
     unpowered = _airborne_without_power(traj)
+    lying = _lying_upside_down(traj)
     power_warnings, outside_range = check_power_ranges(traj, cardset)
     if grid is None:
         grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
@@ -194,7 +198,7 @@ def make_map(
     else:
         warnings = []
     scale = _crs_scale_warning(grid, traj)
-    warnings = [w for w in (below, unpowered, scale) if w is not None] + power_warnings + warnings
+    warnings = [w for w in (below, unpowered, lying, scale) if w is not None] + power_warnings + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir) if out_dir is not None else None
     if out is not None and out.exists() and not out.is_dir():
@@ -267,6 +271,21 @@ def _airborne_without_power(traj: Trajectory) -> str | None:
     return (f"{traj.source}: {int(silent.sum())} of {int(airborne.sum())} airborne samples draw no battery current "
             f"(first at t = {traj.t[i]:.2f} s; motors stopped while the land detector still says airborne, or a "
             f"current sensor dropout): silent on the map; --power-w W maps the whole flight at a constant power")
+
+
+def _lying_upside_down(traj: Trajectory) -> str | None:
+    """The warning for samples that draw power and are not marked on the ground, yet lie upside down
+    (:attr:`~gisnoise.flight.Trajectory.lying`): silent on the map; None when there are none."""
+    lie = traj.lying & (traj.power_w > 0)
+    if traj.on_ground is not None:
+        lie &= ~traj.on_ground
+    if not lie.any():
+        return None
+    i = np.flatnonzero(lie)
+    return (f"{traj.source}: {i.size} samples from t = {traj.t[i[0]]:.1f} s to {traj.t[i[-1]]:.1f} s lie upside down "
+            f"at rest (roll {traj.roll[i[0]]:.0f} deg, pitch {traj.pitch[i[0]]:.0f} deg; a vehicle cannot hover "
+            f"inverted: a crash), drawing {float(np.mean(traj.power_w[i])):.0f} W with no landing logged: not flying, "
+            f"silent on the map")
 
 
 CRS_SCALE_TOLERANCE = 0.01
