@@ -312,7 +312,9 @@ def check_receiver_height(value: float, *, field: str = "receiver_height",
 
 
 GROUND_TOLERANCE_M = 1.0
-"""How far the ground may lie above the track's lowest sample (rounding of take-off and landing), m."""
+"""How close to the track's lowest point the ground lies, m: a sample that near it may stand on the ground
+(:mod:`gisnoise.flight.ground`; GPS heights of a vehicle standing still wander by some decimetres), and a
+given ground may lie that far above it (rounding of take-off and landing)."""
 
 
 def check_receivers(receiver_height: float, ground_h: float | None, track_h: Any) -> None:

@@ -21,12 +21,10 @@ import numpy as np
 
 from gisnoise.flight.rest import REST_SPEED_M_S
 from gisnoise.flight.trajectory import Trajectory
+from gisnoise.limits import GROUND_TOLERANCE_M
 
 __all__ = ["ground_from_track", "flying_segments", "GROUND_TOLERANCE_M", "REST_SPEED_M_S", "GROUND_RULE"]
 
-GROUND_TOLERANCE_M = 1.0
-"""How close to the track's lowest point a sample must lie to stand on the ground, m (GPS heights
-of a vehicle standing still wander by some decimetres)."""
 GROUND_RULE = ("without --dem or --ground-height, the ground is taken from the track only when it starts or "
                "ends on the ground (take-off or landing)")
 
