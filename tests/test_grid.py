@@ -192,3 +192,30 @@ def test_crs_label_is_the_authority_code_else_the_wkt_cached_by_identity():
     for k in range(70):  # more objects than the cache holds, of two CRSs in turn: each gets its own label
         code = 32633 + k % 2
         assert crs_label(CRS.from_epsg(code)) == f"EPSG:{code}"
+
+
+def test_scale_factor_is_projs_cached_by_crs_object_and_point():
+    """Transverse Mercator keeps k0 = 0.9996 along a UTM zone's central meridian; Web Mercator scales by
+    sec(latitude) (2 at 60 deg, 1 on the equator).  The cache answers each CRS object and point with its own
+    value, also when asked in turn, from another thread, and past its size."""
+    import math
+    import threading
+
+    from pyproj import CRS
+
+    from gisnoise.geo import scale_factor
+
+    utm, web = CRS.from_epsg(32632), CRS.from_epsg(3857)
+    for _ in range(2):  # the second round: from the cache
+        assert scale_factor(utm, 9.0, 52.0) == pytest.approx(0.9996, abs=1e-9)
+        assert scale_factor(web, 9.0, 60.0) == pytest.approx(2.0, abs=1e-8)
+        assert scale_factor(web, 9.0, 0.0) == pytest.approx(1.0, abs=1e-8)
+        assert scale_factor(CRS.from_epsg(3857), 9.0, 60.0) == pytest.approx(2.0, abs=1e-8)  # an equal CRS
+    other: list = []
+    t = threading.Thread(target=lambda: other.append(scale_factor(web, 9.0, 45.0)))
+    t.start()
+    t.join()
+    assert other[0] == pytest.approx(math.sqrt(2.0), abs=1e-8)
+    for k in range(300):  # more points than a CRS's table holds
+        lat = -60.0 + 0.4 * k
+        assert scale_factor(web, 9.0, lat) == pytest.approx(1.0 / math.cos(math.radians(lat)), rel=1e-8)

@@ -28,7 +28,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
 from affine import Affine
@@ -50,6 +50,7 @@ __all__ = [
     "resample_dem",
     "transformer",
     "crs_label",
+    "scale_factor",
     "apply_affine",
 ]
 
@@ -116,6 +117,44 @@ def crs_label(crs: CRS) -> str:
 
 
 _labels = _IdentityCache()
+
+
+def scale_factor(crs: CRS, lon: float, lat: float) -> float | None:
+    """The point scale factor of a projected CRS at ``lon, lat`` (deg): the geometric mean of PROJ's meridional
+    and parallel scale there; None when PROJ gives no factors for the CRS.
+
+    Cached by the identity of the CRS object (as :func:`transformer`) and the point: making the
+    ``pyproj.Proj`` of a CRS takes about 0.3 ms, and a service maps the same routes in the same CRS again.
+
+    >>> round(scale_factor(utm_crs(9.0, 52.0), 9.0, 52.0), 6)  # on a UTM zone's central meridian: k0
+    0.9996
+    """
+    key = (float(lon), float(lat))
+    table: dict[tuple[float, float], float | None] = _scales.get((crs,), dict)
+    hit = table.get(key, _MISSING)  # one look-up: another thread may clear the table meanwhile
+    if hit is not _MISSING:
+        return cast(float | None, hit)
+    from pyproj import Proj
+    from pyproj.exceptions import ProjError
+
+    projs = getattr(_local, "projs", None)
+    if projs is None:
+        projs = _local.projs = _IdentityCache()  # one Proj per thread: pyproj objects are not shared
+    k: float | None
+    try:
+        f = projs.get((crs,), lambda: Proj(crs)).get_factors(*key)
+        k = float(np.sqrt(f.meridional_scale * f.parallel_scale))
+    except (ProjError, TypeError, ValueError):
+        k = None
+    if len(table) > 256:
+        table.clear()
+    table[key] = k
+    return k
+
+
+_scales = _IdentityCache()
+"""Per CRS object: scale factors by point (:func:`scale_factor`)."""
+_MISSING = object()
 
 
 def max_cells() -> int:

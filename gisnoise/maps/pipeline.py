@@ -51,7 +51,7 @@ import numpy as np
 from gisnoise.errors import InputError, TrajectoryError
 from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
 from gisnoise.flight.ground import GROUND_TOLERANCE_M
-from gisnoise.geo import GridSpec
+from gisnoise.geo import GridSpec, scale_factor
 from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.clipping import clip_warnings, parse_levels
@@ -294,15 +294,8 @@ CRS_SCALE_TOLERANCE = 0.01
 
 def _crs_scale_warning(grid: Any, traj: Trajectory) -> str | None:
     """The warning for a grid CRS whose scale at the track is far from 1: its cells are not their size on the ground."""
-    from pyproj import Proj
-    from pyproj.exceptions import ProjError
-
-    try:
-        f = Proj(grid.crs).get_factors(float(np.mean(traj.lon)), float(np.mean(traj.lat)))
-    except (ProjError, TypeError, ValueError):  # no scale factors for this CRS: nothing to say
-        return None
-    k = float(np.sqrt(f.meridional_scale * f.parallel_scale))
-    if not np.isfinite(k) or abs(k - 1.0) <= CRS_SCALE_TOLERANCE:
+    k = scale_factor(grid.crs, float(np.mean(traj.lon)), float(np.mean(traj.lat)))
+    if k is None or not np.isfinite(k) or abs(k - 1.0) <= CRS_SCALE_TOLERANCE:  # None: PROJ has no scale for it
         return None
     cell = abs(float(grid.transform.a))
     name = grid.crs.to_string()
