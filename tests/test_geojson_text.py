@@ -29,3 +29,15 @@ def test_signs_and_digits():
     assert text == ('{"c":[[-179.99999999,0.00000000],[-0.50000000,9.00000001],[-10.25000000,100.00000000],'
                     '[0.00000005,-0.00000005]]}')
     assert json.loads(text)["c"] == a.tolist()
+
+
+def test_arrays_anywhere_in_the_document_and_other_objects_refused():
+    """Arrays inside tuples, lists and dicts at any depth are written as positions; any other object json cannot
+    write is refused as json.dumps refuses it."""
+    import pytest
+
+    a = np.array([[1.5, 2.25]])
+    doc = {"a": (a, [{"b": a}], {"c": (1, None, "x")}), "d": 2.5}
+    assert geojson_text(doc) == '{"a":[[[1.50000000,2.25000000]],[{"b":[[1.50000000,2.25000000]]}],{"c":[1,null,"x"]}],"d":2.5}'
+    with pytest.raises(TypeError, match="set is not JSON serializable"):
+        geojson_text({"a": a, "s": {1}})

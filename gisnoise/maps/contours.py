@@ -481,17 +481,13 @@ def geojson_text(doc: dict) -> str:
     """
     arrays: list[np.ndarray] = []
 
-    def swap(o: Any) -> Any:
+    def token(o: Any) -> str:  # json.dumps asks for each object it cannot write itself: the arrays
         if isinstance(o, np.ndarray):
             arrays.append(o)
             return f"{_TOKEN}{len(arrays) - 1}"
-        if isinstance(o, dict):
-            return {k: swap(v) for k, v in o.items()}
-        if isinstance(o, (list, tuple)):
-            return [swap(v) for v in o]
-        return o
+        raise TypeError(f"Object of type {type(o).__name__} is not JSON serializable")
 
-    text = json.dumps(swap(doc), allow_nan=False, separators=(",", ":"))
+    text = json.dumps(doc, allow_nan=False, separators=(",", ":"), default=token)
     if not arrays:
         return text
     bodies = _positions_texts(arrays)
