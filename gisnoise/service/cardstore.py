@@ -11,7 +11,9 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import stat
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +27,8 @@ __all__ = ["CardStore", "StoredCard", "ID_PATTERN"]
 ID_PATTERN = SAFE_ID_PATTERN
 _ID_RE = re.compile(ID_PATTERN)
 _VERSION_RE = re.compile(r"^v(\d+)\.json$")
+SETTLED_S = 2.0
+"""Age (s) of a card folder's modification time from which its listing is kept (see ``CardStore._versions``)."""
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,7 @@ class CardStore:
         self.root = Path(root)
         self._lock = threading.Lock()
         self._cache: dict[Path, tuple[int, int, ModelCard]] = {}
+        self._listings: dict[str, tuple[tuple[int, int, int], tuple[int, ...]]] = {}
 
     def seed(self, folder: Path | None) -> int:
         """Copy the cards of ``folder`` into a store that does not exist yet; returns how many."""
@@ -68,15 +73,35 @@ class CardStore:
         return n
 
     def _versions(self, card_id: str) -> list[int]:
+        """The versions stored for ``card_id``, sorted.
+
+        The listing is kept by the card folder's stat (device, inode, modification time): adding or removing a
+        version changes the folder's modification time.  A listing is kept only once that time lies
+        :data:`SETTLED_S` in the past, so a change within the file system's timestamp granularity of the last one
+        cannot go unseen.
+        """
         d = self.root / card_id
-        if not d.is_dir():
+        try:
+            st = os.stat(d)
+        except (OSError, ValueError):  # as Path.is_dir: missing, not reachable, or a name the OS refuses
             return []
+        if not stat.S_ISDIR(st.st_mode):
+            return []
+        key = (st.st_dev, st.st_ino, st.st_mtime_ns)
+        hit = self._listings.get(card_id)
+        if hit is not None and hit[0] == key:
+            return list(hit[1])
         out = []
         for p in d.iterdir():
             m = _VERSION_RE.match(p.name)
             if m:
                 out.append(int(m.group(1)))
-        return sorted(out)
+        out.sort()
+        if time.time_ns() - st.st_mtime_ns > SETTLED_S * 1e9:
+            if len(self._listings) > 1024:
+                self._listings.clear()
+            self._listings[card_id] = (key, tuple(out))
+        return out
 
     def ids(self) -> list[str]:
         if not self.root.is_dir():

@@ -157,3 +157,40 @@ def test_listing_by_an_unknown_phase_is_refused_naming_the_field(client):
     assert hover.status_code == 200 and "demo-climb" in [c["id"] for c in hover.json()["cards"]]
     assert_names_field(client.get("/cards?phase=Hover"), 422, "phase")
     assert_names_field(client.get("/cards?phase=cruise"), 422, "phase")
+
+
+def test_store_keeps_a_settled_listing_and_sees_every_change(tmp_path, monkeypatch):
+    """A card folder's listing is kept by its stat once its last change is SETTLED_S old (no folder read per
+    request), and a version another writer adds is seen at once: after a settled listing (the folder's time moves)
+    and within the timestamp granularity of a recent change (same folder time: such a listing is not kept)."""
+    import os
+    import time
+    from pathlib import Path
+
+    from gisnoise.model import cards as gcards
+    from gisnoise.service.cardstore import SETTLED_S, CardStore
+
+    store = CardStore(tmp_path / "cards")
+    doc = _doc()
+    card = gcards.from_dict(doc)
+    store.put(card)
+    folder = tmp_path / "cards" / card.id
+    old = time.time_ns() - int(5 * SETTLED_S * 1e9)
+    os.utime(folder, ns=(old, old))
+    reads: list[Path] = []
+    iterdir = Path.iterdir
+    monkeypatch.setattr(Path, "iterdir", lambda self: (reads.append(self), iterdir(self))[1])
+    assert store.versions(card.id) == [1] and store.versions(card.id) == [1]
+    assert reads == [folder]  # the second listing is the kept one
+    p0 = doc["parameters"]["p0"]
+
+    def add(v: int) -> None:  # another writer adds version v
+        (folder / f"v{v}.json").write_text(gcards.dumps(gcards.from_dict(
+            dict(doc, parameters=dict(doc["parameters"], p0=p0 + v)))), encoding="utf-8")
+
+    add(2)  # after a settled listing: the folder's time moves
+    assert store.versions(card.id) == [1, 2] and store.get(card.id).card.parameters["p0"] == p0 + 2
+    recent = os.stat(folder).st_mtime_ns
+    add(3)  # within the timestamp granularity of the change before: the folder's time as it was
+    os.utime(folder, ns=(recent, recent))
+    assert store.versions(card.id) == [1, 2, 3] and store.get(card.id).card.parameters["p0"] == p0 + 3
