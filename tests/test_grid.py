@@ -219,3 +219,25 @@ def test_scale_factor_is_projs_cached_by_crs_object_and_point():
     for k in range(300):  # more points than a CRS's table holds
         lat = -60.0 + 0.4 * k
         assert scale_factor(web, 9.0, lat) == pytest.approx(1.0 / math.cos(math.radians(lat)), rel=1e-8)
+
+
+def test_grid_for_points_keeps_the_projected_extent_of_the_same_points(monkeypatch):
+    """Zone 32's central meridian on the equator projects to (500 000 m, 0 m): the grid around it is the
+    margin snapped to the cells, for each resolution and margin asked again; other points get their own extent,
+    the cell limit holds for a kept extent too, and a CRS given as text is one object for the same points (so the
+    transformer cache hits)."""
+    from gisnoise.geo import grid_for_points
+
+    for _ in range(2):
+        g = grid_for_points([9.0], [0.0], 10.0, 100.0)
+        assert g.crs.to_epsg() == 32632 and tuple(g.transform)[:6] == (10.0, 0.0, 499900.0, 0.0, -10.0, 100.0)
+        assert (g.width, g.height) == (20, 20)
+        g = grid_for_points([9.0], [0.0], 25.0, 60.0)
+        assert tuple(g.transform)[:6] == (25.0, 0.0, 499925.0, 0.0, -25.0, 75.0) and (g.width, g.height) == (6, 6)
+    g = grid_for_points([9.0, 9.0], [0.0, 0.01], 10.0, 100.0)  # 0.9996 x 1105.74 m of meridian arc further north
+    assert (g.width, g.height) == (20, 131) and g.transform.f == 1210.0  # top edge: 1105.30 + 100 m snapped up
+    text = grid_for_points([9.0], [0.0], 10.0, 100.0, crs="EPSG:32632")
+    assert grid_for_points([9.0], [0.0], 10.0, 100.0, crs="EPSG:32632").crs is text.crs
+    monkeypatch.setenv("GISNOISE_MAX_CELLS", "399")
+    with pytest.raises(GridTooLargeError):
+        grid_for_points([9.0], [0.0], 10.0, 100.0)

@@ -404,8 +404,40 @@ def grid_for_points(lon: Any, lat: Any, resolution_m: float = 10.0, margin_m: fl
         raise InvalidGridError(f"margin_m must be a number of metres >= 0, got {margin_m!r}", field="margin_m") from None
     if not math.isfinite(margin) or margin < 0:
         raise InvalidGridError(f"margin_m must be a number of metres >= 0, got {margin_m!r}", field="margin_m")
-    lon = np.asarray(lon, dtype=float)
-    lat = np.asarray(lat, dtype=float)
+    out_crs, x_min, x_max, y_min, y_max = _projected_bounds(np.asarray(lon, dtype=float),
+                                                            np.asarray(lat, dtype=float), crs)
+    left = math.floor((x_min - margin) / res) * res
+    right = math.ceil((x_max + margin) / res) * res
+    bottom = math.floor((y_min - margin) / res) * res
+    top = math.ceil((y_max + margin) / res) * res
+    if right <= left:
+        right = left + res
+    if top <= bottom:
+        top = bottom + res
+    width = int(round((right - left) / res))
+    height = int(round((top - bottom) / res))
+    check_cell_limit(width, height)
+    return GridSpec(out_crs, Affine(res, 0.0, left, 0.0, -res, top), width, height)
+
+
+BOUNDS_CACHE_POINTS = 20_000
+"""Largest number of points whose projected bounding box :func:`grid_for_points` keeps (the key holds their bytes)."""
+
+
+def _projected_bounds(lon: np.ndarray, lat: np.ndarray, crs: Any) -> tuple[CRS, float, float, float, float]:
+    """The grid CRS of :func:`grid_for_points` and the points' bounding box in it: ``(crs, x_min, x_max, y_min,
+    y_max)``, m.
+
+    Kept by the points' bytes and the CRS as given when that is None or text (the same route mapped again at other
+    cell sizes or margins is not projected again, and its CRS object is the same, so the transformer cache hits);
+    errors are not kept.
+    """
+    key = None
+    if (crs is None or isinstance(crs, str)) and lon.size <= BOUNDS_CACHE_POINTS:
+        key = (lon.shape, lat.shape, lon.tobytes(), lat.tobytes(), crs)
+        hit = _bounds.get(key)
+        if hit is not None:
+            return hit
     if crs is None:
         lon_c = float(np.degrees(np.arctan2(np.mean(np.sin(np.radians(lon))), np.mean(np.cos(np.radians(lon))))))
         out_crs = utm_crs(lon_c, float(np.mean(lat)))
@@ -416,18 +448,17 @@ def grid_for_points(lon: Any, lat: Any, resolution_m: float = 10.0, margin_m: fl
     y = np.asarray(y, dtype=float)
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
         raise CRSError(f"crs: the trajectory lies outside the area of use of {out_crs.name!r}", field="crs")
-    left = math.floor((x.min() - margin) / res) * res
-    right = math.ceil((x.max() + margin) / res) * res
-    bottom = math.floor((y.min() - margin) / res) * res
-    top = math.ceil((y.max() + margin) / res) * res
-    if right <= left:
-        right = left + res
-    if top <= bottom:
-        top = bottom + res
-    width = int(round((right - left) / res))
-    height = int(round((top - bottom) / res))
-    check_cell_limit(width, height)
-    return GridSpec(out_crs, Affine(res, 0.0, left, 0.0, -res, top), width, height)
+    out = (out_crs, float(x.min()), float(x.max()), float(y.min()), float(y.max()))
+    if key is not None:
+        with _bounds_lock:
+            if len(_bounds) >= 32:
+                _bounds.clear()
+            _bounds[key] = out
+    return out
+
+
+_bounds: dict[tuple[Any, ...], tuple[CRS, float, float, float, float]] = {}
+_bounds_lock = threading.Lock()
 
 
 def resample_dem(dem: Dem, grid: GridSpec) -> np.ndarray:
