@@ -21,8 +21,9 @@ then moves it (:func:`relocate`) before any effect is tested: a wrong position
 is a fact about the campaign, not a physical effect to be named.
 
 A microphone listed far beyond any search radius (kilometres off) is found by the
-rule of ``campaign check`` instead (:func:`gisnoise.measure.spreading_outliers`): its
-loudest level plus ``20 lg`` of its listed distance lies more than
+rule of ``campaign check`` instead (:func:`gisnoise.measure.spreading_outliers`): the
+median of its level plus ``20 lg`` of its listed distance over its loudest
+:data:`~gisnoise.measure.WINDOW_S` (20 s) lies more than
 :data:`~gisnoise.measure.OUTLIER_DB` (20 dB, a tenfold distance) from the microphones'
 median.  No effect of a drone explains that, so :func:`far_off_microphones` names it
 and the diagnosis leaves it out (:func:`exclusion_sentence` says so); with fewer than
@@ -41,7 +42,7 @@ import numpy as np
 from gisnoise.diagnose._rows import _effective_samples, _rows_of
 from gisnoise.errors import InputError
 from gisnoise.geo import emission_angles
-from gisnoise.measure import OUTLIER_DB, Samples, spreading_outliers
+from gisnoise.measure import OUTLIER_DB, WINDOW_S, Samples, spreading_outliers
 from gisnoise.model import Ansatz
 
 __all__ = ["MIN_MICROPHONES", "MIN_POSITION_GAIN", "MIN_POSITION_OFFSET_M", "POSITION_RADIUS_M",
@@ -250,8 +251,8 @@ def far_off_microphones(s: Samples) -> tuple[dict[str, list[dict[str, Any]]], li
     The rule of ``campaign check`` (:func:`gisnoise.measure.spreading_outliers`, beyond
     :data:`~gisnoise.measure.OUTLIER_DB`), judged per flight.  A listed position is the same in every
     flight, so a wrong one shows in every flight the rule can judge (three or more microphones); a
-    microphone named in some of them only (a loud sound the reader did not mask can make one flight's
-    loudest level misleading) is kept, with a sentence.
+    microphone named in some of them only (a long loud sound the reader did not mask can fill much of
+    one flight's loudest seconds) is kept, with a sentence.
 
     Parameters
     ----------
@@ -261,8 +262,9 @@ def far_off_microphones(s: Samples) -> tuple[dict[str, list[dict[str, Any]]], li
     Returns
     -------
     far : dict
-        Per microphone named in every flight judged, one entry per flight: ``flight``, ``level_dba`` (its
-        loudest valid level, dB(A)), ``listed_distance_m`` (from the listed position at that sample, m) and
+        Per microphone named in every flight judged, one entry per flight: ``flight``, ``level_dba`` (the
+        level of the median sample of its loudest valid :data:`~gisnoise.measure.WINDOW_S`, dB(A)),
+        ``listed_distance_m`` (from the listed position at that sample, m) and
         ``offset_db`` (its source level from the listed position minus the microphones' median, dB).
     notes : list of str
         One sentence per microphone named in some flights only.
@@ -278,11 +280,11 @@ def far_off_microphones(s: Samples) -> tuple[dict[str, list[dict[str, Any]]], li
         if named and len(named) == len(entries):
             far[mic] = entries
         elif named:
-            notes.append(f"microphone '{mic}': its loudest level puts the source " + ", ".join(
+            notes.append(f"microphone '{mic}': its loudest {WINDOW_S:.0f} s put the source " + ", ".join(
                 f"{e['offset_db']:+.0f} dB in '{e['flight']}'" for e in entries) + " off what the microphones' "
                 f"median hears (spherical spreading); beyond {OUTLIER_DB:.0f} dB in some flights only, which a "
                 "listed position, the same in every flight, does not explain: it is kept; check its position and "
-                "the loudest sound it recorded")
+                "the loud sounds it recorded")
     return far, notes
 
 
@@ -292,8 +294,8 @@ def exclusion_sentence(far: Mapping[str, Sequence[Mapping[str, Any]]]) -> str:
              for m in sorted(far)]
     one = len(parts) == 1
     return (f"microphone{'' if one else 's'} {', '.join(parts)} {'is' if one else 'are'} left out of the diagnosis: "
-            f"{'its' if one else 'their'} loudest level from the listed position puts the source that far from "
-            f"what the microphones' median hears (spherical spreading); more than {OUTLIER_DB:.0f} dB is ten times "
+            f"{'its' if one else 'their'} loudest {WINDOW_S:.0f} s from the listed position put the source that far "
+            f"from what the microphones' median hears (spherical spreading); more than {OUTLIER_DB:.0f} dB is ten times "
             f"the distance, which no effect of the drone explains: check {'its position' if one else 'their positions'}")
 
 

@@ -4,12 +4,9 @@
 from __future__ import annotations
 
 from gisnoise.measure.campaign import (
-    OUTLIER_DB,
     check_campaign,
     inspect_campaign,
     read_campaign,
-    spreading_notes,
-    spreading_outliers,
 )
 from gisnoise.measure.document import (
     SCHEMA,
@@ -44,9 +41,15 @@ from gisnoise.measure.samples import (
     series_ids,
     series_key,
 )
+from gisnoise.measure.spreading import (
+    OUTLIER_DB,
+    WINDOW_S,
+    spreading_notes,
+    spreading_outliers,
+)
 from gisnoise.measure.table import (
     SIGNAL_BAND_MARGIN_DB,
     build_samples,
 )
 
-__all__ = ['DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'OUTLIER_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'build_samples', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'spreading_notes', 'spreading_outliers', 'wav_levels', 'write_level_csv', 'write_levels']
+__all__ = ['DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'OUTLIER_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'WINDOW_S', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'build_samples', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'spreading_notes', 'spreading_outliers', 'wav_levels', 'write_level_csv', 'write_levels']

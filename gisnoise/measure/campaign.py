@@ -50,6 +50,7 @@ from gisnoise.measure.document import (
 from gisnoise.measure.events import DEFAULT_EVENT_DB, DEFAULT_SNR_DB
 from gisnoise.measure.levels import DEFAULT_BLOCK_S, _most_common_rate, _wav_rate, read_level_csv, wav_levels
 from gisnoise.measure.parts import Campaign, Problem, ProgressFn
+from gisnoise.measure.spreading import spreading_notes
 
 __all__ = ["read_campaign", "check_campaign", "inspect_campaign"]
 
@@ -113,46 +114,6 @@ def inspect_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> tuple[Cam
             for note in spreading_notes(s):
                 collector.add(cjs, "microphones", f"{cjs}: {note}")
     return camp, collector.problems
-
-
-def spreading_notes(s: Any) -> list[str]:
-    """One sentence per :func:`spreading_outliers` finding (``campaign check``, the diagnosis' contradictions)."""
-    return [f"microphone '{mic}': its loudest level in flight '{flight}', {level:.1f} dB(A) at {dist:.0f} m from its "
-            f"listed position, puts the source {off:+.0f} dB off what the microphones' median hears from theirs "
-            "(spherical spreading); check its position" for mic, flight, level, dist, off in spreading_outliers(s)]
-
-
-OUTLIER_DB = 20.0
-"""How far (dB) a microphone's source level from its listed position may lie from the others' before it is named."""
-
-
-def spreading_outliers(s: Any, limit_db: float = OUTLIER_DB) -> list[tuple[str, str, float, float, float]]:
-    """Microphones whose listed position their levels contradict: ``(mic, flight, level, distance, offset)``.
-
-    Per flight, each microphone's loudest valid sample gives the source's level at 1 m from the
-    listed position, ``L + 20 lg d`` (spherical spreading; no absorption or directivity).  Against
-    the median over the microphones (three or more: one misplaced microphone does not move it), an
-    offset beyond ``limit_db``
-    (20 dB: ten times the distance, far more than a drone's directivity or the ground change) means
-    the listed position cannot be where the levels were measured.
-    """
-    out = []
-    for flight in np.unique(s.flight):
-        src: dict[str, tuple[float, float, float]] = {}
-        for mic in np.unique(s.mic):
-            rows = np.flatnonzero((s.flight == flight) & (s.mic == mic) & s.valid & np.isfinite(s.level))
-            if rows.size >= 3:
-                i = rows[int(np.argmax(s.level[rows]))]
-                d = max(float(s.d[i]), 1.0)
-                src[str(mic)] = (float(s.level[i]) + 20.0 * np.log10(d), float(s.level[i]), d)
-        if len(src) < 3:
-            continue
-        mid = float(np.median([v[0] for v in src.values()]))
-        for mic, (lw, level, d) in src.items():
-            off = lw - mid
-            if abs(off) > limit_db:
-                out.append((mic, str(flight), level, d, off))
-    return out
 
 
 def check_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> list[Problem]:
