@@ -16,6 +16,12 @@ from gisnoise.flight.ground import (
     flying_segments,
     ground_from_track,
 )
+from gisnoise.flight.logcut import (
+    LogCut,
+    dataflash_cut,
+    log_cut_warning,
+    ulog_cut,
+)
 from gisnoise.flight.logs import (
     FLIGHT_SUFFIXES,
     read_flight,
@@ -68,4 +74,4 @@ from gisnoise.flight.waypoints import (
     route_from_waypoints,
 )
 
-__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'GROUND_RULE', 'GROUND_TOLERANCE_M', 'flying_segments', 'ground_from_track', 'HOVER_MAX_SPEED_M_S', 'LOG_MAP_RATE_HZ', 'LYING_MIN_S', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'lying_inverted', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'trajectory_from_path', 'trajectory_to_geojson']
+__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'GROUND_RULE', 'GROUND_TOLERANCE_M', 'flying_segments', 'ground_from_track', 'HOVER_MAX_SPEED_M_S', 'LOG_MAP_RATE_HZ', 'LYING_MIN_S', 'LogCut', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'dataflash_cut', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'log_cut_warning', 'lying_inverted', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'trajectory_from_path', 'trajectory_to_geojson', 'ulog_cut']

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
+from gisnoise.errors import GisnoiseError, InputError, MissingColumnError, TrajectoryError
 from gisnoise.flight._logkernels import (
     POWER_WAY_OUT,
     _at_rest_low,
@@ -33,6 +33,7 @@ from gisnoise.flight._logkernels import (
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.clock import gps_to_unix
+from gisnoise.flight.logcut import cut_error, dataflash_cut, refuse_cut_definitions
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
 
@@ -62,10 +63,26 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
     src = str(path)
     if not Path(src).is_file():
         raise TrajectoryError(f"{src}: no such file", field="path")
+    cut = dataflash_cut(Path(src).read_bytes())   # pymavlink stops at a cut message without a word
+    refuse_cut_definitions(src, cut, "FMT messages")
     try:
         reader = DFReader.DFReader_binary(src, zero_time_base=True)
     except Exception as exc:
         raise TrajectoryError(f"{src}: not a readable DataFlash log ({exc})", field="path") from None
+    try:
+        traj = _dataflash_trajectory(src, reader, start_utc, geoid_undulation_m, rate_hz, power_w)
+    except GisnoiseError as exc:
+        if cut is None:
+            raise
+        raise cut_error(src, exc, cut) from None
+    if cut is not None:
+        traj.metadata["log_cut"] = cut.metadata(float(traj.t[-1]))
+    return traj
+
+
+def _dataflash_trajectory(src: str, reader: Any, start_utc: Any, geoid_undulation_m: float | None,
+                          rate_hz: float | None, power_w: float | None) -> Trajectory:
+    """The trajectory of an opened DataFlash log (see :func:`read_dataflash`); closes the reader."""
     wanted = ["GPS", "POS", "ATT", "BAT", "CURR", "CUR2", "RPM", "ARSP", "EV"]
     rows: dict[str, list[tuple[Any, ...]]] = {k: [] for k in wanted}
     fmts: dict[str, tuple[str, list[str]]] = {}

@@ -63,6 +63,14 @@ Phase (see :func:`~gisnoise.flight.phases.phase_by_speed`)
     vertical speed exceeds 1 m/s and the horizontal speed, else ``hover`` below 3 m/s
     horizontal speed, else ``horizontal``.
 
+Logs cut short
+    A ``.ulg`` or ``.bin`` file that ends inside a message (the battery died, the SD card filled, a
+    download stopped) is read up to its last whole message, as pyulog and pymavlink do without a word;
+    the trajectory's metadata records the cut (``log_cut``) and maps and ``gisnoise campaign check``
+    show one warning (:func:`gisnoise.flight.logcut.log_cut_warning`).  A file cut inside its
+    definitions, before any logged data, is refused in one line naming it; any other error on a cut
+    file names the cut (:mod:`gisnoise.flight.logcut`).
+
 A log without battery voltage or current raises an error that names the way out:
 a constant ``power_w``.  A missing topic or message raises :class:`~gisnoise.errors.MissingColumnError`
 naming it and the file.

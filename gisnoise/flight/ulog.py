@@ -17,13 +17,15 @@ See :mod:`gisnoise.flight.logs` for the time base.
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
+from gisnoise.errors import GisnoiseError, InputError, MissingColumnError, TrajectoryError
 from gisnoise.flight._logkernels import (
     POWER_WAY_OUT,
     _at_rest_low,
@@ -36,6 +38,7 @@ from gisnoise.flight._logkernels import (
     msl_height_datum,
     msl_to_ellipsoid_undulation,
 )
+from gisnoise.flight.logcut import cut_error, refuse_cut_definitions, ulog_cut
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
@@ -76,12 +79,29 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         raise InputError("reading PX4 ULog needs pyulog (pip install 'gisnoise[logs]')", field="path") from None
     src = str(path)
     try:
-        with open(src, "rb") as fh:   # closed here also when pyulog gives up on a corrupt file
-            ulog = ULog(fh, list(_ULOG_TOPICS))
+        data = Path(src).read_bytes()
     except FileNotFoundError:
         raise TrajectoryError(f"{src}: no such file", field="path") from None
+    cut = ulog_cut(data)          # pyulog reads a cut file up to its last whole message without a word
+    refuse_cut_definitions(src, cut, "formats, info, parameters")
+    try:
+        ulog = ULog(io.BytesIO(data), list(_ULOG_TOPICS))
     except Exception as exc:  # pyulog raises bare exceptions on corrupt files
         raise TrajectoryError(f"{src}: not a readable ULog ({exc})", field="path") from None
+    try:
+        traj = _ulog_trajectory(src, ulog, start_utc, geoid_undulation_m, rate_hz, power_w)
+    except GisnoiseError as exc:
+        if cut is None:
+            raise
+        raise cut_error(src, exc, cut) from None
+    if cut is not None:
+        traj.metadata["log_cut"] = cut.metadata(float(traj.t[-1]))
+    return traj
+
+
+def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: float | None, rate_hz: float | None,
+                     power_w: float | None) -> Trajectory:
+    """The trajectory of a parsed ULog (see :func:`read_ulog`)."""
     topics: dict[str, list[dict[str, np.ndarray]]] = {}
     for d in ulog.data_list:
         topics.setdefault(d.name, []).append(d.data)

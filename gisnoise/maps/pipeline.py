@@ -24,6 +24,8 @@ Two rules hold for every face:
   metrics are evaluated over the flying stretches only (:func:`gisnoise.flight.flying_segments`)
   and summed in energy (LAmax the largest, SEL and LAeq as energy sums over the whole
   trajectory's period, time above added);
+* a flight log cut short (it ends inside a message: :mod:`gisnoise.flight.logcut`) is mapped up to its last
+  whole message, and a warning says the flight may go on beyond its last sample;
 * airborne samples without electric power (zero battery current while no landed flag is
   set): when no airborne sample has power, the log does not measure the current in flight
   and the map is refused (``power_w``, naming ``--power-w``); when some have power, the
@@ -49,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError, TrajectoryError
-from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
+from gisnoise.flight import Trajectory, flying_segments, ground_from_track, log_cut_warning, read_route
 from gisnoise.flight.ground import GROUND_TOLERANCE_M
 from gisnoise.geo import GridSpec, scale_factor
 from gisnoise.limits import check_receivers, check_work
@@ -198,7 +200,8 @@ def make_map(
     else:
         warnings = []
     scale = _crs_scale_warning(grid, traj)
-    warnings = [w for w in (below, unpowered, lying, scale) if w is not None] + power_warnings + warnings
+    warnings = [w for w in (log_cut_warning(traj), below, unpowered, lying, scale) if w is not None] \
+        + power_warnings + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir) if out_dir is not None else None
     if out is not None and out.exists() and not out.is_dir():

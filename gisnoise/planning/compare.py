@@ -34,7 +34,7 @@ from gisnoise.exposure import (
     population_points,
     population_scores,
 )
-from gisnoise.flight import Trajectory, ground_from_track, read_route
+from gisnoise.flight import Trajectory, ground_from_track, log_cut_warning, read_route
 from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
 from gisnoise.maps import CardSet, MapResult, evaluate_flying, write_geotiff
@@ -189,7 +189,8 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         row["route"] = n
         bands[n] = band
         rows.append(row)
-    warnings = [w for w in (_clipped(n, b, lv, metric) for n, b in bands.items()) if w is not None]
+    warnings = [w for w in (log_cut_warning(t) for t in trajs.values()) if w is not None]   # logs cut short
+    warnings += [w for w in (_clipped(n, b, lv, metric) for n, b in bands.items()) if w is not None]
     key = f"{float(rank_level_db):g}"
 
     def score(r: dict[str, Any]) -> tuple[float, float, float]:

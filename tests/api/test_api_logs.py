@@ -79,3 +79,18 @@ def test_bad_log_uploads_name_the_field(client, trajectory, field):
     req = {"trajectory": trajectory, "cards": [CARD], "grid": {"resolution_m": 20, "margin_m": 100}}
     body = assert_names_field(client.post("/contours", json=req), 422, None)
     assert body["field"].startswith("trajectory") and body["field"].endswith(field.rsplit(".", 1)[1])
+
+
+def test_cut_log_upload_is_mapped_with_a_warning_naming_the_upload(client):
+    """A log cut mid-message (a dead battery, a stopped download) is mapped up to the cut, and the GeoJSON's
+    warnings say so, naming the upload and never the server's temporary folder."""
+    raw = VTOL.read_bytes()
+    k = int(0.9 * len(raw))
+    req = {"trajectory": {"format": "log", "name": "hop_cut.ulg", "data_base64": base64.b64encode(raw[:k]).decode()},
+           "cards": [CARD], "grid": {"resolution_m": 20, "margin_m": 100}, "levels": [45, 50]}
+    r = client.post("/contours", json=req)
+    assert r.status_code == 200, r.text
+    named = [w for w in r.json()["gisnoise"]["warnings"] if "the file was cut" in w]
+    assert len(named) == 1 and named[0].startswith(f"hop_cut.ulg: the log ends mid-message at byte {k} of ")
+    whole = client.post("/contours", json={**req, "trajectory": _log(VTOL, "hop.ulg")})
+    assert not any("the file was cut" in w for w in whole.json()["gisnoise"]["warnings"])
