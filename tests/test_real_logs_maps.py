@@ -271,3 +271,34 @@ def test_campaign_check_reads_every_log(tmp_path, name):
     (root / "mics" / "m1" / "f1.csv").write_text("t,LA\n" + "".join(f"{t:.3f},60.0\n" for t in t_r))
     r = run("campaign", "check", str(root))
     assert r.exit_code == 0, r.output
+
+
+def test_copter_with_the_demo_cards_warns_naming_each_card_and_its_powers(tmp_path):
+    """log171 is a 1 kg quad drawing at most about 430 W (V x I of its CURR messages); the demo cards were fitted
+    on a 35 kg eVTOL's campaign at 2.3-9.9 kW: every flying sample of every phase lies below the card it uses, and
+    the map names each card with the powers it is used at."""
+    from gisnoise.data import card_path
+    from gisnoise.model import load, stated_power_range_w
+
+    ids = ("demo-horizontal", "demo-climb", "demo-sink")
+    out = tmp_path / "m"
+    r = CliRunner().invoke(cli, ["-q", "contour", str(COPTER), *sum((["--card", c] for c in ids), []), "--out",
+                                 str(out), "--resolution", "20", "--margin", "100", "--geoid-undulation", str(N_SITE)])
+    assert r.exit_code == 0, r.output
+    with rasterio.open(out / "levels.tif") as ds:
+        meta = json.loads(ds.tags()["gisnoise"])
+    tr = read_route(COPTER, geoid_undulation_m=N_SITE).trajectory
+    cards = {c: load(card_path(c)) for c in ids}
+    lowest = min(stated_power_range_w(c)[0] for c in cards.values())
+    assert tr.power_w[tr.flying].max() < 0.25 * lowest
+    outside = meta["power_outside_card_range"]
+    served = {c: (card.phase, *card.phases) for c, card in cards.items()}
+    used = [c for c in ids if np.isin(tr.phase[tr.flying], served[c]).any()]
+    assert sorted(outside) == sorted(used) and len(used) >= 2
+    for c in used:
+        pw = tr.power_w[tr.flying & np.isin(tr.phase, served[c])]
+        lo, hi = stated_power_range_w(cards[c])
+        assert outside[c] == {"range_w": [lo, hi], "used_w": [pw.min(), pw.max()], "samples": pw.size}
+        line = (f"card {c!r} is used at {pw.min():.4g}-{pw.max():.4g} W: {pw.size} flying sample(s) outside the "
+                f"{lo:.4g}-{hi:.4g} W it was fitted at")
+        assert line in r.stderr and any(line in w for w in meta["warnings"])
