@@ -270,3 +270,17 @@ def test_route_comparison_names_a_cut_log(tmp_path, card):
                          names=["cut", "whole"], margin_m=100.0)
     named = [w for w in cmp.doc["warnings"] if CUT in w]
     assert len(named) == 1 and named[0].startswith(f"{cut_path}: the log ends mid-message at byte ")
+
+
+def test_diagnose_names_a_cut_log_before_it_diagnoses(tmp_path, card):
+    """The diagnosis reads the campaign as campaign check does and says a cut log once, first (whatever the
+    diagnosis of this one-microphone campaign then finds); the uncut log's campaign gets no such line."""
+    cut_path = _write_cut(VTOL, int(0.9 * VTOL.stat().st_size), tmp_path)
+    r = run("diagnose", str(_campaign(tmp_path / "a", cut_path)), "--card", card, "--out", str(tmp_path / "d"),
+            "--no-report")
+    lines = [ln for ln in r.stderr.splitlines() if CUT in ln]
+    assert len(lines) == 1 and lines[0].startswith("warning: ") and "f1.ulg: the log ends mid-message" in lines[0]
+    assert r.stderr.splitlines()[0] == lines[0]
+    r = run("diagnose", str(_campaign(tmp_path / "b", VTOL)), "--card", card, "--out", str(tmp_path / "e"),
+            "--no-report")
+    assert CUT not in r.stderr

@@ -37,11 +37,16 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     and OUT/report.html with the figures.
     """
     from gisnoise.diagnose import run_diagnosis, with_mic_heights, write_diagnosis, write_report
+    from gisnoise.flight import log_cut_warning
     from gisnoise.measure import read_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     card = load(card_path)
     camp = read_campaign(campaign, absorption=absorption)
+    for f in camp.flights:  # a log cut short is diagnosed up to its cut, and said (as campaign check says it)
+        cut = log_cut_warning(camp.trajectories[f.id])
+        if cut is not None:
+            click.echo(f"warning: {cut}", err=True)
     samples = with_mic_heights(camp.samples(), campaign)
     names = list(effects) or None
     n_steps = 3 + (len(names) if names else 8)
