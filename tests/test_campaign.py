@@ -487,6 +487,20 @@ def test_unknown_mount(tmp_path):
     assert "ground_plate" in str(e.value)
 
 
+@pytest.mark.parametrize("h", [-2.99e56, 1e7])
+def test_an_origin_height_beyond_the_height_limits_is_refused(tmp_path, h):
+    """The origin's height follows the microphones' rule (limits.min_height_m..max_height_m): 3e56 m below the
+    ellipsoid put every position of the local frame near 1e56 m, where the microphone-drone distances of whole
+    flights round to 0 m (found by the campaign fuzzer)."""
+    root = make_campaign(tmp_path / "c")
+    doc = json.loads((root / "campaign.json").read_text())
+    doc["origin"]["h"] = h
+    (root / "campaign.json").write_text(json.dumps(doc, allow_nan=True))
+    with pytest.raises(CampaignError, match=r"campaign\.json: origin\.h: .* m is outside \[-500, ") as e:
+        read_campaign(root)
+    assert e.value.field == "origin.h"
+
+
 def test_wav_of_the_wrong_sample_rate(tmp_path):
     root = make_wav_campaign(tmp_path / "c", fs={"m1": 48000, "m2": 48000, "m3": 44100}, seconds=0.5)
     with pytest.raises(CampaignError, match=r"mics/m3/f1\.wav: sample_rate_hz is 44100 Hz, the campaign's other "

@@ -84,10 +84,15 @@ def _parse_header(cjs: str, doc: Mapping[str, Any], col: _Collector,
         col.add(cjs, "origin", f"{cjs}: field 'origin' needs numbers lat, lon, h, got {o!r}")
         ok = False
     else:
-        try:
+        try:  # the microphones' rule: coordinates in range (never wrapped), the height plausible
+            lim = current_limits()
+            check_range("origin.h", o["h"], lim.min_height_m, lim.max_height_m, unit="m", source=cjs)
             origin = LocalFrame(float(o["lat"]), float(o["lon"]), float(o["h"]))
         except GisnoiseError as exc:
-            col.add(cjs, "origin", f"{cjs}: field 'origin': {exc}")
+            if exc.field == "origin.h":
+                col.add(cjs, "origin.h", str(exc))
+            else:
+                col.add(cjs, "origin", f"{cjs}: field 'origin': {exc}")
             ok = False
     w = doc.get("weather", {})
     weather: dict[str, Any] = {}
