@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import GisnoiseError, InputError, MissingColumnError, TrajectoryError
+from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
 from gisnoise.flight._logkernels import (
     POWER_WAY_OUT,
     _at_rest_low,
@@ -33,7 +33,7 @@ from gisnoise.flight._logkernels import (
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.clock import gps_to_unix
-from gisnoise.flight.logcut import cut_error, dataflash_cut, refuse_cut_definitions
+from gisnoise.flight.logcut import dataflash_cut, read_cut, refuse_cut_definitions
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
 
@@ -69,14 +69,7 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
         reader = DFReader.DFReader_binary(src, zero_time_base=True)
     except Exception as exc:
         raise TrajectoryError(f"{src}: not a readable DataFlash log ({exc})", field="path") from None
-    try:
-        traj = _dataflash_trajectory(src, reader, start_utc, geoid_undulation_m, rate_hz, power_w)
-    except GisnoiseError as exc:
-        if cut is None:
-            raise
-        raise cut_error(src, exc, cut) from None
-    if cut is not None:
-        traj.metadata["log_cut"] = cut.metadata(float(traj.t[-1]))
+    traj: Trajectory = read_cut(src, cut, lambda: _dataflash_trajectory(src, reader, start_utc, geoid_undulation_m, rate_hz, power_w))
     return traj
 
 

@@ -29,13 +29,14 @@ that maps and ``gisnoise campaign check`` show.
 from __future__ import annotations
 
 import struct
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from gisnoise.errors import GisnoiseError, TrajectoryError
 
-__all__ = ["LogCut", "ulog_cut", "dataflash_cut", "refuse_cut_definitions", "cut_error", "log_cut_warning"]
+__all__ = ["LogCut", "ulog_cut", "dataflash_cut", "refuse_cut_definitions", "cut_error", "read_cut",
+           "log_cut_warning"]
 
 _ULOG_MAGIC = b"ULog\x01\x12\x35"
 _ULOG_TYPES = frozenset(b"BFIMPQARDLCSO")      # the message types of the ULog specification
@@ -228,6 +229,20 @@ def refuse_cut_definitions(src: str, cut: LogCut | None, definitions: str) -> No
 def cut_error(src: str, exc: GisnoiseError, cut: LogCut) -> GisnoiseError:
     """The reader's error ``exc`` on a cut log, with the cut named (same class and field)."""
     return type(exc)(f"{exc} (the log {cut.describe()}: the file was cut)", field=exc.field)
+
+
+def read_cut(src: str, cut: LogCut | None, read: Callable[[], Any]) -> Any:
+    """``read()`` (a reader's trajectory) with the cut of its file: named in the reader's errors
+    (:func:`cut_error`) and recorded in the trajectory's metadata (``log_cut``)."""
+    try:
+        traj = read()
+    except GisnoiseError as exc:
+        if cut is None:
+            raise
+        raise cut_error(src, exc, cut) from None
+    if cut is not None:
+        traj.metadata["log_cut"] = cut.metadata(float(traj.t[-1]))
+    return traj
 
 
 def log_cut_warning(traj: Any) -> str | None:

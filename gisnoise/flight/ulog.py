@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import GisnoiseError, InputError, MissingColumnError, TrajectoryError
+from gisnoise.errors import InputError, MissingColumnError, TrajectoryError
 from gisnoise.flight._logkernels import (
     POWER_WAY_OUT,
     _at_rest_low,
@@ -38,7 +38,7 @@ from gisnoise.flight._logkernels import (
     msl_height_datum,
     msl_to_ellipsoid_undulation,
 )
-from gisnoise.flight.logcut import cut_error, refuse_cut_definitions, ulog_cut
+from gisnoise.flight.logcut import read_cut, refuse_cut_definitions, ulog_cut
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
@@ -88,14 +88,7 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         ulog = ULog(io.BytesIO(data), list(_ULOG_TOPICS))
     except Exception as exc:  # pyulog raises bare exceptions on corrupt files
         raise TrajectoryError(f"{src}: not a readable ULog ({exc})", field="path") from None
-    try:
-        traj = _ulog_trajectory(src, ulog, start_utc, geoid_undulation_m, rate_hz, power_w)
-    except GisnoiseError as exc:
-        if cut is None:
-            raise
-        raise cut_error(src, exc, cut) from None
-    if cut is not None:
-        traj.metadata["log_cut"] = cut.metadata(float(traj.t[-1]))
+    traj: Trajectory = read_cut(src, cut, lambda: _ulog_trajectory(src, ulog, start_utc, geoid_undulation_m, rate_hz, power_w))
     return traj
 
 
