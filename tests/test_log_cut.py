@@ -284,3 +284,15 @@ def test_diagnose_names_a_cut_log_before_it_diagnoses(tmp_path, card):
     r = run("diagnose", str(_campaign(tmp_path / "b", VTOL)), "--card", card, "--out", str(tmp_path / "e"),
             "--no-report")
     assert CUT not in r.stderr
+
+
+def test_fit_names_a_cut_log_before_it_fits(tmp_path, card):
+    """``gisnoise fit`` reads the campaign as campaign check does and says a cut log once, first (whatever the fit
+    of this one-microphone campaign then gives); the uncut log's campaign gets no such line."""
+    cut_path = _write_cut(VTOL, int(0.9 * VTOL.stat().st_size), tmp_path)
+    r = run("fit", str(_campaign(tmp_path / "a", cut_path)), "--phase", "hover", "--out", str(tmp_path / "a.json"))
+    lines = [ln for ln in r.stderr.splitlines() if CUT in ln]
+    assert len(lines) == 1 and lines[0].startswith("warning: ") and "f1.ulg: the log ends mid-message" in lines[0]
+    assert r.stderr.splitlines()[0] == lines[0]
+    r = run("fit", str(_campaign(tmp_path / "b", VTOL)), "--phase", "hover", "--out", str(tmp_path / "b.json"))
+    assert CUT not in r.stderr

@@ -83,7 +83,9 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
     converge, or whose parameters the data cannot tell apart, writes no card and
     says why.  An existing --out is refused unless it is a model card and --force is given.
     """
+    from gisnoise.flight import log_cut_warning
     from gisnoise.identify import fit_campaign
+    from gisnoise.measure import read_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     _check_out(out, force)
@@ -94,9 +96,14 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
     template = load(start) if start else None
     name = ansatz or (template.ansatz if template else "paper-offset")
     fixed = _parse_fix(fix)
+    camp = read_campaign(campaign, absorption=absorption)
+    for f in camp.flights:  # a log cut short is fitted up to its cut, and said (as campaign check says it)
+        cut = log_cut_warning(camp.trajectories[f.id])
+        if cut is not None:
+            click.echo(f"warning: {cut}", err=True)
     with progress(ctx, f"fitting {phase}", float(max_iter)) as update:
-        res = fit_campaign(campaign, phase, name, p0=template, fixed=fixed or None, max_iter=max_iter,
-                           progress=lambda i, cost: update(float(i)), read_kw={"absorption": absorption})
+        res = fit_campaign(camp, phase, name, p0=template, fixed=fixed or None, max_iter=max_iter,
+                           progress=lambda i, cost: update(float(i)))
     card = res.to_card(template, id=card_id, phase=phase, phases=list(serves) if serves else None,
                        covariance=covariance)
     path = save(card, out, overwrite=force)  # a card written there during the fit is not replaced either
