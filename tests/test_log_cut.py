@@ -8,25 +8,19 @@ pyulog and pymavlink reading the uncut files: what a cut file gives is the uncut
 import json
 import shutil
 import struct
-from pathlib import Path
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
 
-from gisnoise.cli.main import cli
 from gisnoise.errors import TrajectoryError
 from gisnoise.flight import dataflash_cut, log_cut_warning, read_flight, ulog_cut
-from gisnoise.model import ModelCard, save
 
 pyulog = pytest.importorskip("pyulog")
 DFReader = pytest.importorskip("pymavlink.DFReader")
 
-DATA = Path(__file__).parent / "data"
-VTOL = DATA / "pyulog_sample_log_small_vtol.ulg"
-QUAD = DATA / "robologs_test_quad_fmuv5.ulg"
-COPTER = DATA / "dronekit_la_testdata_log171_copter.bin"
-N_SITE = 22.0   # geoid undulation given for the ArduPilot log (Canberra), m
+# the real logs, their site's geoid undulation and the command runner
+from test_real_logs_maps import COPTER, N_SITE, QUAD, VTOL, run  # noqa: E402
+
 CUT = "the file was cut"
 
 
@@ -42,18 +36,6 @@ def _write_cut(src, k, tmp_path):
 
 def _read(path):
     return read_flight(path, geoid_undulation_m=N_SITE)
-
-
-@pytest.fixture()
-def card(tmp_path):
-    c = ModelCard(id="omni", vehicle="test", phase="hover", ansatz="paper-offset",
-                  parameters=dict(p0=65.0, p1=10.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
-                  reference_power_w=300.0, phases=("horizontal", "climb", "sink", "transition"))
-    return str(save(c, tmp_path / "omni.json"))
-
-
-def run(*args):
-    return CliRunner().invoke(cli, ["-q", *args], catch_exceptions=False)
 
 
 # ----------------------------------------------------------------------------- complete logs
@@ -203,17 +185,17 @@ def test_ulog_framing_header_cut_and_appended_data():
 
 
 # ----------------------------------------------------------------------------- the faces
-def test_map_of_a_cut_log_says_so_once_and_in_the_contours(tmp_path, card):
+def test_map_of_a_cut_log_says_so_once_and_in_the_contours(tmp_path, omni_card):
     cut_path = _write_cut(VTOL, int(0.9 * VTOL.stat().st_size), tmp_path)
     out = tmp_path / "m"
-    r = run("contour", str(cut_path), "--card", card, "--out", str(out), "--resolution", "20", "--margin", "100")
+    r = run("contour", str(cut_path), "--card", omni_card, "--out", str(out), "--resolution", "20", "--margin", "100")
     assert r.exit_code == 0, r.output
     lines = [ln for ln in r.stderr.splitlines() if CUT in ln]
     assert len(lines) == 1 and lines[0].startswith(f"warning: {cut_path}: the log ends mid-message at byte ")
     doc = json.loads((out / "contours.geojson").read_text())
     assert sum(CUT in w for w in doc["gisnoise"]["warnings"]) == 1
     # the uncut log: no such warning
-    r = run("contour", str(VTOL), "--card", card, "--out", str(tmp_path / "u"), "--resolution", "20", "--margin",
+    r = run("contour", str(VTOL), "--card", omni_card, "--out", str(tmp_path / "u"), "--resolution", "20", "--margin",
             "100")
     assert r.exit_code == 0 and CUT not in r.output
     doc = json.loads((tmp_path / "u" / "contours.geojson").read_text())
@@ -252,7 +234,7 @@ def test_campaign_check_names_a_cut_log_without_failing(tmp_path):
     assert r.exit_code == 0 and CUT not in r.output
 
 
-def test_route_comparison_names_a_cut_log(tmp_path, card):
+def test_route_comparison_names_a_cut_log(tmp_path, omni_card):
     import rasterio
     from affine import Affine
     from pyproj import CRS
@@ -266,27 +248,27 @@ def test_route_comparison_names_a_cut_log(tmp_path, card):
     with rasterio.open(tmp_path / "pop.tif", "w", driver="GTiff", width=20, height=20, count=1, dtype="float32",
                        crs=CRS.from_user_input(tmerc).to_wkt(), transform=Affine(10.0, 0, -100.0, 0, -10.0, 100.0)) as d:
         d.write(np.ones((20, 20), dtype=np.float32), 1)
-    cmp = compare_routes([cut_path, VTOL], [card], population=read_population(tmp_path / "pop.tif"),
+    cmp = compare_routes([cut_path, VTOL], [omni_card], population=read_population(tmp_path / "pop.tif"),
                          names=["cut", "whole"], margin_m=100.0)
     named = [w for w in cmp.doc["warnings"] if CUT in w]
     assert len(named) == 1 and named[0].startswith(f"{cut_path}: the log ends mid-message at byte ")
 
 
-def test_diagnose_names_a_cut_log_before_it_diagnoses(tmp_path, card):
+def test_diagnose_names_a_cut_log_before_it_diagnoses(tmp_path, omni_card):
     """The diagnosis reads the campaign as campaign check does and says a cut log once, first (whatever the
     diagnosis of this one-microphone campaign then finds); the uncut log's campaign gets no such line."""
     cut_path = _write_cut(VTOL, int(0.9 * VTOL.stat().st_size), tmp_path)
-    r = run("diagnose", str(_campaign(tmp_path / "a", cut_path)), "--card", card, "--out", str(tmp_path / "d"),
+    r = run("diagnose", str(_campaign(tmp_path / "a", cut_path)), "--card", omni_card, "--out", str(tmp_path / "d"),
             "--no-report")
     lines = [ln for ln in r.stderr.splitlines() if CUT in ln]
     assert len(lines) == 1 and lines[0].startswith("warning: ") and "f1.ulg: the log ends mid-message" in lines[0]
     assert r.stderr.splitlines()[0] == lines[0]
-    r = run("diagnose", str(_campaign(tmp_path / "b", VTOL)), "--card", card, "--out", str(tmp_path / "e"),
+    r = run("diagnose", str(_campaign(tmp_path / "b", VTOL)), "--card", omni_card, "--out", str(tmp_path / "e"),
             "--no-report")
     assert CUT not in r.stderr
 
 
-def test_fit_names_a_cut_log_before_it_fits(tmp_path, card):
+def test_fit_names_a_cut_log_before_it_fits(tmp_path):
     """``gisnoise fit`` reads the campaign as campaign check does and says a cut log once, first (whatever the fit
     of this one-microphone campaign then gives); the uncut log's campaign gets no such line."""
     cut_path = _write_cut(VTOL, int(0.9 * VTOL.stat().st_size), tmp_path)

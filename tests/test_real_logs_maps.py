@@ -14,7 +14,6 @@ from click.testing import CliRunner
 
 from gisnoise.cli.main import cli
 from gisnoise.flight import LOG_MAP_RATE_HZ, flying_segments, read_route
-from gisnoise.model import ModelCard, save
 
 pyulog = pytest.importorskip("pyulog")
 DFReader = pytest.importorskip("pymavlink.DFReader")
@@ -26,14 +25,6 @@ VTOL = DATA / "pyulog_sample_log_small_vtol.ulg"
 QUAD = DATA / "robologs_test_quad_fmuv5.ulg"
 COPTER = DATA / "dronekit_la_testdata_log171_copter.bin"
 N_SITE = 22.0   # geoid undulation given for the ArduPilot log (Canberra), m
-
-
-@pytest.fixture()
-def card(tmp_path):
-    c = ModelCard(id="omni", vehicle="test", phase="hover", ansatz="paper-offset",
-                  parameters=dict(p0=65.0, p1=10.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
-                  reference_power_w=300.0, phases=("horizontal", "climb", "sink", "transition"))
-    return str(save(c, tmp_path / "omni.json"))
 
 
 def run(*args):
@@ -171,10 +162,10 @@ def test_copter_lying_upside_down_at_the_end_does_not_fly():
     assert not tr.lying[t_abs < raw["first_inverted"]].any()
 
 
-def test_copter_map_names_the_upside_down_samples_and_is_silent_there(tmp_path, card):
+def test_copter_map_names_the_upside_down_samples_and_is_silent_there(tmp_path, omni_card):
     raw = _copter_end_raw()
     out = tmp_path / "m"
-    r = CliRunner().invoke(cli, ["-q", "contour", str(COPTER), "--card", card, "--out", str(out), "--resolution", "20",
+    r = CliRunner().invoke(cli, ["-q", "contour", str(COPTER), "--card", omni_card, "--out", str(out), "--resolution", "20",
                                  "--margin", "100", "--geoid-undulation", str(N_SITE)])
     assert r.exit_code == 0, r.output
     tr = read_route(COPTER, geoid_undulation_m=N_SITE).trajectory
@@ -188,11 +179,11 @@ def test_copter_map_names_the_upside_down_samples_and_is_silent_there(tmp_path, 
 
 
 @pytest.mark.parametrize("name,extra", [(VTOL, ()), (QUAD, ()), (COPTER, ("--geoid-undulation", str(N_SITE)))])
-def test_every_log_makes_a_map_and_on_ground_samples_are_silent(tmp_path, card, name, extra):
+def test_every_log_makes_a_map_and_on_ground_samples_are_silent(tmp_path, omni_card, name, extra):
     log = tmp_path / (name.stem + name.suffix.upper())        # .ULG / .BIN as some autopilots write them
     shutil.copy(name, log)
     out = tmp_path / "map"
-    r = run("contour", str(log), "--card", card, "--out", str(out), "--resolution", "20", "--margin", "100",
+    r = run("contour", str(log), "--card", omni_card, "--out", str(out), "--resolution", "20", "--margin", "100",
             *extra)
     assert r.exit_code == 0, r.output
     with rasterio.open(out / "levels.tif") as ds:
@@ -208,7 +199,7 @@ def test_every_log_makes_a_map_and_on_ground_samples_are_silent(tmp_path, card, 
     assert 30.0 < lamax.max() <= bound + 1e-6
 
 
-def test_quad_airborne_samples_without_current_are_silent_and_named(tmp_path, card):
+def test_quad_airborne_samples_without_current_are_silent_and_named(tmp_path, omni_card):
     """The quad's land detector says airborne for about a second after each 0.2 m hop while the battery's
     coulomb count stands still (no current): those samples are silent, and the warning counts them."""
     tr = read_route(QUAD).trajectory
@@ -217,7 +208,7 @@ def test_quad_airborne_samples_without_current_are_silent_and_named(tmp_path, ca
     airborne = ~landed[np.clip(np.searchsorted(tl, t_abs, side="right") - 1, 0, len(tl) - 1)]
     unpowered = airborne & (sum(np.interp(t_abs, tb, pw) for tb, pw in bats) <= 0)
     assert 0 < unpowered.sum() < airborne.sum()
-    r = CliRunner().invoke(cli, ["-q", "contour", str(QUAD), "--card", card, "--out", str(tmp_path / "m"),
+    r = CliRunner().invoke(cli, ["-q", "contour", str(QUAD), "--card", omni_card, "--out", str(tmp_path / "m"),
                                  "--resolution", "20", "--margin", "100"])
     assert r.exit_code == 0, r.output
     named = f"{int(unpowered.sum())} of {int(airborne.sum())} airborne samples draw no battery current"
@@ -228,18 +219,18 @@ def test_quad_airborne_samples_without_current_are_silent_and_named(tmp_path, ca
     assert any(named in w for w in doc["gisnoise"]["warnings"])
 
 
-def test_track_without_current_in_flight_names_power_w(tmp_path, card):
+def test_track_without_current_in_flight_names_power_w(tmp_path, omni_card):
     """A log that measures no current in flight (every airborne sample at 0 W): one line naming --power-w."""
     tr = read_route(VTOL).trajectory
     csv = tmp_path / "no_current.csv"
     tr.with_(power_w=np.zeros(len(tr))).to_csv(csv)
-    r = run("contour", str(csv), "--card", card, "--out", str(tmp_path / "m"), "--ground-height", str(tr.h.min()))
+    r = run("contour", str(csv), "--card", omni_card, "--out", str(tmp_path / "m"), "--ground-height", str(tr.h.min()))
     assert r.exit_code == 2
     assert "--power-w" in r.output and "all" in r.output and len(r.output.strip().splitlines()) == 1
 
 
-def test_copter_log_without_undulation_or_geoid_grid_names_the_option(tmp_path, card, no_geoid_grid):
-    r = run("contour", str(COPTER), "--card", card, "--out", str(tmp_path / "m"))
+def test_copter_log_without_undulation_or_geoid_grid_names_the_option(tmp_path, omni_card, no_geoid_grid):
+    r = run("contour", str(COPTER), "--card", omni_card, "--out", str(tmp_path / "m"))
     assert r.exit_code == 2 and "--geoid-undulation" in r.output
 
 

@@ -23,6 +23,7 @@ import io
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -146,11 +147,14 @@ class Trajectory:
             fly &= ~self.on_ground
         return fly & ~self.lying
 
-    @property
+    @cached_property
     def lying(self) -> np.ndarray:
         """True on samples where the vehicle lies upside down: inverted and at rest for 1 s or longer
-        (:func:`gisnoise.flight.rest.lying_inverted`)."""
-        return lying_inverted(self.t, self.lat, self.lon, self.h, self.roll, self.pitch)
+        (:func:`gisnoise.flight.rest.lying_inverted`).  Found once per trajectory (its arrays are not changed
+        after it is made; :meth:`select` and :meth:`with_` make new ones); read-only."""
+        out = lying_inverted(self.t, self.lat, self.lon, self.h, self.roll, self.pitch)
+        out.flags.writeable = False
+        return out
 
     def origin(self) -> LocalFrame:
         """A local frame at the first sample's ground point (h0 = min height)."""

@@ -52,9 +52,8 @@ import numpy as np
 
 from gisnoise.errors import InputError, TrajectoryError
 from gisnoise.flight import Trajectory, flying_segments, ground_from_track, log_cut_warning, read_route
-from gisnoise.flight.ground import GROUND_TOLERANCE_M
 from gisnoise.geo import GridSpec, scale_factor
-from gisnoise.limits import check_receivers, check_work
+from gisnoise.limits import GROUND_TOLERANCE_M, check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.clipping import clip_warnings, parse_levels
 from gisnoise.maps.contours import contours_text, write_geojson
@@ -318,7 +317,7 @@ def _below_track_ground(traj: Trajectory, ground_h: float | None) -> str | None:
     """The warning for a track that flies lower than the ground taken from its own take-off or landing point.
 
     Logged heights drift (GPS heights of a hovering vehicle wander by metres); more than
-    :data:`~gisnoise.flight.ground.GROUND_TOLERANCE_M` below that ground the UAV is put under the receivers.
+    :data:`~gisnoise.limits.GROUND_TOLERANCE_M` below that ground the UAV is put under the receivers.
     """
     fly = traj.flying
     if ground_h is None or not fly.any():
