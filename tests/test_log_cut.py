@@ -251,7 +251,7 @@ def test_route_comparison_names_a_cut_log(tmp_path, omni_card):
     cmp = compare_routes([cut_path, VTOL], [omni_card], population=read_population(tmp_path / "pop.tif"),
                          names=["cut", "whole"], margin_m=100.0)
     named = [w for w in cmp.doc["warnings"] if CUT in w]
-    assert len(named) == 1 and named[0].startswith(f"{cut_path}: the log ends mid-message at byte ")
+    assert len(named) == 1 and named[0].startswith(f"cut: {cut_path}: the log ends mid-message at byte ")
 
 
 def test_diagnose_names_a_cut_log_before_it_diagnoses(tmp_path, omni_card):

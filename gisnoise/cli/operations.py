@@ -98,6 +98,11 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
         doc = operations_exposure(res, sched, population=pop, buildings=bld, facade_height_m=facade_height)
         ex = write_exposure(doc, out)
         paths["exposure"], paths["table"] = ex["exposure"], ex["table"]
+    from gisnoise.maps import clip_warnings
+
+    contoured = list(lv if lv is not None else sched.levels_db)
+    for w in res.metadata["warnings"] + (clip_warnings(res, contoured, metrics=["Lden", "Lnight"]) if contoured else []):
+        click.echo(f"warning: {w}", err=True)
     g = res.grid
     ex = res.metadata["execution"]
     how = (f"Dask ({ex['workers']} workers, {ex['tasks']} tasks)" if ex["executor"] == "dask"

@@ -51,16 +51,16 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError, TrajectoryError
-from gisnoise.flight import Trajectory, flying_segments, ground_from_track, log_cut_warning, read_route
-from gisnoise.geo import GridSpec, scale_factor
-from gisnoise.limits import GROUND_TOLERANCE_M, check_receivers, check_work
+from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
+from gisnoise.geo import GridSpec
+from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.clipping import clip_warnings, parse_levels
 from gisnoise.maps.contours import contours_text, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
+from gisnoise.maps.flightchecks import crs_scale_warning, flight_findings
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map
-from gisnoise.maps.powers import check_power_ranges
 from gisnoise.maps.prepare import dem_nodata_warning
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
@@ -189,18 +189,14 @@ def make_map(
     check_receivers(receiver_height, ground_h, traj.h[traj.flying] if traj.flying.any() else traj.h)
     from_track = ground_h is None and dem is None and route.ground_h_m is None and "ground_h_m" not in traj.metadata
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
-    below = _below_track_ground(traj, ground_h) if from_track else None
-    unpowered = _airborne_without_power(traj)
-    lying = _lying_upside_down(traj)
-    power_warnings, outside_range = check_power_ranges(traj, cardset)
+    found = flight_findings(traj, cardset, ground_h=ground_h if from_track else None)
     if grid is None:
         grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
                                       background=background, sel="SEL" in metrics)
     else:
         warnings = []
-    scale = _crs_scale_warning(grid, traj)
-    warnings = [w for w in (log_cut_warning(traj), below, unpowered, lying, scale) if w is not None] \
-        + power_warnings + warnings
+    scale = crs_scale_warning(grid, traj.lon, traj.lat)
+    warnings = found.warnings + ([scale] if scale is not None else []) + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir) if out_dir is not None else None
     if out is not None and out.exists() and not out.is_dir():
@@ -223,8 +219,8 @@ def make_map(
     # the vertical datum of the track (flight logs: MSL + geoid undulation, and which; the estimator's height)
     result.metadata.setdefault("trajectory", {}).update(
         {k: traj.metadata[k] for k in TRACK_HEIGHT_KEYS if k in traj.metadata})
-    if outside_range:
-        result.metadata["power_outside_card_range"] = outside_range
+    if found.power_outside:
+        result.metadata["power_outside_card_range"] = found.power_outside
     result.metadata["levels_db"] = lv
     dem_gap = dem_nodata_warning(result.metadata)
     warnings = warnings + ([dem_gap] if dem_gap is not None else []) + clip_warnings(result, lv)
@@ -253,82 +249,12 @@ def make_map(
     return paths
 
 
-def _airborne_without_power(traj: Trajectory) -> str | None:
-    """The rule for airborne samples (not ``on_ground``) without electric power (see the module docstring).
-
-    None when there are none; an error when no airborne sample has power (the log does not measure the current
-    in flight: the way out is a constant power); else the warning that names them (they are silent).
-    """
-    if traj.on_ground is None:
-        return None
-    airborne = ~traj.on_ground
-    silent = airborne & (traj.power_w <= 0)
-    if not silent.any():
-        return None
-    i = int(np.flatnonzero(silent)[0])
-    if silent.sum() == airborne.sum():
-        raise InputError(f"{traj.source}: electric power is zero on all {int(silent.sum())} airborne samples (first "
-                         f"at t = {traj.t[i]:.2f} s: the battery current is not measured in flight); give a "
-                         f"constant power (--power-w W, field power_w)", field="power_w")
-    return (f"{traj.source}: {int(silent.sum())} of {int(airborne.sum())} airborne samples draw no battery current "
-            f"(first at t = {traj.t[i]:.2f} s; motors stopped while the land detector still says airborne, or a "
-            f"current sensor dropout): silent on the map; --power-w W maps the whole flight at a constant power")
-
-
-def _lying_upside_down(traj: Trajectory) -> str | None:
-    """The warning for samples that draw power and are not marked on the ground, yet lie upside down
-    (:attr:`~gisnoise.flight.Trajectory.lying`): silent on the map; None when there are none."""
-    lie = traj.lying & (traj.power_w > 0)
-    if traj.on_ground is not None:
-        lie &= ~traj.on_ground
-    if not lie.any():
-        return None
-    i = np.flatnonzero(lie)
-    return (f"{traj.source}: {i.size} samples from t = {traj.t[i[0]]:.1f} s to {traj.t[i[-1]]:.1f} s lie upside down "
-            f"at rest (roll {traj.roll[i[0]]:.0f} deg, pitch {traj.pitch[i[0]]:.0f} deg; a vehicle cannot hover "
-            f"inverted: a crash), drawing {float(np.mean(traj.power_w[i])):.0f} W with no landing logged: not flying, "
-            f"silent on the map")
-
-
-CRS_SCALE_TOLERANCE = 0.01
-"""Largest departure of the grid CRS's scale factor from 1 at the map before the map says so (1 %)."""
-
-
-def _crs_scale_warning(grid: Any, traj: Trajectory) -> str | None:
-    """The warning for a grid CRS whose scale at the track is far from 1: its cells are not their size on the ground."""
-    k = scale_factor(grid.crs, float(np.mean(traj.lon)), float(np.mean(traj.lat)))
-    if k is None or not np.isfinite(k) or abs(k - 1.0) <= CRS_SCALE_TOLERANCE:  # None: PROJ has no scale for it
-        return None
-    cell = abs(float(grid.transform.a))
-    name = grid.crs.to_string()
-    return (f"crs: {name} scales distances by {k:.3f} at the map: its {cell:g} m cells are {cell / k:.1f} m on "
-            f"the ground and the margin shrinks alike (a local UTM zone, the default, keeps them true)")
-
-
 TRACK_HEIGHT_KEYS = ("height_datum", "height_note", "height_anchor_m", "height_anchor_range_m", "height_resets",
                      "geoid_model", "geoid_undulation_m")
 """The trajectory metadata on its heights that the map metadata repeats (see :mod:`gisnoise.flight.logs`)."""
 
 GROUND_FROM_TRACK = "take-off or landing point of the track"
 """The map metadata's ``ground_h_source`` when the ground is the track's own take-off or landing height."""
-
-
-def _below_track_ground(traj: Trajectory, ground_h: float | None) -> str | None:
-    """The warning for a track that flies lower than the ground taken from its own take-off or landing point.
-
-    Logged heights drift (GPS heights of a hovering vehicle wander by metres); more than
-    :data:`~gisnoise.limits.GROUND_TOLERANCE_M` below that ground the UAV is put under the receivers.
-    """
-    fly = traj.flying
-    if ground_h is None or not fly.any():
-        return None
-    i = int(np.argmin(np.where(fly, traj.h, np.inf)))
-    depth = ground_h - float(traj.h[i])
-    if depth <= GROUND_TOLERANCE_M:
-        return None
-    return (f"{traj.source}: the track flies up to {depth:.1f} m below the ground taken from its take-off or landing "
-            f"point ({ground_h:.1f} m; at t = {traj.t[i]:.1f} s): its logged heights drift, and there the UAV is put "
-            f"under the receivers; give the ground with --ground-height M (field ground_h_m) or --dem DEM.tif")
 
 
 def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: float | None = None) -> float | None:

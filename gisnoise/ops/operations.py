@@ -27,6 +27,12 @@ there is below ``duration 10^(floor/10)``, so each level band is kept where the 
 flights could move it by at most 0.01 dB and NaN elsewhere (LAmax: kept where at or
 above the floor).  N-above and time above are exact; their thresholds must not lie
 below the floor.
+
+Every flight is checked as a map of it is (:func:`schedule_findings`, :mod:`gisnoise.maps.flightchecks`): a log
+cut short, a track below the ground taken from the flights, airborne samples without power, a crashed vehicle
+lying upside down, powers outside a card's fitted range; the warnings are the result's ``metadata["warnings"]``
+(kept in ``summary.json`` and the contours' GeoJSON, printed by ``gisnoise operations``) and the refusals come
+before any evaluation.
 """
 
 from __future__ import annotations
@@ -39,14 +45,14 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.geo import GridSpec
-from gisnoise.maps import MapResult, band_unit, default_threads
+from gisnoise.maps import CardSet, MapResult, band_unit, crs_scale_warning, default_threads, flight_findings
 from gisnoise.ops.accumulate import new_accumulators, period_bands
 from gisnoise.ops.periods import PENALTY_DB, PERIOD_HOURS, PERIOD_START_H, PERIODS
 from gisnoise.ops.scale import SCHEDULER_ENV, run_on_dask
 from gisnoise.ops.schedule import Schedule
-from gisnoise.ops.tiles import DEFAULT_TILE_CELLS, make_plan, run_local, tile_windows
+from gisnoise.ops.tiles import DEFAULT_TILE_CELLS, flights_ground, make_plan, run_local, tile_windows
 
-__all__ = ["evaluate_operations"]
+__all__ = ["evaluate_operations", "schedule_findings"]
 
 _LOCAL_TILES_PER_THREAD = 8
 """Tiles per thread at least, in one process: every thread busy, the progress in steps of a few per cent."""
@@ -103,6 +109,7 @@ def evaluate_operations(
     if not isinstance(schedule, Schedule):
         raise InputError(f"schedule must be a Schedule, got {type(schedule).__name__}", field="schedule")
     grid = schedule.receiver_grid() if grid is None else grid
+    warnings, outside = schedule_findings(schedule, grid)  # before any evaluation: a refusal costs none
     plan = make_plan(schedule, grid)
     if single_process and (scheduler or workers):
         raise InputError("single_process excludes scheduler and workers", field="single_process")
@@ -156,5 +163,42 @@ def evaluate_operations(
         "engine": "fast",
         "tiles": len(windows),
         "execution": how,
+        "warnings": warnings,
     }
+    if outside:
+        meta["power_outside_card_range"] = outside
     return MapResult(bands=bands, grid=grid, metadata=meta)
+
+
+GROUND_FROM_FLIGHTS = "a take-off or landing point of a flight, or a route's stated ground"
+"""Where a day's ground came from when the schedule gives neither ``ground_h_m`` nor ``dem``."""
+
+
+def schedule_findings(schedule: Schedule, grid: GridSpec) -> tuple[list[str], dict[str, Any]]:
+    """The checks a map makes of its flight (:func:`gisnoise.maps.flight_findings`) on every flight with a count,
+    and the grid's CRS scale check at the flights.
+
+    Returns the warnings (a warning several flights share is one line naming them all: ``flights a, b: ...``) and,
+    per flight, the cards used outside the powers they were fitted at.  Raises
+    :class:`~gisnoise.errors.InputError` as a map of the flight would (a card valid only at the power flown meets
+    other powers; no airborne sample draws power).
+    """
+    ground = flights_ground(schedule)
+    said: dict[str, list[str]] = {}
+    outside: dict[str, Any] = {}
+    for f in schedule.flights:
+        if f.total == 0:
+            continue
+        cards = f.cards if f.cards is not None else schedule.cards
+        found = flight_findings(f.trajectory, cards if isinstance(cards, CardSet) else CardSet(cards),
+                                ground_h=ground, ground_from=GROUND_FROM_FLIGHTS,
+                                ground_hint="the schedule's ground_h_m or dem")
+        for w in found.warnings:
+            said.setdefault(w, []).append(f.id)
+        if found.power_outside:
+            outside[f.id] = found.power_outside
+    warnings = [f"flight{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {w}" for w, ids in said.items()]
+    lon = np.concatenate([f.trajectory.lon for f in schedule.flights])
+    lat = np.concatenate([f.trajectory.lat for f in schedule.flights])
+    scale = crs_scale_warning(grid, lon, lat)
+    return warnings + ([scale] if scale is not None else []), outside

@@ -37,7 +37,7 @@ from gisnoise.maps import (
 from gisnoise.ops.accumulate import accumulate, new_accumulators
 from gisnoise.ops.schedule import Schedule
 
-__all__ = ["DEFAULT_TILE_CELLS", "FlightParts", "Plan", "make_plan", "run_local", "tile_windows"]
+__all__ = ["DEFAULT_TILE_CELLS", "FlightParts", "Plan", "flights_ground", "make_plan", "run_local", "tile_windows"]
 
 log = logging.getLogger(__name__)
 
@@ -109,6 +109,15 @@ class Plan:
     floor_db: float | None = None
 
 
+def flights_ground(schedule: Schedule) -> float | None:
+    """The flat ground the flights give when the schedule states neither ground nor DEM: the lowest of their
+    stated grounds and take-off or landing points (:attr:`Flight.ground_h_m`); None when the schedule gives it."""
+    if schedule.ground_h_m is not None or schedule.dem is not None:
+        return None
+    stated = [f.ground_h_m for f in schedule.flights if f.ground_h_m is not None]
+    return min(stated) if stated else None
+
+
 def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
     """The receivers of ``grid`` and every flight with a count in their frame, in schedule order.
 
@@ -116,11 +125,7 @@ def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
     routes state, else at the lowest point of the flights.
     """
     require_numba()
-    ground_h = schedule.ground_h_m
-    if ground_h is None and schedule.dem is None:
-        stated = [f.ground_h_m for f in schedule.flights if f.ground_h_m is not None]
-        if stated:
-            ground_h = min(stated)
+    ground_h = schedule.ground_h_m if schedule.ground_h_m is not None else flights_ground(schedule)
     rc = receivers_for(grid, [f.trajectory for f in schedule.flights], receiver_height=schedule.receiver_height_m,
                        dem=schedule.dem, ground_h=ground_h, dem_offset_m=schedule.dem_offset_m)
     if schedule.ground_h_m is None and schedule.dem is None and ground_h is not None and rc.ground is not None:

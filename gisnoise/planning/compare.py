@@ -6,7 +6,10 @@ for every route), evaluates each with the map evaluator and measures its exposur
 (:mod:`gisnoise.exposure`): people above each level, the peak level at any dwelling
 (most exposed façade), and the total exposure in person-dB above the lowest level
 (``sum over people of max(L - L_low, 0)``).  Routes are ranked by people above the
-ranking level, then by person-dB, then by the peak dwelling level.
+ranking level, then by person-dB, then by the peak dwelling level.  Each route is checked as a map
+of it is (:func:`gisnoise.maps.flight_findings`: a log cut short, a track below the ground taken from the
+routes, airborne samples without power, a crash, powers outside a card's fitted range) before any
+evaluation; its warnings, named by route, lead the document's ``warnings``.
 
 :func:`write_comparison` writes ``comparison.json`` (schema ``gisnoise/comparison/1``),
 ``comparison.md`` (the table), ``levels.tif`` (the metric of every route, one band per
@@ -34,14 +37,17 @@ from gisnoise.exposure import (
     population_points,
     population_scores,
 )
-from gisnoise.flight import Trajectory, ground_from_track, log_cut_warning, read_route
+from gisnoise.flight import Trajectory, ground_from_track, read_route
 from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
-from gisnoise.maps import CardSet, MapResult, evaluate_flying, write_geotiff
+from gisnoise.maps import CardSet, MapResult, crs_scale_warning, evaluate_flying, flight_findings, write_geotiff
 
 __all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
 
 COMPARISON_SCHEMA = "gisnoise/comparison/1"
+
+GROUND_FROM_ROUTES = "a route's take-off or landing point or stated ground"
+"""Where the common ground came from when no ground is given (the words of the below-ground warning)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,17 +174,28 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     rs = [read_route(r) for r in routes]
     cardset = cards if isinstance(cards, CardSet) else CardSet(cards if isinstance(cards, (list, tuple)) else [cards])
     trajs = {n: r.trajectory for n, r in zip(nm, rs, strict=True)}
+    taken = None  # the ground when the routes gave it: each route is checked against it
     if ground_h is None:  # the ground rule of the maps: stated by a route, else a take-off or landing point
         stated = [r.ground_h_m for r in rs if r.ground_h_m is not None]
         known = stated or [g for g in map(ground_from_track, trajs.values()) if g is not None]
         if not known:
             raise InputError("ground unknown: no route states its ground or starts or ends on the ground (a take-off "
                              "or landing); give --ground-height M (field ground_h_m)", field="ground_h_m")
-        ground_h = min(known)
+        ground_h = taken = min(known)
+    warnings: list[str] = []
+    outside: dict[str, Any] = {}
+    for n, traj in trajs.items():  # each route as a map of it is checked, before any evaluation
+        found = flight_findings(traj, cardset, ground_h=taken, ground_from=GROUND_FROM_ROUTES,
+                                ground_hint="--ground-height M (field ground_h_m)")
+        warnings += [f"{n}: {w}" for w in found.warnings]
+        if found.power_outside:
+            outside[n] = found.power_outside
+    lon = np.concatenate([t.lon for t in trajs.values()])
+    lat = np.concatenate([t.lat for t in trajs.values()])
     if grid is None:
-        lon = np.concatenate([t.lon for t in trajs.values()])
-        lat = np.concatenate([t.lat for t in trajs.values()])
         grid = grid_for_points(lon, lat, resolution_m, margin_m, crs)
+    scale = crs_scale_warning(grid, lon, lat)
+    warnings += [scale] if scale is not None else []
     pts = population_points(population, grid) if population is not None else None
     bands: dict[str, np.ndarray] = {}
     rows: list[dict[str, Any]] = []
@@ -189,7 +206,6 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         row["route"] = n
         bands[n] = band
         rows.append(row)
-    warnings = [w for w in (log_cut_warning(t) for t in trajs.values()) if w is not None]   # logs cut short
     warnings += [w for w in (_clipped(n, b, lv, metric) for n, b in bands.items()) if w is not None]
     key = f"{float(rank_level_db):g}"
 
@@ -207,6 +223,8 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
            "dose_metric": f"person-dB: sum over people of max({metric} - {lv[0]:g} dB, 0)",
            "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked,
            "warnings": warnings}
+    if outside:
+        doc["power_outside_card_range"] = outside
     return Comparison(nm, grid, bands, metric, doc, trajs)
 
 
