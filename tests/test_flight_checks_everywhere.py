@@ -133,3 +133,25 @@ def test_route_comparison_checks_each_route_as_its_map_does(tmp_path):
     with pytest.raises(InputError) as e:
         compare_routes(routes, [_steady(tmp_path)], population=pop, ground_h=0.0, margin_m=300.0)
     assert e.value.field == "power_w" and "(2400-2400 W" in str(e.value)
+
+
+def test_route_optimize_says_the_routes_fly_outside_the_cards_powers(tmp_path):
+    """A card fitted at 1-2 W: both the direct and the optimized route fly every sample above it; the command
+    says so for each route, and comparison.json counts each route's flying samples."""
+    from test_route_optimize import pad, town
+
+    card = ModelCard(id="tiny", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(PARAMS, p1=10.0), reference_power_w=3000.0,
+                     phases=("climb", "sink", "hover", "transition"), statistics={"power_range_w": [1.0, 2.0]})
+    cp = str(save(card, tmp_path / "tiny.json"))
+    town(tmp_path / "pop.tif")
+    (s_lon, s_lat), (g_lon, g_lat) = pad(-1500.0), pad(1500.0)
+    r = CliRunner().invoke(cli, ["-q", "route", "optimize", "--from", f"{s_lon},{s_lat}", "--to", f"{g_lon},{g_lat}",
+                                 "--card", cp, "--population", str(tmp_path / "pop.tif"), "--out",
+                                 str(tmp_path / "out"), "--max-detour", "25", "--resolution", "50"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    for name, file in (("direct", "direct.geojson"), ("optimized", "route.geojson")):
+        tr = read_route(tmp_path / "out" / file).trajectory
+        assert doc["power_outside_card_range"][name]["tiny"]["samples"] == int(tr.flying.sum())
+        assert sum(line.startswith(f"warning: {name}: ") and "outside" in line for line in r.stderr.splitlines()) == 1

@@ -94,6 +94,8 @@ def optimize(start: str, goal: str, cards: tuple[str, ...], out: str, population
     for name, doc in (("route.geojson", res.optimized_doc), ("direct.geojson", res.direct_doc)):
         (o / name).write_text(json.dumps(waypoints_geojson(doc, name=name.split(".")[0]), indent=1))
     (o / "optimize.json").write_text(json.dumps(res.summary, indent=1))
+    for w in res.comparison.doc["warnings"]:  # each route checked as its map would be, and clipped counts
+        click.echo(f"warning: {w}", err=True)
     sm = res.summary
     key = f"{rank_level:g}"
     click.echo(f"direct {sm['direct_length_m']:.0f} m, optimized {sm['optimized_length_m']:.0f} m "
