@@ -80,6 +80,7 @@ def test_a_day_of_operations_names_a_crashed_log_as_its_map_does(tmp_path, omni_
     r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "ops")])
     assert r.exit_code == 0, r.output
     assert f"warning: flight crash: {COPTER}: {named}" in r.stderr
+    assert "; 1 flight; " in r.stdout
     summary = json.loads((tmp_path / "ops" / "summary.json").read_text())
     assert said[0] in summary["metadata"]["warnings"]
     geo = json.loads((tmp_path / "ops" / "contours.geojson").read_text())

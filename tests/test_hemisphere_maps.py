@@ -177,3 +177,21 @@ def test_auto_engine_takes_the_fast_engine_for_hemisphere_cards(m300):
     res = evaluate_grid(traj, [m300], centred_grid(10.0, 3, 3), ground_h=0.0, metrics=("LAmax",))
     assert res.metadata["engine"] == "fast"
     assert fast_engine_serves([m300], uncertainty=True) is not None
+
+
+def test_a_phase_no_card_serves_names_the_way_a_hemisphere_serves_it(m300):
+    """The M300 table stands for horizontal flight: a climb it does not serve is refused naming the samples, and,
+    since a hemisphere card is among the cards, how to import it for that phase too; parametric cards alone get
+    no such tip."""
+    from gisnoise.errors import CardError
+    from gisnoise.maps import CardSet
+
+    phase = np.array(["horizontal"] * 3 + ["climb"] * 2)
+    with pytest.raises(CardError) as e:
+        CardSet([m300]).assign(phase)
+    assert "no model card serves phase 'climb' (2 samples, samples 3-4)" in str(e.value)
+    assert str(e.value).endswith("(a measured hemisphere serves further phases when imported with gisnoise card "
+                                 "import-hemisphere ... --also-phase climb)")
+    with pytest.raises(CardError) as e:
+        CardSet([omni_card("horizontal")]).assign(phase)
+    assert "--also-phase" not in str(e.value)

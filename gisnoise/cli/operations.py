@@ -107,6 +107,7 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     ex = res.metadata["execution"]
     how = (f"Dask ({ex['workers']} workers, {ex['tasks']} tasks)" if ex["executor"] == "dask"
            else f"{ex['threads']} threads")
-    click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m; {len(res.metadata['flights'])} "
-               f"flights; {res.metadata['tiles']} tiles on {how}")
+    nf = len(res.metadata["flights"])
+    click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m; {nf} flight{'s' if nf != 1 else ''}; "
+               f"{res.metadata['tiles']} tiles on {how}")
     _echo_bands_and_files(res, paths, ("levels", "contours", "summary", "map", "exposure", "table"))

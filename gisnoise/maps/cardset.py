@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import CardError
-from gisnoise.model import ModelCard, load
+from gisnoise.model import HemisphereCard, ModelCard, load
 
 __all__ = ["CardSet", "as_cardset"]
 
@@ -106,9 +106,11 @@ class CardSet:
                 if t is not None:
                     tt = np.asarray(t, dtype=float)
                     when = f", t = {tt[i0]:g}-{tt[i1]:g} s"
+                tip = "" if not any(isinstance(c, HemisphereCard) for c in self.cards) else (f" (a measured hemisphere serves further phases when imported with "
+                                               f"gisnoise card import-hemisphere ... --also-phase {ph})")
                 raise CardError(
                     f"{source}: no model card serves phase {ph!r} ({idx.size} samples, samples {r0}-{r1}{when}); "
-                    f"cards serve {', '.join(self.phases)}; add a card whose phase or phases include {ph!r}",
+                    f"cards serve {', '.join(self.phases)}; add a card whose phase or phases include {ph!r}{tip}",
                     field="phase")
             out[m] = self._index[ph]
         return out
