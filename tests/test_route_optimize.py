@@ -49,8 +49,13 @@ def pad(e):
 
 
 @pytest.fixture(scope="module")
-def result(tmp_path_factory):
-    pop = read_population(town(tmp_path_factory.mktemp("town") / "pop.tif"))
+def population(tmp_path_factory):
+    return read_population(town(tmp_path_factory.mktemp("town") / "pop.tif"))
+
+
+@pytest.fixture(scope="module")
+def result(population):
+    pop = population
     return optimize_route(pad(-1500.0), pad(1500.0), [omni()], population=pop, altitude_m=60.0, max_detour_pct=25.0,
                           resolution_m=40.0, eval_resolution_m=20.0)
 
@@ -70,6 +75,22 @@ def test_optimized_route_goes_around_the_block_and_halves_the_people_above_55(re
     e, n, _ = FRAME.to_enu(traj.lat, traj.lon, np.zeros_like(traj.lat))
     inside = (np.abs(e) < BLOCK) & (np.abs(n) < BLOCK)
     assert not inside.any()
+
+
+def test_the_comparison_grid_holds_every_level_of_both_routes(result, population):
+    """The omni card reaches 45 dB(A) at 40 m 10^(25/20) = 711 m slant: the comparison's grid takes its margin from
+    the cards, so no edge cell reaches 45 dB(A) and the people above each level equal those counted on a grid
+    3 km wider on every side (a 300-450 m margin cut the 45 and 50 dB(A) zones)."""
+    from gisnoise.planning import compare_routes
+
+    doc = result.comparison.doc
+    assert not [w for w in doc["warnings"] if "grid's edge" in w]
+    wide = compare_routes([result.direct_doc, result.optimized_doc], [omni()], population=population,
+                          names=["direct", "optimized"], resolution_m=20.0, margin_m=3000.0, ground_h=0.0)
+    got = {r["route"]: r["people_above"] for r in doc["ranking"]}
+    for r in wide.doc["ranking"]:
+        for level, people in r["people_above"].items():
+            assert got[r["route"]][level] == pytest.approx(people, rel=1e-5)  # float32 levels on other cells
 
 
 def test_optimized_route_keeps_turn_radius_and_detour_limit(result):

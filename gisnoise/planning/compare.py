@@ -40,7 +40,16 @@ from gisnoise.exposure import (
 from gisnoise.flight import Trajectory, ground_from_track, read_route
 from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
-from gisnoise.maps import CardSet, MapResult, crs_scale_warning, evaluate_flying, flight_findings, write_geotiff
+from gisnoise.maps import (
+    SEL_OFFSET_DB,
+    CardSet,
+    MapResult,
+    auto_margin,
+    crs_scale_warning,
+    evaluate_flying,
+    flight_findings,
+    write_geotiff,
+)
 
 __all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
 
@@ -130,7 +139,7 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
 def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population | None = None,
                    buildings: Buildings | None = None, names: Sequence[str] | None = None, metric: str = "LAmax",
                    levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), rank_level_db: float = 55.0,
-                   resolution_m: float = 20.0, margin_m: float = 500.0, crs: Any = None,
+                   resolution_m: float = 20.0, margin_m: float | None = 500.0, crs: Any = None,
                    receiver_height: float = 1.5, ground_h: float | None = None, engine: str = "numpy",
                    grid: GridSpec | None = None) -> Comparison:
     """Evaluate candidate routes on one grid and rank them by exposure (see the module docstring).
@@ -151,7 +160,9 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     rank_level_db : float
         Routes are ranked by the people above this level first; must be one of ``levels``.
     resolution_m, margin_m, crs, receiver_height, engine
-        The common grid and the evaluator, as ``gisnoise contour``.
+        The common grid and the evaluator, as ``gisnoise contour``; ``margin_m=None``: from the cards, the
+        largest over the routes of the margin at which no edge cell reaches the lowest level
+        (:func:`gisnoise.maps.auto_margin`; for ``SEL`` its SEL bound), so no count is cut by the edge.
     ground_h : float, optional
         Flat ground's ellipsoidal height, m; default the height the routes state (waypoints),
         else the lowest take-off or landing point of the routes that start or end on the ground
@@ -193,6 +204,9 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     lon = np.concatenate([t.lon for t in trajs.values()])
     lat = np.concatenate([t.lat for t in trajs.values()])
     if grid is None:
+        if margin_m is None:
+            margin_m, said = _margin(trajs.values(), cardset, metric, lv[0], resolution_m, crs)
+            warnings += said
         grid = grid_for_points(lon, lat, resolution_m, margin_m, crs)
     scale = crs_scale_warning(grid, lon, lat)
     warnings += [scale] if scale is not None else []
@@ -226,6 +240,22 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     if outside:
         doc["power_outside_card_range"] = outside
     return Comparison(nm, grid, bands, metric, doc, trajs)
+
+
+def _margin(trajs: Any, cards: CardSet, metric: str, lowest_db: float, resolution_m: float,
+            crs: Any) -> tuple[float, list[str]]:
+    """The common grid's margin from the cards: the largest over the routes of :func:`gisnoise.maps.auto_margin`
+    at the lowest level (``LAmax``, and ``LAeq``, which stays below it; ``SEL`` by its own bound), and what it
+    warned (a margin cut by the cell limit), once each."""
+    margin, said = 0.0, []
+    for traj in trajs:
+        if metric == "SEL":  # auto_margin bounds the SEL at its lowest level + SEL_OFFSET_DB
+            m, w = auto_margin(traj, cards, lowest_db - SEL_OFFSET_DB, resolution_m=resolution_m, crs=crs, sel=True)
+        else:
+            m, w = auto_margin(traj, cards, lowest_db, resolution_m=resolution_m, crs=crs, sel=False)
+        margin = max(margin, m)
+        said += [x for x in w if x not in said]
+    return margin, said
 
 
 def _clipped(name: str, band: np.ndarray, levels: Sequence[float], metric: str) -> str | None:

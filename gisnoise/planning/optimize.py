@@ -333,7 +333,7 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
         del i
     cmp = compare_routes([d_doc, o_doc], cardset, population=population, buildings=buildings,
                          names=["direct", "optimized"], levels=levels, rank_level_db=rank_level_db,
-                         resolution_m=eval_resolution_m, margin_m=max(2 * r, 300.0), ground_h=ground_h)
+                         resolution_m=eval_resolution_m, margin_m=None, ground_h=ground_h)
     rows = {x["route"]: x for x in cmp.doc["ranking"]}
     key = f"{rank_level_db:g}"
 

@@ -198,6 +198,8 @@ class QuieterRouteAlgorithm(_PlanningBase):
                              altitude_m=self.parameterAsDouble(parameters, self.ALTITUDE, context),
                              max_detour_pct=self.parameterAsDouble(parameters, self.MAX_DETOUR, context),
                              resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context))
+        for w in res.comparison.doc["warnings"]:  # each route checked as its map would be, and clipped counts
+            feedback.reportError(f"warning: {w}", fatalError=False)
         out = self.parameterAsString(parameters, self.OUTPUT_FOLDER, context)
         write_comparison(res.comparison, out)
         route = os.path.join(out, "route.geojson")

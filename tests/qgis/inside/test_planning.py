@@ -69,15 +69,30 @@ def test_compare_ranks_the_route_around_the_block_first(plugin, town, tmp_path):
 
 
 def test_quieter_route_goes_around_the_block(plugin, town, tmp_path):
+    """... and says in the log what the comparison warns (here: the default vehicle flies outside the demo cards'
+    fitted powers), each warning once."""
     import processing
+    from qgis.core import QgsProcessingFeedback
 
+    class Said(QgsProcessingFeedback):
+        def __init__(self):
+            super().__init__()
+            self.errors = []
+
+        def reportError(self, error, fatalError=False):  # noqa: N802, N803 (QGIS's names)
+            self.errors.append(error)
+            super().reportError(error, fatalError)
+
+    said = Said()
     s_lon, s_lat = _lonlat(-1500.0, 0.0)
     g_lon, g_lat = _lonlat(1500.0, 0.0)
     cards = ",".join(str(CARDS / f"demo_{p}.json") for p in ("horizontal", "climb", "sink"))
     res = processing.run("gisnoise:quieterroute", {
         "START": f"{s_lon},{s_lat} [EPSG:4326]", "GOAL": f"{g_lon},{g_lat} [EPSG:4326]", "CARDS": cards,
         "POPULATION": str(town / "pop.tif"), "ALTITUDE": 60.0, "MAX_DETOUR": 25.0, "RESOLUTION": 50.0,
-        "OUTPUT_FOLDER": str(tmp_path / "opt")})
+        "OUTPUT_FOLDER": str(tmp_path / "opt")}, feedback=said)
+    warned = json.loads((tmp_path / "opt" / "comparison.json").read_text())["warnings"]
+    assert warned and said.errors == [f"warning: {w}" for w in warned]
     summary = json.loads((tmp_path / "opt" / "optimize.json").read_text())
     assert res["REDUCTION_PCT"] == pytest.approx(summary["reduction_pct"])
     assert summary["reduction_pct"] > 50.0
