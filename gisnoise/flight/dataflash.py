@@ -13,7 +13,10 @@ the time base.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
+import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -34,6 +37,7 @@ from gisnoise.flight._logkernels import (
 )
 from gisnoise.flight.clock import gps_to_unix
 from gisnoise.flight.logcut import dataflash_cut, read_cut, refuse_cut_definitions
+from gisnoise.flight.logdamage import dataflash_damage, record_damage, without_damage
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
 
@@ -63,13 +67,26 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
     src = str(path)
     if not Path(src).is_file():
         raise TrajectoryError(f"{src}: no such file", field="path")
-    cut = dataflash_cut(Path(src).read_bytes())   # pymavlink stops at a cut message without a word
+    data = Path(src).read_bytes()
+    damage = dataflash_damage(data)   # pymavlink skips damaged bytes without a flag, reading garbage first
+    cut = dataflash_cut(without_damage(data, damage) if damage is not None else data)
+    if cut is not None and damage is not None:
+        cut = cut.moved(damage.skipped_bytes)   # pymavlink stops at a cut message without a word
     refuse_cut_definitions(src, cut, "FMT messages")
-    try:
-        reader = DFReader.DFReader_binary(src, zero_time_base=True)
-    except Exception as exc:
-        raise TrajectoryError(f"{src}: not a readable DataFlash log ({exc})", field="path") from None
-    traj: Trajectory = read_cut(src, cut, lambda: _dataflash_trajectory(src, reader, start_utc, geoid_undulation_m, rate_hz, power_w))
+    with contextlib.ExitStack() as stack:
+        path_read = src
+        if damage is not None:    # pymavlink reads a file: the bytes without the damage, in a temporary one
+            tmp = stack.enter_context(tempfile.TemporaryDirectory())
+            path_read = os.path.join(tmp, "log.bin")
+            Path(path_read).write_bytes(without_damage(data, damage))
+        stack.enter_context(contextlib.redirect_stdout(io.StringIO()))   # pymavlink prints on corrupt data
+        try:
+            reader = DFReader.DFReader_binary(path_read, zero_time_base=True)
+        except Exception as exc:
+            raise TrajectoryError(f"{src}: not a readable DataFlash log ({exc})", field="path") from None
+        traj: Trajectory = read_cut(src, cut, lambda: _dataflash_trajectory(src, reader, start_utc, geoid_undulation_m,
+                                                                             rate_hz, power_w))
+    record_damage(traj, damage, len(data), None)
     return traj
 
 

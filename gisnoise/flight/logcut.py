@@ -23,7 +23,8 @@ DataFlash
 when it ends at a message boundary.  The readers refuse a file cut inside its definitions
 (:func:`refuse_cut_definitions`), name the cut in any other error, and record it in the
 trajectory's metadata (``log_cut``), from which :func:`log_cut_warning` makes the one-line warning
-that maps and ``gisnoise campaign check`` show.
+that maps and ``gisnoise campaign check`` show; it says too a log damaged inside
+(:mod:`gisnoise.flight.logdamage`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from gisnoise.errors import GisnoiseError, TrajectoryError
+from gisnoise.flight.logdamage import log_damage_warning
 
 __all__ = ["LogCut", "ulog_cut", "dataflash_cut", "refuse_cut_definitions", "cut_error", "read_cut",
            "log_cut_warning"]
@@ -74,6 +76,12 @@ class LogCut:
         if self.message_end is None:
             return f"ends at byte {self.file_bytes} inside the header of the message at byte {self.message_at}"
         return f"ends mid-message at byte {self.file_bytes} of {self.message_end}"
+
+    def moved(self, by: int) -> LogCut:
+        """The cut found in bytes ``by`` fewer than the file's (damage left out before it,
+        :mod:`gisnoise.flight.logdamage`), in the file's offsets."""
+        return LogCut(self.file_bytes + by, self.message_at + by,
+                      None if self.message_end is None else self.message_end + by, self.in_definitions)
 
     def metadata(self, t_last_s: float) -> dict[str, Any]:
         """The trajectory's ``log_cut`` metadata; ``t_last_s`` is its last sample's time, s."""
@@ -246,7 +254,14 @@ def read_cut(src: str, cut: LogCut | None, read: Callable[[], Any]) -> Any:
 
 
 def log_cut_warning(traj: Any) -> str | None:
-    """The one-line warning for a trajectory read from a cut log (its ``metadata["log_cut"]``), or None."""
+    """The one-line warning for a trajectory read from a cut log (its ``metadata["log_cut"]``) or from a log
+    damaged inside (``metadata["log_corrupt"]``, :func:`~gisnoise.flight.logdamage.log_damage_warning`), both
+    joined when both hold; None when neither."""
+    said = [w for w in (_cut_warning(traj), log_damage_warning(traj)) if w is not None]
+    return "; ".join(said) if said else None
+
+
+def _cut_warning(traj: Any) -> str | None:
     cut = traj.metadata.get("log_cut") if isinstance(traj.metadata, Mapping) else None
     if not cut:
         return None

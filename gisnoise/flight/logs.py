@@ -71,6 +71,15 @@ Logs cut short
     definitions, before any logged data, is refused in one line naming it; any other error on a cut
     file names the cut (:mod:`gisnoise.flight.logcut`).
 
+Logs damaged inside
+    Bytes zeroed or garbled mid-file (a bad SD card sector, a broken copy) are found by walking the
+    framing (:mod:`gisnoise.flight.logdamage`) and left out, from the message the damage begins in to
+    where the framing holds again, before pyulog or pymavlink read the file: no zeroed or garbled value
+    reaches the trajectory, and the samples on either side are read.  The trajectory's metadata records
+    the stretches left out (``log_corrupt``) and the same one-line warning names the file, the bytes and
+    the boot-clock times whose samples are missing.  What pyulog prints about corrupt data never reaches
+    stdout.  Damage wholly inside one message's payload leaves the framing whole and cannot be told.
+
 A log without battery voltage or current raises an error that names the way out:
 a constant ``power_w``.  A missing topic or message raises :class:`~gisnoise.errors.MissingColumnError`
 naming it and the file.

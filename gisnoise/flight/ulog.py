@@ -17,6 +17,7 @@ See :mod:`gisnoise.flight.logs` for the time base.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 from collections.abc import Mapping
@@ -39,6 +40,7 @@ from gisnoise.flight._logkernels import (
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.logcut import read_cut, refuse_cut_definitions, ulog_cut
+from gisnoise.flight.logdamage import record_damage, ulog_damage, without_damage
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
@@ -82,13 +84,24 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
         data = Path(src).read_bytes()
     except FileNotFoundError:
         raise TrajectoryError(f"{src}: no such file", field="path") from None
+    file_bytes = len(data)
+    damage = ulog_damage(data)    # pyulog reads through damage with garbage, or drops the rest as if cut
+    if damage is not None:
+        data = without_damage(data, damage)
     cut = ulog_cut(data)          # pyulog reads a cut file up to its last whole message without a word
+    if cut is not None and damage is not None:
+        cut = cut.moved(damage.skipped_bytes)
     refuse_cut_definitions(src, cut, "formats, info, parameters")
+    said = io.StringIO()          # pyulog prints what it finds corrupt: never on the user's stdout
     try:
-        ulog = ULog(io.BytesIO(data), list(_ULOG_TOPICS))
+        with contextlib.redirect_stdout(said):
+            ulog = ULog(io.BytesIO(data), list(_ULOG_TOPICS))
     except Exception as exc:  # pyulog raises bare exceptions on corrupt files
         raise TrajectoryError(f"{src}: not a readable ULog ({exc})", field="path") from None
     traj: Trajectory = read_cut(src, cut, lambda: _ulog_trajectory(src, ulog, start_utc, geoid_undulation_m, rate_hz, power_w))
+    parser_said = said.getvalue().strip().splitlines()[:1] or (["pyulog found the file corrupt"]
+                                                                if ulog.file_corruption else [])
+    record_damage(traj, damage, file_bytes, parser_said[0] if parser_said else None)
     return traj
 
 
