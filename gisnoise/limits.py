@@ -58,7 +58,7 @@ from gisnoise.errors import InputError
 
 __all__ = ["Limits", "WorkLimitError", "DEFAULTS", "current", "override", "check_range", "check_array", "check_lonlat",
            "check_attitude", "check_power", "check_track", "check_heights", "check_times", "check_samples", "check_count",
-           "check_receiver_height", "check_ground_below", "check_receivers", "GROUND_TOLERANCE_M", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id",
+           "check_receiver_height", "check_ground_below", "check_receivers", "GROUND_TOLERANCE_M", "MAX_UAV_SPEED_M_S", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id",
            "MIN_SAMPLES", "check_work", "MEASURED_LEVEL_RANGE_DB", "check_levels"]
 
 
@@ -315,6 +315,12 @@ GROUND_TOLERANCE_M = 1.0
 """How close to the track's lowest point the ground lies, m: a sample that near it may stand on the ground
 (:mod:`gisnoise.flight.ground`; GPS heights of a vehicle standing still wander by some decimetres), and a
 given ground may lie that far above it (rounding of take-off and landing)."""
+
+
+MAX_UAV_SPEED_M_S = 150.0
+"""Fastest a vehicle of the product's class moves between two samples of its track, m/s (540 km/h: small
+electric VTOL drones cruise at 15-40 m/s, racing quadcopters reach about 50 m/s): a sample farther from its
+neighbour is a position glitch (:mod:`gisnoise.flight.glitches`)."""
 
 
 def check_receivers(receiver_height: float, ground_h: float | None, track_h: Any) -> None:

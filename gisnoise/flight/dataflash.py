@@ -36,6 +36,7 @@ from gisnoise.flight._logkernels import (
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.clock import gps_to_unix
+from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.logcut import dataflash_cut, read_cut, refuse_cut_definitions
 from gisnoise.flight.logdamage import dataflash_damage, record_damage, without_damage
 from gisnoise.flight.trajectory import Trajectory
@@ -168,6 +169,8 @@ def _dataflash_trajectory(src: str, reader: Any, start_utc: Any, geoid_undulatio
     spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
     t = _time_base(src, tb, spans, rate_hz)
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
+    glitches = mend_glitches(t, lat_i, lon_i, h_i, source=src)  # before the phase and the ground are derived
+    lat_i, lon_i, h_i = glitches.lat, glitches.lon, glitches.h
     roll, pitch, yaw = (_interp_deg(t, t_att, att[k]) for k in ("Roll", "Pitch", "Yaw"))
     power = _power(t, batteries, power_w)
     cols: dict[str, Any] = {"lat": lat_i, "lon": lon_i, "h": h_i, "roll": roll, "pitch": pitch, "yaw": yaw,
@@ -185,7 +188,10 @@ def _dataflash_trajectory(src: str, reader: Any, start_utc: Any, geoid_undulatio
     meta = {"height_datum": msl_height_datum(f"{pos_name}.Alt", geoid_meta),
             **geoid_meta,
             "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}
-    return _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)
+    traj = _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)
+    if glitches.runs:
+        traj.metadata["position_glitches"] = glitches.metadata(traj.t)
+    return traj
 
 
 _EV_ARMED, _EV_DISARMED, _EV_LAND_COMPLETE, _EV_NOT_LANDED = 10, 11, 18, 28

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from gisnoise.errors import GisnoiseError, TrajectoryError
+from gisnoise.flight.glitches import glitch_warning
 from gisnoise.flight.logdamage import log_damage_warning
 
 __all__ = ["LogCut", "ulog_cut", "dataflash_cut", "refuse_cut_definitions", "cut_error", "read_cut",
@@ -255,9 +256,10 @@ def read_cut(src: str, cut: LogCut | None, read: Callable[[], Any]) -> Any:
 
 def log_cut_warning(traj: Any) -> str | None:
     """The one-line warning for a trajectory read from a cut log (its ``metadata["log_cut"]``) or from a log
-    damaged inside (``metadata["log_corrupt"]``, :func:`~gisnoise.flight.logdamage.log_damage_warning`), both
-    joined when both hold; None when neither."""
-    said = [w for w in (_cut_warning(traj), log_damage_warning(traj)) if w is not None]
+    damaged inside (``metadata["log_corrupt"]``, :func:`~gisnoise.flight.logdamage.log_damage_warning`) or whose
+    position glitches were mended (``metadata["position_glitches"]``, any track:
+    :func:`~gisnoise.flight.glitches.glitch_warning`), joined when several hold; None when none."""
+    said = [w for w in (_cut_warning(traj), log_damage_warning(traj), glitch_warning(traj)) if w is not None]
     return "; ".join(said) if said else None
 
 

@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import TrajectoryError
+from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.phases import MULTICOPTER_PHASES
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.flight.vehicle import GRAVITY, VehicleModel
@@ -90,6 +91,8 @@ def trajectory_from_path(t: Any, lat: Any, lon: Any, h: Any, *, vehicle: Vehicle
     if t.size > 1 and np.any(np.diff(t) <= 0):
         i = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
         raise TrajectoryError(f"{source}: field 't' is not strictly increasing at sample {i}", field="t")
+    glitches = mend_glitches(t, lat, lon, h, source=source)  # before the states are derived from them
+    lat, lon, h = glitches.lat, glitches.lon, glitches.h
     frame = LocalFrame(float(lat[0]), float(lon[0]), float(h.min()))
     e, n, u = frame.to_enu(lat, lon, h)
     der = derive_states(t, e, n, u, vehicle, phase=given.get("phase"))
@@ -98,4 +101,5 @@ def trajectory_from_path(t: Any, lat: Any, lon: Any, h: Any, *, vehicle: Vehicle
         kw[k] = given[k] if given.get(k) is not None else der[k]
     if given.get("rpm") is not None:
         kw["rpm"] = given["rpm"]
-    return Trajectory(**kw, source=source)
+    meta = {"position_glitches": glitches.metadata(t)} if glitches.runs else {}
+    return Trajectory(**kw, source=source, metadata=meta)

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import MissingColumnError, TrajectoryError
+from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.phases import PHASES
 from gisnoise.flight.rest import lying_inverted
 from gisnoise.geo import LocalFrame, wrap_angle, wrap_deg
@@ -247,7 +248,11 @@ def from_columns(cols: Mapping[str, Any], *, source: str = "trajectory") -> Traj
         except (TypeError, ValueError):
             raise TrajectoryError(f"{source}: column '{c}' has a non-numeric value", field=c) from None
     kw["phase"] = np.asarray(cols["phase"], dtype=str) if "phase" in cols else np.full(n, "horizontal")
-    return Trajectory(**kw, source=source)
+    glitches = mend_glitches(kw["t"], kw["lat"], kw["lon"], kw["h"], source=source)
+    if not glitches.runs:
+        return Trajectory(**kw, source=source)
+    kw.update(lat=glitches.lat, lon=glitches.lon, h=glitches.h)
+    return Trajectory(**kw, source=source, metadata={"position_glitches": glitches.metadata(kw["t"])})
 
 
 def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str | None = None) -> Trajectory:

@@ -39,6 +39,7 @@ from gisnoise.flight._logkernels import (
     msl_height_datum,
     msl_to_ellipsoid_undulation,
 )
+from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.logcut import read_cut, refuse_cut_definitions, ulog_cut
 from gisnoise.flight.logdamage import record_damage, ulog_damage, without_damage
 from gisnoise.flight.trajectory import Trajectory
@@ -193,6 +194,8 @@ def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: fl
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
     if h_series is not None:
         h_i = np.interp(t, *h_series)
+    glitches = mend_glitches(t, lat_i, lon_i, h_i, source=src)  # before the phase and the ground are derived
+    lat_i, lon_i, h_i = glitches.lat, glitches.lon, glitches.h
     roll, pitch, yaw = quaternion_to_euler(_interp_quaternion(t, t_att, q))
     power = _power(t, batteries, power_w)
 
@@ -222,7 +225,10 @@ def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: fl
     if gps_cols is not None and gps_cols["utc_offset"] is not None:
         utc_offset = gps_cols["utc_offset"]
     meta = {"height_datum": datum, **height_meta, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
-    return _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
+    traj = _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
+    if glitches.runs:
+        traj.metadata["position_glitches"] = glitches.metadata(traj.t)
+    return traj
 
 
 def estimator_height(lp: Mapping[str, np.ndarray] | None, t_gps: np.ndarray,

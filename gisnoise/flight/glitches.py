@@ -1,0 +1,153 @@
+"""Position glitches: samples no UAV can be at, mended where the track around them tells where it was.
+
+A GNSS receiver can report a fix kilometres off for a moment (multipath, a cold start, a reset), and a
+log damaged inside its messages can hold a fix at latitude 0, longitude 0.  Mapped as read, such a sample
+makes a noise island where nothing flew (one instant, loud enough for an LAmax spot), or stretches the
+grid over half the globe.  Physics fixes the test: between two consecutive samples a vehicle of the
+product's class moves at most :data:`gisnoise.limits.MAX_UAV_SPEED_M_S` times the time between them.
+
+:func:`mend_glitches` walks the segments that break that bound.  From the last sample before such a
+segment it looks for the first later sample it could reach at that speed, within
+:data:`GLITCH_MAX_S`: the samples between are a glitch, and their positions are replaced by the straight,
+uniform flight between those two samples (their other fields, attitude and power, stay as logged).  A
+glitch at the track's start or end, with no sample beyond it to reach, takes the nearest good position
+(of the two sides of the jump, the one with fewer samples, lasting at most :data:`GLITCH_MAX_S`).
+A jump after which the track does not come back within :data:`GLITCH_MAX_S` (a position reset, or two
+tracks joined) cannot be told from the flight: it is refused, naming where and how far
+(:class:`~gisnoise.errors.TrajectoryError`, field ``lat``).  Samples that are not glitches keep their
+positions bit for bit.
+
+The readers of flight logs mend the positions on their time base before the phase and the on-ground
+samples are derived from them; flight CSVs and timed GeoJSON paths are mended as they are read.  The
+trajectory's metadata lists the glitches (``position_glitches``: times on its own clock, the jump and
+its speed), from which :func:`glitch_warning` makes the one-line warning every map, fit and diagnosis
+shows (through :func:`gisnoise.flight.log_cut_warning`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import TrajectoryError
+from gisnoise.geo import LocalFrame
+from gisnoise.limits import MAX_UAV_SPEED_M_S
+
+__all__ = ["GLITCH_MAX_S", "Glitches", "glitch_warning", "mend_glitches"]
+
+GLITCH_MAX_S = 10.0
+"""Longest glitch mended, s: a track that stays away longer is refused (the flight there is not known)."""
+
+
+@dataclass(frozen=True)
+class Glitches:
+    """What :func:`mend_glitches` found: ``runs`` as ``(first, end)`` sample indices (``end`` exclusive), the
+    largest jump into or out of each (m) and its speed (m/s); ``lat``, ``lon``, ``h`` the mended positions."""
+
+    runs: tuple[tuple[int, int, float, float], ...]
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+
+    def metadata(self, t: Any) -> list[dict[str, float]]:
+        """The trajectory's ``position_glitches`` on its clock ``t`` (s; the reader's time base shifted)."""
+        tt = np.asarray(t, dtype=float)
+        return [{"t_first_s": float(tt[i0]), "t_last_s": float(tt[i1 - 1]), "samples": int(i1 - i0),
+                 "jump_m": round(jump, 1), "speed_m_s": round(speed, 1)} for i0, i1, jump, speed in self.runs]
+
+
+def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajectory") -> Glitches:
+    """Find and mend the position glitches of a track (see the module docstring).
+
+    ``t`` in s, increasing; ``lat``, ``lon`` in deg, ``h`` in m.  A track with fewer than three samples, a
+    non-finite value or times that do not increase is returned as it is (the trajectory's own checks name
+    those).  Raises :class:`~gisnoise.errors.TrajectoryError` (field ``lat``) for a jump the track does not
+    come back from within :data:`GLITCH_MAX_S`.
+
+    >>> t = np.arange(6.0)
+    >>> lat = np.full(6, 52.0); lon = 10.0 + 1e-4 * t; lon[3] = 11.0   # one fix 68 km east, for one second
+    >>> g = mend_glitches(t, lat, lon, np.full(6, 100.0))
+    >>> [r[:2] for r in g.runs], round(float(g.lon[3]), 6)
+    ([(3, 4)], 10.0003)
+    """
+    t, lat, lon, h = (np.asarray(a, dtype=float) for a in (t, lat, lon, h))
+    same = Glitches((), lat, lon, h)
+    n = t.size
+    if n < 3 or not all(np.all(np.isfinite(a)) for a in (t, lat, lon, h)) or np.any(np.diff(t) <= 0):
+        return same
+    frame = LocalFrame(float(np.median(lat)), float(np.median(lon)), float(np.median(h)))
+    p = np.stack(frame.to_enu(lat, lon, h), axis=-1)
+    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    fast = np.flatnonzero(step > MAX_UAV_SPEED_M_S * np.diff(t))
+    if fast.size == 0:
+        return same
+
+    def reach(i: int, j: int) -> bool:  # sample j within the speed bound of sample i
+        return bool(np.linalg.norm(p[j] - p[i]) <= MAX_UAV_SPEED_M_S * abs(t[j] - t[i]))
+
+    runs: list[tuple[int, int, float, float]] = []
+    k = 0
+    while True:
+        nxt = fast[fast >= k]
+        if nxt.size == 0:
+            break
+        a = int(nxt[0])  # the segment a -> a + 1 breaks the bound: a is the last good sample
+        end = None
+        for j in range(a + 2, n):  # the run a + 1 .. j - 1 lasts t[j - 1] - t[a + 1]
+            if t[j - 1] - t[a + 1] > GLITCH_MAX_S:
+                break
+            if reach(a, j):
+                end = j
+                break
+        # else the track starts in the glitch (samples 0 .. a) or ends in it (a + 1 ..): the shorter side
+        ends = [(i1 - i0, i0, i1) for i0, i1 in ((0, a + 1), (a + 1, n))
+                if t[i1 - 1] - t[i0] <= GLITCH_MAX_S and not (i0 == 0 and runs)]
+        if end is not None:
+            i0, i1 = a + 1, end
+        elif ends:
+            _, i0, i1 = min(ends)
+        else:
+            raise TrajectoryError(
+                f"{source}: the position jumps {step[a]:,.0f} m between t = {t[a]:.2f} and {t[a + 1]:.2f} s "
+                f"({step[a] / (t[a + 1] - t[a]):,.0f} m/s; no UAV flies faster than {MAX_UAV_SPEED_M_S:g} m/s) and "
+                f"does not come back within {GLITCH_MAX_S:g} s: a position reset or two tracks joined; mend the "
+                "track or cut it there", field="lat")
+        edges = [s for s in (i0 - 1, i1 - 1) if 0 <= s < n - 1]
+        jump = max(float(step[s]) for s in edges)
+        speed = max(float(step[s] / (t[s + 1] - t[s])) for s in edges)
+        runs.append((i0, i1, jump, speed))
+        k = i1
+    lat, lon, h = lat.copy(), lon.copy(), h.copy()
+    for i0, i1, _, _ in runs:
+        idx = np.arange(i0, i1)
+        if i0 == 0 or i1 == n:  # held at the nearest good sample, as logged
+            g = i1 if i0 == 0 else i0 - 1
+            lat[idx], lon[idx], h[idx] = lat[g], lon[g], h[g]
+            continue
+        f = ((t[idx] - t[i0 - 1]) / (t[i1] - t[i0 - 1]))[:, None]
+        q = p[i0 - 1] + f * (p[i1] - p[i0 - 1])
+        lat[idx], lon[idx], h[idx] = frame.to_wgs84(q[:, 0], q[:, 1], q[:, 2])
+    return Glitches(tuple(runs), lat, lon, h)
+
+
+def glitch_warning(traj: Any) -> str | None:
+    """The one-line warning for a trajectory whose position glitches were mended (its ``metadata
+    ["position_glitches"]``); None when there were none."""
+    runs = traj.metadata.get("position_glitches") if isinstance(traj.metadata, Mapping) else None
+    if not runs:
+        return None
+    worst = max(runs, key=lambda r: r["jump_m"])
+
+    def span(r: Mapping[str, Any]) -> str:
+        a, b = f"{r['t_first_s']:.1f}", f"{r['t_last_s']:.1f}"
+        return f"t = {a} s" if a == b else f"t = {a}-{b} s"
+
+    when = ", ".join(span(r) for r in runs[:3]) + (f" and {len(runs) - 3} more" if len(runs) > 3 else "")
+    n = sum(r["samples"] for r in runs)
+    what = (f"{n} sample{'s' if n != 1 else ''} in {len(runs)} position glitches" if len(runs) > 1 else
+            f"{n} sample{'s' if n != 1 else ''} in a position glitch")
+    return (f"{traj.source}: {what} ({when}; a jump of up to {worst['jump_m']:,.0f} m at {worst['speed_m_s']:,.0f} "
+            f"m/s, faster than any UAV flies) mended: there the track runs straight between the samples around it")

@@ -1,0 +1,130 @@
+"""Position glitches: a fix no UAV can reach is mended from the track around it, said once, never mapped.
+
+The truths: the speed bound (150 m/s between two samples), the straight uniform flight between the samples
+around a glitch, and the real ArduPilot log171 as logged: a copy with one fix moved to latitude 0, longitude 0
+or 1.1 km north maps as the log itself does, and the real logs have no glitch to mend.
+"""
+
+import json
+
+import numpy as np
+import pytest
+import rasterio
+
+from gisnoise.errors import TrajectoryError
+from gisnoise.flight import read_flight, read_route
+from gisnoise.flight.glitches import GLITCH_MAX_S, mend_glitches
+from gisnoise.geo import LocalFrame
+from gisnoise.maps import make_map
+from gisnoise.model import ModelCard, save
+
+from test_real_logs_maps import COPTER, N_SITE, QUAD, VTOL  # noqa: E402
+
+FRAME = LocalFrame(52.0, 10.0, 100.0)
+
+
+def _track(n=101, dt=0.1, v=10.0):
+    """Eastwards at v m/s, 30 m up, n samples dt apart."""
+    t = np.arange(n) * dt
+    lat, lon, h = FRAME.to_wgs84(v * t, 0 * t, 0 * t + 30.0)
+    return t, lat, lon, h
+
+
+@pytest.mark.parametrize("path", [VTOL, QUAD, COPTER], ids=lambda p: p.stem)
+def test_the_real_logs_have_no_glitch(path):
+    tr = read_flight(path, geoid_undulation_m=N_SITE)
+    assert "position_glitches" not in tr.metadata
+
+
+def test_a_track_without_glitches_keeps_every_position_bit_for_bit():
+    t, lat, lon, h = _track(v=149.0)  # just below the bound
+    g = mend_glitches(t, lat, lon, h)
+    assert g.runs == () and g.lat is not None
+    assert np.array_equal(g.lat, lat) and np.array_equal(g.lon, lon) and np.array_equal(g.h, h)
+
+
+def test_a_run_inside_the_track_flies_straight_between_its_neighbours():
+    """Three samples (a 5 Hz fix resampled at 10 Hz: ramp, glitch, ramp) 2 km off: mended onto the straight
+    flight at 10 m/s, within a millimetre; the other samples untouched."""
+    t, lat, lon, h = _track()
+    bad = [40, 41, 42]
+    lat2, lon2, h2 = lat.copy(), lon.copy(), h.copy()
+    lat2[bad], lon2[bad], _ = FRAME.to_wgs84(np.array([410.0, 2000.0, 420.0]), np.array([1000.0, 2000.0, 1000.0]),
+                                             np.full(3, 30.0))
+    g = mend_glitches(t, lat2, lon2, h2)
+    assert [r[:2] for r in g.runs] == [(40, 43)]
+    e, n, u = FRAME.to_enu(g.lat, g.lon, g.h)
+    np.testing.assert_allclose(e, 10.0 * t, atol=1e-3)
+    np.testing.assert_allclose(n, 0.0, atol=1e-3)
+    np.testing.assert_allclose(u, 30.0, atol=1e-3)
+    keep = np.setdiff1d(np.arange(t.size), bad)
+    assert np.array_equal(g.lat[keep], lat[keep]) and np.array_equal(g.lon[keep], lon[keep])
+
+
+@pytest.mark.parametrize("where", ["start", "end"])
+def test_a_glitch_at_either_end_takes_the_nearest_good_position(where):
+    t, lat, lon, h = _track()
+    i = 0 if where == "start" else t.size - 1
+    lat2, lon2 = lat.copy(), lon.copy()
+    lat2[i], lon2[i] = 0.0, 0.0
+    g = mend_glitches(t, lat2, lon2, h)
+    j = 1 if where == "start" else t.size - 2
+    assert [r[:2] for r in g.runs] == [(0, 1) if where == "start" else (t.size - 1, t.size)]
+    assert (g.lat[i], g.lon[i]) == (lat[j], lon[j])
+
+
+def test_a_jump_the_track_does_not_come_back_from_is_refused_naming_it():
+    """From t = 15 s on the 30 s track runs 3 km north: a reset or two tracks joined, not a glitch of at most 10 s
+    on either side; a jump 5 s before the end is the track's end glitching (held at its last good position)."""
+    t, lat, lon, h = _track(n=301)
+    lat2, lon2, _ = FRAME.to_wgs84(10.0 * t, np.where(t >= 15.0, 3000.0, 0.0), 0 * t + 30.0)
+    assert 15.0 > GLITCH_MAX_S
+    with pytest.raises(TrajectoryError) as e:
+        mend_glitches(t, lat2, lon2, h, source="joined.csv")
+    assert e.value.field == "lat"
+    assert str(e.value).startswith("joined.csv: the position jumps 3,000 m between t = 14.90 and 15.00 s (30,000 m/s")
+    lat3, lon3, _ = FRAME.to_wgs84(10.0 * t, np.where(t >= 25.0, 3000.0, 0.0), 0 * t + 30.0)
+    g = mend_glitches(t, lat3, lon3, h)
+    assert [r[:2] for r in g.runs] == [(250, 301)] and np.all(g.lat[250:] == lat3[249])
+
+
+@pytest.fixture(scope="module")
+def copter_csv(tmp_path_factory):
+    d = tmp_path_factory.mktemp("glitch")
+    tr = read_route(COPTER, geoid_undulation_m=N_SITE).trajectory
+    tr.to_csv(d / "log171.csv")
+    card = ModelCard(id="omni", vehicle="test", phase="hover", ansatz="paper-offset",
+                     parameters=dict(p0=65.0, p1=10.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=300.0, phases=("horizontal", "climb", "sink", "transition"))
+    return d, tr, str(save(card, d / "omni.json"))
+
+
+@pytest.mark.parametrize("glitch", ["null island", "1.1 km north"])
+def test_log171_with_a_glitch_maps_as_the_log_itself(copter_csv, glitch):
+    """One sample at t = 80 s moved to latitude 0, longitude 0 (before: a grid of 1e12 cells refused as too
+    large) or 0.01 deg north (before: mapped, a noise spot 1.1 km from the flight): the map equals the log's
+    own within 0.01 dB, and the warning names the file and the time once."""
+    d, tr, card = copter_csv
+    lines = (d / "log171.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    i = int(np.argmin(np.abs(tr.t - 80.0)))
+    row = lines[i + 1].split(",")
+    if glitch == "null island":
+        row[head.index("lat")], row[head.index("lon")] = "0.0", "0.0"
+    else:
+        row[head.index("lat")] = repr(float(row[head.index("lat")]) + 0.01)
+    lines[i + 1] = ",".join(row)
+    bad = d / f"glitch_{glitch.split()[0]}.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    kw = dict(resolution_m=10.0, margin_m=150.0, outputs=("levels",))
+    ref = make_map(d / "log171.csv", [card], d / "ref", **kw)
+    got = make_map(bad, [card], d / glitch.split()[0], **kw)
+    said = [w for w in got["warnings"] if "position glitch" in w]
+    assert len(said) == 1 and said[0].startswith(f"{bad}: 1 sample in a position glitch (t = {tr.t[i]:.1f} s;")
+    assert not [w for w in ref["warnings"] if "position glitch" in w]
+    with rasterio.open(ref["levels"]) as a, rasterio.open(got["levels"]) as b:
+        assert a.transform == b.transform and a.shape == b.shape
+        for k in range(1, a.count + 1):
+            np.testing.assert_allclose(b.read(k), a.read(k), atol=0.01)
+        meta = json.loads(b.tags()["gisnoise"])
+    assert any("position glitch" in w for w in meta["warnings"])
