@@ -7,10 +7,16 @@ from collections import Counter
 import click
 import numpy as np
 
-from gisnoise.cli.options import progress
+from gisnoise.cli.options import echo_warnings, progress
 from gisnoise.errors import GisnoiseError
-from gisnoise.flight import log_cut_warning
-from gisnoise.measure import DEFAULT_EVENT_DB, DEFAULT_SNR_DB, Samples, inspect_campaign, write_levels
+from gisnoise.measure import (
+    DEFAULT_EVENT_DB,
+    DEFAULT_SNR_DB,
+    Samples,
+    campaign_log_warnings,
+    inspect_campaign,
+    write_levels,
+)
 
 campaign_arg = click.argument("campaign", type=click.Path(file_okay=False))
 
@@ -56,10 +62,7 @@ def check(ctx: click.Context, campaign: str, absorption: bool, snr_db: float, ev
             phases = ", ".join(f"{p} {n}" for p, n in sorted(Counter(tr.phase.tolist()).items()))
             click.echo(f"{f.id:<16}{_short(f.log):<24}{tr.duration_s:>11.1f}{len(tr):>10d}"
                        f"{int(sel.sum()):>9d}{int((s.valid[sel]).sum()) if s is not None else 0:>9d}  {phases}")
-        for f in camp.flights:   # a log cut short reads up to its cut: not a problem, but said
-            cut = log_cut_warning(camp.trajectories[f.id])
-            if cut is not None:
-                click.echo(f"warning: {cut}", err=True)
+        echo_warnings(campaign_log_warnings(camp))   # a log cut short reads up to its cut: not a problem, but said
         click.echo("")
         click.echo(f"{'microphone':<16}{'mount':<14}{'files':>6}{'blocks':>9}{'valid':>9}{'background_dB':>15}")
         for m in camp.microphones:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from gisnoise.cli.options import progress
+from gisnoise.cli.options import echo_warnings, progress
 from gisnoise.model import load
 
 
@@ -37,16 +37,12 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     and OUT/report.html with the figures.
     """
     from gisnoise.diagnose import run_diagnosis, with_mic_heights, write_diagnosis, write_report
-    from gisnoise.flight import log_cut_warning
-    from gisnoise.measure import read_campaign
+    from gisnoise.measure import campaign_log_warnings, read_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     card = load(card_path)
     camp = read_campaign(campaign, absorption=absorption)
-    for f in camp.flights:  # a log cut short is diagnosed up to its cut, and said (as campaign check says it)
-        cut = log_cut_warning(camp.trajectories[f.id])
-        if cut is not None:
-            click.echo(f"warning: {cut}", err=True)
+    echo_warnings(campaign_log_warnings(camp))  # a log cut short is diagnosed up to its cut, and said
     samples = with_mic_heights(camp.samples(), campaign)
     names = list(effects) or None
     n_steps = 3 + (len(names) if names else 8)

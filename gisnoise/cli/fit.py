@@ -6,7 +6,7 @@ import math
 
 import click
 
-from gisnoise.cli.options import progress
+from gisnoise.cli.options import echo_warnings, progress
 from gisnoise.errors import InputError
 from gisnoise.model import PHASES, load, save
 from gisnoise.model.cards import SCHEMA_PREFIX
@@ -83,9 +83,8 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
     converge, or whose parameters the data cannot tell apart, writes no card and
     says why.  An existing --out is refused unless it is a model card and --force is given.
     """
-    from gisnoise.flight import log_cut_warning
     from gisnoise.identify import fit_campaign
-    from gisnoise.measure import read_campaign
+    from gisnoise.measure import campaign_log_warnings, read_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     _check_out(out, force)
@@ -97,10 +96,7 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
     name = ansatz or (template.ansatz if template else "paper-offset")
     fixed = _parse_fix(fix)
     camp = read_campaign(campaign, absorption=absorption)
-    for f in camp.flights:  # a log cut short is fitted up to its cut, and said (as campaign check says it)
-        cut = log_cut_warning(camp.trajectories[f.id])
-        if cut is not None:
-            click.echo(f"warning: {cut}", err=True)
+    echo_warnings(campaign_log_warnings(camp))  # a log cut short is fitted up to its cut, and said
     with progress(ctx, f"fitting {phase}", float(max_iter)) as update:
         res = fit_campaign(camp, phase, name, p0=template, fixed=fixed or None, max_iter=max_iter,
                            progress=lambda i, cost: update(float(i)))

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -34,3 +34,9 @@ def progress(ctx: click.Context | None, description: str, total: float | None) -
                   TimeRemainingColumn(), transient=True, console=Console(stderr=True)) as bar:
         task = bar.add_task(description, total=total)
         yield lambda done: bar.update(task, completed=done)
+
+
+def echo_warnings(warnings: Iterable[str]) -> None:
+    """Each warning on stderr as ``warning: <text>``, one line each (stdout carries the results alone)."""
+    for w in warnings:
+        click.echo(f"warning: {w}", err=True)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from gisnoise.measure.campaign import (
+    campaign_log_warnings,
     check_campaign,
     inspect_campaign,
     read_campaign,
@@ -52,4 +53,4 @@ from gisnoise.measure.table import (
     build_samples,
 )
 
-__all__ = ['DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'OUTLIER_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'WINDOW_S', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'build_samples', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'spreading_notes', 'spreading_outliers', 'wav_levels', 'write_level_csv', 'write_levels']
+__all__ = ['DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'OUTLIER_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'WINDOW_S', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'build_samples', 'campaign_log_warnings', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'spreading_notes', 'spreading_outliers', 'wav_levels', 'write_level_csv', 'write_levels']

@@ -9,7 +9,9 @@ A campaign folder (see the specification, section 3)::
 
 :func:`read_campaign` reads and checks everything and raises
 :class:`~gisnoise.errors.CampaignError` (naming the file and field) at the first
-problem; :func:`check_campaign` collects every problem instead.  Where both a level
+problem; :func:`check_campaign` collects every problem instead.  What is read but
+should be said (a flight log cut short) is not a problem: :func:`campaign_log_warnings`
+gives it, one line per log, for every face to show.  Where both a level
 CSV and a WAV exist for a microphone and flight, the CSV is read (``gisnoise
 campaign levels`` writes it from the WAV).
 
@@ -37,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import CampaignError, GisnoiseError
-from gisnoise.flight import Trajectory, read_flight
+from gisnoise.flight import Trajectory, log_cut_warning, read_flight
 from gisnoise.measure.document import (
     _Collector,
     _is_number,
@@ -52,7 +54,7 @@ from gisnoise.measure.levels import DEFAULT_BLOCK_S, _most_common_rate, _wav_rat
 from gisnoise.measure.parts import Campaign, Problem, ProgressFn
 from gisnoise.measure.spreading import spreading_notes
 
-__all__ = ["read_campaign", "check_campaign", "inspect_campaign"]
+__all__ = ["read_campaign", "check_campaign", "inspect_campaign", "campaign_log_warnings"]
 
 
 def read_campaign(folder: str | os.PathLike[str], *, exclusions: Iterable[Any] | None = None,
@@ -114,6 +116,35 @@ def inspect_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> tuple[Cam
             for note in spreading_notes(s):
                 collector.add(cjs, "microphones", f"{cjs}: {note}")
     return camp, collector.problems
+
+
+def campaign_log_warnings(camp: Campaign) -> list[str]:
+    """The one-line warnings about a campaign's flight logs, in the order of its flights.
+
+    What :func:`gisnoise.flight.log_cut_warning` says about each flight's log, naming
+    the file: a log cut short (a dead battery, a full SD card, a broken download) is
+    read up to its cut and fitted or diagnosed as far as it goes, not a problem of the
+    campaign, but said.  The one list every face shows: the command line prints each
+    line on stderr as ``warning: <line>``; the service's fit and diagnose jobs carry
+    them in their result's ``warnings``.
+
+    Parameters
+    ----------
+    camp : Campaign
+        A campaign of :func:`read_campaign` (or :func:`inspect_campaign`).
+
+    Returns
+    -------
+    list of str
+        One line per flight whose log needs one; empty when none does.
+    """
+    out = []
+    for f in camp.flights:
+        traj = camp.trajectories.get(f.id)
+        w = log_cut_warning(traj) if traj is not None else None
+        if w is not None:
+            out.append(w)
+    return out
 
 
 def check_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> list[Problem]:
