@@ -205,7 +205,10 @@ class JobInfo(BaseModel):
     attempts: int = Field(description="Starts of the job; more than 1 after a restart re-ran it.")
     cancel_requested: bool
     error: JobError | None
-    summary: dict[str, Any] | None
+    summary: dict[str, Any] | None = Field(
+        description="The result of a succeeded job: the numbers its kind reports.  Fit and diagnose jobs carry "
+                    "`warnings` (list of str, empty when none): what the command line says about the campaign's "
+                    "flight logs (a log cut short, say), one line each.")
     files: list[str] = Field(description="Result files, downloadable at /jobs/{id}/files/{name}.")
     url: str
     result_url: str | None

@@ -8,7 +8,7 @@ import tempfile
 import zipfile
 import zlib
 from pathlib import Path, PurePosixPath
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 from fastapi import APIRouter, File, Form, Request, UploadFile
 from fastapi.concurrency import run_in_threadpool
@@ -21,6 +21,9 @@ from gisnoise.service.jobs import JobContext
 from gisnoise.service.models import CardRef, JobInfo, PhaseName, SafeId
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 from gisnoise.service.routes_jobs import JOB_LINKS, job_info
+
+if TYPE_CHECKING:
+    from gisnoise.measure import Campaign
 
 __all__ = ["router", "unpack_campaign", "run_fit_job", "run_diagnose_job"]
 
@@ -159,8 +162,31 @@ async def diagnose_job(request: Request, state: StateDep,
 
 
 # ------------------------------------------------------------------ handlers
+def _read_campaign(ctx: JobContext) -> Campaign:
+    """The job's stored campaign, read as the command line reads it; a cancel is seen between its files."""
+    from gisnoise.measure import read_campaign
+
+    return read_campaign(ctx.input_dir / "campaign", progress=lambda done, total: ctx.check_cancel())
+
+
+def _log_warnings(ctx: JobContext, camp: Campaign) -> list[str]:
+    """The campaign's log warnings (:func:`gisnoise.measure.campaign_log_warnings`, the lines the command
+    line prints), each log named as in the client's upload (``upload/campaign/flights/<file>``), not by the
+    server's folder."""
+    from gisnoise.measure import campaign_log_warnings
+
+    warnings = campaign_log_warnings(camp)
+    for folder in (ctx.input_dir.resolve(), ctx.input_dir):
+        _strip_server_paths(warnings, str(folder))
+    return warnings
+
+
 def run_fit_job(ctx: JobContext) -> dict[str, Any]:
-    """Fit the stored campaign; writes card.json (the fitted card) and fit.json (a summary)."""
+    """Fit the stored campaign; writes card.json (the fitted card) and fit.json (a summary).
+
+    The summary (the job's result and fit.json) carries ``warnings``: the campaign's log warnings
+    (:func:`_log_warnings`), empty when there are none.
+    """
     from gisnoise.identify import fit_campaign
 
     p = ctx.params
@@ -170,8 +196,10 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
         ctx.progress(min(0.1 + 0.85 * iteration / max_iter, 0.95), f"iteration {iteration}, cost {cost:.6g}")
 
     ctx.progress(0.0, "reading the campaign")
-    result = fit_campaign(ctx.input_dir / "campaign", p["phase"], ansatz=p["ansatz"], max_iter=max_iter,
-                          progress=progress, cancel=ctx.cancel)
+    camp = _read_campaign(ctx)
+    warnings = _log_warnings(ctx, camp)
+    result = fit_campaign(camp, p["phase"], ansatz=p["ansatz"], max_iter=max_iter, progress=progress,
+                          cancel=ctx.cancel)
     ctx.check_cancel()
     data = result.info.get("data")
     if isinstance(data, dict):  # the server's folder means nothing to the client
@@ -179,7 +207,7 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
     card = result.to_card(id=p.get("card_id") or None, phase=p["phase"])
     gcards.save(card, ctx.output_dir / "card.json")
     summary: dict[str, Any] = {"card_id": card.id, "phase": card.phase, "ansatz": card.ansatz,
-                               "parameters": dict(card.parameters), "std": card.std}
+                               "parameters": dict(card.parameters), "std": card.std, "warnings": warnings}
     for k in ("success", "n", "cost", "aic", "bic", "message"):
         v = getattr(result, k, None)
         if isinstance(v, (bool, int, float, str)):
@@ -207,22 +235,30 @@ def _report(module: str, *args: Any, **kw: Any) -> str:
 
 
 def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
-    """Diagnose the stored card against the stored campaign: diagnosis.json (and report.html), as the CLI."""
-    from gisnoise.diagnose import run_diagnosis, write_diagnosis
+    """Diagnose the stored card against the stored campaign: diagnosis.json (and report.html), as the CLI.
+
+    The summary (the job's result) carries ``warnings``: the campaign's log warnings (:func:`_log_warnings`),
+    empty when there are none.
+    """
+    from gisnoise.diagnose import run_diagnosis, with_mic_heights, write_diagnosis
 
     card = gcards.load(ctx.input_dir / "card.json")
     ctx.progress(0.0, "reading the campaign")
+    camp = _read_campaign(ctx)
+    warnings = _log_warnings(ctx, camp)
 
     def progress(done: int, total: int, what: str = "") -> None:
         ctx.progress(0.9 * done / max(total, 1), what or "diagnosing")
 
-    diag = run_diagnosis(ctx.input_dir / "campaign", card, progress=progress, cancel=ctx.cancel)
+    samples = with_mic_heights(camp.samples(), ctx.input_dir / "campaign")
+    diag = run_diagnosis(samples, card, progress=progress, cancel=ctx.cancel)
     ctx.check_cancel()
     _strip_server_paths(diag.result, str(ctx.input_dir))  # the server's folder means nothing to the client
     write_diagnosis(diag, ctx.output_dir, campaign=f"uploaded campaign (job {ctx.job.id})")
     summary = {"card": card.id, "verdict": diag.result.get("verdict"), "baseline": diag.result.get("baseline"),
                # what the diagnosis found wrong in campaign.json (a position, a height, a clock), as the CLI says it
-               "contradictions": list((diag.result.get("metadata") or {}).get("contradictions") or [])}
+               "contradictions": list((diag.result.get("metadata") or {}).get("contradictions") or []),
+               "warnings": warnings}
     if ctx.params.get("report", True):
         ctx.progress(0.9, "writing the report")
         summary["report"] = _report("gisnoise.diagnose.report", diag, ctx.output_dir,

@@ -159,3 +159,34 @@ def test_load_the_sample_route_and_see_its_contours(page):
     assert not b.evaluate("document.getElementById('status').classList.contains('error')"), \
         b.evaluate("document.getElementById('status').textContent")
     assert contour_fraction(b.screenshot()) > 0.05  # an L-shaped route leaves much of its frame empty
+
+
+def test_a_fit_job_on_a_cut_log_lists_its_warning_as_text(tmp_path):
+    """The jobs table shows a succeeded fit job's warnings (the campaign's log cut short) under its row, as
+    plain text: the job's summary, line for line."""
+    import httpx
+
+    pytest.importorskip("pymavlink", reason="DataFlash logs need the 'logs' extra")
+    from log171_campaign import campaign, cut_log, zip_campaign
+
+    cut, k = cut_log(tmp_path)
+    data = zip_campaign(campaign(tmp_path / "camp", cut))
+    srv = Server(tmp_path / "data")
+    browser = Browser(CHROMIUM)
+    try:
+        browser.navigate(srv.url + "/")
+        browser.wait_for("window.gisnoise && window.gisnoise.ready === true", 30)
+        r = httpx.post(srv.url + "/jobs/fit", files={"campaign": ("c.zip", data, "application/zip")},
+                       data={"phase": "horizontal"}, timeout=60)
+        assert r.status_code == 202, r.text
+        job = r.json()["id"]
+        row = f"document.querySelector('#jobs tr[data-warnings-of=\"{job}\"]')"
+        browser.wait_for(f"{row} !== null", 60)
+        warnings = httpx.get(f"{srv.url}/jobs/{job}").json()["summary"]["warnings"]
+        assert len(warnings) == 1 and f"flights/f1.bin: the log ends mid-message at byte {k} of " in warnings[0]
+        lines = browser.evaluate(f"[...{row}.querySelectorAll('td > div')].map((d) => d.textContent)")
+        assert lines == [f"warning: {w}" for w in warnings]
+        assert browser.evaluate(f"{row}.querySelectorAll('td > div > *').length") == 0   # text, no markup
+    finally:
+        browser.close()
+        srv.stop()

@@ -413,11 +413,29 @@ async function refreshJobs() {
     }
     tr.append(tda);
     tbody.append(tr);
+    const warnings = (j.status === "succeeded" && j.summary && j.summary.warnings) || [];
+    if (warnings.length) tbody.append(warningsRow(j.id, warnings));
     if (j.id === app.shownJob && j.status === "succeeded" && !app.shownDone) {
       app.shownDone = true;
       showJob(j.id);
     }
   }
+}
+
+// A job's warnings (fit and diagnose: the campaign's flight logs), one line each, as plain text.
+function warningsRow(id, warnings) {
+  const tr = document.createElement("tr");
+  tr.className = "job-warnings";
+  tr.dataset.warningsOf = id;
+  const td = document.createElement("td");
+  td.colSpan = 5;
+  for (const w of warnings) {
+    const line = document.createElement("div");
+    line.textContent = `warning: ${w}`;
+    td.append(line);
+  }
+  tr.append(td);
+  return tr;
 }
 
 async function showJob(id) {
