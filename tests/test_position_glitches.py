@@ -10,6 +10,7 @@ import json
 import numpy as np
 import pytest
 import rasterio
+from test_real_logs_maps import COPTER, N_SITE, QUAD, VTOL  # noqa: E402
 
 from gisnoise.errors import TrajectoryError
 from gisnoise.flight import read_flight, read_route
@@ -17,8 +18,6 @@ from gisnoise.flight.glitches import GLITCH_MAX_S, mend_glitches
 from gisnoise.geo import LocalFrame
 from gisnoise.maps import make_map
 from gisnoise.model import ModelCard, save
-
-from test_real_logs_maps import COPTER, N_SITE, QUAD, VTOL  # noqa: E402
 
 FRAME = LocalFrame(52.0, 10.0, 100.0)
 

@@ -101,7 +101,7 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
 
     def compute(self, parameters, context, feedback):
         from gisnoise.diagnose import run_diagnosis, write_diagnosis
-        from gisnoise.measure import read_campaign
+        from gisnoise.measure import campaign_log_warnings, read_campaign
         from gisnoise.model import cards as gcards
 
         folder = self.parameterAsFile(parameters, self.CAMPAIGN, context)
@@ -120,8 +120,11 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
             if what:
                 feedback.pushInfo(str(what))
 
+        campaign = read_campaign(folder)
+        for w in campaign_log_warnings(campaign):  # what the command line and the service say about the logs
+            feedback.reportError(f"warning: {w}", fatalError=False)
         feedback.pushInfo(f"diagnosing {card.id} against the campaign {folder}")
-        diag = run_diagnosis(folder, card, candidates=candidates, progress=progress, cancel=feedback.isCanceled)
+        diag = run_diagnosis(campaign, card, candidates=candidates, progress=progress, cancel=feedback.isCanceled)
         write_diagnosis(diag, dest, campaign=folder)
         result = diag.result
         verdict = result.get("verdict") or {}
@@ -141,7 +144,6 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
             write_report(diag, report)
             out[self.OUTPUT_REPORT] = report
         feedback.setProgress(90.0)
-        campaign = read_campaign(folder)
         seg_dest = self._segments(parameters, context, feedback, campaign, result.get("segments") or [])
         if seg_dest:
             out[self.OUTPUT_SEGMENTS] = seg_dest

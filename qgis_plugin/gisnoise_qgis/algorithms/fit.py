@@ -72,6 +72,7 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
 
     def compute(self, parameters, context, feedback):
         from gisnoise.identify import fit_campaign
+        from gisnoise.measure import campaign_log_warnings, read_campaign
         from gisnoise.model import cards as gcards
 
         folder = self.parameterAsFile(parameters, self.CAMPAIGN, context)
@@ -86,8 +87,11 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
             feedback.setProgress(min(100.0 * iteration / max_iter, 99.0))
             feedback.pushDebugInfo(f"iteration {iteration}: negative log-likelihood {cost:.4f}")
 
+        camp = read_campaign(folder)
+        for w in campaign_log_warnings(camp):  # what the command line and the service say about the logs
+            feedback.reportError(f"warning: {w}", fatalError=False)
         feedback.pushInfo(f"fitting ansatz {ansatz!r} to the {phase} samples of {folder}")
-        result = fit_campaign(folder, phase, ansatz=ansatz, max_iter=max_iter, progress=progress,
+        result = fit_campaign(camp, phase, ansatz=ansatz, max_iter=max_iter, progress=progress,
                               cancel=feedback.isCanceled)
         feedback.pushInfo(result.summary())
         card = result.to_card()

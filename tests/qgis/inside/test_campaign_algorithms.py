@@ -54,6 +54,46 @@ def test_fit_recovers_the_simulated_truth(control_fit, control_campaign, tmp_pat
     assert (path.parent / "report" / "report.html").is_file()
 
 
+def test_fit_and_diagnose_say_what_the_command_line_says_about_the_flights(plugin, control_campaign, tmp_path):
+    """One sample of a flight CSV moved 1.1 km north (a position glitch, mended on reading): both algorithms
+    report the line campaign check prints, once, before they fit or diagnose."""
+    import shutil
+
+    import processing
+    from qgis.core import QgsProcessingFeedback
+
+    from gisnoise.measure import campaign_log_warnings, read_campaign
+
+    class Said(QgsProcessingFeedback):
+        def __init__(self):
+            super().__init__()
+            self.errors = []
+
+        def reportError(self, error, fatalError=False):  # noqa: N802, N803 (QGIS's names)
+            self.errors.append(error)
+            super().reportError(error, fatalError)
+
+    camp = tmp_path / "campaign"
+    shutil.copytree(control_campaign, camp)
+    flight = sorted((camp / "flights").glob("*.csv"))[0]
+    lines = flight.read_text().splitlines()
+    col = lines[0].split(",").index("lat")
+    row = lines[len(lines) // 2].split(",")
+    row[col] = repr(float(row[col]) + 0.01)
+    lines[len(lines) // 2] = ",".join(row)
+    flight.write_text("\n".join(lines) + "\n")
+    expected = campaign_log_warnings(read_campaign(camp))
+    assert len(expected) == 1 and str(flight) in expected[0] and "position glitch" in expected[0]
+    said = Said()
+    processing.run("gisnoise:fitcard", {"CAMPAIGN": str(camp), "PHASE": 0, "ANSATZ": "paper-offset",
+                                        "OUTPUT_CARD": str(tmp_path / "card.json")}, feedback=said)
+    assert said.errors == [f"warning: {expected[0]}"]
+    said = Said()
+    processing.run("gisnoise:diagnose", {"CAMPAIGN": str(camp), "CARD": str(truth_card(control_campaign, tmp_path)),
+                                         "OUTPUT_JSON": str(tmp_path / "diagnosis.json")}, feedback=said)
+    assert said.errors == [f"warning: {expected[0]}"]
+
+
 def test_fit_of_a_folder_that_is_no_campaign_names_the_file(plugin, tmp_path):
     import processing
     from qgis.core import QgsProcessingException
