@@ -34,7 +34,7 @@ import numpy as np
 
 from gisnoise.errors import TrajectoryError
 from gisnoise.geo import LocalFrame
-from gisnoise.limits import MAX_UAV_SPEED_M_S
+from gisnoise.limits import MAX_UAV_SPEED_M_S, current
 
 __all__ = ["GLITCH_MAX_S", "Glitches", "glitch_warning", "mend_glitches"]
 
@@ -63,8 +63,9 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
     """Find and mend the position glitches of a track (see the module docstring).
 
     ``t`` in s, increasing; ``lat``, ``lon`` in deg, ``h`` in m.  A track with fewer than three samples, a
-    non-finite value or times that do not increase is returned as it is (the trajectory's own checks name
-    those).  Raises :class:`~gisnoise.errors.TrajectoryError` (field ``lat``) for a jump the track does not
+    non-finite value, times that do not increase or a position outside the limits (latitude, longitude,
+    :mod:`gisnoise.limits` heights) is returned as it is (the trajectory's own checks refuse those, naming
+    them).  Raises :class:`~gisnoise.errors.TrajectoryError` (field ``lat``) for a jump the track does not
     come back from within :data:`GLITCH_MAX_S`.
 
     >>> t = np.arange(6.0)
@@ -78,6 +79,10 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
     n = t.size
     if n < 3 or not all(np.all(np.isfinite(a)) for a in (t, lat, lon, h)) or np.any(np.diff(t) <= 0):
         return same
+    lim = current()
+    if (np.any(np.abs(lat) > 90.0) or np.any(np.abs(lon) > 180.0) or np.any(h < lim.min_height_m)
+            or np.any(h > lim.max_height_m)):
+        return same  # a value out of range is refused by the trajectory's checks, naming it, not mended
     frame = LocalFrame(float(np.median(lat)), float(np.median(lon)), float(np.median(h)))
     p = np.stack(frame.to_enu(lat, lon, h), axis=-1)
     step = np.linalg.norm(np.diff(p, axis=0), axis=1)
