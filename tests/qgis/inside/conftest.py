@@ -198,3 +198,20 @@ def bilinear(array, geotransform, x, y):
     top = array[r0, c0] * (1 - fc) + array[r0, c1] * fc
     bottom = array[r1, c0] * (1 - fc) + array[r1, c1] * fc
     return top * (1 - fr) + bottom * fr
+
+
+def recording_feedback():
+    """A Processing feedback that keeps what the algorithm reports as errors (``.errors``; warnings are reported
+    that way, ``fatalError=False``)."""
+    from qgis.core import QgsProcessingFeedback
+
+    class Recording(QgsProcessingFeedback):
+        def __init__(self):
+            super().__init__()
+            self.errors = []
+
+        def reportError(self, error, fatalError=False):  # noqa: N802, N803 (QGIS's names)
+            self.errors.append(error)
+            super().reportError(error, fatalError)
+
+    return Recording()

@@ -3,7 +3,7 @@
 import json
 
 import pytest
-from conftest import REPO
+from conftest import REPO, recording_feedback
 
 pytestmark = pytest.mark.qgis
 
@@ -60,18 +60,8 @@ def test_fit_and_diagnose_say_what_the_command_line_says_about_the_flights(plugi
     import shutil
 
     import processing
-    from qgis.core import QgsProcessingFeedback
 
     from gisnoise.measure import campaign_log_warnings, read_campaign
-
-    class Said(QgsProcessingFeedback):
-        def __init__(self):
-            super().__init__()
-            self.errors = []
-
-        def reportError(self, error, fatalError=False):  # noqa: N802, N803 (QGIS's names)
-            self.errors.append(error)
-            super().reportError(error, fatalError)
 
     camp = tmp_path / "campaign"
     shutil.copytree(control_campaign, camp)
@@ -84,11 +74,11 @@ def test_fit_and_diagnose_say_what_the_command_line_says_about_the_flights(plugi
     flight.write_text("\n".join(lines) + "\n")
     expected = campaign_log_warnings(read_campaign(camp))
     assert len(expected) == 1 and str(flight) in expected[0] and "position glitch" in expected[0]
-    said = Said()
+    said = recording_feedback()
     processing.run("gisnoise:fitcard", {"CAMPAIGN": str(camp), "PHASE": 0, "ANSATZ": "paper-offset",
                                         "OUTPUT_CARD": str(tmp_path / "card.json")}, feedback=said)
     assert said.errors == [f"warning: {expected[0]}"]
-    said = Said()
+    said = recording_feedback()
     processing.run("gisnoise:diagnose", {"CAMPAIGN": str(camp), "CARD": str(truth_card(control_campaign, tmp_path)),
                                          "OUTPUT_JSON": str(tmp_path / "diagnosis.json")}, feedback=said)
     assert said.errors == [f"warning: {expected[0]}"]

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import CARDS
+from conftest import CARDS, recording_feedback
 
 pytestmark = pytest.mark.qgis
 
@@ -72,18 +72,8 @@ def test_quieter_route_goes_around_the_block(plugin, town, tmp_path):
     """... and says in the log what the comparison warns (here: the default vehicle flies outside the demo cards'
     fitted powers), each warning once."""
     import processing
-    from qgis.core import QgsProcessingFeedback
 
-    class Said(QgsProcessingFeedback):
-        def __init__(self):
-            super().__init__()
-            self.errors = []
-
-        def reportError(self, error, fatalError=False):  # noqa: N802, N803 (QGIS's names)
-            self.errors.append(error)
-            super().reportError(error, fatalError)
-
-    said = Said()
+    said = recording_feedback()
     s_lon, s_lat = _lonlat(-1500.0, 0.0)
     g_lon, g_lat = _lonlat(1500.0, 0.0)
     cards = ",".join(str(CARDS / f"demo_{p}.json") for p in ("horizontal", "climb", "sink"))
