@@ -12,9 +12,8 @@ import pytest
 import rasterio
 from test_real_logs_maps import COPTER, N_SITE, QUAD, VTOL  # noqa: E402
 
-from gisnoise.errors import TrajectoryError
-from gisnoise.flight import read_flight, read_route
-from gisnoise.flight.glitches import GLITCH_MAX_S, mend_glitches
+from gisnoise.flight import Trajectory, read_flight, read_route
+from gisnoise.flight.glitches import GLITCH_MAX_S, glitch_warning, mend_glitches
 from gisnoise.geo import LocalFrame
 from gisnoise.maps import make_map
 from gisnoise.model import ModelCard, save
@@ -72,16 +71,21 @@ def test_a_glitch_at_either_end_takes_the_nearest_good_position(where):
     assert (g.lat[i], g.lon[i]) == (lat[j], lon[j])
 
 
-def test_a_jump_the_track_does_not_come_back_from_is_refused_naming_it():
+def test_a_jump_the_track_does_not_come_back_from_is_kept_and_named():
     """From t = 15 s on the 30 s track runs 3 km north: a reset or two tracks joined, not a glitch of at most 10 s
-    on either side; a jump 5 s before the end is the track's end glitching (held at its last good position)."""
+    on either side; which side is right is unknown, so both stay as logged and the warning names the jump.  A jump
+    5 s before the end is the track's end glitching (held at its last good position)."""
     t, lat, lon, h = _track(n=301)
     lat2, lon2, _ = FRAME.to_wgs84(10.0 * t, np.where(t >= 15.0, 3000.0, 0.0), 0 * t + 30.0)
     assert 15.0 > GLITCH_MAX_S
-    with pytest.raises(TrajectoryError) as e:
-        mend_glitches(t, lat2, lon2, h, source="joined.csv")
-    assert e.value.field == "lat"
-    assert str(e.value).startswith("joined.csv: the position jumps 3,000 m between t = 14.90 and 15.00 s (30,000 m/s")
+    g = mend_glitches(t, lat2, lon2, h)
+    assert g.runs == () and [j[0] for j in g.jumps] == [149] and g.jumps[0][1] == pytest.approx(3000.0, abs=0.1)
+    assert np.array_equal(g.lat, lat2) and np.array_equal(g.lon, lon2)
+    tr = Trajectory(t=t, lat=lat2, lon=lon2, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t + 90.0,
+                    power_w=0 * t + 3000.0, phase=np.full(t.size, "horizontal"), source="joined.csv",
+                    metadata=g.metadata(t))
+    assert glitch_warning(tr).startswith("joined.csv: the position jumps 3,000 m between t = 14.90 and 15.00 s "
+                                         "(30,000 m/s, faster than any UAV flies) and does not come back within 10 s")
     lat3, lon3, _ = FRAME.to_wgs84(10.0 * t, np.where(t >= 25.0, 3000.0, 0.0), 0 * t + 30.0)
     g = mend_glitches(t, lat3, lon3, h)
     assert [r[:2] for r in g.runs] == [(250, 301)] and np.all(g.lat[250:] == lat3[249])

@@ -189,8 +189,7 @@ def _dataflash_trajectory(src: str, reader: Any, start_utc: Any, geoid_undulatio
             **geoid_meta,
             "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}
     traj = _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)
-    if glitches.runs:
-        traj.metadata["position_glitches"] = glitches.metadata(traj.t)
+    traj.metadata.update(glitches.metadata(traj.t))
     return traj
 
 

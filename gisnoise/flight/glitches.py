@@ -12,16 +12,16 @@ segment it looks for the first later sample it could reach at that speed, within
 uniform flight between those two samples (their other fields, attitude and power, stay as logged).  A
 glitch at the track's start or end, with no sample beyond it to reach, takes the nearest good position
 (of the two sides of the jump, the one with fewer samples, lasting at most :data:`GLITCH_MAX_S`).
-A jump after which the track does not come back within :data:`GLITCH_MAX_S` (a position reset, or two
-tracks joined) cannot be told from the flight: it is refused, naming where and how far
-(:class:`~gisnoise.errors.TrajectoryError`, field ``lat``).  Samples that are not glitches keep their
-positions bit for bit.
+A jump after which the track does not come back within :data:`GLITCH_MAX_S` (an estimator's position
+reset, or two tracks joined) cannot be mended from the flight: which side is right is not known, so the
+track is kept as logged on both sides and the warning names the jump (where, how far), for the user to
+judge the map there.  Samples that are not glitches keep their positions bit for bit.
 
 The readers of flight logs mend the positions on their time base before the phase and the on-ground
 samples are derived from them; flight CSVs and timed GeoJSON paths are mended as they are read.  The
 trajectory's metadata lists the glitches (``position_glitches``: times on its own clock, the jump and
-its speed), from which :func:`glitch_warning` makes the one-line warning every map, fit and diagnosis
-shows (through :func:`gisnoise.flight.log_cut_warning`).
+its speed) and the jumps kept (``position_jumps``), from which :func:`glitch_warning` makes the one-line
+warning every map, fit and diagnosis shows (through :func:`gisnoise.flight.log_cut_warning`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,6 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import TrajectoryError
 from gisnoise.geo import LocalFrame
 from gisnoise.limits import MAX_UAV_SPEED_M_S, current
 
@@ -45,18 +44,28 @@ GLITCH_MAX_S = 10.0
 @dataclass(frozen=True)
 class Glitches:
     """What :func:`mend_glitches` found: ``runs`` as ``(first, end)`` sample indices (``end`` exclusive), the
-    largest jump into or out of each (m) and its speed (m/s); ``lat``, ``lon``, ``h`` the mended positions."""
+    largest jump into or out of each (m) and its speed (m/s); ``jumps`` kept as logged, as ``(i, jump, speed)``
+    (between samples ``i`` and ``i + 1``); ``lat``, ``lon``, ``h`` the mended positions."""
 
     runs: tuple[tuple[int, int, float, float], ...]
     lat: np.ndarray
     lon: np.ndarray
     h: np.ndarray
+    jumps: tuple[tuple[int, float, float], ...] = ()
 
-    def metadata(self, t: Any) -> list[dict[str, float]]:
-        """The trajectory's ``position_glitches`` on its clock ``t`` (s; the reader's time base shifted)."""
+    def metadata(self, t: Any) -> dict[str, Any]:
+        """The trajectory's ``position_glitches`` and ``position_jumps`` (those there are) on its clock ``t``
+        (s; the reader's time base shifted)."""
         tt = np.asarray(t, dtype=float)
-        return [{"t_first_s": float(tt[i0]), "t_last_s": float(tt[i1 - 1]), "samples": int(i1 - i0),
+        out: dict[str, Any] = {}
+        if self.runs:
+            out["position_glitches"] = [
+                {"t_first_s": float(tt[i0]), "t_last_s": float(tt[i1 - 1]), "samples": int(i1 - i0),
                  "jump_m": round(jump, 1), "speed_m_s": round(speed, 1)} for i0, i1, jump, speed in self.runs]
+        if self.jumps:
+            out["position_jumps"] = [{"t_s": float(tt[i]), "t_next_s": float(tt[i + 1]), "jump_m": round(jump, 1),
+                                      "speed_m_s": round(speed, 1)} for i, jump, speed in self.jumps]
+        return out
 
 
 def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajectory") -> Glitches:
@@ -65,8 +74,7 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
     ``t`` in s, increasing; ``lat``, ``lon`` in deg, ``h`` in m.  A track with fewer than three samples, a
     non-finite value, times that do not increase or a position outside the limits (latitude, longitude,
     :mod:`gisnoise.limits` heights) is returned as it is (the trajectory's own checks refuse those, naming
-    them).  Raises :class:`~gisnoise.errors.TrajectoryError` (field ``lat``) for a jump the track does not
-    come back from within :data:`GLITCH_MAX_S`.
+    them).
 
     >>> t = np.arange(6.0)
     >>> lat = np.full(6, 52.0); lon = 10.0 + 1e-4 * t; lon[3] = 11.0   # one fix 68 km east, for one second
@@ -89,11 +97,13 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
     fast = np.flatnonzero(step > MAX_UAV_SPEED_M_S * np.diff(t))
     if fast.size == 0:
         return same
+    del source  # named by the warning, from the trajectory
 
     def reach(i: int, j: int) -> bool:  # sample j within the speed bound of sample i
         return bool(np.linalg.norm(p[j] - p[i]) <= MAX_UAV_SPEED_M_S * abs(t[j] - t[i]))
 
     runs: list[tuple[int, int, float, float]] = []
+    jumps: list[tuple[int, float, float]] = []
     k = 0
     while True:
         nxt = fast[fast >= k]
@@ -114,12 +124,10 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
             i0, i1 = a + 1, end
         elif ends:
             _, i0, i1 = min(ends)
-        else:
-            raise TrajectoryError(
-                f"{source}: the position jumps {step[a]:,.0f} m between t = {t[a]:.2f} and {t[a + 1]:.2f} s "
-                f"({step[a] / (t[a + 1] - t[a]):,.0f} m/s; no UAV flies faster than {MAX_UAV_SPEED_M_S:g} m/s) and "
-                f"does not come back within {GLITCH_MAX_S:g} s: a position reset or two tracks joined; mend the "
-                "track or cut it there", field="lat")
+        else:  # kept as logged, and said
+            jumps.append((a, float(step[a]), float(step[a] / (t[a + 1] - t[a]))))
+            k = a + 1
+            continue
         edges = [s for s in (i0 - 1, i1 - 1) if 0 <= s < n - 1]
         jump = max(float(step[s]) for s in edges)
         speed = max(float(step[s] / (t[s + 1] - t[s])) for s in edges)
@@ -135,15 +143,28 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
         f = ((t[idx] - t[i0 - 1]) / (t[i1] - t[i0 - 1]))[:, None]
         q = p[i0 - 1] + f * (p[i1] - p[i0 - 1])
         lat[idx], lon[idx], h[idx] = frame.to_wgs84(q[:, 0], q[:, 1], q[:, 2])
-    return Glitches(tuple(runs), lat, lon, h)
+    return Glitches(tuple(runs), lat, lon, h, tuple(jumps))
 
 
 def glitch_warning(traj: Any) -> str | None:
     """The one-line warning for a trajectory whose position glitches were mended (its ``metadata
     ["position_glitches"]``); None when there were none."""
-    runs = traj.metadata.get("position_glitches") if isinstance(traj.metadata, Mapping) else None
-    if not runs:
-        return None
+    meta = traj.metadata if isinstance(traj.metadata, Mapping) else {}
+    runs, jumps = meta.get("position_glitches") or [], meta.get("position_jumps") or []
+    said = []
+    if runs:
+        said.append(_mended(traj.source, runs))
+    for j in jumps[:3]:
+        said.append(f"{traj.source}: the position jumps {j['jump_m']:,.0f} m between t = {j['t_s']:.2f} and "
+                    f"{j['t_next_s']:.2f} s ({j['speed_m_s']:,.0f} m/s, faster than any UAV flies) and does not come "
+                    f"back within {GLITCH_MAX_S:g} s: a position reset or two tracks joined, kept as logged on both "
+                    "sides (one of them is off by the jump)")
+    if len(jumps) > 3:
+        said.append(f"{traj.source}: {len(jumps) - 3} more such jumps")
+    return "; ".join(said) if said else None
+
+
+def _mended(source: str, runs: list[Mapping[str, Any]]) -> str:
     worst = max(runs, key=lambda r: r["jump_m"])
 
     def span(r: Mapping[str, Any]) -> str:
@@ -154,5 +175,5 @@ def glitch_warning(traj: Any) -> str | None:
     n = sum(r["samples"] for r in runs)
     what = (f"{n} sample{'s' if n != 1 else ''} in {len(runs)} position glitches" if len(runs) > 1 else
             f"{n} sample{'s' if n != 1 else ''} in a position glitch")
-    return (f"{traj.source}: {what} ({when}; a jump of up to {worst['jump_m']:,.0f} m at {worst['speed_m_s']:,.0f} "
+    return (f"{source}: {what} ({when}; a jump of up to {worst['jump_m']:,.0f} m at {worst['speed_m_s']:,.0f} "
             f"m/s, faster than any UAV flies) mended: there the track runs straight between the samples around it")

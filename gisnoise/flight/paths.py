@@ -101,5 +101,4 @@ def trajectory_from_path(t: Any, lat: Any, lon: Any, h: Any, *, vehicle: Vehicle
         kw[k] = given[k] if given.get(k) is not None else der[k]
     if given.get("rpm") is not None:
         kw["rpm"] = given["rpm"]
-    meta = {"position_glitches": glitches.metadata(t)} if glitches.runs else {}
-    return Trajectory(**kw, source=source, metadata=meta)
+    return Trajectory(**kw, source=source, metadata=glitches.metadata(t))

@@ -249,10 +249,10 @@ def from_columns(cols: Mapping[str, Any], *, source: str = "trajectory") -> Traj
             raise TrajectoryError(f"{source}: column '{c}' has a non-numeric value", field=c) from None
     kw["phase"] = np.asarray(cols["phase"], dtype=str) if "phase" in cols else np.full(n, "horizontal")
     glitches = mend_glitches(kw["t"], kw["lat"], kw["lon"], kw["h"], source=source)
-    if not glitches.runs:
+    if not glitches.runs and not glitches.jumps:
         return Trajectory(**kw, source=source)
     kw.update(lat=glitches.lat, lon=glitches.lon, h=glitches.h)
-    return Trajectory(**kw, source=source, metadata={"position_glitches": glitches.metadata(kw["t"])})
+    return Trajectory(**kw, source=source, metadata=glitches.metadata(kw["t"]))
 
 
 def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str | None = None) -> Trajectory:

@@ -226,8 +226,7 @@ def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: fl
         utc_offset = gps_cols["utc_offset"]
     meta = {"height_datum": datum, **height_meta, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
     traj = _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
-    if glitches.runs:
-        traj.metadata["position_glitches"] = glitches.metadata(traj.t)
+    traj.metadata.update(glitches.metadata(traj.t))
     return traj
 
 
