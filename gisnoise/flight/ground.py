@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from gisnoise.errors import TrajectoryError
 from gisnoise.flight.rest import REST_SPEED_M_S
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.limits import GROUND_TOLERANCE_M
 
-__all__ = ["ground_from_track", "flying_segments", "GROUND_TOLERANCE_M", "REST_SPEED_M_S", "GROUND_RULE"]
+__all__ = ["ground_from_track", "flying_parts", "flying_segments", "GROUND_TOLERANCE_M", "REST_SPEED_M_S", "GROUND_RULE"]
 
 GROUND_RULE = ("without --dem or --ground-height, the ground is taken from the track only when it starts or "
                "ends on the ground (take-off or landing)")
@@ -82,3 +83,18 @@ def flying_segments(traj: Trajectory) -> list[tuple[int, int]]:
             out.append((i, j))
         i = j
     return out
+
+
+def flying_parts(traj: Trajectory) -> list[Trajectory]:
+    """The parts of ``traj`` that make noise: itself when it flies throughout, else its flying stretches
+    (:func:`flying_segments`), each its own trajectory.  What a map and a day of operations evaluate.
+
+    Raises :class:`~gisnoise.errors.TrajectoryError` (field ``power_w``) when no two consecutive samples fly.
+    """
+    if bool(np.all(traj.flying)):
+        return [traj]
+    segs = flying_segments(traj)
+    if not segs:
+        raise TrajectoryError(f"{traj.source}: no two consecutive flying samples (all on the ground or without "
+                              "power): nothing makes noise", field="power_w")
+    return [traj.select(np.arange(i0, i1)) for i0, i1 in segs]

@@ -50,8 +50,8 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import InputError, TrajectoryError
-from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_route
+from gisnoise.errors import InputError
+from gisnoise.flight import Trajectory, flying_parts, ground_from_track, read_route
 from gisnoise.geo import GridSpec
 from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
@@ -316,13 +316,10 @@ def evaluate_flying(traj: Trajectory, cards: Any, grid: Any, *, period_s: float 
 def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: float | None,
                      snapshot_t: float | None, progress: Callable[[float], Any], kw: dict[str, Any]) -> MapResult:
     """Metrics over the flying stretches of ``traj`` summed in energy (see the module docstring)."""
-    segs = flying_segments(traj)
-    if not segs:
-        raise TrajectoryError(f"{traj.source}: no two consecutive flying samples (all on the ground or without "
-                              "power): nothing makes noise", field="power_w")
-    if kw.get("uncertainty") and len(segs) > 1:
+    parts = flying_parts(traj)
+    if kw.get("uncertainty") and len(parts) > 1:
         raise InputError(f"{traj.source}: uncertainty bands need one flying stretch; the track lands and takes "
-                         f"off again ({len(segs)} stretches)", field="uncertainty")
+                         f"off again ({len(parts)} stretches)", field="uncertainty")
     if snapshot_t is not None and not traj.t[0] <= float(snapshot_t) <= traj.t[-1]:  # as evaluate_grid refuses it
         raise InputError(f"snapshot_t={float(snapshot_t):g} s lies outside the trajectory "
                          f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
@@ -332,11 +329,10 @@ def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: fl
                          f"({traj.duration_s:g} s)", field="period_s")
     period = traj.duration_s if period_s is None else period_s
     results: list[MapResult] = []
-    for k, (i0, i1) in enumerate(segs):
-        part = traj.select(np.arange(i0, i1))
+    for k, part in enumerate(parts):
         snap = snapshot_t if snapshot_t is not None and part.t[0] <= snapshot_t <= part.t[-1] else None
         results.append(evaluate_grid(part, cardset, grid, period_s=period, snapshot_t=snap,
-                                     progress=_part_progress(progress, k, len(segs)), **kw))
+                                     progress=_part_progress(progress, k, len(parts)), **kw))
     first = results[0]
     bands: dict[str, np.ndarray] = {}
     for name in first.bands:
@@ -357,7 +353,7 @@ def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: fl
     meta["trajectory"] = {"source": traj.source, "samples": len(traj), "t_start_s": float(traj.t[0]),
                           "t_end_s": float(traj.t[-1]), "duration_s": traj.duration_s}
     meta["snapshot_t_s"] = snapshot_t
-    meta["flying_stretches"] = [[float(traj.t[i0]), float(traj.t[i1 - 1])] for i0, i1 in segs]
+    meta["flying_stretches"] = [[float(p.t[0]), float(p.t[-1])] for p in parts]
     meta["samples_on_ground"] = int(np.sum(~traj.flying))
     meta["evaluation_instants"] = int(sum(r.metadata.get("evaluation_instants", 0) for r in results))
     if "period_s" in meta:

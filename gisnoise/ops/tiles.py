@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import Cancelled, InputError
-from gisnoise.flight import Trajectory, flying_segments
+from gisnoise.flight import Trajectory, flying_parts
 from gisnoise.geo import GridSpec
 from gisnoise.maps import (
     CardSet,
@@ -87,14 +87,9 @@ class FlightParts:
 
 
 def flight_parts(traj: Trajectory, prepare: Callable[[Trajectory], FlightInstants]) -> FlightParts:
-    """The flying stretches of ``traj`` (:func:`gisnoise.flight.flying_segments`), each prepared by ``prepare``."""
-    if bool(np.all(traj.flying)):
-        return FlightParts((prepare(traj),))
-    segs = flying_segments(traj)
-    if not segs:
-        raise InputError(f"{traj.source}: no two consecutive flying samples (all on the ground or without power): "
-                         "nothing makes noise", field="power_w")
-    return FlightParts(tuple(prepare(traj.select(np.arange(i0, i1))) for i0, i1 in segs))
+    """The parts of ``traj`` that make noise (:func:`gisnoise.flight.flying_parts`, as a map's), each prepared by
+    ``prepare``."""
+    return FlightParts(tuple(prepare(p) for p in flying_parts(traj)))
 
 
 @dataclass(frozen=True, eq=False)
