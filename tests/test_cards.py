@@ -92,3 +92,25 @@ def test_missing_card_file(tmp_path):
     with pytest.raises(CardError, match="no such card file") as exc:
         cards.load(tmp_path / "none.json")
     assert exc.value.field == "card"
+
+
+def test_a_card_with_parameters_near_the_float_limit_is_refused_naming_them(recwarn):
+    """Directivity coefficients of 1e40-1e156 (found by the request fuzzer): the levels overflow, and their share of
+    the level (Jacobian times parameter) overflows too; the card is refused naming those parameters, with no
+    floating-point warning on the way."""
+    import warnings
+
+    from gisnoise.model import ModelCard
+    from gisnoise.model.plausibility import card_problems
+
+    par = dict(p0=70.0, p1=20.0, p2=-7.888581266818121e40, p3=0.0, p4=9.315563349416767e155,
+               p5=3.46778199803437e150, p6=1.0, p7=40.0)
+    card = ModelCard(id="x", vehicle="v", phase="horizontal", ansatz="paper-offset", parameters=par,
+                     reference_power_w=3000.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        problems = card_problems(card)
+    assert len(problems) == 1 and "outside the plausible" in problems[0]
+    named = problems[0].split("driven by ")[1]
+    assert any(f"{k} =" in named for k in ("p2", "p4", "p5"))
+    assert not any(f"{k} =" in named for k in ("p0", "p1", "p3", "p6", "p7"))

@@ -136,7 +136,8 @@ def card_problems(card: Any) -> list[str]:
         worst = int(np.flatnonzero(bad)[np.argmax(np.abs(np.nan_to_num(flat[bad], nan=1e300)))])
         culprits = names
         if j is not None and np.all(np.isfinite(j[worst])):
-            contrib = np.abs(j[worst] * p)
+            with np.errstate(over="ignore"):  # parameters near the float limit: their contribution is inf
+                contrib = np.abs(j[worst] * p)
             if bg is not None:
                 contrib[names.index(bg)] = 0.0
             culprits = [names[k] for k in np.argsort(-contrib) if contrib[k] >= 0.5 * contrib.max()]
