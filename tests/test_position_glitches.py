@@ -131,3 +131,26 @@ def test_log171_with_a_glitch_maps_as_the_log_itself(copter_csv, glitch):
             np.testing.assert_allclose(b.read(k), a.read(k), atol=0.01)
         meta = json.loads(b.tags()["gisnoise"])
     assert any("position glitch" in w for w in meta["warnings"])
+
+
+def test_the_quick_bound_never_misses_a_step_the_frame_finds_too_fast():
+    """The cheap test that skips the local frame bounds every step from above: on random steps near the bound,
+    anywhere on the globe (poles, antimeridian, up to 10 km), a step the frame finds faster than 150 m/s is
+    always among those the bound lets through."""
+    from gisnoise.flight.glitches import _may_be_fast
+    from gisnoise.limits import MAX_UAV_SPEED_M_S
+
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        lat0, lon0 = rng.uniform(-89.9, 89.9), rng.uniform(-180.0, 180.0)
+        h0 = rng.uniform(-400.0, 9000.0)
+        fr = LocalFrame(lat0, lon0, h0)
+        az, el = rng.uniform(0, 2 * np.pi), rng.uniform(-np.pi / 2, np.pi / 2)
+        d = MAX_UAV_SPEED_M_S * rng.uniform(0.98, 1.02)  # a 1 s step within 2 % of the bound
+        la, lo, hh = fr.to_wgs84(np.array([0.0, d * np.cos(el) * np.sin(az)]),
+                                 np.array([0.0, d * np.cos(el) * np.cos(az)]), np.array([0.0, d * np.sin(el)]))
+        lo = (lo + 180.0) % 360.0 - 180.0
+        t = np.array([0.0, 1.0])
+        e, n, u = LocalFrame(float(la[0]), float(lo[0]), float(hh[0])).to_enu(la, lo, hh)
+        if np.hypot(np.hypot(e[1] - e[0], n[1] - n[0]), u[1] - u[0]) > MAX_UAV_SPEED_M_S:
+            assert _may_be_fast(t, la, lo, hh)

@@ -91,6 +91,8 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
     if (np.any(np.abs(lat) > 90.0) or np.any(np.abs(lon) > 180.0) or np.any(h < lim.min_height_m)
             or np.any(h > lim.max_height_m)):
         return same  # a value out of range is refused by the trajectory's checks, naming it, not mended
+    if not _may_be_fast(t, lat, lon, h):
+        return same
     frame = LocalFrame(float(np.median(lat)), float(np.median(lon)), float(np.median(h)))
     p = np.stack(frame.to_enu(lat, lon, h), axis=-1)
     step = np.linalg.norm(np.diff(p, axis=0), axis=1)
@@ -144,6 +146,23 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
         q = p[i0 - 1] + f * (p[i1] - p[i0 - 1])
         lat[idx], lon[idx], h[idx] = frame.to_wgs84(q[:, 0], q[:, 1], q[:, 2])
     return Glitches(tuple(runs), lat, lon, h, tuple(jumps))
+
+
+_R_CURVATURE_MAX_M = 6_399_593.6
+"""The WGS84 ellipsoid's largest radius of curvature (meridional and prime vertical, at the poles), m."""
+
+
+def _may_be_fast(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray) -> bool:
+    """Whether some step of the track may break the speed bound, from an upper bound of each step's length: the
+    path along the meridian, then the parallel, then the vertical is no shorter than the straight step, and its
+    arcs are no longer than (largest radius of curvature + highest height) times their angle.  The local frame,
+    which costs more than the rest, is then needed only for tracks that may hold a glitch."""
+    r = _R_CURVATURE_MAX_M + max(float(np.max(h)), 0.0)
+    dlat = np.radians(np.abs(np.diff(lat)))
+    dlon = np.radians(np.abs(np.diff(lon)))
+    dlon = np.minimum(dlon, 2.0 * np.pi - dlon)  # across the antimeridian
+    bound = r * (dlat + dlon) + np.abs(np.diff(h))
+    return bool(np.any(bound > MAX_UAV_SPEED_M_S * np.diff(t)))
 
 
 def glitch_warning(traj: Any) -> str | None:
