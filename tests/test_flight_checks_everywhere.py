@@ -156,3 +156,40 @@ def test_route_optimize_says_the_routes_fly_outside_the_cards_powers(tmp_path):
         tr = read_route(tmp_path / "out" / file).trajectory
         assert doc["power_outside_card_range"][name]["tiny"]["samples"] == int(tr.flying.sum())
         assert sum(line.startswith(f"warning: {name}: ") and "outside" in line for line in r.stderr.splitlines()) == 1
+
+
+def test_a_schedule_gives_a_logs_geoid_undulation_and_constant_power(tmp_path, omni_card):
+    """A flight log in a schedule takes what `contour --geoid-undulation N --power-w W` gives a map of it: the
+    same heights and powers, bit for bit; a flight CSV, which states its power, refuses power_w."""
+    flights = [{"id": "c", "trajectory": str(COPTER), "counts": {"day": 1}, "geoid_undulation_m": 22.0,
+                "power_w": 250.0}]
+    path = tmp_path / "day.json"
+    path.write_text(json.dumps({"schema": "gisnoise/operations/1", "cards": [omni_card], "flights": flights}))
+    got = load_schedule(path).flights[0].trajectory
+    want = read_route(COPTER, geoid_undulation_m=22.0, power_w=250.0).trajectory
+    assert np.array_equal(got.h, want.h) and np.array_equal(got.power_w, want.power_w)
+    assert np.all(got.power_w == 250.0)
+    assert not np.array_equal(got.h, read_route(COPTER, geoid_undulation_m=0.0, power_w=250.0).trajectory.h)
+    _track(3000.0).to_csv(tmp_path / "fast.csv")
+    flights = [{"id": "a", "trajectory": "fast.csv", "counts": {"day": 1}, "power_w": 250.0}]
+    path = _schedule(tmp_path, omni_card, flights, ground_h_m=0.0)
+    with pytest.raises(InputError) as e:
+        load_schedule(path)
+    assert e.value.field == "power_w"
+
+
+def test_a_schedule_refuses_a_field_it_does_not_know(tmp_path, omni_card):
+    """A misspelt field (geoid_undulaton_m) would be left out without a word, the log's heights then taken from
+    the geoid grid: refused, naming it and the fields a flight knows."""
+    flights = [{"id": "c", "trajectory": str(COPTER), "counts": {"day": 1}, "geoid_undulaton_m": 22.0}]
+    path = tmp_path / "day.json"
+    path.write_text(json.dumps({"schema": "gisnoise/operations/1", "cards": [omni_card], "flights": flights}))
+    with pytest.raises(InputError) as e:
+        load_schedule(path)
+    assert e.value.field == "geoid_undulaton_m"
+    assert "flight 'c': unknown field 'geoid_undulaton_m' (known: id, trajectory, counts" in str(e.value)
+    path.write_text(json.dumps({"schema": "gisnoise/operations/1", "cards": [omni_card], "flights": flights[:0],
+                                "grid": {"resolution": 10}}))
+    with pytest.raises(InputError) as e:
+        load_schedule(path)
+    assert e.value.field == "resolution" and "grid: unknown field 'resolution'" in str(e.value)

@@ -1,7 +1,8 @@
 """The schedule of a day of operations: which flights, how often in each period, on which receivers.
 
 A *schedule* lists the flights a place expects on an average day, each a trajectory
-(flight CSV, GeoJSON LineString with times or waypoints; :func:`gisnoise.flight.read_route`)
+(flight CSV, PX4 or ArduPilot flight log, GeoJSON LineString with times or waypoints;
+:func:`gisnoise.flight.read_route`)
 flown a number of times in each period of the day (:mod:`gisnoise.ops.periods`), given
 as counts or as departure clock times.
 
@@ -19,9 +20,14 @@ Schedule document (JSON, ``"schema": "gisnoise/operations/1"``; paths relative t
         {"id": "north", "trajectory": "routes/north.json",
          "counts": {"day": 24, "evening": 4, "night": 1}},
         {"id": "south", "trajectory": "routes/south.csv",
-         "departures": ["07:30", "12:10", "19:45", "23:20"], "cards": ["cards/other.json"]}]}
+         "departures": ["07:30", "12:10", "19:45", "23:20"], "cards": ["cards/other.json"]},
+        {"id": "logged", "trajectory": "logs/00000042.BIN", "counts": {"day": 2},
+         "geoid_undulation_m": 47.3,       # a log's heights above mean sea level made ellipsoidal
+         "power_w": 2400}]}                # a log without battery current: a constant power
 
-Without ``ground_h_m`` and ``dem`` the ground is the take-off or landing point of the flights that
+A flight's ``geoid_undulation_m`` and ``power_w`` are those of ``gisnoise contour``'s
+``--geoid-undulation`` and ``--power-w`` (for flight logs; a source that states its power refuses
+``power_w``).  Without ``ground_h_m`` and ``dem`` the ground is the take-off or landing point of the flights that
 start or end on the ground (the lowest of them), as for a map; a schedule whose flights are all
 in the air throughout is refused (field ``ground_h_m``).
 
@@ -199,6 +205,20 @@ def _levels(doc: Mapping[str, Any], key: str, default: Sequence[float], source: 
         raise InputError(f"{source}: {exc}", field=key) from None
 
 
+_FIELDS = ("schema", "cards", "grid", "receiver_height_m", "ground_h_m", "dem", "dem_offset_m", "levels_db",
+           "thresholds_db", "floor_db", "substeps", "flights")
+_GRID_FIELDS = ("resolution_m", "margin_m", "crs", "bounds")
+_FLIGHT_FIELDS = ("id", "trajectory", "counts", "departures", "cards", "geoid_undulation_m", "power_w")
+
+
+def _known(doc: Mapping[str, Any], known: Sequence[str], where: str, source: str) -> None:
+    """Refuse a field the schedule does not know (a misspelt one would be left out without a word)."""
+    unknown = [k for k in doc if k not in known]
+    if unknown:
+        raise InputError(f"{source}: {where}unknown field {unknown[0]!r} (known: {', '.join(known)})",
+                         field=str(unknown[0]))
+
+
 def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[str] = ".",
                        source: str = "schedule") -> Schedule:
     """A :class:`Schedule` from its JSON document; relative paths are taken from ``base_dir``."""
@@ -208,6 +228,7 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
     if schema != SCHEMA:
         raise InputError(f"{source}: schema {schema!r} is not supported (reads {SCHEMA!r})", field="schema")
     base = Path(base_dir)
+    _known(doc, _FIELDS, "", source)
 
     def path(v: Any, key: str) -> Path:
         if not isinstance(v, str) or not v.strip():
@@ -230,6 +251,7 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
     g = doc.get("grid") or {}
     if not isinstance(g, Mapping):
         raise InputError(f"{source}: grid must be an object", field="grid")
+    _known(g, _GRID_FIELDS, "grid: ", source)
     resolution = _num(g, "resolution_m", 10.0, source, minimum=0.0, strict=True)
     margin = _num(g, "margin_m", 500.0, source, minimum=0.0)
     grid = None
@@ -251,9 +273,12 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
         if not isinstance(fd, Mapping):
             raise InputError(f"{source}: flights[{i}] must be an object", field="flights")
         fid = str(fd.get("id", f"flight{i + 1}"))
+        _known(fd, _FLIGHT_FIELDS, f"flight {fid!r}: ", source)
         if "trajectory" not in fd:
             raise InputError(f"{source}: flight {fid!r} has no 'trajectory'", field="trajectory")
-        route = read_route(path(fd["trajectory"], "trajectory"), dem=dem_path, dem_offset_m=dem_offset)
+        route = read_route(path(fd["trajectory"], "trajectory"), dem=dem_path, dem_offset_m=dem_offset,
+                           geoid_undulation_m=_num(fd, "geoid_undulation_m", None, f"{source}: flight {fid!r}"),
+                           power_w=_num(fd, "power_w", None, f"{source}: flight {fid!r}", minimum=0.0, strict=True))
         counts: dict[str, float] = {p: 0.0 for p in PERIODS}
         given = fd.get("counts")
         if given is not None:
