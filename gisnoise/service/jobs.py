@@ -24,7 +24,7 @@ import traceback
 import uuid
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -97,6 +97,9 @@ class JobContext:
     progress: Callable[..., None]
     cancel: Callable[[], bool]
     """Returns True when the job should stop; handlers pass it to the core as ``cancel=``."""
+    warnings: list[str] = field(default_factory=list)
+    """What the handler found to say about its input before the work (e.g. a campaign's cut logs): kept in the
+    summary of a job that then fails (``{"warnings": [...]}``), where they may explain the failure."""
 
     @property
     def params(self) -> Mapping[str, Any]:
@@ -460,8 +463,8 @@ class WorkerPool:
             for folder in (ctx.input_dir.resolve(), ctx.input_dir):
                 msg = msg.replace(str(folder), "upload")
             msg = scrub_paths(msg, [store.jobs_dir.resolve(), store.jobs_dir])
-            store.finish(job.id, "failed", error=msg, error_field=fld,
-                         error_status=status_for(exc), message="failed")
+            store.finish(job.id, "failed", error=msg, error_field=fld, error_status=status_for(exc), message="failed",
+                         summary={"warnings": list(ctx.warnings)} if ctx.warnings else None)
             return
         except Exception as exc:  # noqa: BLE001 - a job's bug must not kill the worker
             shutil.rmtree(partial, ignore_errors=True)

@@ -198,6 +198,7 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
     ctx.progress(0.0, "reading the campaign")
     camp = _read_campaign(ctx)
     warnings = _log_warnings(ctx, camp)
+    ctx.warnings.extend(warnings)  # a job that then fails keeps them
     result = fit_campaign(camp, p["phase"], ansatz=p["ansatz"], max_iter=max_iter, progress=progress,
                           cancel=ctx.cancel)
     ctx.check_cancel()
@@ -246,6 +247,7 @@ def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
     ctx.progress(0.0, "reading the campaign")
     camp = _read_campaign(ctx)
     warnings = _log_warnings(ctx, camp)
+    ctx.warnings.extend(warnings)  # a job that then fails keeps them
 
     def progress(done: int, total: int, what: str = "") -> None:
         ctx.progress(0.9 * done / max(total, 1), what or "diagnosing")

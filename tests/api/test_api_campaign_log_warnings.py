@@ -94,3 +94,16 @@ def test_the_fit_of_the_cut_log_finds_the_card_its_levels_came_from(client, camp
             assert abs(fitted[name] - truth) < 5 * std[name], (name, fitted[name], truth, std[name])
         else:
             assert fitted[name] == pytest.approx(truth), name
+
+
+def test_a_job_that_fails_keeps_the_warnings_that_may_explain_it(client, campaigns):
+    """A fit of a phase the quad never flies (transition) fails on the cut campaign: the job names the failure and
+    its summary keeps the cut log's one warning, the same line as the succeeding fit's."""
+    _, data, _ = campaigns["cut"]
+    r = client.post("/jobs/fit", files={"campaign": ("c.zip", data, "application/zip")},
+                    data={"phase": "transition", "card_id": "log171-transition"})
+    assert r.status_code == 202, r.text
+    job = wait_job(client, r.json()["id"], timeout=120)
+    assert job["status"] == "failed" and job["error"]
+    ok = _fit(client, data)
+    assert job["summary"] == {"warnings": ok["summary"]["warnings"]} and len(ok["summary"]["warnings"]) == 1

@@ -413,7 +413,7 @@ async function refreshJobs() {
     }
     tr.append(tda);
     tbody.append(tr);
-    const warnings = (j.status === "succeeded" && j.summary && j.summary.warnings) || [];
+    const warnings = (j.summary && j.summary.warnings) || [];  // a failed job keeps them too
     if (warnings.length) tbody.append(warningsRow(j.id, warnings));
     if (j.id === app.shownJob && j.status === "succeeded" && !app.shownDone) {
       app.shownDone = true;
