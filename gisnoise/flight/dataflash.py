@@ -37,8 +37,8 @@ from gisnoise.flight._logkernels import (
 )
 from gisnoise.flight.clock import gps_to_unix
 from gisnoise.flight.glitches import mend_glitches
-from gisnoise.flight.logcut import dataflash_cut, read_cut, refuse_cut_definitions
-from gisnoise.flight.logdamage import dataflash_damage, record_damage, without_damage
+from gisnoise.flight.logcut import dataflash_cut, framing, read_cut, refuse_cut_definitions
+from gisnoise.flight.logdamage import dataflash_damage, record_damage
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
 
@@ -69,17 +69,15 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
     if not Path(src).is_file():
         raise TrajectoryError(f"{src}: no such file", field="path")
     data = Path(src).read_bytes()
-    damage = dataflash_damage(data)   # pymavlink skips damaged bytes without a flag, reading garbage first
-    cut = dataflash_cut(without_damage(data, damage) if damage is not None else data)
-    if cut is not None and damage is not None:
-        cut = cut.moved(damage.skipped_bytes)   # pymavlink stops at a cut message without a word
+    # pymavlink skips damaged bytes without a flag, reading garbage first, and stops at a cut message without a word
+    clean, damage, cut = framing(data, dataflash_damage, dataflash_cut)
     refuse_cut_definitions(src, cut, "FMT messages")
     with contextlib.ExitStack() as stack:
         path_read = src
         if damage is not None:    # pymavlink reads a file: the bytes without the damage, in a temporary one
             tmp = stack.enter_context(tempfile.TemporaryDirectory())
             path_read = os.path.join(tmp, "log.bin")
-            Path(path_read).write_bytes(without_damage(data, damage))
+            Path(path_read).write_bytes(clean)
         stack.enter_context(contextlib.redirect_stdout(io.StringIO()))   # pymavlink prints on corrupt data
         try:
             reader = DFReader.DFReader_binary(path_read, zero_time_base=True)
@@ -169,7 +167,7 @@ def _dataflash_trajectory(src: str, reader: Any, start_utc: Any, geoid_undulatio
     spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
     t = _time_base(src, tb, spans, rate_hz)
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
-    glitches = mend_glitches(t, lat_i, lon_i, h_i, source=src)  # before the phase and the ground are derived
+    glitches = mend_glitches(t, lat_i, lon_i, h_i)  # before the phase and the ground are derived
     lat_i, lon_i, h_i = glitches.lat, glitches.lon, glitches.h
     roll, pitch, yaw = (_interp_deg(t, t_att, att[k]) for k in ("Roll", "Pitch", "Yaw"))
     power = _power(t, batteries, power_w)

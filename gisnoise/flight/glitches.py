@@ -68,7 +68,7 @@ class Glitches:
         return out
 
 
-def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajectory") -> Glitches:
+def mend_glitches(t: Any, lat: Any, lon: Any, h: Any) -> Glitches:
     """Find and mend the position glitches of a track (see the module docstring).
 
     ``t`` in s, increasing; ``lat``, ``lon`` in deg, ``h`` in m.  A track with fewer than three samples, a
@@ -99,7 +99,6 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any, *, source: str = "trajecto
     fast = np.flatnonzero(step > MAX_UAV_SPEED_M_S * np.diff(t))
     if fast.size == 0:
         return same
-    del source  # named by the warning, from the trajectory
 
     def reach(i: int, j: int) -> bool:  # sample j within the speed bound of sample i
         return bool(np.linalg.norm(p[j] - p[i]) <= MAX_UAV_SPEED_M_S * abs(t[j] - t[i]))

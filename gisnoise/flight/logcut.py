@@ -36,9 +36,9 @@ from typing import Any
 
 from gisnoise.errors import GisnoiseError, TrajectoryError
 from gisnoise.flight.glitches import glitch_warning
-from gisnoise.flight.logdamage import log_damage_warning
+from gisnoise.flight.logdamage import LogDamage, log_damage_warning, without_damage
 
-__all__ = ["LogCut", "ulog_cut", "dataflash_cut", "refuse_cut_definitions", "cut_error", "read_cut",
+__all__ = ["LogCut", "ulog_cut", "dataflash_cut", "refuse_cut_definitions", "cut_error", "read_cut", "framing",
            "log_cut_warning"]
 
 _ULOG_MAGIC = b"ULog\x01\x12\x35"
@@ -252,6 +252,19 @@ def read_cut(src: str, cut: LogCut | None, read: Callable[[], Any]) -> Any:
     if cut is not None:
         traj.metadata["log_cut"] = cut.metadata(float(traj.t[-1]))
     return traj
+
+
+def framing(data: bytes, damage_of: Callable[[bytes], LogDamage | None],
+            cut_of: Callable[[bytes], LogCut | None]) -> tuple[bytes, LogDamage | None, LogCut | None]:
+    """A log's bytes as its parser is to read them, with what their framing holds: the bytes without the damage
+    ``damage_of`` finds (:func:`~gisnoise.flight.logdamage.without_damage`), that damage, and the cut ``cut_of``
+    finds in them, in the file's offsets (:meth:`LogCut.moved`)."""
+    damage = damage_of(data)
+    if damage is None:
+        return data, None, cut_of(data)
+    clean = without_damage(data, damage)
+    cut = cut_of(clean)
+    return clean, damage, None if cut is None else cut.moved(damage.skipped_bytes)
 
 
 def log_cut_warning(traj: Any) -> str | None:

@@ -91,7 +91,7 @@ def trajectory_from_path(t: Any, lat: Any, lon: Any, h: Any, *, vehicle: Vehicle
     if t.size > 1 and np.any(np.diff(t) <= 0):
         i = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
         raise TrajectoryError(f"{source}: field 't' is not strictly increasing at sample {i}", field="t")
-    glitches = mend_glitches(t, lat, lon, h, source=source)  # before the states are derived from them
+    glitches = mend_glitches(t, lat, lon, h)  # before the states are derived from them
     lat, lon, h = glitches.lat, glitches.lon, glitches.h
     frame = LocalFrame(float(lat[0]), float(lon[0]), float(h.min()))
     e, n, u = frame.to_enu(lat, lon, h)

@@ -248,9 +248,7 @@ def from_columns(cols: Mapping[str, Any], *, source: str = "trajectory") -> Traj
         except (TypeError, ValueError):
             raise TrajectoryError(f"{source}: column '{c}' has a non-numeric value", field=c) from None
     kw["phase"] = np.asarray(cols["phase"], dtype=str) if "phase" in cols else np.full(n, "horizontal")
-    glitches = mend_glitches(kw["t"], kw["lat"], kw["lon"], kw["h"], source=source)
-    if not glitches.runs and not glitches.jumps:
-        return Trajectory(**kw, source=source)
+    glitches = mend_glitches(kw["t"], kw["lat"], kw["lon"], kw["h"])  # unchanged without glitches
     kw.update(lat=glitches.lat, lon=glitches.lon, h=glitches.h)
     return Trajectory(**kw, source=source, metadata=glitches.metadata(kw["t"]))
 

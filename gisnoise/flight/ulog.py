@@ -40,8 +40,8 @@ from gisnoise.flight._logkernels import (
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.glitches import mend_glitches
-from gisnoise.flight.logcut import read_cut, refuse_cut_definitions, ulog_cut
-from gisnoise.flight.logdamage import record_damage, ulog_damage, without_damage
+from gisnoise.flight.logcut import framing, read_cut, refuse_cut_definitions, ulog_cut
+from gisnoise.flight.logdamage import record_damage, ulog_damage
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
@@ -86,12 +86,9 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     except FileNotFoundError:
         raise TrajectoryError(f"{src}: no such file", field="path") from None
     file_bytes = len(data)
-    damage = ulog_damage(data)    # pyulog reads through damage with garbage, or drops the rest as if cut
-    if damage is not None:
-        data = without_damage(data, damage)
-    cut = ulog_cut(data)          # pyulog reads a cut file up to its last whole message without a word
-    if cut is not None and damage is not None:
-        cut = cut.moved(damage.skipped_bytes)
+    # pyulog reads through damage with garbage, or drops the rest as if cut; it reads a cut file up to its last
+    # whole message without a word
+    data, damage, cut = framing(data, ulog_damage, ulog_cut)
     refuse_cut_definitions(src, cut, "formats, info, parameters")
     said = io.StringIO()          # pyulog prints what it finds corrupt: never on the user's stdout
     try:
@@ -194,7 +191,7 @@ def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: fl
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
     if h_series is not None:
         h_i = np.interp(t, *h_series)
-    glitches = mend_glitches(t, lat_i, lon_i, h_i, source=src)  # before the phase and the ground are derived
+    glitches = mend_glitches(t, lat_i, lon_i, h_i)  # before the phase and the ground are derived
     lat_i, lon_i, h_i = glitches.lat, glitches.lon, glitches.h
     roll, pitch, yaw = quaternion_to_euler(_interp_quaternion(t, t_att, q))
     power = _power(t, batteries, power_w)

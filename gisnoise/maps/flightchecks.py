@@ -53,7 +53,7 @@ class FlightFindings:
 
 
 def flight_findings(traj: Trajectory, cards: CardSet, *, ground_h: float | None = None,
-                    ground_from: str = "", ground_hint: str = "") -> FlightFindings:
+                    ground_from: str = GROUND_FROM_OWN, ground_hint: str = GROUND_HINT_CLI) -> FlightFindings:
     """The checks of the module docstring on ``traj`` flown with ``cards``.
 
     ``ground_h``: the flat ground when it was taken from take-off or landing points (the track is then checked
@@ -61,8 +61,7 @@ def flight_findings(traj: Trajectory, cards: CardSet, *, ground_h: float | None 
     words for where that ground came from and how the user gives it on this face (default: the map's, the
     track's own take-off or landing point and the command line's options; :func:`below_track_ground`).
     """
-    below = below_track_ground(traj, ground_h, ground_from=ground_from or GROUND_FROM_OWN,
-                               hint=ground_hint or GROUND_HINT_CLI)
+    below = below_track_ground(traj, ground_h, ground_from=ground_from, hint=ground_hint)
     unpowered = airborne_without_power(traj)
     lying = lying_upside_down(traj)
     power_warnings, outside = check_power_ranges(traj, cards)
