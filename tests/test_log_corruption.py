@@ -14,7 +14,7 @@ import struct
 import numpy as np
 import pytest
 
-from gisnoise.flight import dataflash_damage, log_cut_warning, read_flight, ulog_damage
+from gisnoise.flight import dataflash_damage, read_flight, track_warning, ulog_damage
 
 pyulog = pytest.importorskip("pyulog")
 pytest.importorskip("pymavlink.DFReader")
@@ -50,7 +50,7 @@ def _damaged(raw, at, span, mode):
 def test_whole_logs_have_no_damage_and_no_warning(path, capfd):
     assert _damage_of(path)(path.read_bytes()) is None
     tr = _read(path)
-    assert "log_corrupt" not in tr.metadata and log_cut_warning(tr) is None
+    assert "log_corrupt" not in tr.metadata and track_warning(tr) is None
     assert capfd.readouterr().out == ""
 
 
@@ -73,7 +73,7 @@ def test_damaged_log_warns_once_prints_nothing_and_keeps_the_samples_before(tmp_
     out = capfd.readouterr()
     assert out.out == "" and out.err == ""                  # nothing on the user's stdout (nor stderr)
     # one warning naming the file; every damaged byte left out; the metadata is JSON
-    warning = log_cut_warning(tr)
+    warning = track_warning(tr)
     assert warning is not None and "\n" not in warning and warning.count(CORRUPT) == 1
     assert warning.startswith(f"{bad}: {CORRUPT}") and "are missing" in warning
     meta = json.loads(json.dumps(tr.metadata["log_corrupt"]))
@@ -122,7 +122,7 @@ def test_ulog_zeros_from_inside_a_gps_fix_reach_no_sample(tmp_path):
     assert fixes(bad) - fixes(QUAD)
     tr, tr_full = _read(bad), _read(QUAD)
     assert np.all((tr.lat >= tr_full.lat.min()) & (tr.lat <= tr_full.lat.max()))
-    assert log_cut_warning(tr).startswith(f"{bad}: {CORRUPT}")
+    assert track_warning(tr).startswith(f"{bad}: {CORRUPT}")
 
 
 def test_ulog_garbled_size_past_the_end_loses_no_flight(tmp_path):
@@ -140,7 +140,7 @@ def test_ulog_garbled_size_past_the_end_loses_no_flight(tmp_path):
     assert n_bad < sum(len(d.data["timestamp"]) for d in full.data_list)
     tr, tr_full = _read(bad), _read(VTOL)
     assert tr.t[-1] == tr_full.t[-1]                       # the flight after it is read
-    warning = log_cut_warning(tr)
+    warning = track_warning(tr)
     assert warning.startswith(f"{bad}: {CORRUPT}") and tr.metadata["log_corrupt"]["spans"][0][0] <= o
 
 
@@ -153,4 +153,4 @@ def test_dataflash_zeros_from_inside_a_gps_message_reach_no_sample(tmp_path):
     tr, tr_full = _read(bad), _read(COPTER)
     assert np.all((tr.lat >= tr_full.lat.min()) & (tr.lat <= tr_full.lat.max()))
     assert np.all((tr.lon >= tr_full.lon.min()) & (tr.lon <= tr_full.lon.max()))
-    assert log_cut_warning(tr).startswith(f"{bad}: {CORRUPT}")
+    assert track_warning(tr).startswith(f"{bad}: {CORRUPT}")

@@ -14,7 +14,6 @@ the time base.
 from __future__ import annotations
 
 import contextlib
-import io
 import os
 import tempfile
 from collections.abc import Callable, Mapping
@@ -39,6 +38,7 @@ from gisnoise.flight.clock import gps_to_unix
 from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.logcut import dataflash_cut, framing, read_cut, refuse_cut_definitions
 from gisnoise.flight.logdamage import dataflash_damage, record_damage
+from gisnoise.flight.parserout import captured_stdout
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
 
@@ -78,7 +78,7 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
             tmp = stack.enter_context(tempfile.TemporaryDirectory())
             path_read = os.path.join(tmp, "log.bin")
             Path(path_read).write_bytes(clean)
-        stack.enter_context(contextlib.redirect_stdout(io.StringIO()))   # pymavlink prints on corrupt data
+        stack.enter_context(captured_stdout())   # pymavlink prints on corrupt data: never on the user's stdout
         try:
             reader = DFReader.DFReader_binary(path_read, zero_time_base=True)
         except Exception as exc:

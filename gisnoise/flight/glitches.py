@@ -21,7 +21,7 @@ The readers of flight logs mend the positions on their time base before the phas
 samples are derived from them; flight CSVs and timed GeoJSON paths are mended as they are read.  The
 trajectory's metadata lists the glitches (``position_glitches``: times on its own clock, the jump and
 its speed) and the jumps kept (``position_jumps``), from which :func:`glitch_warning` makes the one-line
-warning every map, fit and diagnosis shows (through :func:`gisnoise.flight.log_cut_warning`).
+warning every map, fit and diagnosis shows (through :func:`gisnoise.flight.track_warning`).
 """
 
 from __future__ import annotations

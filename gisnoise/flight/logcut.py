@@ -22,9 +22,9 @@ DataFlash
 :func:`ulog_cut` and :func:`dataflash_cut` give the :class:`LogCut` of a file's bytes, or None
 when it ends at a message boundary.  The readers refuse a file cut inside its definitions
 (:func:`refuse_cut_definitions`), name the cut in any other error, and record it in the
-trajectory's metadata (``log_cut``), from which :func:`log_cut_warning` makes the one-line warning
-that maps and ``gisnoise campaign check`` show; it says too a log damaged inside
-(:mod:`gisnoise.flight.logdamage`).
+trajectory's metadata (``log_cut``), from which :func:`cut_warning` makes the one-line warning
+that maps and ``gisnoise campaign check`` show (with a log damaged inside and position glitches:
+:func:`gisnoise.flight.readnotes.track_warning`).
 """
 
 from __future__ import annotations
@@ -35,11 +35,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from gisnoise.errors import GisnoiseError, TrajectoryError
-from gisnoise.flight.glitches import glitch_warning
-from gisnoise.flight.logdamage import LogDamage, log_damage_warning, without_damage
+from gisnoise.flight.logdamage import LogDamage, without_damage
 
 __all__ = ["LogCut", "ulog_cut", "dataflash_cut", "refuse_cut_definitions", "cut_error", "read_cut", "framing",
-           "log_cut_warning"]
+           "cut_warning"]
 
 _ULOG_MAGIC = b"ULog\x01\x12\x35"
 _ULOG_TYPES = frozenset(b"BFIMPQARDLCSO")      # the message types of the ULog specification
@@ -267,16 +266,8 @@ def framing(data: bytes, damage_of: Callable[[bytes], LogDamage | None],
     return clean, damage, None if cut is None else cut.moved(damage.skipped_bytes)
 
 
-def log_cut_warning(traj: Any) -> str | None:
-    """The one-line warning for a trajectory read from a cut log (its ``metadata["log_cut"]``) or from a log
-    damaged inside (``metadata["log_corrupt"]``, :func:`~gisnoise.flight.logdamage.log_damage_warning`) or whose
-    position glitches were mended (``metadata["position_glitches"]``, any track:
-    :func:`~gisnoise.flight.glitches.glitch_warning`), joined when several hold; None when none."""
-    said = [w for w in (_cut_warning(traj), log_damage_warning(traj), glitch_warning(traj)) if w is not None]
-    return "; ".join(said) if said else None
-
-
-def _cut_warning(traj: Any) -> str | None:
+def cut_warning(traj: Any) -> str | None:
+    """The one-line warning for a trajectory read from a cut log (its ``metadata["log_cut"]``), or None."""
     cut = traj.metadata.get("log_cut") if isinstance(traj.metadata, Mapping) else None
     if not cut:
         return None

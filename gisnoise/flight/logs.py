@@ -67,7 +67,7 @@ Logs cut short
     A ``.ulg`` or ``.bin`` file that ends inside a message (the battery died, the SD card filled, a
     download stopped) is read up to its last whole message, as pyulog and pymavlink do without a word;
     the trajectory's metadata records the cut (``log_cut``) and maps and ``gisnoise campaign check``
-    show one warning (:func:`gisnoise.flight.logcut.log_cut_warning`).  A file cut inside its
+    show one warning (:func:`gisnoise.flight.readnotes.track_warning`).  A file cut inside its
     definitions, before any logged data, is refused in one line naming it; any other error on a cut
     file names the cut (:mod:`gisnoise.flight.logcut`).
 

@@ -17,7 +17,6 @@ See :mod:`gisnoise.flight.logs` for the time base.
 
 from __future__ import annotations
 
-import contextlib
 import io
 import os
 from collections.abc import Mapping
@@ -42,6 +41,7 @@ from gisnoise.flight._logkernels import (
 from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.logcut import framing, read_cut, refuse_cut_definitions, ulog_cut
 from gisnoise.flight.logdamage import record_damage, ulog_damage
+from gisnoise.flight.parserout import captured_stdout
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
 
@@ -90,9 +90,8 @@ def read_ulog(path: str | os.PathLike[str], *, start_utc: Any = None, geoid_undu
     # whole message without a word
     data, damage, cut = framing(data, ulog_damage, ulog_cut)
     refuse_cut_definitions(src, cut, "formats, info, parameters")
-    said = io.StringIO()          # pyulog prints what it finds corrupt: never on the user's stdout
     try:
-        with contextlib.redirect_stdout(said):
+        with captured_stdout() as said:  # pyulog prints what it finds corrupt: never on the user's stdout
             ulog = ULog(io.BytesIO(data), list(_ULOG_TOPICS))
     except Exception as exc:  # pyulog raises bare exceptions on corrupt files
         raise TrajectoryError(f"{src}: not a readable ULog ({exc})", field="path") from None

@@ -4,7 +4,8 @@
 warnings a user must see (in the order below) and the cards used outside their fitted power range;
 the refusals among them raise :class:`~gisnoise.errors.InputError`:
 
-* a flight log cut short (:func:`gisnoise.flight.log_cut_warning`): mapped up to its cut;
+* a flight log cut short or damaged inside, or positions mended (:func:`gisnoise.flight.track_warning`):
+  mapped with what could be read;
 * a track flying more than :data:`~gisnoise.limits.GROUND_TOLERANCE_M` below the ground taken from
   take-off or landing points (:func:`below_track_ground`);
 * airborne samples without electric power (:func:`airborne_without_power`; all of them: refused,
@@ -26,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.flight import Trajectory, log_cut_warning
+from gisnoise.flight import Trajectory, track_warning
 from gisnoise.geo import scale_factor
 from gisnoise.limits import GROUND_TOLERANCE_M
 from gisnoise.maps.cardset import CardSet
@@ -65,7 +66,7 @@ def flight_findings(traj: Trajectory, cards: CardSet, *, ground_h: float | None 
     unpowered = airborne_without_power(traj)
     lying = lying_upside_down(traj)
     power_warnings, outside = check_power_ranges(traj, cards)
-    warnings = [w for w in (log_cut_warning(traj), below, unpowered, lying) if w is not None] + power_warnings
+    warnings = [w for w in (track_warning(traj), below, unpowered, lying) if w is not None] + power_warnings
     return FlightFindings(warnings, outside)
 
 

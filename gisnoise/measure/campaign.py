@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import CampaignError, GisnoiseError
-from gisnoise.flight import Trajectory, log_cut_warning, read_flight
+from gisnoise.flight import Trajectory, read_flight, track_warning
 from gisnoise.measure.document import (
     _Collector,
     _is_number,
@@ -121,7 +121,7 @@ def inspect_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> tuple[Cam
 def campaign_log_warnings(camp: Campaign) -> list[str]:
     """The one-line warnings about a campaign's flight logs, in the order of its flights.
 
-    What :func:`gisnoise.flight.log_cut_warning` says about each flight's log, naming
+    What :func:`gisnoise.flight.track_warning` says about each flight's log, naming
     the file: a log cut short (a dead battery, a full SD card, a broken download) is
     read up to its cut and fitted or diagnosed as far as it goes, not a problem of the
     campaign, but said.  The one list every face shows: the command line prints each
@@ -141,7 +141,7 @@ def campaign_log_warnings(camp: Campaign) -> list[str]:
     out = []
     for f in camp.flights:
         traj = camp.trajectories.get(f.id)
-        w = log_cut_warning(traj) if traj is not None else None
+        w = track_warning(traj) if traj is not None else None
         if w is not None:
             out.append(w)
     return out
