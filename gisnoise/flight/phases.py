@@ -18,6 +18,7 @@ __all__ = [
     "PHASES",
     "MULTICOPTER_PHASES",
     "phase_by_speed",
+    "smoothed_speed",
     "HOVER_MAX_SPEED_M_S",
     "VERTICAL_MIN_SPEED_M_S",
 ]
@@ -69,6 +70,21 @@ def phase_by_speed(t: Any, vel_enu: Any, *, smoothing_s: float = PHASE_SMOOTHING
     out[(vu > vertical_min_m_s) & (vu > vh)] = "climb"
     out[(-vu > vertical_min_m_s) & (-vu > vh)] = "sink"
     return out
+
+
+def smoothed_speed(t: Any, enu: Any, *, smoothing_s: float = PHASE_SMOOTHING_S) -> np.ndarray:
+    """Speed over the ground, m/s, of positions ``enu`` (shape (n, 3), m) at times ``t``: the velocity
+    (central differences) smoothed as :func:`phase_by_speed` smooths it, then its norm.
+
+    >>> smoothed_speed([0.0, 1.0, 2.0, 3.0], [[0, 0, 0], [3, 4, 0], [6, 8, 0], [9, 12, 0]]).tolist()
+    [5.0, 5.0, 5.0, 5.0]
+    """
+    t = np.asarray(t, dtype=float)
+    p = np.asarray(enu, dtype=float).reshape(-1, 3)
+    if len(t) < 2:
+        return np.zeros(len(t))
+    v = np.gradient(p, t, axis=0)
+    return np.linalg.norm(_moving_average(t, v, smoothing_s), axis=1)
 
 
 def _moving_average(t: np.ndarray, v: np.ndarray, width: float) -> np.ndarray:

@@ -12,7 +12,9 @@ the refusals among them raise :class:`~gisnoise.errors.InputError`:
   field ``power_w``);
 * samples lying upside down at rest after a crash (:func:`lying_upside_down`);
 * the cards' stated power ranges (:func:`gisnoise.maps.powers.check_power_ranges`: a card valid only
-  at the power it was fitted at, used at others, is refused, field ``power_w``).
+  at the power it was fitted at, used at others, is refused, field ``power_w``);
+* measured hemispheres flown away from the speed they were measured at
+  (:func:`gisnoise.maps.conditions.check_hemisphere_speeds`).
 
 :func:`crs_scale_warning` is the grid's own check (a CRS whose scale at the map is far from 1).
 :func:`gisnoise.maps.make_map`, :func:`gisnoise.ops.evaluate_operations` and
@@ -31,6 +33,7 @@ from gisnoise.flight import Trajectory, track_warning
 from gisnoise.geo import scale_factor
 from gisnoise.limits import GROUND_TOLERANCE_M
 from gisnoise.maps.cardset import CardSet
+from gisnoise.maps.conditions import check_hemisphere_speeds
 from gisnoise.maps.powers import check_power_ranges
 
 __all__ = ["CRS_SCALE_TOLERANCE", "FlightFindings", "airborne_without_power", "below_track_ground",
@@ -46,11 +49,13 @@ GROUND_HINT_CLI = "--ground-height M (field ground_h_m) or --dem DEM.tif"
 
 @dataclass(frozen=True)
 class FlightFindings:
-    """What :func:`flight_findings` found: ``warnings`` (one line each) and, per card used outside the powers
-    it was fitted at, ``{"range_w": [lo, hi], "used_w": [min, max], "samples": n}``."""
+    """What :func:`flight_findings` found: ``warnings`` (one line each); per card used outside the powers
+    it was fitted at, ``{"range_w": [lo, hi], "used_w": [min, max], "samples": n}``; per hemisphere card flown
+    away from its stated speed, what :func:`~gisnoise.maps.conditions.check_hemisphere_speeds` gives."""
 
     warnings: list[str] = field(default_factory=list)
     power_outside: dict[str, Any] = field(default_factory=dict)
+    speed_outside: dict[str, Any] = field(default_factory=dict)
 
 
 def flight_findings(traj: Trajectory, cards: CardSet, *, ground_h: float | None = None,
@@ -66,8 +71,9 @@ def flight_findings(traj: Trajectory, cards: CardSet, *, ground_h: float | None 
     unpowered = airborne_without_power(traj)
     lying = lying_upside_down(traj)
     power_warnings, outside = check_power_ranges(traj, cards)
+    speed_warnings, speed_outside = check_hemisphere_speeds(traj, cards)
     warnings = [w for w in (track_warning(traj), below, unpowered, lying) if w is not None] + power_warnings
-    return FlightFindings(warnings, outside)
+    return FlightFindings(warnings + speed_warnings, outside, speed_outside)
 
 
 def airborne_without_power(traj: Trajectory) -> str | None:

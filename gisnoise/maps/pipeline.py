@@ -37,7 +37,9 @@ Two rules hold for every face:
   after a crash, are silent, and a warning names them (how many, when, attitude and power);
 * powers against the cards' stated power ranges (:mod:`gisnoise.model.power_range`): a card
   without power term used at other powers is refused (``power_w``); a card with one used
-  outside the powers it was fitted at gives a warning and ``metadata["power_outside_card_range"]``.
+  outside the powers it was fitted at gives a warning and ``metadata["power_outside_card_range"]``;
+* speeds against the speed a hemisphere card was measured at (:mod:`gisnoise.maps.conditions`): samples
+  more than 5 kt from it give a warning and ``metadata["hemisphere_speed_outside_condition"]``.
 """
 
 from __future__ import annotations
@@ -221,6 +223,8 @@ def make_map(
         {k: traj.metadata[k] for k in TRACK_HEIGHT_KEYS if k in traj.metadata})
     if found.power_outside:
         result.metadata["power_outside_card_range"] = found.power_outside
+    if found.speed_outside:
+        result.metadata["hemisphere_speed_outside_condition"] = found.speed_outside
     result.metadata["levels_db"] = lv
     dem_gap = dem_nodata_warning(result.metadata)
     warnings = warnings + ([dem_gap] if dem_gap is not None else []) + clip_warnings(result, lv)

@@ -1,0 +1,66 @@
+"""The speed a map flies each measured hemisphere at, against the speed it was measured at.
+
+A hemisphere card is one flight condition (:class:`~gisnoise.model.HemisphereCard`): its
+``condition["speed_m_s"]`` is the speed the vehicle flew while it was measured (the Salford
+file name's ``F05``: 5 m/s).  The map evaluates the table at whatever speed the flight flies the
+card's phase at; the level there is the measured condition's, not the flight's.
+
+The tolerance is that of a noise certification flight: 14 CFR Part 36, Appendix H (helicopters)
+lets the airspeed of a test flight vary from its reference airspeed by at most 5 kt
+(:data:`SPEED_TOLERANCE_M_S`, 2.57 m/s) for the measurement to stand for that reference condition.
+Samples flown farther from the stated speed are named in one warning per card; the map is made.
+The speed is the logged airspeed when the trajectory has one (``airspeed_m_s``; routes from
+waypoints carry their speed there), else the speed over the ground from the positions, smoothed
+over :data:`~gisnoise.flight.phases.PHASE_SMOOTHING_S` as the phase rule smooths it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gisnoise.flight import Trajectory, smoothed_speed
+from gisnoise.maps.cardset import CardSet
+from gisnoise.model import HemisphereCard
+
+__all__ = ["SPEED_TOLERANCE_M_S", "check_hemisphere_speeds"]
+
+SPEED_TOLERANCE_M_S = 5 * 1852 / 3600
+"""Largest departure of the flown speed from a hemisphere's stated speed that is still its condition, m/s
+(5 kt: 14 CFR Part 36 Appendix H's airspeed tolerance of a helicopter noise test flight)."""
+
+
+def check_hemisphere_speeds(traj: Trajectory, cardset: CardSet) -> tuple[list[str], dict[str, Any]]:
+    """Warn about hemisphere cards flown away from their stated speed (module docstring).
+
+    Returns the warnings (one per card) and, per such card, ``{"stated_m_s": v, "flown_m_s": [min, max],
+    "samples": n, "of": m, "speed": "airspeed" | "ground speed"}`` for the map's metadata (``n`` of the card's
+    ``m`` flying samples are outside the tolerance; ``flown_m_s`` is their range).
+    """
+    stated = {k: float(c.condition["speed_m_s"]) for k, c in enumerate(cardset.cards)
+              if isinstance(c, HemisphereCard) and isinstance(c.condition.get("speed_m_s"), (int, float))}
+    fly = traj.flying
+    if not stated or not fly.any():
+        return [], {}
+    if traj.airspeed_m_s is not None:
+        speed, what = traj.airspeed_m_s, "airspeed"
+    else:
+        speed, what = smoothed_speed(traj.t, np.column_stack(traj.enu(traj.origin()))), "ground speed"
+    idx = cardset.assign(traj.phase[fly], traj.t[fly], source=traj.source, rows=np.flatnonzero(fly))
+    flown = speed[fly]
+    warnings: list[str] = []
+    meta: dict[str, Any] = {}
+    for k, v0 in stated.items():
+        s = flown[idx == k]
+        off = s[np.abs(s - v0) > SPEED_TOLERANCE_M_S]
+        if off.size == 0:
+            continue
+        card = cardset.cards[k]
+        lo, hi = float(off.min()), float(off.max())
+        warnings.append(f"{traj.source}: hemisphere {card.id!r} was measured at {v0:g} m/s; {off.size} of its "
+                        f"{s.size} samples fly at {lo:.1f}-{hi:.1f} m/s {what} (more than 5 kt from it): the "
+                        f"map gives them the {v0:g} m/s levels")
+        meta[card.id] = {"stated_m_s": v0, "flown_m_s": [round(lo, 2), round(hi, 2)], "samples": int(off.size),
+                         "of": int(s.size), "speed": what}
+    return warnings, meta
