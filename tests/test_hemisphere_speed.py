@@ -44,17 +44,32 @@ def test_flown_beyond_five_knots_every_sample_is_named(m300, v):
     (w,) = found.warnings
     n = len(traj)
     assert f"hemisphere 'm300' was measured at 5 m/s; {n} of its {n} samples fly at {v:.1f}-{v:.1f} m/s ground " \
-           "speed" in w
+           "speed, more than 5 kt from it" in w
     meta = found.speed_outside["m300"]
     assert meta["samples"] == meta["of"] == n and meta["speed"] == "ground speed"
-    assert meta["flown_m_s"] == pytest.approx([v, v], abs=1e-3)
+    assert meta["flown_m_s"] == [pytest.approx([v, v], abs=1e-3)]
+
+
+def test_slower_and_faster_samples_have_their_own_ranges(m300):
+    """Hovering (0 m/s) then 12 m/s: two ranges, neither holding the stated 5 m/s."""
+    fast = straight_flight(v=12.0, height=30.0, n0=-120.0, n1=120.0, dt=0.5)
+    e, n, u = fast.enu(fast.origin())
+    n = np.where(np.arange(len(fast)) < 20, n[0], n - (n[20] - n[0]))     # 20 samples at rest, then 12 m/s
+    lat, lon, h = fast.origin().to_wgs84(e, n, u)
+    traj = fast.with_(lat=lat, lon=lon, h=h)
+    (w,) = flight_findings(traj, CardSet([m300])).warnings
+    meta = check_hemisphere_speeds(traj, CardSet([m300]))[1]["m300"]
+    (slow_lo, slow_hi), (fast_lo, fast_hi) = meta["flown_m_s"]
+    assert slow_lo == 0.0 and slow_hi < 5 - SPEED_TOLERANCE_M_S and fast_lo > 5 + SPEED_TOLERANCE_M_S
+    assert fast_hi == pytest.approx(12.0, abs=1e-3)
+    assert f"fly at 0.0-{slow_hi:.1f} and {fast_lo:.1f}-12.0 m/s ground speed" in w
 
 
 def test_the_logged_airspeed_is_the_speed_when_there_is_one(m300):
     traj = straight_flight(v=5.0, height=30.0, n0=-100.0, n1=100.0, dt=0.5)     # 5 m/s over the ground
     into_wind = traj.with_(airspeed_m_s=np.full(len(traj), 9.0))                  # 9 m/s through the air
     _, meta = check_hemisphere_speeds(into_wind, CardSet([m300]))
-    assert meta["m300"]["speed"] == "airspeed" and meta["m300"]["flown_m_s"] == [9.0, 9.0]
+    assert meta["m300"]["speed"] == "airspeed" and meta["m300"]["flown_m_s"] == [[9.0, 9.0]]
 
 
 def test_only_the_samples_the_hemisphere_serves_count(m300):
@@ -72,7 +87,7 @@ def test_a_map_says_it_in_its_warnings_and_metadata(m300, tmp_path):
                             metrics=["LAmax"], levels=[50])
     n = len(traj)
     assert out["result"].metadata["hemisphere_speed_outside_condition"] == {
-        "m300": {"stated_m_s": 5.0, "flown_m_s": [15.0, 15.0], "samples": n, "of": n, "speed": "ground speed"}}
+        "m300": {"stated_m_s": 5.0, "flown_m_s": [[15.0, 15.0]], "samples": n, "of": n, "speed": "ground speed"}}
     assert sum("hemisphere 'm300' was measured at 5 m/s" in w for w in out["result"].metadata["warnings"]) == 1
 
 

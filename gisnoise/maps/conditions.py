@@ -34,9 +34,10 @@ SPEED_TOLERANCE_M_S = 5 * 1852 / 3600
 def check_hemisphere_speeds(traj: Trajectory, cardset: CardSet) -> tuple[list[str], dict[str, Any]]:
     """Warn about hemisphere cards flown away from their stated speed (module docstring).
 
-    Returns the warnings (one per card) and, per such card, ``{"stated_m_s": v, "flown_m_s": [min, max],
+    Returns the warnings (one per card) and, per such card, ``{"stated_m_s": v, "flown_m_s": [[min, max], ...],
     "samples": n, "of": m, "speed": "airspeed" | "ground speed"}`` for the map's metadata (``n`` of the card's
-    ``m`` flying samples are outside the tolerance; ``flown_m_s`` is their range).
+    ``m`` flying samples are outside the tolerance; ``flown_m_s``: the range of those slower than ``v``, then of
+    those faster, each when there are any).
     """
     stated = {k: float(c.condition["speed_m_s"]) for k, c in enumerate(cardset.cards)
               if isinstance(c, HemisphereCard) and isinstance(c.condition.get("speed_m_s"), (int, float))}
@@ -57,10 +58,12 @@ def check_hemisphere_speeds(traj: Trajectory, cardset: CardSet) -> tuple[list[st
         if off.size == 0:
             continue
         card = cardset.cards[k]
-        lo, hi = float(off.min()), float(off.max())
+        slow, fast = off[off < v0], off[off > v0]
+        ranges = " and ".join(f"{a.min():.1f}-{a.max():.1f}" for a in (slow, fast) if a.size)
         warnings.append(f"{traj.source}: hemisphere {card.id!r} was measured at {v0:g} m/s; {off.size} of its "
-                        f"{s.size} samples fly at {lo:.1f}-{hi:.1f} m/s {what} (more than 5 kt from it): the "
-                        f"map gives them the {v0:g} m/s levels")
-        meta[card.id] = {"stated_m_s": v0, "flown_m_s": [round(lo, 2), round(hi, 2)], "samples": int(off.size),
-                         "of": int(s.size), "speed": what}
+                        f"{s.size} samples fly at {ranges} m/s {what}, more than 5 kt from it: the map gives them "
+                        f"the {v0:g} m/s levels")
+        meta[card.id] = {"stated_m_s": v0, "flown_m_s": [[round(float(a.min()), 2), round(float(a.max()), 2)]
+                                                         for a in (slow, fast) if a.size],
+                         "samples": int(off.size), "of": int(s.size), "speed": what}
     return warnings, meta
