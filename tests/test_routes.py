@@ -202,7 +202,7 @@ def test_linestring_without_times_is_flown_as_waypoints():
     ({"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[10, 52, 5], [10.1, 52, 5]]},
       "properties": {"times": [0.0]}}, "times"),
     ({"type": "Feature", "geometry": {"type": "LineString", "coordinates": [[10, 52, 5], [10.1, 52, 5]]},
-      "properties": {"times": [1.0, 1.0]}}, "t"),
+      "properties": {"times": [1.0, 1.0]}}, "times"),
     ({"type": "Polygon", "coordinates": []}, "trajectory"),
 ])
 def test_bad_documents_name_the_field(doc, field):

@@ -11,7 +11,11 @@ GeoJSON ``LineString`` with times
     ``properties.altitude_reference`` says ``agl`` or ``msl`` (see waypoints).  Optional
     per-vertex lists in ``properties``: ``power_w``, ``phase``, ``roll``, ``pitch``,
     ``yaw`` (deg), ``rpm``, ``airspeed_m_s``; missing ones are derived from the motion
-    (:func:`~gisnoise.flight.paths.derive_states`);
+    (:func:`~gisnoise.flight.paths.derive_states`).  The vertices are flown straight at constant
+    velocity between their times; a leg longer than ``sample_dt_s`` (a ``properties`` or request
+    setting, default 0.5 s, as waypoints) is cut into equal parts no longer than it, the states between vertices
+    interpolated as :meth:`~gisnoise.flight.Trajectory.interpolate` does (as ``--substeps`` does):
+    a planned leg of a few vertices is heard all along it, not only at its vertices;
 waypoints
     a route plan (a ``gisnoise/waypoints/1`` JSON document, a GeoJSON ``FeatureCollection``
     of ``Point`` features or a ``LineString`` without times) that
@@ -37,6 +41,7 @@ from gisnoise.flight.paths import trajectory_from_path
 from gisnoise.flight.trajectory import Trajectory, read_flight_csv
 from gisnoise.flight.vehicle import VehicleModel
 from gisnoise.flight.waypoints import _WP_PREFIX, WAYPOINTS_SCHEMA, Route, _heights, _settings, route_from_waypoints
+from gisnoise.limits import check_samples
 
 __all__ = ["read_trajectory", "read_route", "trajectory_to_geojson", "LOG_MAP_RATE_HZ"]
 
@@ -242,9 +247,32 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
             raise TrajectoryError(f"{source}: properties.{k} must list one value per vertex ({len(coords)})",
                                   field=k)
         states[k] = np.asarray(v, dtype=str if k == "phase" else float)
-    traj = trajectory_from_path(t, lat, lon, h, vehicle=st["vehicle"], source=source, **states)
+    if t.size > 1 and np.any(np.diff(t) <= 0):
+        i = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
+        raise TrajectoryError(f"{source}: properties.times must increase strictly; vertex {i} is at t = {t[i]:g} s "
+                              f"after {t[i - 1]:g} s", field="times")
+    traj = _sampled(trajectory_from_path(t, lat, lon, h, vehicle=st["vehicle"], source=source, **states),
+                    st["sample_dt_s"])
     traj.metadata.update(datum)
     return Route(traj, ground)
+
+
+def _sampled(traj: Trajectory, dt: float) -> Trajectory:
+    """``traj`` (a timed path's vertices) with every leg longer than ``dt`` s cut into equal parts no longer than
+    it; states between vertices interpolated (:meth:`Trajectory.interpolate`), the vertices kept as they are."""
+    t = traj.t
+    parts = np.ceil(np.diff(t) / dt - 1e-9).astype(np.int64) if t.size > 1 else np.zeros(0, np.int64)
+    if not np.any(parts > 1):
+        return traj
+    check_samples(float(parts.sum()) + 1, field="sample_dt_s", what="LineString")  # before allocating
+    leg = np.repeat(np.arange(t.size - 1), parts)
+    k = np.arange(leg.size) - np.repeat(np.cumsum(parts) - parts, parts)   # part k of its leg
+    tt = np.append(t[leg] + (t[leg + 1] - t[leg]) * k / parts[leg], t[-1])
+    state = traj.interpolate(tt)
+    at = np.append(np.cumsum(parts) - parts, leg.size)  # the vertices, exactly as they were
+    for name, v in state.items():
+        v[at] = getattr(traj, name)
+    return Trajectory(t=tt, **state, source=traj.source, metadata=traj.metadata)
 
 
 def trajectory_to_geojson(route: Trajectory) -> dict[str, Any]:
