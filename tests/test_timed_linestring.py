@@ -58,3 +58,12 @@ def test_times_that_do_not_increase_are_refused_naming_times():
     with pytest.raises(TrajectoryError, match="properties.times must increase strictly; vertex 1") as e:
         read_trajectory(leg(times=(5.0, 5.0)))
     assert e.value.field == "times"
+
+
+def test_a_leg_faster_than_any_uav_is_refused_naming_it():
+    """500 m in 2 s is 250 m/s (limit 150 m/s): the times are wrong; before, the power derived from that speed
+    was refused with advice to raise the power limit."""
+    with pytest.raises(TrajectoryError, match=r"the leg from vertex 0 to 1 is 500 m long in 2 s \(250 m/s") as e:
+        read_trajectory(leg(times=(0.0, 2.0)))
+    assert e.value.field == "times"
+    assert len(read_trajectory(leg(times=(0.0, 500.0 / 149.0)))) > 2   # just below the limit: flown

@@ -41,7 +41,8 @@ from gisnoise.flight.paths import trajectory_from_path
 from gisnoise.flight.trajectory import Trajectory, read_flight_csv
 from gisnoise.flight.vehicle import VehicleModel
 from gisnoise.flight.waypoints import _WP_PREFIX, WAYPOINTS_SCHEMA, Route, _heights, _settings, route_from_waypoints
-from gisnoise.limits import check_samples
+from gisnoise.geo import LocalFrame
+from gisnoise.limits import MAX_UAV_SPEED_M_S, check_samples
 
 __all__ = ["read_trajectory", "read_route", "trajectory_to_geojson", "LOG_MAP_RATE_HZ"]
 
@@ -251,10 +252,26 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
         i = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
         raise TrajectoryError(f"{source}: properties.times must increase strictly; vertex {i} is at t = {t[i]:g} s "
                               f"after {t[i - 1]:g} s", field="times")
+    _check_leg_speeds(t, lat, lon, h, source)
     traj = _sampled(trajectory_from_path(t, lat, lon, h, vehicle=st["vehicle"], source=source, **states),
                     st["sample_dt_s"])
     traj.metadata.update(datum)
     return Route(traj, ground)
+
+
+def _check_leg_speeds(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray, source: str) -> None:
+    """Refuse a leg flown faster than any UAV flies (:data:`~gisnoise.limits.MAX_UAV_SPEED_M_S`): its times or
+    coordinates are wrong (the power derived from it would be refused as out of range, misleadingly)."""
+    if t.size < 2:
+        return
+    e, n, u = LocalFrame(float(lat[0]), float(lon[0]), float(h.min())).to_enu(lat, lon, h)
+    length = np.sqrt(np.diff(e) ** 2 + np.diff(n) ** 2 + np.diff(u) ** 2)
+    speed = length / np.diff(t)
+    if np.any(speed > MAX_UAV_SPEED_M_S):
+        i = int(np.argmax(speed > MAX_UAV_SPEED_M_S))
+        raise TrajectoryError(f"{source}: the leg from vertex {i} to {i + 1} is {length[i]:,.0f} m long in "
+                              f"{t[i + 1] - t[i]:g} s ({speed[i]:,.0f} m/s, faster than the {MAX_UAV_SPEED_M_S:g} m/s "
+                              "a UAV flies): check properties.times and the coordinates", field="times")
 
 
 def _sampled(traj: Trajectory, dt: float) -> Trajectory:
