@@ -197,8 +197,11 @@ def from_dict(doc: Mapping[str, Any], *, source: str = "model card", force: bool
     if not isinstance(doc, Mapping):
         raise CardError(f"{source}: expected a JSON object", field="schema")
     schema = doc.get("schema")
-    if isinstance(schema, str) and schema in _CARD_KINDS:
-        return _CARD_KINDS[schema](doc, source=source)
+    if isinstance(schema, str) and schema in _CARD_KINDS:  # another kind (a hemisphere card): the same guard
+        other = _CARD_KINDS[schema](doc, source=source)
+        if not force:
+            check_card(other, source=source)
+        return other
     if not isinstance(schema, str) or not schema.startswith(SCHEMA_PREFIX):
         raise SchemaVersionError(
             f"{source}: field 'schema' must be '{SCHEMA}', got {schema!r} (not a model card?)", field="schema"
