@@ -4,6 +4,9 @@ An upload never overwrites: a card whose id is new becomes version 1; an
 identical re-upload returns the existing version; a different card with an
 existing id is refused (409) unless a new version is asked for, which then
 becomes version N + 1.  ``get`` returns the latest version unless one is named.
+
+A card stored here has passed the plausibility guard (:func:`gisnoise.model.check_card`) on
+upload; one stored before the guard refused it is refused when read (422 naming the field).
 """
 
 from __future__ import annotations
@@ -121,7 +124,11 @@ class CardStore:
             raise ApiError(404, f"version: card {card_id!r} has no version {v} (versions: "
                                 f"{', '.join(map(str, vs))})", field="version")
         path = self.root / card_id / f"v{v}.json"
-        return StoredCard(self._load(path), v, path)
+        try:
+            card = self._load(path)
+        except gcards.CardError as exc:  # stored before the guard refused it: named as the store names it
+            raise type(exc)(str(exc).replace(str(path), f"stored card {card_id}@{v}"), field=exc.field) from None
+        return StoredCard(card, v, path)
 
     def _load(self, path: Path) -> ModelCard:
         """A card file, parsed once (versions are never rewritten; the cache key is also the file's stat)."""
@@ -148,6 +155,8 @@ class CardStore:
                 what = str(exc).removeprefix(f"{exc.field}: ") if exc.field else str(exc)
                 raise ApiError(422, f"{field}: {what}", field=field) from None
             raise
+        except gcards.CardError as exc:  # a stored card the guard refuses: the request's reference is the field
+            raise ApiError(422, f"{field}: {exc}", field=field) from None
 
     def put(self, card: ModelCard, *, new_version: bool = False) -> tuple[StoredCard, bool]:
         """Store a card; returns (stored card, created).
@@ -159,8 +168,11 @@ class CardStore:
         with self._lock:
             vs = self._versions(card.id)
             if vs:
-                latest = self.get(card.id)
-                if latest.card == card:
+                try:
+                    latest: StoredCard | None = self.get(card.id)
+                except gcards.CardError:  # a stored version the guard refuses: the upload differs from it
+                    latest = None
+                if latest is not None and latest.card == card:
                     return latest, False
                 if not new_version:
                     raise ApiError(409, f"id: a different card {card.id!r} exists (version {vs[-1]}); "

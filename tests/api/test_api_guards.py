@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from service_helpers import assert_names_field
+import json
+
+from service_helpers import CARDS, assert_names_field
 from test_api_contours import _omni_card, _request
 
 
@@ -28,3 +30,32 @@ def test_contour_of_an_airborne_track_without_ground_is_422_naming_ground_h_m(cl
     del req["ground_h_m"]
     body = assert_names_field(client.post("/contours", json=req), 422, "ground_h_m")
     assert "--dem" in body["detail"] or "dem" in body["detail"]
+
+
+def _stored_without_the_guard(client, doc: dict) -> None:
+    """Put ``doc`` into the store as version 1 as a store written before the guard refused it would hold it."""
+    folder = client.app.state.gisnoise.cards.root / doc["id"]
+    folder.mkdir(parents=True)
+    (folder / "v1.json").write_text(json.dumps(doc), encoding="utf-8")
+
+
+def test_a_card_stated_at_1e_9_m_is_refused_by_upload_and_map_naming_reference_distance_m(client):
+    """The tester's card: demo-horizontal with reference_distance_m 1e-9 was stored (201) and mapped at -168 to
+    -149 dB(A) without a word. Upload and inline use are 422 naming it; a store that holds one from before
+    refuses it by the request's reference."""
+    doc = json.loads((CARDS / "demo_horizontal.json").read_text())
+    doc.update(id="absurd6", reference_distance_m=1e-9)
+    body = assert_names_field(client.post("/cards", json=doc), 422, "reference_distance_m")
+    assert "1e-09" in body["detail"] and "\n" not in body["detail"]
+    assert client.get("/cards/absurd6").status_code == 404          # nothing stored
+    assert_names_field(client.post("/contours", json=_request(cards=[doc])), 422, "cards[0].reference_distance_m")
+    _stored_without_the_guard(client, doc)
+    body = assert_names_field(client.post("/contours", json=_request(cards=["demo-horizontal", "absurd6@1"])), 422,
+                              "cards[1]")
+    assert "reference_distance_m" in body["detail"] and "absurd6@1" in body["detail"]
+    assert str(client.app.state.gisnoise.settings.data_dir) not in body["detail"]
+    # a plausible card under that id is a new version, not a conflict with the refused one
+    fixed = dict(doc, reference_distance_m=40.0)
+    r = client.post("/cards", params={"new_version": "true"}, json=fixed)
+    assert r.status_code == 201 and r.json()["version"] == 2, r.text
+    assert client.post("/contours", json=_request(cards=["absurd6"])).status_code == 200

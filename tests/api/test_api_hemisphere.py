@@ -54,3 +54,25 @@ def test_bad_hemisphere_upload_is_refused_naming_the_field(client, m300):
     r = client.post("/cards", json=doc)
     assert r.status_code in (400, 422), r.text
     assert "measured" in r.text
+
+
+def test_an_implausible_hemisphere_is_refused_on_upload_naming_levels_db_and_by_reference_in_a_map(client, m300):
+    """Every band of the M300 table at 200 dB (211.9 dB(A) at 1 m, 179 dB(A) at 40 m): before, the upload was
+    stored (201) and every map with it was 422 naming 'parameters', a field hemisphere cards do not have. The
+    upload runs the map's guard and names the table; a stored one from before is named by the request's reference."""
+    doc = json.loads(dumps(m300))
+    doc["id"] = "hemi-bad1"
+    doc["levels_db"] = np.full(np.shape(doc["levels_db"]), 200.0).tolist()
+    body = client.post("/cards", json=doc).json()
+    assert body["field"] == "levels_db" and "levels_db" in body["detail"], body
+    assert client.get("/cards/hemi-bad1").status_code == 404          # nothing stored
+    req = {"trajectory": {"format": "csv", "text": flyover_csv(h=20.0, speed=5.0, dt=0.2, length_m=200.0)},
+           "grid": {"resolution_m": 5, "margin_m": 30}, "levels": [45, 50], "ground_h_m": 0.0}
+    r = client.post("/contours", json=dict(req, cards=[doc]))
+    assert r.status_code == 422 and r.json()["field"] == "cards[0].levels_db", r.text
+    folder = client.app.state.gisnoise.cards.root / "hemi-bad1"  # a store written before the upload's guard
+    folder.mkdir(parents=True)
+    (folder / "v1.json").write_text(json.dumps(doc), encoding="utf-8")
+    r = client.post("/contours", json=dict(req, cards=["hemi-bad1"]))
+    assert r.status_code == 422 and r.json()["field"] == "cards[0]", r.text
+    assert "levels_db" in r.json()["detail"] and "hemi-bad1@1" in r.json()["detail"]
