@@ -1,25 +1,30 @@
 """The service's model-card store: versioned card files in ``<data_dir>/cards/<id>/v<N>.json``.
 
-An upload never overwrites: a card whose id is new becomes version 1; an
+An upload never overwrites: a card whose id was never used becomes version 1; an
 identical re-upload returns the existing version; a different card with an
 existing id is refused (409) unless a new version is asked for, which then
 becomes version N + 1.  ``get`` returns the latest version unless one is named.
 
+``id@N`` is an immutable reference: version numbers of an id only ever increase.  The
+highest number issued is kept in ``<id>/highest_version.json`` (written atomically, before
+the card file, so a number is never issued twice even after a crash), which deletes leave in
+place: after deleting version 2 of 2, or every version, the next upload of the id is version 3.
 A card stored here has passed the plausibility guard (:func:`gisnoise.model.check_card`) on
 upload; one stored before the guard refused it is refused when read (422 naming the field).
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
-import shutil
 import stat
 import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from gisnoise import jsonio
 from gisnoise.limits import SAFE_ID_PATTERN
 from gisnoise.model import ModelCard
 from gisnoise.model import cards as gcards
@@ -30,6 +35,8 @@ __all__ = ["CardStore", "StoredCard", "ID_PATTERN"]
 ID_PATTERN = SAFE_ID_PATTERN
 _ID_RE = re.compile(ID_PATTERN)
 _VERSION_RE = re.compile(r"^v(\d+)\.json$")
+HIGHEST_FILE = "highest_version.json"
+"""File in a card's folder holding the highest version ever issued for its id (``{"highest_version": N}``)."""
 SETTLED_S = 2.0
 """Age (s) of a card folder's modification time from which its listing is kept (see ``CardStore._versions``)."""
 
@@ -158,6 +165,22 @@ class CardStore:
         except gcards.CardError as exc:  # a stored card the guard refuses: the request's reference is the field
             raise ApiError(422, f"{field}: {exc}", field=field) from None
 
+    def _highest(self, card_id: str, versions: list[int]) -> int:
+        """The highest version ever issued for ``card_id``: its record, or its highest stored version."""
+        top = versions[-1] if versions else 0
+        try:
+            doc = json.loads((self.root / card_id / HIGHEST_FILE).read_text(encoding="utf-8"))
+            n = doc.get("highest_version") if isinstance(doc, dict) else None
+        except (OSError, ValueError):  # no record yet (a store older than it), or an unreadable one
+            return top
+        return max(top, n) if isinstance(n, int) and not isinstance(n, bool) else top
+
+    def _record_highest(self, card_id: str, version: int) -> None:
+        """Record ``version`` as the highest issued for ``card_id`` (temporary file and atomic replace)."""
+        d = self.root / card_id
+        d.mkdir(parents=True, exist_ok=True)
+        jsonio.write_json({"highest_version": int(version)}, d / HIGHEST_FILE)
+
     def put(self, card: ModelCard, *, new_version: bool = False) -> tuple[StoredCard, bool]:
         """Store a card; returns (stored card, created).
 
@@ -167,6 +190,7 @@ class CardStore:
         check_id(card.id)
         with self._lock:
             vs = self._versions(card.id)
+            v = self._highest(card.id, vs) + 1  # never a number issued before, deleted or not
             if vs:
                 try:
                     latest: StoredCard | None = self.get(card.id)
@@ -176,11 +200,10 @@ class CardStore:
                     return latest, False
                 if not new_version:
                     raise ApiError(409, f"id: a different card {card.id!r} exists (version {vs[-1]}); "
-                                        f"upload with new_version=true to add version {vs[-1] + 1}, "
+                                        f"upload with new_version=true to add version {v}, "
                                         f"or choose another id", field="id")
-            v = (vs[-1] + 1) if vs else 1
             d = self.root / card.id
-            d.mkdir(parents=True, exist_ok=True)
+            self._record_highest(card.id, v)  # before the card: a crash in between skips v, never reuses it
             path = d / f"v{v}.json"
             tmp = d / f".v{v}.json.tmp"
             tmp.write_text(gcards.dumps(card), encoding="utf-8")
@@ -189,18 +212,25 @@ class CardStore:
             return StoredCard(card, v, path), True
 
     def delete(self, card_id: str, version: int | None = None) -> list[int]:
-        """Delete one version or all; returns the deleted versions."""
+        """Delete one version or all; returns the deleted versions.
+
+        The record of the highest version issued stays (the folder holds it once no version is left),
+        so a later upload of the id never gets a deleted version's number.
+        """
         check_id(card_id)
         with self._lock:
             vs = self._versions(card_id)
             if not vs:
                 raise ApiError(404, f"id: no card with id {card_id!r}", field="id")
-            if version is None:
-                shutil.rmtree(self.root / card_id)
-                return vs
-            if version not in vs:
+            if version is not None and version not in vs:
                 raise ApiError(404, f"version: card {card_id!r} has no version {version}", field="version")
-            (self.root / card_id / f"v{version}.json").unlink()
-            if len(vs) == 1:
-                shutil.rmtree(self.root / card_id, ignore_errors=True)
-            return [version]
+            d = self.root / card_id
+            self._record_highest(card_id, self._highest(card_id, vs))  # a store older than the record gets it
+            gone = vs if version is None else [version]
+            for v in gone:
+                (d / f"v{v}.json").unlink()
+                self._cache.pop(d / f"v{v}.json", None)
+            if version is None:  # left-over temporary files of interrupted uploads go too
+                for p in d.glob(".v*.json.tmp"):
+                    p.unlink(missing_ok=True)
+            return gone

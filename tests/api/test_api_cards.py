@@ -194,3 +194,63 @@ def test_store_keeps_a_settled_listing_and_sees_every_change(tmp_path, monkeypat
     add(3)  # within the timestamp granularity of the change before: the folder's time as it was
     os.utime(folder, ns=(recent, recent))
     assert store.versions(card.id) == [1, 2, 3] and store.get(card.id).card.parameters["p0"] == p0 + 3
+
+
+def _notes(client, card_id: str, version: int):
+    r = client.get(f"/cards/{card_id}", params={"version": version})
+    return r.json()["notes"] if r.status_code == 200 else r.status_code
+
+
+def test_a_deleted_version_number_is_never_issued_again(client):
+    """``id@N`` names one content for good: version numbers of an id only increase, across deletes of the latest
+    version and of the whole card (the tester's sequence gave reuse@2, then reuse@1, new contents)."""
+    doc = dict(_doc(), id="reuse")
+    assert client.post("/cards", json=doc).json()["version"] == 1
+    r = client.post("/cards", params={"new_version": "true"}, json=dict(doc, notes="A"))
+    assert r.status_code == 201 and r.json()["version"] == 2
+    assert client.delete("/cards/reuse", params={"version": 2}).status_code == 204
+    body = assert_names_field(client.post("/cards", json=dict(doc, notes="B")), 409, "id")
+    assert "add version 3" in body["detail"]
+    r = client.post("/cards", params={"new_version": "true"}, json=dict(doc, notes="B"))
+    assert r.status_code == 201 and r.json()["version"] == 3 and r.json()["versions"] == [1, 3]
+    assert _notes(client, "reuse", 2) == 404 and _notes(client, "reuse", 3) == "B"
+    # the whole card deleted: an upload of the id continues after the highest number issued (n + 1)
+    assert client.delete("/cards/reuse").status_code == 204
+    assert client.get("/cards/reuse").status_code == 404
+    assert "reuse" not in {c["id"] for c in client.get("/cards").json()["cards"]}
+    r = client.post("/cards", json=dict(doc, notes="C"))
+    assert r.status_code == 201 and r.json()["version"] == 4 and r.json()["versions"] == [4]
+    assert [_notes(client, "reuse", v) for v in (1, 2, 3, 4)] == [404, 404, 404, "C"]
+    assert client.get("/cards/reuse/versions").json() == {"id": "reuse", "versions": [4]}
+
+
+def test_the_highest_version_issued_survives_a_restart(make_client):
+    c1 = make_client()
+    doc = dict(_doc(), id="kept")
+    c1.post("/cards", json=doc)
+    c1.post("/cards", params={"new_version": "true"}, json=dict(doc, notes="A"))
+    assert c1.delete("/cards/kept", params={"version": 2}).status_code == 204
+    c2 = make_client()  # a new app on the same data folder
+    r = c2.post("/cards", params={"new_version": "true"}, json=dict(doc, notes="B"))
+    assert r.status_code == 201 and r.json()["version"] == 3
+    assert c2.delete("/cards/kept").status_code == 204
+    c3 = make_client()
+    r = c3.post("/cards", json=dict(doc, notes="C"))
+    assert r.status_code == 201 and r.json()["version"] == 4
+
+
+def test_a_store_without_the_record_takes_it_from_its_versions_when_one_is_deleted(tmp_path):
+    """A store written before the record existed: deleting its latest version records that number first."""
+    from gisnoise.model import cards as gcards
+    from gisnoise.service.cardstore import HIGHEST_FILE, CardStore
+
+    store = CardStore(tmp_path / "cards")
+    card = gcards.from_dict(dict(_doc(), id="old"))
+    store.put(card)
+    store.put(gcards.from_dict(dict(_doc(), id="old", notes="A")), new_version=True)
+    (tmp_path / "cards" / "old" / HIGHEST_FILE).unlink()
+    assert store.delete("old", 2) == [2]
+    stored, created = store.put(gcards.from_dict(dict(_doc(), id="old", notes="B")), new_version=True)
+    assert created and stored.version == 3
+    assert json.loads((tmp_path / "cards" / "old" / HIGHEST_FILE).read_text()) == {"highest_version": 3}
+    assert not list((tmp_path / "cards" / "old").glob(".*.tmp"))  # no temporary file left
