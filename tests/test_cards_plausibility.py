@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -151,3 +152,15 @@ def test_a_hemisphere_is_judged_by_its_level_at_40_m_and_refused_naming_levels_d
     with pytest.raises(ImplausibleCardError) as exc:
         cards.from_dict(json.loads(cards.dumps(_one_band_table(90.0, radius_m=0.01))))
     assert exc.value.field == "reference_distance_m"
+
+
+@pytest.mark.parametrize("p6, rise", [(-1.0, 6.0206), (0.0, 0.0)])
+def test_a_card_as_loud_or_louder_farther_away_is_refused_naming_p6(p6, rise):
+    """Eq. 10: the level at 80 m against 40 m is -p6 20 lg 2 dB; a card with p6 <= 0 does not fall with
+    distance (with p6 = -1 a map's loudest levels sat at its edge, 108.6 dB(A) against 101.7 under the track)."""
+    with pytest.raises(ImplausibleCardError, match=re.escape(f"level at 80 m is {rise:+.3g} dB against 40 m")
+                       + rf".*driven by p6 = {p6:g}$") as e:
+        cards.from_dict({**DEMO, "parameters": {**DEMO["parameters"], "p6": p6}})
+    assert e.value.field == "parameters"
+    # the least spreading that falls at all passes (a line source's 3 dB per doubling: p6 = 0.5)
+    assert card_problems(cards.from_dict({**DEMO, "parameters": {**DEMO["parameters"], "p6": 0.5}})) == []

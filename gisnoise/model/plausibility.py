@@ -27,6 +27,10 @@ and the card is refused when
 
 * any level lies outside :data:`LEVEL_RANGE_DB` (-20 to 160 dB(A): quieter than any
   audible UAV at 40 m, or louder than a jet engine at that distance), or is not finite;
+* its level at twice that distance (80 m) is not below its level at 40 m in some direction and
+  power: a point source's sound spreads, so its level falls with distance (6 dB per doubling
+  in free field; a card with spreading ``p6 <= 0`` is as loud or louder far away and would put
+  its loudest levels at the edge of every map);
 * its covariance gives a parameter a non-finite standard deviation or a level standard
   deviation over the sphere above :data:`MAX_LEVEL_STD_DB` (20 dB: the card says
   nothing about the level).
@@ -186,6 +190,24 @@ def _problems(card: Any) -> list[tuple[str, str]]:
                     f"{lo_w:g}-{hi_w:g} W ranges {np.nanmin(flat):.4g} to {np.nanmax(flat):.4g} dB(A), outside "
                     f"the plausible {lo_ok:g} to {hi_ok:g} dB(A); driven by "
                     + ", ".join(f"{k} = {float(card.parameters[k]):.4g}" for k in culprits)))
+    far = dict(x, d=np.full(x["d"].shape, 2 * RULE_DISTANCE_M))
+    with np.errstate(all="ignore"):
+        lv_far, jac_far = base.level_and_jacobian(p, far, d_ref=float(card.reference_distance_m), background=False)
+    rise = np.asarray(lv_far).reshape(-1) - flat
+    if not out and np.all(np.isfinite(rise)) and rise.max() >= 0:  # (levels out of range: that says enough)
+        worst = int(np.argmax(rise))
+        culprits = names
+        if j is not None and jac_far is not None:
+            with np.errstate(all="ignore"):
+                # parameters that shape the fall with distance; at 0 (p6 = 0) a parameter still counts
+                contrib = np.abs(np.asarray(jac_far).reshape(flat.size, -1)[worst] - j[worst]) * np.maximum(np.abs(p),
+                                                                                                             1.0)
+            if np.all(np.isfinite(contrib)) and contrib.max() > 0:
+                culprits = [names[k] for k in np.argsort(-contrib) if contrib[k] >= 0.5 * contrib.max()]
+        out.append(("parameters", f"level at {2 * RULE_DISTANCE_M:g} m is {rise.max():+.3g} dB against "
+                    f"{RULE_DISTANCE_M:g} m in its worst direction: a source's level falls with distance "
+                    "(spherical spreading -6 dB per doubling); driven by "
+                    + ", ".join(f"{k} = {float(card.parameters[k]):.4g}" for k in culprits)))
     if cov is not None:
         var = np.diag(cov)
         badvar = [names[k] for k in range(len(names)) if not np.isfinite(var[k])]
@@ -209,7 +231,7 @@ def card_problems(card: Any) -> list[str]:
 
     The rules are the module docstring's: the reference distance within :data:`REFERENCE_DISTANCE_RANGE_M`,
     the levels at :data:`RULE_DISTANCE_M` within :data:`LEVEL_RANGE_DB` (a hemisphere card: its node
-    levels there), a bounded level uncertainty.
+    levels there), levels falling with distance, a bounded level uncertainty.
     """
     return [msg for _, msg in _problems(card)]
 
