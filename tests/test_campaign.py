@@ -679,3 +679,118 @@ def test_a_byte_order_mark_in_campaign_json_is_accepted(tmp_path):
     np.testing.assert_array_equal(a.level, b.level)
     hb = with_mic_heights(b, bom).meta["microphones"]
     assert hb["m1"]["height_agl_m"] == 1.5
+
+
+# ----------------------------------------------------------------------------- heights, clocks, places, backgrounds
+def _take_off_track(dh: float = 0.0) -> dict[str, np.ndarray]:
+    """The straight flyover preceded by a vertical take-off from the origin's ground (h 80 m): on the ground
+    (no power) at t = -20 s, climbing to 50 m by -10 s; every height shifted by ``dh``."""
+    tr = straight_track()
+    t_up = np.arange(-20.0, -10.0, 0.5)
+    enu = np.stack([np.full(t_up.size, X0[0] - 10 * V[0]), np.zeros(t_up.size), 5.0 * (t_up + 20.0)], axis=-1)
+    lat, lon, _ = FRAME.to_wgs84(enu[:, 0], enu[:, 1], enu[:, 2])
+    up = {"t": t_up, "lat": lat, "lon": lon, "h": ORIGIN["h"] + enu[:, 2],   # from the ground at 80 m
+          "roll": np.zeros(t_up.size), "pitch": np.zeros(t_up.size),
+          "yaw": np.full(t_up.size, 90.0), "power_w": np.where(t_up == -20.0, 0.0, 3000.0),
+          "phase": np.full(t_up.size, "climb")}
+    out = {k: np.concatenate([up[k], tr[k]]) for k in tr}
+    out["h"] = out["h"] + dh
+    return out
+
+
+
+
+def test_heights_125_m_low_put_the_vehicle_below_the_ground_and_are_refused(tmp_path):
+    """A log 125 m below ellipsoidal heights (its take-off at -45 m, the microphones' ground at 80 m): the
+    vehicle is underground for its whole airborne time; check names flight, field h and the 125 m, read refuses."""
+    mics = {k: v for k, v in MICS.items()}
+    doc = {"microphones": [mic_entry(k, v, height_agl_m=float(v[2])) for k, v in mics.items()]}
+    good = make_campaign(tmp_path / "good", track=_take_off_track(), doc_changes=doc)
+    assert check_campaign(good) == []
+    bad = make_campaign(tmp_path / "bad", track=_take_off_track(-125.0), doc_changes=doc)
+    problems = check_campaign(bad)
+    assert [p.field for p in problems] == ["h"]
+    msg = problems[0].message
+    assert "flight 'f1'" in msg and "field 'h'" in msg and "for 100 % of its airborne time" in msg
+    assert "take-off or landing at -45.0 m lies 125.0 m below that ground" in msg
+    assert "ellipsoidal" in msg and "geoid_undulation_m" in msg
+    with pytest.raises(CampaignError, match="125.0 m below") as e:
+        read_campaign(bad)
+    assert e.value.field == "h"
+
+
+def test_heights_within_gps_noise_of_the_ground_are_not_a_problem(tmp_path):
+    """A vehicle 0.9 m (within GROUND_TOLERANCE_M) below the microphones' stated ground is GPS noise, not a datum."""
+    from gisnoise.limits import GROUND_TOLERANCE_M
+
+    track = straight_track()
+    track["h"] = np.full(track["t"].size, 80.0 - 0.9 * GROUND_TOLERANCE_M)
+    doc = {"microphones": [mic_entry(k, v, height_agl_m=float(v[2])) for k, v in MICS.items()]}
+    root = make_campaign(tmp_path / "c", track=track, doc_changes=doc)
+    assert not [p for p in check_campaign(root) if p.field == "h"]
+
+
+def test_levels_10_db_low_against_the_stated_background_are_named(tmp_path):
+    """m1's levels 10 dB low (a calibration error): its quietest blocks, the 16 before the log (pure 40 dB
+    background), read 30 dB(A), 10.0 dB under its stated background_db; the others are silent."""
+    from gisnoise.measure import campaign_log_warnings
+
+    def levels(mic, t_r, d):
+        before = closed_form_te(t_r, MICS[mic]) < -10.0
+        la = np.where(before, BG, uav_level(d))
+        return la - 10.0 if mic == "m1" else la
+
+    doc = {"microphones": [mic_entry(k, v, background_db=BG) for k, v in MICS.items()]}
+    root = make_campaign(tmp_path / "c", t_r=np.arange(-12.0, 58.0, 0.125), level_fn=levels, doc_changes=doc)
+    camp = read_campaign(root)
+    warnings = campaign_log_warnings(camp)
+    assert len(warnings) == 1, warnings
+    assert warnings[0].startswith("microphone 'm1': the quietest 2 % of its 560 levels lie below 30.0 dB(A), "
+                                  "10.0 dB under the background_db 40 dB(A)")
+    assert "calibration" in warnings[0]
+    assert check_campaign(root) == []     # a warning, not a problem
+    root_ok = make_campaign(tmp_path / "ok", t_r=np.arange(-12.0, 58.0, 0.125),
+                            level_fn=lambda mic, t_r, d: levels("m2", t_r, d) if mic == "m1" else levels(mic, t_r, d),
+                            doc_changes=doc)
+    assert campaign_log_warnings(read_campaign(root_ok)) == []
+
+
+def test_sample_campaign_has_no_background_warning():
+    from gisnoise.measure import campaign_log_warnings
+
+    root = Path(__file__).resolve().parents[1] / "sample_data" / "campaign"
+    assert campaign_log_warnings(read_campaign(root)) == []
+
+
+def test_a_flight_with_no_block_in_its_log_is_refused_by_the_reader(tmp_path):
+    """Audio 1000 s after the log (a wrong start_utc): check reports it, read_campaign (fit, diagnose) refuses."""
+    root = make_campaign(tmp_path / "c", t_r=np.arange(1003.0, 1058.0, 0.125))
+    problems = check_campaign(root)
+    assert len(problems) == 3 and all("no block falls within the flight log of 'f1' (check start_utc)"
+                                      in p.message for p in problems)
+    with pytest.raises(CampaignError, match=r"no block falls within the flight log of 'f1' \(check start_utc\)"):
+        read_campaign(root)
+    from gisnoise.identify import fit_campaign
+
+    with pytest.raises(CampaignError, match="no block falls within the flight log of 'f1'"):
+        fit_campaign(root, "horizontal")    # fit (and diagnose) read the campaign as check does: refused
+
+
+def test_a_track_33_km_from_the_microphones_names_the_distance_not_the_clock(tmp_path):
+    """The log 0.3 deg north (33.4 km) of the microphones, right clock: the message gives the distance."""
+    track = straight_track()
+    track["lat"] = track["lat"] + 0.3
+    root = make_campaign(tmp_path / "c", track=track)
+    problems = check_campaign(root)
+    assert problems and all("the flight track is 33 km from the microphones" in p.message for p in problems)
+    assert not any("start_utc" in p.message for p in problems)
+
+
+def test_a_microphone_without_lat_is_said_missing(tmp_path):
+    root = make_campaign(tmp_path / "c")
+    doc = json.loads((root / "campaign.json").read_text())
+    del doc["microphones"][1]["lat"]
+    (root / "campaign.json").write_text(json.dumps(doc))
+    msgs = [p.message for p in check_campaign(root)]
+    assert any("field 'microphones[1].lat' is missing" in m for m in msgs), msgs
+    assert not any("None" in m for m in msgs)

@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import CampaignError, GisnoiseError
-from gisnoise.flight import Trajectory, read_flight, track_warning
+from gisnoise.flight import Trajectory, ground_from_track, read_flight, track_warning
+from gisnoise.limits import GROUND_TOLERANCE_M
 from gisnoise.measure.document import (
     _Collector,
     _is_number,
@@ -51,10 +52,27 @@ from gisnoise.measure.document import (
 )
 from gisnoise.measure.events import DEFAULT_EVENT_DB, DEFAULT_SNR_DB
 from gisnoise.measure.levels import DEFAULT_BLOCK_S, _most_common_rate, _wav_rate, read_level_csv, wav_levels
-from gisnoise.measure.parts import Campaign, Problem, ProgressFn
+from gisnoise.measure.parts import Campaign, Flight, LevelSeries, Microphone, Problem, ProgressFn
 from gisnoise.measure.spreading import spreading_notes
 
-__all__ = ["read_campaign", "check_campaign", "inspect_campaign", "campaign_log_warnings"]
+__all__ = ["read_campaign", "check_campaign", "inspect_campaign", "campaign_log_warnings", "FAR_TRACK_M",
+           "QUIET_PERCENTILE", "BACKGROUND_MARGIN_DB"]
+
+FAR_TRACK_M = 10_000.0
+"""A flight track whose nearest point lies farther than this from every microphone (m) cannot have been heard:
+spherical spreading alone takes 80 dB off the level at 1 m over 10 km (air absorption more), far below any
+outdoor background.  A flight with no block within its log names that distance instead of its clock."""
+
+QUIET_PERCENTILE = 2.0
+"""The quiet end of a microphone's levels that :func:`campaign_log_warnings` compares with its stated
+background, percent of its blocks."""
+
+BACKGROUND_MARGIN_DB = 3.0
+"""How far below its stated background a microphone's quiet end (:data:`QUIET_PERCENTILE`) may lie, dB: a
+measured level is the energetic sum of the UAV and the background, so only the background's own fluctuation
+takes a block below it; 2 % of the blocks lie 3 dB or more below only for a background fluctuating by more than
+1.5 dB (std of its block levels), the rule by which the level-trend fit refuses a background estimate
+(:func:`gisnoise.measure.events.fit_level_trend`)."""
 
 
 def read_campaign(folder: str | os.PathLike[str], *, exclusions: Iterable[Any] | None = None,
@@ -85,11 +103,16 @@ def read_campaign(folder: str | os.PathLike[str], *, exclusions: Iterable[Any] |
     Raises
     ------
     CampaignError
-        At the first problem, naming the file and the field.
+        At the first problem, naming the file and the field; among them a flight log whose
+        heights put the vehicle below the microphones' ground (field ``h``) and a level file
+        none of whose blocks falls within its flight's log (field ``t``; the samples are
+        computed to find it).
     """
-    camp, _ = _load(folder, strict=True, exclusions=exclusions, absorption=absorption, snr_db=snr_db,
-                    event_db=event_db, block_s=block_s, progress=progress)
+    camp, col = _load(folder, strict=True, exclusions=exclusions, absorption=absorption, snr_db=snr_db,
+                      event_db=event_db, block_s=block_s, progress=progress)
     assert camp is not None
+    if camp.levels:   # a series none of whose blocks falls within its flight log is refused as check reports it
+        _outside_problems(camp, camp.samples(), col)
     return camp
 
 
@@ -107,11 +130,7 @@ def inspect_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> tuple[Cam
         except GisnoiseError as exc:
             collector.error(str(Path(folder) / "campaign.json"), exc)
         else:
-            for lv in camp.levels:
-                m = (s.mic == lv.mic) & (s.flight == lv.flight)
-                if m.any() and np.all(s.mask_reason[m] == "outside_flight"):
-                    collector.add(lv.source, "t", f"{lv.source}: no block falls within the flight log of "
-                                  f"'{lv.flight}' (check start_utc)")
+            _outside_problems(camp, s, collector)
             cjs = str(Path(folder) / "campaign.json")
             for note in spreading_notes(s):
                 collector.add(cjs, "microphones", f"{cjs}: {note}")
@@ -119,14 +138,20 @@ def inspect_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> tuple[Cam
 
 
 def campaign_log_warnings(camp: Campaign) -> list[str]:
-    """The one-line warnings about a campaign's flight logs, in the order of its flights.
+    """The one-line warnings about a campaign: its flight logs, in the order of its flights, then its microphones.
 
     What :func:`gisnoise.flight.track_warning` says about each flight's log, naming
     the file: a log cut short (a dead battery, a full SD card, a broken download) is
     read up to its cut and fitted or diagnosed as far as it goes, not a problem of the
-    campaign, but said.  The one list every face shows: the command line prints each
-    line on stderr as ``warning: <line>``; the service's fit and diagnose jobs carry
-    them in their result's ``warnings``.
+    campaign, but said.  Then each microphone whose quiet levels lie below the
+    background campaign.json states for it: the quiet end of its levels (their
+    :data:`QUIET_PERCENTILE` percentile over its files, user exclusions left out, 50
+    blocks or more) more than :data:`BACKGROUND_MARGIN_DB` below its ``background_db``.
+    A measured level holds the background, so this says the levels are too low (a
+    calibration or sensitivity error) or the stated background too high.  The one list
+    every face shows: the command line prints each line on stderr as
+    ``warning: <line>``; the service's fit and diagnose jobs carry them in their
+    result's ``warnings``.
 
     Parameters
     ----------
@@ -144,7 +169,82 @@ def campaign_log_warnings(camp: Campaign) -> list[str]:
         w = track_warning(traj) if traj is not None else None
         if w is not None:
             out.append(w)
+    return out + _background_warnings(camp)
+
+
+def _background_warnings(camp: Campaign) -> list[str]:
+    """One line per microphone whose quiet levels lie below its stated background (see :func:`campaign_log_warnings`)."""
+    out = []
+    for m in camp.microphones:
+        if m.background_db is None:
+            continue
+        la = [lv.la[_kept(camp, lv)] for lv in camp.levels if lv.mic == m.id]
+        levels = np.concatenate(la) if la else np.zeros(0)
+        if levels.size < 100.0 / QUIET_PERCENTILE:
+            continue
+        quiet = float(np.percentile(levels, QUIET_PERCENTILE))
+        if quiet < m.background_db - BACKGROUND_MARGIN_DB:
+            out.append(f"microphone '{m.id}': the quietest {QUIET_PERCENTILE:g} % of its {levels.size} levels lie "
+                       f"below {quiet:.1f} dB(A), {m.background_db - quiet:.1f} dB under the background_db "
+                       f"{m.background_db:g} dB(A) campaign.json states for it; a level holds the background and "
+                       f"lies below it only by the background's fluctuation (allowed {BACKGROUND_MARGIN_DB:g} dB): "
+                       "check its calibration (sensitivity_v_per_pa, full_scale_v, the level files) or its "
+                       "background_db")
     return out
+
+
+def _kept(camp: Campaign, lv: LevelSeries) -> np.ndarray:
+    """Finite levels of a series outside the user's exclusions."""
+    keep = np.isfinite(lv.la)
+    for e in camp.exclusions:
+        if e.flight == lv.flight and (e.mic is None or e.mic == lv.mic):
+            keep &= ~((lv.t >= e.t0) & (lv.t <= e.t1))
+    return keep
+
+
+def _outside_problems(camp: Campaign, s: Any, col: _Collector) -> None:
+    """A level file none of whose blocks falls within its flight's log: its clock (start_utc), or a track far
+    from the microphones (farther than :data:`FAR_TRACK_M`: another place's log)."""
+    for lv in camp.levels:
+        m = (s.mic == lv.mic) & (s.flight == lv.flight)
+        if m.any() and np.all(s.mask_reason[m] == "outside_flight"):
+            far = _track_distance_m(camp.trajectories[lv.flight], camp.microphones)
+            hint = (f"the flight track is {far / 1000.0:,.0f} km from the microphones; check that the log is this "
+                    "campaign's" if far > FAR_TRACK_M else "check start_utc")
+            col.add(lv.source, "t", f"{lv.source}: no block falls within the flight log of '{lv.flight}' ({hint})")
+
+
+def _track_distance_m(traj: Trajectory, mics: tuple[Microphone, ...]) -> float:
+    """Great-circle distance from the track's nearest point to the nearest microphone, m (haversine, mean radius)."""
+    if not mics:
+        return 0.0
+    lat = np.radians(np.asarray(traj.lat, float))[:, None]
+    lon = np.radians(np.asarray(traj.lon, float))[:, None]
+    mlat = np.radians([m.lat for m in mics])[None, :]
+    mlon = np.radians([m.lon for m in mics])[None, :]
+    a = np.sin((lat - mlat) / 2) ** 2 + np.cos(lat) * np.cos(mlat) * np.sin((lon - mlon) / 2) ** 2
+    return float(2.0 * 6_371_008.8 * np.arcsin(np.sqrt(np.clip(np.min(a), 0.0, 1.0))))
+
+
+def _below_ground(f: Flight, traj: Trajectory, mics: list[Microphone]) -> str | None:
+    """The flight's heights in the wrong datum: more than half its airborne samples more than
+    GROUND_TOLERANCE_M below the lowest microphone's ground (its ``h`` less ``height_agl_m``)."""
+    if not mics or len(traj) == 0:
+        return None
+    ground = min(m.h - (m.height_agl_m or 0.0) for m in mics)
+    fly = np.asarray(traj.flying, bool)
+    h = np.asarray(traj.h, float)[fly] if fly.any() else np.asarray(traj.h, float)
+    below = h < ground - GROUND_TOLERANCE_M
+    if below.mean() <= 0.5:
+        return None
+    g = ground_from_track(traj)
+    by = (f"its take-off or landing at {g:.1f} m lies {ground - g:.1f} m below that ground" if g is not None
+          else f"its median airborne height {float(np.median(h)):.1f} m lies {ground - float(np.median(h)):.1f} m "
+               "below that ground")
+    return (f"{f.log}: field 'h' of flight '{f.id}' puts the vehicle below the microphones' ground ({ground:.1f} m, "
+            f"ellipsoidal) for {100.0 * below.mean():.0f} % of its airborne time: {by}; heights must be ellipsoidal "
+            "(a log above mean sea level needs the flight's geoid_undulation_m, one above take-off the take-off's "
+            "ellipsoidal height added)")
 
 
 def check_campaign(folder: str | os.PathLike[str], **kwargs: Any) -> list[Problem]:
@@ -204,6 +304,10 @@ def _load(folder: str | os.PathLike[str], *, strict: bool, exclusions: Iterable[
                                              power_w=f.power_w)
         except GisnoiseError as exc:
             col.error(f.log, exc)
+            continue
+        wrong_datum = _below_ground(f, trajectories[f.id], mics)
+        if wrong_datum is not None:
+            col.add(f.log, "h", wrong_datum)
     # microphone files
     pairs = []
     for m in mics:

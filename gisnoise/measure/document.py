@@ -180,6 +180,10 @@ def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Micro
         lim = current_limits()
         for k, (lo, hi) in (("lat", (-90.0, 90.0)), ("lon", (-180.0, 180.0)),
                             ("h", (lim.min_height_m, lim.max_height_m))):
+            if k not in m:
+                col.add(cjs, f"{where}.{k}", f"{cjs}: field '{where}.{k}' is missing (a number is needed)")
+                good = False
+                continue
             if not _is_number(m.get(k)):
                 col.add(cjs, f"{where}.{k}", f"{cjs}: field '{where}.{k}' must be a number, got {m.get(k)!r}")
                 good = False
