@@ -435,3 +435,34 @@ def test_a_start_without_directivity_is_not_refused(campaign):
     start = dict(TRUTH, p0=50.0, p1=10.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=0.8, p7=35.0)
     res = fit(samples, reference_power_w=REF_W, p0=start)
     assert np.all(np.abs(res.p - P_TRUE) < 3.0 * res.std_array)
+
+
+def test_fit_names_a_microphone_listed_50_m_off_and_not_unequal_noise(campaign_folder, tmp_path):
+    """Microphones of unequal noise (0.8, 1.2, 1.6 dB) fit silently; m2 listed 50 m east of where its levels were
+    measured is named (its residual is steady over seconds, the others' white), the card still written."""
+    import json
+    import shutil
+
+    from gisnoise.geo import LocalFrame
+    from gisnoise.identify.fit import SYSTEMATIC_MIN_DB, systematic_residuals
+
+    clean = fit_campaign(campaign_folder, "horizontal")
+    assert clean.info["warnings"] == []
+    assert "warnings" not in clean.statistics()
+    moved = shutil.copytree(campaign_folder, tmp_path / "moved")
+    doc = json.loads((moved / "campaign.json").read_text())
+    m2 = doc["microphones"][1]
+    assert m2["id"] == "m2"
+    frame = LocalFrame(ORIGIN["lat"], ORIGIN["lon"], ORIGIN["h"])
+    e, n, u = frame.to_enu(m2["lat"], m2["lon"], m2["h"])
+    m2["lat"], m2["lon"], m2["h"] = (float(v) for v in frame.to_wgs84(e + 50.0, n, u))
+    (moved / "campaign.json").write_text(json.dumps(doc))
+    res = fit_campaign(moved, "horizontal")
+    parts = systematic_residuals(res.samples, res.residuals)
+    assert parts["m2"][1] > SYSTEMATIC_MIN_DB
+    assert len(res.info["warnings"]) == 1
+    w = res.info["warnings"][0]
+    assert w.startswith(f"microphone 'm2': noise std {res.noise_std['m2']:.2f} dB against")
+    assert "position" in w and "gisnoise diagnose" in w
+    assert res.statistics()["warnings"] == [w]
+    assert res.to_card().statistics["warnings"] == [w]

@@ -100,6 +100,7 @@ def command(ctx: click.Context, campaign: str, phase: str, ansatz: str | None, o
     with progress(ctx, f"fitting {phase}", float(max_iter)) as update:
         res = fit_campaign(camp, phase, name, p0=template, fixed=fixed or None, max_iter=max_iter,
                            progress=lambda i, cost: update(float(i)))
+    echo_warnings(res.info.get("warnings") or [])  # a microphone the model misses alone: said, the card written
     card = res.to_card(template, id=card_id, phase=phase, phases=list(serves) if serves else None,
                        covariance=covariance)
     path = save(card, out, overwrite=force)  # a card written there during the fit is not replaced either

@@ -22,7 +22,8 @@ from gisnoise.measure import Samples, read_campaign, series_key
 from gisnoise.model import PHASES, POWER_RANGE_DEX, Ansatz, check_testable, get_ansatz, get_effect
 
 __all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "P7_MAX_STD_DB",
-           "BACKGROUND_DOMINATED_DB", "background_dominated_rows"]
+           "BACKGROUND_DOMINATED_DB", "background_dominated_rows", "systematic_residuals", "misfit_warnings",
+           "SYSTEMATIC_WINDOW_S", "SYSTEMATIC_MIN_DB", "SYSTEMATIC_RATIO"]
 
 
 def fit(
@@ -203,8 +204,86 @@ def fit_campaign(
         info["vehicle"] = vehicle["name"]
     if held:
         info["held_parameters"] = held
+    info["warnings"] = misfit_warnings(res)
     res.info.update(info)
     return res
+
+
+SYSTEMATIC_WINDOW_S = 2.0
+"""Reception time over which a microphone's residual is averaged to find its systematic part, s (16 blocks of
+0.125 s: measurement noise averages down by 4, a geometry error changes slowly along the track)."""
+SYSTEMATIC_MIN_DB = 0.5
+"""Systematic residual rms (dB) below which a microphone is not named, whatever the others'."""
+SYSTEMATIC_RATIO = 3.0
+"""How many times the median of the other microphones' systematic residual one microphone's must exceed."""
+
+
+def systematic_residuals(samples: Samples, residuals: Any,
+                         window_s: float = SYSTEMATIC_WINDOW_S) -> dict[str, tuple[float, float]]:
+    """Per microphone: noise std and the systematic part of it, dB.
+
+    Within each series (microphone and flight) the residual is averaged over ``window_s``
+    of reception time centred on each row (the rows the fit used).  The rms of that
+    running mean, less the white noise it lets through (the variance of the residual
+    about it over the count averaged), is what stays the same over seconds: a wrong
+    position, height or a reflection seen by that microphone, not its signal-to-noise
+    ratio, which only scales the white part.
+
+    Returns
+    -------
+    dict
+        ``mic -> (noise std, systematic rms)`` in dB.
+    """
+    r = np.asarray(residuals, dtype=float)
+    out: dict[str, tuple[float, float]] = {}
+    sid = series_key(samples.mic, samples.flight)
+    for mic in dict.fromkeys(samples.mic.tolist()):
+        sm_sq, white, n_all = 0.0, 0.0, 0
+        for key in np.unique(sid[samples.mic == mic]):
+            rows = np.flatnonzero(sid == key)
+            rows = rows[np.argsort(samples.t_r[rows], kind="stable")]
+            t, x = np.asarray(samples.t_r[rows], float), r[rows]
+            c = np.concatenate([[0.0], np.cumsum(x)])
+            lo = np.searchsorted(t, t - window_s / 2.0, side="left")
+            hi = np.searchsorted(t, t + window_s / 2.0, side="right")
+            k = (hi - lo).astype(float)
+            mean = (c[hi] - c[lo]) / k
+            fast = float(np.mean((x - mean) ** 2)) if x.size > 1 else 0.0
+            sm_sq += float(np.sum(mean ** 2))
+            white += float(np.sum(fast / k))
+            n_all += x.size
+        if n_all:
+            sys_db = math.sqrt(max(sm_sq - white, 0.0) / n_all)
+            out[str(mic)] = (float(np.sqrt(np.mean(r[samples.mic == mic] ** 2))), sys_db)
+    return out
+
+
+def misfit_warnings(res: FitResult) -> list[str]:
+    """One line per microphone the fit misses alone (``gisnoise fit`` prints them, the result's ``info['warnings']``).
+
+    A microphone is named when its systematic residual (:func:`systematic_residuals`) exceeds
+    :data:`SYSTEMATIC_MIN_DB` and :data:`SYSTEMATIC_RATIO` times the median of the other
+    microphones'.  Its noise std alone is no test: microphones of unequal signal-to-noise
+    ratio differ in it by a factor of two in clean campaigns, and over thousands of
+    autocorrelated residuals an F-test of the variance ratio is significant at any ratio;
+    measurement noise averages out over :data:`SYSTEMATIC_WINDOW_S`, what the model misses
+    at one microphone only (its position, height, a reflection) does not.
+    """
+    parts = systematic_residuals(res.samples, res.residuals)
+    if len(parts) < 2:
+        return []
+    out = []
+    for mic, (std, sys_db) in parts.items():
+        ref = float(np.median([v[1] for m, v in parts.items() if m != mic]))
+        if sys_db > SYSTEMATIC_MIN_DB and sys_db > SYSTEMATIC_RATIO * ref:
+            stds = [res.noise_std.get(m, v[0]) for m, v in parts.items() if m != mic]
+            span = f"{min(stds):.2f}" if len(stds) == 1 else f"{min(stds):.2f}-{max(stds):.2f}"
+            out.append(f"microphone '{mic}': noise std {res.noise_std.get(mic, std):.2f} dB against "
+                       f"{span} for the other{'s' if len(stds) > 1 else ''}, {sys_db:.2f} dB of it systematic "
+                       f"(steady over {SYSTEMATIC_WINDOW_S:g} s) against a median {ref:.2f} for the others: the "
+                       "model misses this microphone alone; check its position, height and calibration "
+                       "(gisnoise diagnose searches its position)")
+    return out
 
 
 STEADY_POWER_DEX = POWER_RANGE_DEX

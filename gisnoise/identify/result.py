@@ -75,7 +75,10 @@ class FitResult:
     samples : Samples
         The rows used (for reports).
     info : dict
-        Provenance facts (campaign, flights, microphones, vehicle).
+        Provenance facts (campaign, flights, microphones, vehicle) and, from
+        :func:`~gisnoise.identify.fit.fit_campaign`, ``warnings``: one line per microphone
+        the model misses alone (:func:`~gisnoise.identify.fit.misfit_warnings`), also in
+        :meth:`statistics` (so on the card) when there are any.
     """
 
     ansatz: str
@@ -190,6 +193,7 @@ class FitResult:
             "fixed": dict(self.fixed),
             "at_bounds": list(self.at_bounds),
             "message": self.message,
+            **({"warnings": list(self.info["warnings"])} if self.info.get("warnings") else {}),
         }
 
     def to_card(

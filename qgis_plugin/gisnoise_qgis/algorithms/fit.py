@@ -94,6 +94,8 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
         result = fit_campaign(camp, phase, ansatz=ansatz, max_iter=max_iter, progress=progress,
                               cancel=feedback.isCanceled)
         feedback.pushInfo(result.summary())
+        for w in result.info.get("warnings") or []:  # a microphone the model misses alone, as the command line says
+            feedback.reportError(f"warning: {w}", fatalError=False)
         card = result.to_card()
         gcards.save(card, dest)
         out = {self.OUTPUT_CARD: dest, self.RMS_DB: result.rms_db, self.N_SAMPLES: int(result.n),
