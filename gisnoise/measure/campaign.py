@@ -56,12 +56,16 @@ from gisnoise.measure.parts import Campaign, Flight, LevelSeries, Microphone, Pr
 from gisnoise.measure.spreading import spreading_notes
 
 __all__ = ["read_campaign", "check_campaign", "inspect_campaign", "campaign_log_warnings", "FAR_TRACK_M",
-           "QUIET_PERCENTILE", "BACKGROUND_MARGIN_DB"]
+           "QUIET_PERCENTILE", "BACKGROUND_MARGIN_DB", "UNSTATED_MIC_HEIGHT_M"]
 
 FAR_TRACK_M = 10_000.0
 """A flight track whose nearest point lies farther than this from every microphone (m) cannot have been heard:
 spherical spreading alone takes 80 dB off the level at 1 m over 10 km (air absorption more), far below any
 outdoor background.  A flight with no block within its log names that distance instead of its clock."""
+
+UNSTATED_MIC_HEIGHT_M = 10.0
+"""How high above its ground a microphone without ``height_agl_m`` (and not on a ground plate) may stand, m, for
+the heights check of the flight logs: tripods stand 1.2-4 m high, masts up to 10 m."""
 
 QUIET_PERCENTILE = 2.0
 """The quiet end of a microphone's levels that :func:`campaign_log_warnings` compares with its stated
@@ -226,12 +230,20 @@ def _track_distance_m(traj: Trajectory, mics: tuple[Microphone, ...]) -> float:
     return float(2.0 * 6_371_008.8 * np.arcsin(np.sqrt(np.clip(np.min(a), 0.0, 1.0))))
 
 
+def _mic_ground(m: Microphone) -> float:
+    """The lowest a microphone's ground can lie, m ellipsoidal: its ``h`` less ``height_agl_m``; a ground plate
+    lies on it; another mount of unstated height stands at most :data:`UNSTATED_MIC_HEIGHT_M` above it."""
+    if m.height_agl_m is not None:
+        return m.h - m.height_agl_m
+    return m.h if m.mount == "ground_plate" else m.h - UNSTATED_MIC_HEIGHT_M
+
+
 def _below_ground(f: Flight, traj: Trajectory, mics: list[Microphone]) -> str | None:
     """The flight's heights in the wrong datum: more than half its airborne samples more than
-    GROUND_TOLERANCE_M below the lowest microphone's ground (its ``h`` less ``height_agl_m``)."""
+    GROUND_TOLERANCE_M below the lowest microphone's ground (:func:`_mic_ground`)."""
     if not mics or len(traj) == 0:
         return None
-    ground = min(m.h - (m.height_agl_m or 0.0) for m in mics)
+    ground = min(_mic_ground(m) for m in mics)
     fly = np.asarray(traj.flying, bool)
     h = np.asarray(traj.h, float)[fly] if fly.any() else np.asarray(traj.h, float)
     below = h < ground - GROUND_TOLERANCE_M
