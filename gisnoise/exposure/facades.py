@@ -32,7 +32,7 @@ import numpy as np
 from gisnoise.errors import InputError
 from gisnoise.exposure.layers import Buildings
 from gisnoise.flight import Trajectory, flying_segments
-from gisnoise.geo import WGS84, LocalFrame, emission_angles, transformer
+from gisnoise.geo import WGS84, LocalFrame, centre_lon, emission_angles, transformer
 from gisnoise.maps import CardSet
 from gisnoise.model import ModelCard
 
@@ -136,7 +136,7 @@ def point_levels(traj: Trajectory, cards: CardSet | Iterable[ModelCard] | ModelC
                              "façade levels take the base ansatzes only", field="card")
     lon, lat = np.atleast_1d(np.asarray(lon, dtype=float)), np.atleast_1d(np.asarray(lat, dtype=float))
     h = np.broadcast_to(np.asarray(h, dtype=float), lon.shape)
-    frame = LocalFrame(float(np.mean(lat)), float(np.mean(lon)), float(np.mean(h)))
+    frame = LocalFrame(float(np.mean(lat)), centre_lon(lon), float(np.mean(h)))
     re, rn, ru = frame.to_enu(lat, lon, h)
     se, sn, su = frame.to_enu(traj.lat, traj.lon, traj.h)
     yaw, pitch, roll = (np.radians(a) for a in (traj.yaw, traj.pitch, traj.roll))

@@ -31,7 +31,7 @@ from pyproj import Transformer
 
 from gisnoise.errors import InputError
 
-__all__ = ["LocalFrame", "dcm_ned_to_body", "body_vector", "emission_angles", "wrap_angle", "wrap_deg"]
+__all__ = ["LocalFrame", "dcm_ned_to_body", "body_vector", "emission_angles", "wrap_angle", "wrap_deg", "centre_lon"]
 
 
 def wrap_angle(a: Any) -> np.ndarray:
@@ -46,6 +46,29 @@ def wrap_deg(a: Any) -> np.ndarray:
     a = np.asarray(a, dtype=float)
     w = np.mod(a + 180.0, 360.0) - 180.0
     return np.where(w == -180.0, 180.0, w)
+
+
+def centre_lon(lon: Any, how: str = "mean") -> float:
+    """The centre longitude of points, deg in (-180, 180]: their mean (``how="mean"``) or median (``"median"``)
+    on the circle.
+
+    ``lon``: array_like of longitudes, deg.  Points that span at most 180 deg of longitude get the plain
+    ``numpy.mean`` / ``numpy.median`` (the same numbers as ever); wider, they are taken on the circle:
+    unwrapped about their circular mean (the direction of the mean of their unit vectors), averaged there and
+    wrapped back.  A track across the antimeridian (lon 179.99 to -179.99) has its centre near 180, not near 0.
+
+    >>> centre_lon([179.99, -179.99, -179.97])
+    -179.99
+    >>> centre_lon([10.0, 11.0, 15.0], "median")
+    11.0
+    """
+    a = np.asarray(lon, dtype=float).ravel()
+    f = np.median if how == "median" else np.mean
+    if a.size == 0 or float(np.ptp(a)) <= 180.0:
+        return float(f(a))
+    r = np.radians(a)
+    c = float(np.degrees(np.arctan2(np.mean(np.sin(r)), np.mean(np.cos(r)))))
+    return round(float(wrap_deg(c + float(f(wrap_deg(a - c))))), 12)
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory, track_warning
-from gisnoise.geo import scale_factor
+from gisnoise.geo import centre_lon, scale_factor
 from gisnoise.limits import GROUND_TOLERANCE_M
 from gisnoise.maps.cardset import CardSet
 from gisnoise.maps.conditions import check_hemisphere_speeds
@@ -119,8 +119,9 @@ CRS_SCALE_TOLERANCE = 0.01
 
 def crs_scale_warning(grid: Any, lon: Any, lat: Any) -> str | None:
     """The warning for a grid CRS whose scale at the tracks (positions ``lon``, ``lat``, deg) is far from 1: its
-    cells are not their size on the ground."""
-    k = scale_factor(grid.crs, float(np.mean(lon)), float(np.mean(lat)))
+    cells are not their size on the ground.  The scale is taken at the tracks' centre, its longitude on the circle
+    (:func:`gisnoise.geo.centre_lon`: a track across the antimeridian is centred near 180 deg, not 0)."""
+    k = scale_factor(grid.crs, centre_lon(lon), float(np.mean(lat)))
     if k is None or not np.isfinite(k) or abs(k - 1.0) <= CRS_SCALE_TOLERANCE:  # None: PROJ has no scale for it
         return None
     cell = abs(float(grid.transform.a))
