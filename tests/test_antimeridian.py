@@ -11,12 +11,13 @@ import pytest
 import rasterio
 from click.testing import CliRunner
 from pyproj import Geod
-from shapely.geometry import Point, Polygon, shape
+from shapely.geometry import MultiPolygon, Point, Polygon, shape
 
 from gisnoise.cli.main import cli
 from gisnoise.flight import Trajectory
-from gisnoise.geo import centre_lon, grid_for_points, scale_factor
+from gisnoise.geo import LocalFrame, centre_lon, grid_for_points, scale_factor
 from gisnoise.maps import crs_scale_warning
+from gisnoise.maps.antimeridian import split_at_antimeridian
 from gisnoise.model import ModelCard, save
 
 G0, HEIGHT, SPEED, HALF = 70.0, 60.0, 10.0, 600.0
@@ -76,6 +77,54 @@ def loudest_band_against_raster(out, traj):
     cells = float((z >= LEVELS[-1]).sum()) * res * res / k ** 2
     assert abs(abs(area) - cells) <= perimeter * res / 2, (area, cells, perimeter)
     return doc, geom
+
+
+def test_a_map_across_the_antimeridian_is_cut_there_and_keeps_its_area(tmp_path, card):
+    """A flyover from 179.994 E to 179.994 W: each feature lies within [-180, 180] deg, in pieces that meet at +-180
+    and each span well under a degree; the loudest isoband holds every track point and the raster's area; the default
+    UTM zone's scale (1.0009 here) gives no warning (the mean of the track's longitudes, near 0, gave 2.2)."""
+    traj = flyover(LocalFrame(-16.5, 180.0, 0.0))
+    assert traj.lon.max() > 179.99 and traj.lon.min() < -179.99
+    r, out = contour(tmp_path, card, traj)
+    assert r.exit_code == 0, r.output
+    doc, band = loudest_band_against_raster(out, traj)
+    assert isinstance(band, MultiPolygon) and len(band.geoms) == 2
+    for f in doc["features"]:
+        g = shape(f["geometry"])
+        assert g.is_valid
+        pts = positions(g)
+        assert all(np.abs(p[:, 0]).max() <= 180.0 and np.ptp(p[:, 0]) < 0.1 for p in pts)
+        lon = np.concatenate([p[:, 0] for p in pts])
+        assert (lon == 180.0).any() and (lon == -180.0).any(), f["properties"]["name"]
+    assert not any("scales distances" in w for w in doc["gisnoise"]["warnings"])
+
+
+def test_a_map_beside_the_antimeridian_is_not_cut(tmp_path, card):
+    """The same flyover 2 km west of it: nothing reaches 180 deg, nothing is cut, the band stays one polygon."""
+    traj = flyover(LocalFrame(-16.5, 179.97, 0.0))
+    r, out = contour(tmp_path, card, traj)
+    assert r.exit_code == 0, r.output
+    _, band = loudest_band_against_raster(out, traj)
+    assert isinstance(band, MultiPolygon) and len(band.geoms) == 1 and band.bounds[2] < 180.0
+
+
+def test_split_keeps_the_polygons_area_and_holes_and_cuts_lines_at_the_crossing():
+    """A square with a hole across 180 deg (in longitudes running on) is cut into two valid pieces whose areas sum to
+    the square's (the hole lies in the eastern piece); a polygon within [-180, 180] is kept as the same object."""
+    ring = np.array([[179.5, 0.0], [180.5, 0.0], [180.5, 1.0], [179.5, 1.0], [179.5, 0.0]])
+    hole = np.array([[180.2, 0.2], [180.2, 0.8], [180.4, 0.8], [180.4, 0.2], [180.2, 0.2]])
+    inside = [np.array([[10.0, 0.0], [11.0, 0.0], [11.0, 1.0], [10.0, 0.0]])]
+    line = np.array([[179.0, 0.0], [181.0, 2.0], [179.5, 2.5]])
+    (polys,), (lines,) = split_at_antimeridian([[[ring, hole], inside]], [[line]], 1e-8)
+    assert polys[-1] is inside
+    pieces = [Polygon(p[0], p[1:]) for p in polys[:-1]]
+    assert len(pieces) == 2 and all(p.is_valid and p.exterior.is_ccw for p in pieces)
+    assert sum(p.area for p in pieces) == pytest.approx(1.0 - 0.12, abs=1e-12)
+    east = next(p for p in pieces if p.bounds[0] == -180.0)
+    assert east.bounds == (-180.0, 0.0, -179.5, 1.0) and len(east.interiors) == 1
+    assert [a.tolist() for a in lines] == [[[179.0, 0.0], [180.0, 1.0]],
+                                           [[-180.0, 1.0], [-179.0, 2.0], [-180.0, 2.33333333]],
+                                           [[180.0, 2.33333333], [179.5, 2.5]]]
 
 
 def test_crs_scale_is_taken_at_the_tracks_centre_on_the_circle():

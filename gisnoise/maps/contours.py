@@ -45,6 +45,7 @@ from shapely.geometry.polygon import orient
 
 from gisnoise.geo import WGS84, transformer
 from gisnoise.geo import shapes as shapely
+from gisnoise.maps.antimeridian import ContinuousLongitudes, split_at_antimeridian
 from gisnoise.maps.clipping import clip_warnings, clipped_levels, edge_max, geojson_warnings, parse_levels
 from gisnoise.maps.sel import metric_levels
 
@@ -398,7 +399,7 @@ def _features(result: MapResult, levels: Any, metrics: Sequence[str] | None, *, 
         result.band(n)
     grid = result.grid
     x, y = grid.xs, grid.ys
-    tr = transformer(grid.crs, WGS84)
+    tr = ContinuousLongitudes(transformer(grid.crs, WGS84), grid)  # across the antimeridian: :mod:`.antimeridian`
     units = result.units
     features: list[dict] = []
     for name in names:
@@ -408,6 +409,8 @@ def _features(result: MapResult, levels: Any, metrics: Sequence[str] | None, *, 
         mlv = metric_levels(name, lv)
         bounds = [(mlv[i], mlv[i + 1] if i + 1 < len(mlv) else None) for i in range(len(mlv))]
         bands, lines = _band_geometries(x, y, z, bounds, mlv, tr)
+        if tr.crossed:  # RFC 7946 section 3.1.9: cut at +-180 deg
+            bands, lines = split_at_antimeridian(bands, lines, PRECISION_DEG)
         for (lo, hi), geom in zip(bounds, bands, strict=True):
             if geom is None:
                 continue
