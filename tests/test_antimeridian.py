@@ -14,6 +14,7 @@ from pyproj import Geod
 from shapely.geometry import MultiPolygon, Point, Polygon, shape
 
 from gisnoise.cli.main import cli
+from gisnoise.errors import CRSError, InvalidGridError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import LocalFrame, centre_lon, grid_for_points, scale_factor
 from gisnoise.maps import crs_scale_warning
@@ -138,3 +139,41 @@ def test_crs_scale_is_taken_at_the_tracks_centre_on_the_circle():
         grid = grid_for_points(lon, lat, 10.0, 500.0, crs)
         assert grid.crs.to_epsg() == epsg and crs_scale_warning(grid, lon, lat) is None
         assert scale_factor(grid.crs, 179.9945, -16.5) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_grids_round_a_pole_are_refused_naming_the_field():
+    """A track over the North Pole: refused naming the trajectory; a track 11 km off it with a margin reaching over
+    it: refused naming margin_m and a margin that keeps it out (which then works); UTM beyond 84 N: refused naming
+    crs and UPS North."""
+    lat = np.array([89.99, 89.995, 89.992])
+    lon = np.array([0.0, 0.0, 180.0])
+    for crs in (None, "EPSG:32661"):
+        with pytest.raises(InvalidGridError, match="trajectory: .* North Pole") as e:
+            grid_for_points(lon, lat, 10.0, 100.0, crs)
+        assert e.value.field == "trajectory"
+    lat, lon = np.array([89.9, 89.9]), np.array([10.0, 10.02])
+    with pytest.raises(InvalidGridError, match="margin_m: .* North Pole.* a margin under") as e:
+        grid_for_points(lon, lat, 100.0, 12000.0, "EPSG:32661")
+    assert e.value.field == "margin_m"
+    under = float(str(e.value).split("a margin under ")[1].split(" m")[0])
+    grid_for_points(lon, lat, 100.0, under, "EPSG:32661")
+    with pytest.raises(InvalidGridError, match="South Pole"):
+        grid_for_points([0.0, 90.0], [-89.995, -89.995], 10.0, 100.0, "EPSG:32761")
+    with pytest.raises(CRSError, match=r"crs: the map reaches 85\.\d\d deg N.*--crs EPSG:32661") as e:
+        grid_for_points(lon, lat - 4.9, 10.0, 500.0)
+    assert e.value.field == "crs"
+    with pytest.raises(CRSError, match=r"crs: the map reaches 80\.0\d deg S.*--crs EPSG:32761"):
+        grid_for_points(lon, -np.array([79.996, 79.996]), 10.0, 500.0)
+    assert grid_for_points(lon, lat - 4.9, 10.0, 500.0, "EPSG:32661").crs.to_epsg() == 32661
+    assert grid_for_points(lon, lat - 6.0, 10.0, 500.0).crs.to_epsg() == 32632  # 83.9 N: UTM zone 32
+
+
+def test_a_map_beyond_84_north_in_ups_holds_its_track(tmp_path, card):
+    """At 85 N, where the default CRS is refused, --crs EPSG:32661 (UPS North, scale 0.9948 there) maps the
+    flyover: its loudest isoband holds every track point and the raster's area."""
+    traj = flyover(LocalFrame(85.0, 10.0, 0.0))
+    r, _ = contour(tmp_path, card, traj)
+    assert r.exit_code == 2 and "EPSG:32661" in r.output and len(r.output.strip().splitlines()) == 1
+    r, out = contour(tmp_path, card, traj, "--crs", "EPSG:32661")
+    assert r.exit_code == 0, r.output
+    loudest_band_against_raster(out, traj)

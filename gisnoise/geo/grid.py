@@ -7,7 +7,8 @@ one receiver at the centre of every cell, at a height above the ground.
 
 :func:`grid_for_points` chooses the grid around points (a flight's track, several
 flights): their bounding box plus a margin, snapped to multiples of the resolution, in a
-local UTM zone unless a CRS is given.  The number of cells is limited by the environment
+local UTM zone unless a CRS is given; grids round a pole, or beyond the UTM zones' latitudes in the default CRS,
+are refused.  The number of cells is limited by the environment
 variable ``GISNOISE_MAX_CELLS`` (default 25 000 000).
 
 Examples
@@ -385,9 +386,12 @@ def grid_for_points(lon: Any, lat: Any, resolution_m: float = 10.0, margin_m: fl
     Raises
     ------
     CRSError
-        ``crs`` is unknown, geographic or not in metres (field ``crs``).
+        ``crs`` is unknown, geographic or not in metres (field ``crs``); without ``crs``, the grid reaches beyond
+        the latitudes of the UTM zones, 80 deg S to 84 deg N (field ``crs``; the message names the UPS CRS to give).
     InvalidGridError
-        Resolution or margin out of range.
+        Resolution or margin out of range; the grid contains a pole (field ``margin_m``, or ``trajectory`` when the
+        points' own extent holds it): contours in longitude and latitude cannot be drawn round it
+        (:func:`_check_polar`).
     GridTooLargeError
         More cells than ``GISNOISE_MAX_CELLS`` (field ``resolution_m``).
 
@@ -404,8 +408,8 @@ def grid_for_points(lon: Any, lat: Any, resolution_m: float = 10.0, margin_m: fl
         raise InvalidGridError(f"margin_m must be a number of metres >= 0, got {margin_m!r}", field="margin_m") from None
     if not math.isfinite(margin) or margin < 0:
         raise InvalidGridError(f"margin_m must be a number of metres >= 0, got {margin_m!r}", field="margin_m")
-    out_crs, x_min, x_max, y_min, y_max = _projected_bounds(np.asarray(lon, dtype=float),
-                                                            np.asarray(lat, dtype=float), crs)
+    lat = np.asarray(lat, dtype=float)
+    out_crs, x_min, x_max, y_min, y_max = _projected_bounds(np.asarray(lon, dtype=float), lat, crs)
     left = math.floor((x_min - margin) / res) * res
     right = math.ceil((x_max + margin) / res) * res
     bottom = math.floor((y_min - margin) / res) * res
@@ -417,7 +421,62 @@ def grid_for_points(lon: Any, lat: Any, resolution_m: float = 10.0, margin_m: fl
     width = int(round((right - left) / res))
     height = int(round((top - bottom) / res))
     check_cell_limit(width, height)
+    # in a UTM zone (scale within 0.1 % of 1) the grid reaches less than this many degrees of latitude beyond the
+    # points (a degree is over 110 km): ordinary maps are not transformed again for the polar checks
+    reach = (margin + res + math.hypot(x_max - x_min, y_max - y_min)) / 100_000.0
+    if crs is not None or float(lat.max()) + reach >= UTM_LATITUDES[1] or float(lat.min()) - reach <= UTM_LATITUDES[0]:
+        _check_polar(out_crs, (left, bottom, right, top), (x_min, y_min, x_max, y_max), margin, res,
+                     default_crs=crs is None)
     return GridSpec(out_crs, Affine(res, 0.0, left, 0.0, -res, top), width, height)
+
+
+UTM_LATITUDES = (-80.0, 84.0)
+"""Latitudes (deg) between which the UTM zones are defined; beyond, the polar stereographic (UPS) grids are."""
+
+
+def _check_polar(crs: CRS, edges: tuple[float, float, float, float], track: tuple[float, float, float, float],
+                 margin: float, res: float, *, default_crs: bool) -> None:
+    """Refuse a grid that contains a pole, or, in the default CRS (a UTM zone), reaches beyond its latitudes.
+
+    A map is contoured in longitude and latitude (RFC 7946): round a pole, every longitude meets, and a ring
+    about the pole's neighbourhood drawn in longitude and latitude is not the area it encloses (a band round the
+    pole would need the pole's latitude as an edge and all longitudes at once).  Such maps are refused, not drawn
+    wrong: ``margin_m`` is named with the largest margin that keeps the pole out when the track's own extent
+    stays off it (less one cell ``res``, m, for the edges' snapping), else ``trajectory``.  Beyond 84 deg N or 80 deg S the UTM zones are not defined; the default
+    CRS is refused there, naming ``crs`` and the polar stereographic CRS to give (UPS North EPSG:32661, South
+    EPSG:32761).  ``edges``: the grid's (left, bottom, right, top), ``track``: the points' bounding box
+    (x_min, y_min, x_max, y_max), m in ``crs``.
+    """
+    left, bottom, right, top = edges
+    x_min, y_min, x_max, y_max = track
+    px, py = transformer(WGS84, crs).transform([0.0, 0.0], [90.0, -90.0])
+    for name, x, y in zip(("North", "South"), px, py, strict=True):
+        if not (math.isfinite(x) and math.isfinite(y) and left <= x <= right and bottom <= y <= top):
+            continue
+        off = max(x_min - x, x - x_max, y_min - y, y - y_max)  # how far the track's extent stays off the pole, m
+        why = ("contours in longitude and latitude cannot be drawn round a pole, so gisnoise refuses such maps "
+               "rather than draw them wrong")
+        if off > 0:
+            raise InvalidGridError(f"margin_m: the grid with a margin of {margin:g} m contains the {name} Pole: {why}; "
+                                   f"a margin under {max(math.floor(off - res), 0):.0f} m keeps it out", field="margin_m")
+        raise InvalidGridError(f"trajectory: the map's grid contains the {name} Pole, and so does the track's own extent: "
+                               f"{why}", field="trajectory")
+    if not default_crs:
+        return
+    xs = np.concatenate([np.linspace(left, right, 65), np.full(65, right), np.linspace(right, left, 65),
+                         np.full(65, left)])
+    ys = np.concatenate([np.full(65, top), np.linspace(top, bottom, 65), np.full(65, bottom),
+                         np.linspace(bottom, top, 65)])
+    lat = np.asarray(transformer(crs, WGS84).transform(xs, ys)[1], dtype=float)
+    south, north = UTM_LATITUDES
+    if float(np.nanmax(lat)) > north:
+        raise CRSError(f"crs: the map reaches {float(np.nanmax(lat)):.2f} deg N, beyond {north:g} deg N where the UTM "
+                       "zones (the default CRS) are defined; give the polar stereographic CRS UPS North: --crs "
+                       "EPSG:32661", field="crs")
+    if float(np.nanmin(lat)) < south:
+        raise CRSError(f"crs: the map reaches {-float(np.nanmin(lat)):.2f} deg S, beyond {-south:g} deg S where the "
+                       "UTM zones (the default CRS) are defined; give the polar stereographic CRS UPS South: --crs "
+                       "EPSG:32761", field="crs")
 
 
 BOUNDS_CACHE_POINTS = 20_000
