@@ -278,6 +278,44 @@ def test_receivers_beyond_the_dem_are_a_map_warning_said_once(tmp_path, card_pat
     assert json.loads((out / "contours.geojson").read_text())["gisnoise"]["warnings"].count(expected) == 1
 
 
+def test_contours_cut_where_the_dem_ends_are_clipped(tmp_path, card_path):
+    """A DEM covering the western half of the grid: the track (38.5 m above the receivers, 70.3 dB(A) under it)
+    crosses where the levels end, so the LAmax 65 and 68 contours stop there, cut as by the grid's edge: they
+    carry "clipped": true and a clip warning says so.  The grid's own edge stays below 65 dB(A) (100 m beside the
+    track: 70 - 20 lg(sqrt(100^2 + 38.5^2) / 40) = 61.4), so over a DEM that covers the grid nothing is clipped."""
+    from affine import Affine
+
+    from gisnoise.maps import grid_for_trajectory, make_map
+
+    traj = flyover()
+    csv = write_csv(tmp_path / "flight.csv", traj)
+    grid = grid_for_trajectory(traj, 20.0, 100.0)
+    t = grid.transform
+    flags = {}
+    for name, cols in (("half", grid.width // 2), ("whole", grid.width)):
+        dem = tmp_path / f"{name}.tif"
+        with rasterio.open(dem, "w", driver="GTiff", width=cols + 5, height=grid.height + 10, count=1,
+                           dtype="float32", crs=grid.crs.to_wkt(),
+                           transform=Affine(t.a, 0, t.c - 5 * t.a, 0, t.e, t.f - 5 * t.e)) as ds:
+            ds.write(np.full((grid.height + 10, cols + 5), 100.0, dtype=np.float32), 1)
+        paths = make_map(csv, [card_path], tmp_path / name, resolution_m=20.0, margin_m=100.0, dem=str(dem),
+                         metrics=("LAmax",), levels=(65.0, 68.0))
+        doc = json.loads(paths["contours"].read_text())
+        flags[name] = {(f["properties"]["kind"], f["properties"]["level"]): f["properties"]["clipped"]
+                       for f in doc["features"]}
+        clip = [w for w in paths["warnings"] if "contours are clipped" in w]
+        assert clip == [w for w in doc["gisnoise"]["warnings"] if "contours are clipped" in w]
+        if name == "half":
+            assert len(clip) == 1 and clip[0].startswith("LAmax 65, 68 dB(A) contours are clipped: the cells next "
+                                                         "to cells without a level"), clip
+            assert "grid's edge" not in clip[0]
+        else:
+            assert clip == []
+    assert set(flags["half"]) == set(flags["whole"]) == {("isoband", 65.0), ("isoband", 68.0), ("isoline", 65.0),
+                                                          ("isoline", 68.0)}
+    assert all(flags["half"].values()) and not any(flags["whole"].values())
+
+
 def test_fast_engine_map_equals_the_reference_within_0_01_db(tmp_path):
     """`gisnoise contour --engine fast` writes the same LAmax/LAeq/SEL as the NumPy reference (issue 9: 0.01 dB)."""
     root = __import__("pathlib").Path(__file__).resolve().parents[1]

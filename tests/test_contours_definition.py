@@ -10,7 +10,8 @@ positions taken back to the grid's CRS:
   node inside the band (the grid's edge, a NaN border, a plateau);
 * grid nodes clearly inside a band lie in its polygons, nodes clearly outside do not;
 * polygons are valid, exteriors counter-clockwise, holes clockwise, positions on the
-  1e-8 deg grid; ``clipped`` says whether the band's level reaches the grid's outer nodes;
+  1e-8 deg grid; ``clipped`` says whether the band's level reaches the grid's outer nodes or a node next
+  to a NaN node (where the contour stops as at the grid's edge);
 * the polygons checked and oriented all at once (:func:`gisnoise.geo.shapes.ring_polygons`)
   equal those done one by one with shapely's ``orient`` (the shapely 1.8 path).
 """
@@ -122,7 +123,11 @@ def test_contours_lie_on_their_levels_and_bound_their_bands(name, shapely_path):
     doc = contours_geojson(result, LEVELS, metrics=["LAmax"])
     zc = z  # rows northwards: row v of zc is contour row v
     finite = np.isfinite(zc)
-    edge_max = np.nanmax(np.concatenate([zc[0], zc[-1], zc[:, 0], zc[:, -1]]))
+    # where the values end: the outer nodes and the nodes next to (of 8 neighbours) a NaN node
+    from scipy.ndimage import binary_dilation
+
+    by_nan = binary_dilation(np.isnan(zc), structure=np.ones((3, 3), bool)) & finite
+    edge_max = np.nanmax(np.concatenate([zc[0], zc[-1], zc[:, 0], zc[:, -1], zc[by_nan]]))
     # the contoured domain: nodes of a cell with at least three finite corners (a cell with one NaN corner
     # keeps the triangle of the other three)
     corners = finite[:-1, :-1].astype(int) + finite[1:, :-1] + finite[:-1, 1:] + finite[1:, 1:]

@@ -1,8 +1,10 @@
-"""The levels of a contour map and where the grid's edge cuts them.
+"""The levels of a contour map and where the edge of its values cuts them.
 
 :func:`parse_levels` reads levels; :func:`clipped_levels` and :func:`clip_warnings` name the
-levels whose contours reach the grid's outer cells (a contour cut by the edge rather than closed
-by the levels); :func:`geojson_warnings` is what a GeoJSON of the map says in ``gisnoise.warnings``.
+levels whose contours reach the cells where the map's values end (a contour cut there rather than
+closed by the levels): the grid's outer cells, and the cells next to cells without value (NaN:
+receivers outside the DEM or on its nodata), where a contour stops as it stops at the grid's edge;
+:func:`geojson_warnings` is what a GeoJSON of the map says in ``gisnoise.warnings``.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from gisnoise.maps.sel import metric_levels
 if TYPE_CHECKING:  # pragma: no cover
     from gisnoise.maps.result import MapResult
 
-__all__ = ["parse_levels", "edge_max", "clipped_levels", "clip_warnings", "geojson_warnings"]
+__all__ = ["parse_levels", "edge_max", "cut_maxima", "clipped_levels", "clip_warnings", "geojson_warnings"]
 
 
 def parse_levels(levels: Any, *, field: str = "levels") -> list[float]:
@@ -41,17 +43,50 @@ def parse_levels(levels: Any, *, field: str = "levels") -> list[float]:
 
 
 def edge_max(z: np.ndarray) -> float:
-    """The largest finite value in the outer cells of a 2-D band (NaN when there is none)."""
+    """The largest finite value in the cells where a 2-D band's values end (NaN when there is none).
+
+    Those are the outer cells and the cells with a value next to (of the 8 neighbours) a cell without
+    one (NaN): a contour reaching either is cut there, not closed by the levels (:func:`cut_maxima`).
+
+    >>> edge_max(np.array([[1., 1., 1., 1.], [1., 5., 9., 1.], [1., 1., 1., 1.]]))
+    1.0
+    >>> edge_max(np.array([[1., 1., 1., 1.], [1., 5., np.nan, 1.], [1., 1., 1., 1.]]))
+    5.0
+    """
+    outer, gap = cut_maxima(z)
+    both = [v for v in (outer, gap) if np.isfinite(v)]
+    return max(both) if both else float("nan")
+
+
+def cut_maxima(z: np.ndarray) -> tuple[float, float]:
+    """The largest finite values of a 2-D band in its outer cells and in its cells next to a cell without value.
+
+    A cell next to one without value (NaN; -inf, no sound, is a value) is one of whose 8 neighbours is NaN:
+    marching squares leaves out every square with a NaN corner, so the contours stop there.  Each maximum
+    is NaN when there is no such finite cell.
+    """
     a = np.asarray(z, dtype=float)
     if a.ndim != 2 or a.size == 0:
-        return float("nan")
+        return float("nan"), float("nan")
     edge = np.concatenate([a[0], a[-1], a[:, 0], a[:, -1]])
     edge = edge[np.isfinite(edge)]
-    return float(edge.max()) if edge.size else float("nan")
+    outer = float(edge.max()) if edge.size else float("nan")
+    hole = np.isnan(a)
+    if not hole.any():
+        return outer, float("nan")
+    near = np.zeros_like(hole)
+    pad = np.pad(hole, 1)
+    h, w = a.shape
+    for dr in (0, 1, 2):
+        for dc in (0, 1, 2):
+            near |= pad[dr:dr + h, dc:dc + w]
+    v = a[near & np.isfinite(a)]
+    return outer, float(v.max()) if v.size else float("nan")
 
 
 def clipped_levels(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> dict[str, list[float]]:
-    """Metric -> the levels whose contours the grid's edge cuts (some outer cell at or above them).
+    """Metric -> the levels whose contours are cut: some outer cell, or some cell next to a cell without value,
+    at or above them (:func:`edge_max`).
 
     Only metrics with at least one such level are listed; ``metrics`` defaults to the level bands.
     """
@@ -67,22 +102,35 @@ def clipped_levels(result: MapResult, levels: Any, *, metrics: Sequence[str] | N
 
 
 def clip_warnings(result: MapResult, levels: Any, *, metrics: Sequence[str] | None = None) -> list[str]:
-    """One line per metric whose contours the grid's edge cuts, naming the metric, levels and edge maximum."""
+    """One line per metric whose contours are cut (:func:`clipped_levels`), naming the metric, the levels and
+    the largest value at the grid's edge and next to the cells without value (receivers without DEM ground)."""
     out = []
     units = result.units
     for name, cut in clipped_levels(result, levels, metrics=metrics).items():
         unit = units.get(name, "dB(A)")
-        top = edge_max(result.band(name))
+        outer, gap = cut_maxima(result.band(name))
+        lo = min(cut)
+        where, tails = [], []
+        if outer >= lo:
+            where.append(f"the grid's edge reaches {outer:.1f} {unit}")
+            tails.append("a wider margin")
+        if gap >= lo:
+            where.append(f"the cells next to cells without a level (receivers without DEM ground) reach "
+                         f"{gap:.1f} {unit}")
+            tails.append("a DEM that covers the grid")
         lv = ", ".join(f"{v:g}" for v in cut)
-        out.append(f"{name} {lv} {unit} contours are clipped: the grid's edge reaches {top:.1f} {unit}; "
-                   f"they carry \"clipped\": true{_CLIP_TAIL}")
+        tail = f" ({' and '.join(tails)} {'shows' if len(tails) == 1 else 'show'} them whole)"
+        out.append(f"{name} {lv} {unit} contours are clipped: {'; '.join(where)}; "
+                   f"they carry \"clipped\": true{tail}")
     return out
 
 
-_CLIP_TAIL = " (a wider margin shows them whole)"  # how a line of clip_warnings ends
+def _is_clip_warning(w: str) -> bool:
+    """Whether ``w`` is a line of :func:`clip_warnings` (it names clipped contours and ends with its tail)."""
+    return " contours are clipped: " in w and w.endswith(" them whole)")
 
 
 def geojson_warnings(result: MapResult, levels: Any, metrics: Sequence[str] | None) -> list[str]:
     """``gisnoise.warnings``: the map's own (``metadata["warnings"]``) and the clip warnings of these levels."""
-    own = [w for w in result.metadata.get("warnings", []) if not str(w).endswith(_CLIP_TAIL)]
+    own = [w for w in result.metadata.get("warnings", []) if not _is_clip_warning(str(w))]
     return own + clip_warnings(result, levels, metrics=metrics)

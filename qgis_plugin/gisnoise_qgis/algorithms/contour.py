@@ -117,7 +117,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             ".bin (constant power for a log without battery current, geoid undulation for ArduPilot).\n\n"
             "Outputs: a GeoTIFF with one band per metric (LAmax, LAeq over the flight, SEL), "
             "isobands and isolines of the chosen levels (properties metric, level and clipped: true where the "
-            "grid's edge cuts the contour; the default margin closes the lowest level of LAmax and LAeq, and "
+            "grid's edge, or the end of the DEM, cuts the contour; the default margin closes the lowest level of LAmax and LAeq, and "
             "of SEL, which is contoured 10 dB above the levels), "
             "styled with graduated colours by level."
         )
