@@ -68,6 +68,12 @@ def test_exposure_of_a_written_map(tmp_path):
     assert b["peak_db_at_residents"] == b["peak_facade_db"]
     assert abs(b["peak_facade_db"] - (G0 - 20 * math.log10(math.hypot(float(e), HEIGHT - 4.0) / 40.0))) < 0.1
     assert (tmp_path / "map" / "exposure.md").read_text().startswith("# Exposure")
+    # the grid's edge lies 300 m beside and beyond the track (+- a 20 m cell): LAmax there is about
+    # 70 - 20 lg(sqrt(300^2 + 58.5^2) / 40) = 52.3 dB(A), so the 35 ... 50 dB(A) classes go on beyond the map
+    lamax = [w for w in doc["warnings"] if w.startswith("LAmax:")]
+    assert len(lamax) == 1 and "35, 40, 45, 50 dB(A) are lower bounds" in lamax[0], doc["warnings"]
+    assert f"warning: {lamax[0]}" in r.stderr.splitlines()
+    assert [c["lower_bound"] for c in doc["population"]["metrics"]["LAmax"]["classes"]][:6] == [True] * 4 + [False] * 2
 
 
 def test_bad_input_is_one_line_and_keeps_what_is_stored(tmp_path):

@@ -207,7 +207,7 @@ def test_exposure_document_with_buildings_and_population(flyover_map, tmp_path):
                        cards=[omni_card()], edges=EDGES)
     paths = write_exposure(doc, tmp_path / "map")
     text = paths["table"].read_text()
-    assert "| 60-65 |" in text and "peak façade level" in text
+    assert "| 60-65 * |" in text and "peak façade level" in text  # the track crosses the map's edge: a lower bound
     b = doc["buildings"]["metrics"]["LAmax"]
     assert sum(c["residents"] for c in b["classes"]) == 10
     assert b["peak_db_at_dwellings"] == b["peak_facade_db"]
@@ -247,3 +247,44 @@ def test_facade_levels_leave_out_samples_on_the_ground():
     la = G0 - 20 * math.log10(math.hypot(80.0, HEIGHT - 4.0) / 40.0)
     assert lv["LAmax"][0] == pytest.approx(la, abs=1e-3)  # the frames differ by the curvature over 80 m
     assert lv["SEL"][0] == pytest.approx(la + 10 * math.log10(60.0), abs=1e-3)
+
+
+def test_classes_the_map_edge_reaches_are_lower_bounds(flyover_map, tmp_path):
+    """The flyover's 3 km track crosses the 700 m map's north and south edges, so the edge reaches LAmax under the
+    track, G0 - 20 lg((HEIGHT - HR) / 40) = 66.7 dB(A): the strips above 45 ... 65 dB(A) go on beyond the map and
+    their areas and people are lower bounds; 70 dB(A) is never reached.  The hover map closes 44 dB(A) inside its
+    edge (800 m away): nothing is a lower bound, until a hole of cells without a level (100 m about the hover)
+    ends the values at 70 - 10 lg((100^2 + 58.5^2) / 40^2) = 61.3 dB(A): 45 ... 60 dB(A) then are."""
+    edges = [45.0, 50.0, 55.0, 60.0, 65.0, 70.0]
+    top = G0 - 20 * math.log10((HEIGHT - HR) / 40.0)
+    assert 65.0 < top < 70.0
+    pop = read_population(uniform_population(tmp_path / "pop.tif", TMERC, 10.0, 900.0, 300.0, 0.25))
+    _, res = flyover_map
+    doc = map_exposure(as_levels(res), population=pop, edges=edges)
+    assert [a["lower_bound"] for a in doc["area_above"]["LAmax"]] == [e < top for e in edges]
+    m = doc["population"]["metrics"]["LAmax"]
+    assert [c["lower_bound"] for c in m["classes"]] == [e < top for e in edges]
+    assert [a["lower_bound"] for a in m["above"]] == [e < top for e in edges]
+    assert len(doc["warnings"]) == 1 and doc["warnings"][0].startswith("LAmax: the map's edge")
+    assert "45, 50, 55, 60, 65 dB(A) are lower bounds" in doc["warnings"][0]
+    paths = write_exposure(doc, tmp_path / "out")
+    md = paths["table"].read_text()
+    assert "| 65-70 * |" in md and "| >= 70 |" in md and f"**Warning:** {doc['warnings'][0]}" in md
+    import json
+
+    assert json.loads(paths["exposure"].read_text())["warnings"] == doc["warnings"]
+
+    t = np.arange(0.0, 60.0 + 1e-9, 1.0)
+    hover = evaluate_grid(flight(0 * t, 0 * t, t, "hover"), [omni_card("hover")], grid(10.0, 800.0, 800.0),
+                          ground_h=0.0, metrics=("LAmax",))
+    doc = map_exposure(as_levels(hover), population=pop, edges=edges)
+    assert doc["warnings"] == [] and not any(a["lower_bound"] for a in doc["area_above"]["LAmax"])
+    band = hover.bands["LAmax"].copy()
+    x, y = np.meshgrid(hover.grid.xs, hover.grid.ys)
+    band[np.hypot(x, y) < 100.0] = np.nan
+    holed = LevelsRaster({"LAmax": band}, hover.grid, hover.units, dict(hover.metadata))
+    doc = map_exposure(holed, population=pop, edges=edges)
+    hole_top = G0 - 10 * math.log10((100.0 ** 2 + (HEIGHT - HR) ** 2) / 40.0 ** 2)
+    assert 60.0 < hole_top < 65.0
+    assert [a["lower_bound"] for a in doc["area_above"]["LAmax"]] == [e < hole_top for e in edges]
+    assert "45, 50, 55, 60 dB(A) are lower bounds" in doc["warnings"][0]

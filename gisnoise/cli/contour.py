@@ -170,6 +170,7 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
                            buildings=read_buildings(buildings) if buildings else None,
                            trajectory=paths["trajectory"], cards=list(cards))
         paths.update(write_exposure(doc, out))
+        paths["warnings"] = list(paths.get("warnings", [])) + [f"exposure: {w}" for w in doc.get("warnings", [])]
     _echo_bands_and_files(res, paths, ("levels", "contours", "map", "exposure", "table"))
     for w in paths.get("warnings", []):
         click.echo(f"warning: {w}", err=True)

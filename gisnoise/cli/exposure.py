@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from gisnoise.cli.options import echo_warnings
 from gisnoise.errors import InputError
 
 
@@ -94,6 +95,7 @@ def command(map_dir: str, population: str | None, buildings: str | None, layer: 
         click.echo(paths["table"].read_text().rstrip())
         for v in paths.values():
             click.echo(f"wrote {v}")
+        echo_warnings(doc.get("warnings", []))
         return
     traj = None
     if b is not None:
@@ -111,3 +113,4 @@ def command(map_dir: str, population: str | None, buildings: str | None, layer: 
     click.echo(paths["table"].read_text().rstrip())
     for v in paths.values():
         click.echo(f"wrote {v}")
+    echo_warnings(doc.get("warnings", []))

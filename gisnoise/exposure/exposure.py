@@ -6,6 +6,13 @@ façade (:func:`gisnoise.exposure.facades.facade_levels`: needs the flight and i
 and the area above each level (:func:`gisnoise.exposure.stats.area_above`).
 :func:`write_exposure` writes ``exposure.json`` (schema ``gisnoise/exposure/1``) and a
 Markdown table ``exposure.md``.
+
+Lower bounds: where a band's values end inside the grid's extent (the grid's edge, or cells
+without a level: receivers outside the DEM) at or above a class's lower edge, the area and the
+people of that class go on beyond the map and are not counted.  Such classes carry
+``"lower_bound": true`` (in ``area_above`` and in the population's classes and ``above``), and
+``warnings`` names the band, its levels and the level the edge reaches
+(:func:`gisnoise.maps.clipping.edge_max`, the rule that flags clipped contours).
 """
 
 from __future__ import annotations
@@ -32,8 +39,9 @@ from gisnoise.exposure.stats import (
 )
 from gisnoise.flight import Trajectory
 from gisnoise.jsonio import to_jsonable
+from gisnoise.maps.clipping import edge_max
 
-__all__ = ["SCHEMA", "map_exposure", "write_exposure", "exposure_table"]
+__all__ = ["SCHEMA", "map_exposure", "write_exposure", "exposure_table", "lower_bound_warning"]
 
 SCHEMA = "gisnoise/exposure/1"
 
@@ -91,17 +99,22 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
     counts = [n for n in names if levels.units.get(n) == "events"]
     dbs = [n for n in names if n not in counts]
     res = levels.grid.resolution
+    top = {n: edge_max(levels.bands[n]) for n in names}  # the highest value where the band's values end
     area: dict[str, Any] = {}
     for n in names:
         e_n, a_n = (ev_edges, events_area_above(levels.bands[n], levels.grid, ev_edges)) if n in counts else \
             (edges, area_above(levels.bands[n], levels.grid, edges))
-        area[n] = [{"level_db" if n in dbs else "level": e, "area_m2": a} for e, a in zip(e_n, a_n, strict=True)]
+        area[n] = [{"level_db" if n in dbs else "level": e, "area_m2": a, "lower_bound": bool(top[n] >= e)}
+                   for e, a in zip(e_n, a_n, strict=True)]
     doc: dict[str, Any] = {
         "schema": SCHEMA, "class_edges_db": edges, "class_width_db": edges[1] - edges[0] if len(edges) > 1 else None,
         "units": {n: levels.units.get(n, "dB(A)") for n in names},
         "grid": levels.grid.to_dict(),
         "area_above": area,
         "area_rule": f"map cells of {res[0]:g} x {res[1]:g} m in 2 x 2 sub-cells, level linear within each",
+        "lower_bound_rule": "a class is a lower bound (lower_bound: true) when the map's values end at or above "
+                            "its lower edge: the grid's edge or a cell next to cells without a level reaches it, "
+                            "so its area and people go on beyond the map",
     }
     if counts:
         doc["event_class_edges"] = ev_edges
@@ -118,10 +131,36 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
                              "rule": "population cells split into sub-cells of at most half a map cell; level linear "
                                      "within each sub-cell (second-order Taylor about the nearest map cell); people outside the map "
                                      "or without a level are counted in people_without_level"}
+    for n, m in doc["population"]["metrics"].items() if population is not None else ():
+        for c in m["classes"]:
+            c["lower_bound"] = bool(top[n] >= c.get("from_db", c.get("from")))
+        for a in m["above"]:
+            a["lower_bound"] = bool(top[n] >= a.get("level_db", a.get("level")))
+    doc["warnings"] = [w for w in (lower_bound_warning(n, top[n], ev_edges if n in counts else edges,
+                                                       doc["units"][n], population is not None) for n in names)
+                       if w is not None]
     if buildings is not None:
         doc["buildings"] = _buildings_doc(levels, buildings, trajectory, cards, names, edges, facade_height_m,
                                           facade_spacing_m, ground_h, facades, ev_edges)
     return doc
+
+
+def lower_bound_warning(name: str, top: float, edges: Sequence[float], unit: str = "dB(A)",
+                        people: bool = True) -> str | None:
+    """The warning of a band whose values end (grid edge, cells without a level) at ``top``, at or above some
+    class edges: those classes' areas (and people) are lower bounds; None when no edge is reached.
+
+    >>> print(lower_bound_warning("LAmax", 42.3, [35.0, 40.0, 45.0], people=False))
+    LAmax: the map's edge (the grid's, or cells without a level) reaches 42.3 dB(A): the areas at or above 35, 40 dB(A) are lower bounds (a wider map counts them whole)
+    >>> lower_bound_warning("LAmax", 30.0, [35.0, 40.0]) is None
+    True
+    """
+    cut = [e for e in edges if top >= e]
+    if not cut:
+        return None
+    what = "areas and people" if people else "areas"
+    return (f"{name}: the map's edge (the grid's, or cells without a level) reaches {top:.1f} {unit}: the {what} "
+            f"at or above {', '.join(f'{e:g}' for e in cut)} {unit} are lower bounds (a wider map counts them whole)")
 
 
 def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, cards: Any, names: Sequence[str],
@@ -187,6 +226,8 @@ def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, 
 def exposure_table(doc: dict[str, Any]) -> str:
     """A Markdown table per metric: people, buildings, residents, dwellings by class; area above."""
     lines = ["# Exposure", ""]
+    if doc.get("warnings"):
+        lines += [f"**Warning:** {w}" for w in doc["warnings"]] + [""]
     names = list(doc["area_above"])
     for n in names:
         ev = doc.get("units", {}).get(n) == "events"
@@ -199,11 +240,14 @@ def exposure_table(doc: dict[str, Any]) -> str:
             lo = e_n[j]
             hi = e_n[j + 1] if j + 1 < len(e_n) else None
             label = f"{lo:g}-{hi:g}" if hi is not None else f">= {lo:g}"
+            label += " *" if a.get("lower_bound") else ""
             cells = [label, f"{pop['classes'][j]['people']:.0f}" if pop else "-"]
             for key in ("buildings", "residents", "dwellings"):
                 cells.append(f"{bld['classes'][j][key]:.0f}" if bld and key in bld["classes"][j] else "-")
             cells.append(f"{a['area_m2'] / 1e6:.4f}")
             lines.append("| " + " | ".join(cells) + " |")
+        if any(a.get("lower_bound") for a in doc["area_above"][n]):
+            lines += ["", "\\* lower bound: the map's edge reaches this class, which goes on beyond the map"]
         if pop:
             lines += ["", f"people without a level (outside the map or on cells without value): {pop['people_without_level']:.0f}"]
         if bld:
