@@ -241,3 +241,37 @@ def test_grid_for_points_keeps_the_projected_extent_of_the_same_points(monkeypat
     monkeypatch.setenv("GISNOISE_MAX_CELLS", "399")
     with pytest.raises(GridTooLargeError):
         grid_for_points([9.0], [0.0], 10.0, 100.0)
+
+
+def test_coarse_cells_are_a_map_warning_and_the_loss_they_name_holds(omni_card):
+    """A straight level flight 50 m above the receivers (ground 0 m, receivers 1.5 m, track 51.5 m), 2 m between
+    samples: right under it LAmax is 65 - 20 lg(50 / 40) = 63.06 dB(A) (the omni card: 65 dB(A) at 40 m,
+    spherical spreading).  The nearest cell centre lies at most res / sqrt(2) beside the track, so the map's
+    maximum falls short by at most 10 lg(1 + (res / sqrt(2) / 50)^2); that exceeds 1 dB above
+    sqrt(2) 50 sqrt(10^0.1 - 1) = 35.98 m: 30 m cells pass silently, 100 m and 5000 m cells are named with
+    their loss bound and 35 m cells to use instead."""
+    from gisnoise.geo import LocalFrame
+    from gisnoise.maps import make_map
+    from gisnoise.maps.grids import coarse_cell_loss_db
+
+    frame = LocalFrame(52.27, 10.52, 0.0)
+    t = np.arange(0.0, 60.0 + 1e-9, 0.1)  # 20 m/s eastwards: 2 m between samples, e = -600 ... 600 m
+    lat, lon, h = frame.to_wgs84(-600.0 + 20.0 * t, np.zeros_like(t), np.full_like(t, 51.5))
+    traj = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=np.full_like(t, 90.0),
+                      power_w=np.full_like(t, 300.0), phase=np.full(t.size, "horizontal"))
+    truth = 65.0 - 20.0 * np.log10(50.0 / 40.0)
+    for res, warned in ((30.0, False), (100.0, True), (5000.0, True)):
+        paths = make_map(traj, [omni_card], None, resolution_m=res, margin_m=100.0, ground_h=0.0,
+                         metrics=("LAmax",), levels=(60.0,), outputs=("contours",))
+        loss = float(coarse_cell_loss_db(res, 50.0))
+        top = float(np.nanmax(paths["result"].bands["LAmax"]))
+        assert truth - loss - 0.01 <= top <= truth + 0.01, (res, top, truth, loss)
+        said = [w for w in paths["warnings"] if w.startswith("resolution:")]
+        assert paths["result"].metadata["warnings"] == paths["warnings"]
+        if not warned:
+            assert loss < 1.0 and said == []
+            continue
+        assert loss > 1.0 and len(said) == 1, paths["warnings"]
+        assert f"cells of {res:g} m are coarse for a flight 50.0 m above the receivers" in said[0]
+        assert f"low by up to {loss:.1f} dB" in said[0] and "cells of 35 m or finer keep that within 1 dB" in said[0]
+    assert coarse_cell_loss_db(35.0, 50.0) <= 1.0 < coarse_cell_loss_db(36.0, 50.0)

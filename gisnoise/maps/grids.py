@@ -49,13 +49,75 @@ from gisnoise.maps.sel import SEL_OFFSET_DB, sel_margin
 from gisnoise.model import HemisphereCard, ModelCard, get_ansatz
 
 __all__ = ["grid_for_trajectory", "grid_for_map", "auto_margin", "audible_distance", "level_table", "MAX_DISTANCE_M",
-           "SIZED_METRICS"]
+           "SIZED_METRICS", "RESOLUTION_TOLERANCE_DB", "coarse_cell_loss_db", "finest_needed_resolution",
+           "resolution_warning"]
 
 MAX_DISTANCE_M = 100_000.0
 """Largest distance the bound looks at, m."""
 
 SIZED_METRICS = ("LAmax", "LAeq")
 """Metrics whose lowest contour the default extent closes (``LAeq <= LAmax`` everywhere)."""
+
+RESOLUTION_TOLERANCE_DB = 1.0
+"""How far LAmax under the track may fall short for the cells' coarseness before a map warns, dB."""
+
+
+def coarse_cell_loss_db(resolution_m: Any, height_m: Any) -> Any:
+    """Most that LAmax under the track can fall short on a grid of cells ``resolution_m`` wide, dB.
+
+    The receivers are the cell centres: the nearest one can lie ``resolution_m / sqrt(2)`` (half a cell's
+    diagonal) beside the point under the UAV, ``height_m`` (m) below it, so by spherical spreading it hears
+    ``10 lg(1 + (resolution_m / sqrt(2) / height_m)^2)`` dB less than a receiver right under the track.
+    Float or array_like; broadcasts.
+
+    >>> round(float(coarse_cell_loss_db(10.0, 100.0)), 4)  # 7.07 m beside, 100 m below
+    0.0217
+    >>> round(float(coarse_cell_loss_db(100.0 * math.sqrt(2.0), 100.0)), 4)  # as far beside as below: 3 dB
+    3.0103
+    """
+    r = np.asarray(resolution_m, dtype=float) / math.sqrt(2.0)
+    return 10.0 * np.log10(1.0 + (r / np.asarray(height_m, dtype=float)) ** 2)
+
+
+def finest_needed_resolution(height_m: float, tolerance_db: float = RESOLUTION_TOLERANCE_DB) -> float:
+    """The coarsest cells, m (rounded down to two significant digits), that keep :func:`coarse_cell_loss_db`
+    within ``tolerance_db`` for a flight ``height_m`` (m) above the receivers.
+
+    >>> finest_needed_resolution(50.0)  # sqrt(2) 50 sqrt(10^0.1 - 1) = 35.98 m
+    35.0
+    """
+    exact = math.sqrt(2.0) * height_m * math.sqrt(10.0 ** (tolerance_db / 10.0) - 1.0)
+    digits = 1 - math.floor(math.log10(exact))
+    return float(f"{math.floor(exact * 10.0 ** digits) * 10.0 ** -digits:.10g}")
+
+
+def resolution_warning(resolution_m: float, height_m: float | None,
+                       tolerance_db: float = RESOLUTION_TOLERANCE_DB) -> str | None:
+    """The warning of a grid whose cells are coarse for the flight's height above the receivers, or None.
+
+    ``height_m``: the flight's median height above the receivers while flying, m (None or not positive: no
+    warning).  Warns when :func:`coarse_cell_loss_db` exceeds ``tolerance_db``, naming the resolution and
+    one that keeps the loss within it (:func:`finest_needed_resolution`).
+
+    >>> resolution_warning(10.0, 100.0) is None
+    True
+    >>> print(resolution_warning(5000.0, 100.0))  # doctest: +NORMALIZE_WHITESPACE
+    resolution: cells of 5000 m are coarse for a flight 100.0 m above the receivers (median while flying): the
+    nearest cell centre can lie 3535.5 m (half a cell's diagonal) beside the track, so LAmax under it may be
+    low by up to 31.0 dB (10 lg(1 + (resolution / sqrt(2) / height)^2)); cells of 71 m or finer keep that
+    within 1 dB
+    """
+    if height_m is None or not math.isfinite(height_m) or height_m <= 0.0:
+        return None
+    loss = float(coarse_cell_loss_db(resolution_m, height_m))
+    if loss <= tolerance_db:
+        return None
+    return (f"resolution: cells of {resolution_m:g} m are coarse for a flight {height_m:.1f} m above the receivers "
+            f"(median while flying): the nearest cell centre can lie {resolution_m / math.sqrt(2.0):.1f} m (half a "
+            f"cell's diagonal) beside the track, so LAmax under it may be low by up to {loss:.1f} dB "
+            f"(10 lg(1 + (resolution / sqrt(2) / height)^2)); cells of "
+            f"{finest_needed_resolution(height_m, tolerance_db):g} m or finer keep that within {tolerance_db:g} dB")
+
 
 _DISTANCES = np.geomspace(1.0, MAX_DISTANCE_M, 241)
 _PHI = np.radians(np.arange(0.0, 360.0, 5.0))

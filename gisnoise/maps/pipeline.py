@@ -39,7 +39,11 @@ Two rules hold for every face:
   without power term used at other powers is refused (``power_w``); a card with one used
   outside the powers it was fitted at gives a warning and ``metadata["power_outside_card_range"]``;
 * speeds against the speed a hemisphere card was measured at (:mod:`gisnoise.maps.conditions`): samples
-  more than 5 kt from it give a warning and ``metadata["hemisphere_speed_outside_condition"]``.
+  more than 5 kt from it give a warning and ``metadata["hemisphere_speed_outside_condition"]``;
+* cells coarse for the flight's height (:func:`gisnoise.maps.grids.resolution_warning`): the receivers are
+  cell centres, the nearest up to half a cell's diagonal beside the track, so LAmax under it may fall short by
+  up to 10 lg(1 + (res / sqrt(2) / H)^2) dB, H the flight's median height above the receivers while flying
+  (:func:`flight_height`); above 1 dB a warning names the resolution and one that keeps it within 1 dB.
 """
 
 from __future__ import annotations
@@ -62,12 +66,12 @@ from gisnoise.maps.contours import contours_text, write_geojson
 from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.flightchecks import crs_scale_warning, flight_findings
 from gisnoise.maps.geotiff import write_geotiff
-from gisnoise.maps.grids import grid_for_map
+from gisnoise.maps.grids import grid_for_map, resolution_warning
 from gisnoise.maps.prepare import dem_nodata_warning
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
-__all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground"]
+__all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground", "flight_height"]
 
 DEFAULT_LEVELS = (45.0, 50.0, 55.0, 60.0)
 
@@ -198,7 +202,10 @@ def make_map(
     else:
         warnings = []
     scale = crs_scale_warning(grid, traj.lon, traj.lat)
-    warnings = found.warnings + ([scale] if scale is not None else []) + warnings
+    coarse = resolution_warning(float(grid.resolution[0]),
+                                flight_height(traj, ground_h, dem, dem_offset_m, receiver_height))
+    warnings = found.warnings + ([scale] if scale is not None else []) + ([coarse] if coarse is not None else []) \
+        + warnings
     check_work(int(grid.width) * int(grid.height), len(traj) * max(int(substeps), 1))  # before any evaluation
     out = Path(out_dir) if out_dir is not None else None
     if out is not None and out.exists() and not out.is_dir():
@@ -281,6 +288,29 @@ def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: flo
                          f"point {lo:.1f} m); give --ground-height M (field ground_h_m) or --dem DEM.tif",
                          field="ground_h")
     return g
+
+
+def flight_height(traj: Trajectory, ground_h: float | None, dem: Any, dem_offset_m: float = 0.0,
+                  receiver_height: float = 1.5) -> float | None:
+    """The flight's median height above the receivers while flying, m (None when unknown).
+
+    Over the flying samples (all when none flies): their height minus the ground's (``ground_h``, else the DEM
+    under each sample plus ``dem_offset_m``; samples off the DEM are left out) minus ``receiver_height``.
+    """
+    fly = traj.flying if bool(np.any(traj.flying)) else np.ones(len(traj), dtype=bool)
+    h = np.asarray(traj.h, dtype=float)[fly]
+    if ground_h is not None:
+        ground = np.full_like(h, float(ground_h))
+    elif dem is not None and not isinstance(dem, np.ndarray):
+        from gisnoise.geo import Dem, read_dem, sample_dem
+
+        ground = sample_dem(dem if isinstance(dem, Dem) else read_dem(dem), np.asarray(traj.lon)[fly],
+                            np.asarray(traj.lat)[fly]) + float(dem_offset_m)
+    else:
+        return None
+    above = h - ground - float(receiver_height)
+    above = above[np.isfinite(above)]
+    return float(np.median(above)) if above.size else None
 
 
 def _check_cells(result: MapResult, source: str) -> None:
