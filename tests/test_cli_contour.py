@@ -334,3 +334,33 @@ def test_fast_engine_map_equals_the_reference_within_0_01_db(tmp_path):
     assert set(bands["fast"]) == set(bands["numpy"]) == {"LAmax", "LAeq", "SEL"}
     for name in ("LAmax", "LAeq", "SEL"):
         np.testing.assert_allclose(bands["fast"][name], bands["numpy"][name], atol=0.01)
+
+
+def test_product_files_of_an_earlier_run_are_named_and_kept(tmp_path, card_path):
+    """A reused --out folder: the map.png and exposure.json/.md an earlier run left there describe that run; the
+    warning names exactly the product files this run does not write, and keeps them byte for byte."""
+    from gisnoise.maps import make_map
+
+    csv = write_csv(tmp_path / "flight.csv", flyover())
+    out = tmp_path / "map"
+    out.mkdir()
+    earlier = {"map.png": b"old png", "exposure.json": b"{}", "exposure.md": b"# old", "levels.tif": b"old",
+               "notes.txt": b"mine"}
+    for name, data in earlier.items():
+        (out / name).write_bytes(data)
+    kw = dict(resolution_m=40.0, margin_m=100.0, ground_h=80.0, metrics=("LAmax",), levels=(60.0,))
+    paths = make_map(csv, [card_path], out, **kw)
+    stale = [w for w in paths["warnings"] if w.startswith("out:")]
+    assert stale == [f"out: {out} holds map.png, exposure.json, exposure.md from an earlier run: they describe "
+                     "that run, not this map (kept; remove them or use a new folder)"]
+    assert all((out / n).read_bytes() == d for n, d in earlier.items() if n != "levels.tif")
+    # the exposure the command line writes after the map is not stale; contours only leaves levels.tif stale
+    paths = make_map(csv, [card_path], out, outputs=("contours",), also_written=("exposure.json", "exposure.md"),
+                     **kw)
+    assert [w for w in paths["warnings"] if w.startswith("out:")] == [
+        f"out: {out} holds levels.tif, map.png from an earlier run: they describe that run, not this map (kept; "
+        "remove them or use a new folder)"]
+    r = run("contour", csv, "--card", card_path, "--out", str(tmp_path / "fresh"), "--resolution", "40",
+            "--margin", "100", "--ground-height", "80", "--metrics", "LAmax")
+    assert r.exit_code == 0 and "earlier run" not in r.output
+

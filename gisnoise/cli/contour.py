@@ -153,7 +153,8 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
             metrics=metrics, crs=crs, dem=dem, receiver_height=receiver_height, ground_h=ground_h,
             dem_offset_m=dem_offset, uncertainty=uncertainty, plot=plot, period_s=period,
             threshold_db=threshold, snapshot_t=snapshot, substeps=substeps, background=background,
-            engine=engine, progress=update, geoid_undulation_m=geoid_undulation, power_w=power_w)
+            engine=engine, progress=update, geoid_undulation_m=geoid_undulation, power_w=power_w,
+            also_written=("exposure.json", "exposure.md") if population or buildings else ())
     res = paths["result"]
     g = res.grid
     auth = g.crs.to_authority()

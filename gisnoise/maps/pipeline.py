@@ -71,7 +71,8 @@ from gisnoise.maps.prepare import dem_nodata_warning
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
-__all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground", "flight_height"]
+__all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground", "flight_height", "PRODUCT_FILES",
+           "stale_products"]
 
 DEFAULT_LEVELS = (45.0, 50.0, 55.0, 60.0)
 
@@ -105,6 +106,7 @@ def make_map(
     power_w: float | None = None,
     outputs: Sequence[str] = ("levels", "contours"),
     grid: GridSpec | None = None,
+    also_written: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Noise map of a trajectory: evaluate on a grid and write GeoTIFF, GeoJSON (and PNG).
 
@@ -161,6 +163,11 @@ def make_map(
     grid : GridSpec, optional
         The receiver grid when the caller has chosen it already (the service checks its size before
         a map is made): ``resolution_m``, ``margin_m`` and ``crs`` are then not used.
+    also_written : sequence of str
+        Names of the files the caller writes into ``out_dir`` after the map (the command line's
+        ``exposure.json`` and ``exposure.md``): not stale.  Product files of a map (:data:`PRODUCT_FILES`)
+        already in ``out_dir`` that this run does not write describe an earlier run: a warning names them
+        (:func:`stale_products`); they are kept.
 
     Returns
     -------
@@ -210,6 +217,10 @@ def make_map(
     out = Path(out_dir) if out_dir is not None else None
     if out is not None and out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
+    if out is not None:
+        written = ({"levels": "levels.tif", "contours": "contours.geojson"}[o] for o in outputs)
+        stale = stale_products(out, [*written, *(["map.png"] if plot else []), *also_written])
+        warnings = warnings + ([stale] if stale is not None else [])
 
     def eval_progress(f: float) -> None:
         if progress is not None:
@@ -258,6 +269,24 @@ def make_map(
     paths["trajectory"] = traj
     paths["warnings"] = warnings
     return paths
+
+
+PRODUCT_FILES = ("levels.tif", "contours.geojson", "map.png", "exposure.json", "exposure.md")
+"""The files a map's folder holds (:func:`make_map`'s, and the exposure written beside them)."""
+
+
+def stale_products(out_dir: str | os.PathLike[str], written: Iterable[str]) -> str | None:
+    """The warning naming the product files (:data:`PRODUCT_FILES`) in ``out_dir`` that this run does not
+    write (``written``): they describe an earlier run.  None when there are none."""
+    out = Path(out_dir)
+    if not out.is_dir():
+        return None
+    fresh = set(written)
+    old = [f for f in PRODUCT_FILES if f not in fresh and (out / f).is_file()]
+    if not old:
+        return None
+    return (f"out: {out} holds {', '.join(old)} from an earlier run: {'it describes' if len(old) == 1 else 'they describe'} "
+            f"that run, not this map (kept; remove {'it' if len(old) == 1 else 'them'} or use a new folder)")
 
 
 TRACK_HEIGHT_KEYS = ("height_datum", "height_note", "height_anchor_m", "height_anchor_range_m", "height_resets",
