@@ -364,3 +364,22 @@ def test_product_files_of_an_earlier_run_are_named_and_kept(tmp_path, card_path)
             "--margin", "100", "--ground-height", "80", "--metrics", "LAmax")
     assert r.exit_code == 0 and "earlier run" not in r.output
 
+
+def test_an_output_folder_that_cannot_be_made_is_named(tmp_path, card_path):
+    """--out under a plain file cannot be a folder: the error names field out and the folder (it was "cannot read
+    the input (FileNotFoundError ...)"), for the map and for its exposure."""
+    csv = write_csv(tmp_path / "flight.csv", flyover())
+    (tmp_path / "afile").write_text("not a folder")
+    bad = tmp_path / "afile" / "map"
+    r = run("contour", csv, "--card", card_path, "--out", str(bad), "--resolution", "40", "--margin", "100",
+            "--ground-height", "80", "--metrics", "LAmax")
+    one_line_error(r, "out")
+    line = r.stderr.strip()
+    assert line.startswith(f"Error: out: cannot create the output folder {bad}"), line
+    assert "cannot read the input" not in line
+    from gisnoise.errors import InputError
+    from gisnoise.exposure import write_exposure
+
+    with pytest.raises(InputError, match="cannot create the output folder") as err:
+        write_exposure({"area_above": {}}, bad)
+    assert err.value.field == "out"

@@ -261,8 +261,9 @@ def exposure_table(doc: dict[str, Any]) -> str:
 
 def write_exposure(doc: dict[str, Any], out_dir: str | os.PathLike[str]) -> dict[str, Path]:
     """Write ``exposure.json`` and ``exposure.md`` into ``out_dir`` (created)."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    from gisnoise.maps.pipeline import output_folder
+
+    out = output_folder(out_dir)
     j = out / "exposure.json"
     tmp = j.with_name(j.name + ".tmp")
     tmp.write_text(json.dumps(to_jsonable(doc), indent=1, allow_nan=False))

@@ -72,7 +72,7 @@ from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
 __all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground", "flight_height", "PRODUCT_FILES",
-           "stale_products"]
+           "stale_products", "output_folder"]
 
 DEFAULT_LEVELS = (45.0, 50.0, 55.0, 60.0)
 
@@ -218,6 +218,7 @@ def make_map(
     if out is not None and out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
     if out is not None:
+        output_folder(out)  # before the evaluation: a folder that cannot be made is said at once
         written = ({"levels": "levels.tif", "contours": "contours.geojson"}[o] for o in outputs)
         stale = stale_products(out, [*written, *(["map.png"] if plot else []), *also_written])
         warnings = warnings + ([stale] if stale is not None else [])
@@ -269,6 +270,25 @@ def make_map(
     paths["trajectory"] = traj
     paths["warnings"] = warnings
     return paths
+
+
+def output_folder(path: str | os.PathLike[str], *, field: str = "out") -> Path:
+    """``path`` as an output folder: created (with its parents) if missing, and writable.
+
+    Raises
+    ------
+    InputError
+        On ``field``, naming the folder, when it cannot be created or written into.
+    """
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{field}: cannot create the output folder {out} ({exc.strerror or exc})",
+                         field=field) from None
+    if not os.access(out, os.W_OK | os.X_OK):
+        raise InputError(f"{field}: cannot write into the output folder {out} (permission denied)", field=field)
+    return out
 
 
 PRODUCT_FILES = ("levels.tif", "contours.geojson", "map.png", "exposure.json", "exposure.md")
