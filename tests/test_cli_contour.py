@@ -383,3 +383,50 @@ def test_an_output_folder_that_cannot_be_made_is_named(tmp_path, card_path):
     with pytest.raises(InputError, match="cannot create the output folder") as err:
         write_exposure({"area_above": {}}, bad)
     assert err.value.field == "out"
+
+
+def test_plain_progress_prints_every_tenth_or_ten_seconds():
+    """Off a terminal, progress is plain lines: one when the work passes a further 10 %, or when 10 s passed since
+    the last line (a slow stretch between two tenths, or before the first report, still says it is alive)."""
+    from gisnoise.cli.options import PlainProgress
+
+    lines, now = [], [100.0]
+    update = PlainProgress("evaluating", 1.0, echo=lines.append, clock=lambda: now[0])
+    for t, done in ((100.5, 0.05), (101.0, 0.10), (101.5, 0.12), (111.0, 0.13), (111.5, 0.14), (112.0, 0.35),
+                    (113.0, 1.0)):
+        now[0] = t
+        update(done)
+    assert lines == ["evaluating: 10 % after 1 s", "evaluating: 13 % after 11 s", "evaluating: 35 % after 12 s",
+                     "evaluating: 100 % after 13 s"]
+    lines.clear()
+    now[0] = 124.0
+    update.tick()  # the heartbeat: 11 s without a report
+    now[0] = 125.0
+    update.tick()
+    assert lines == ["evaluating: 100 % after 24 s"]
+    lines.clear()
+    update = PlainProgress("reading", None, echo=lines.append, clock=lambda: now[0])
+    for t in (126.0, 130.0, 136.0, 137.0):
+        now[0] = t
+        update.tick()
+    assert lines == ["reading: running after 11 s"]
+
+
+def test_the_grid_line_comes_before_the_evaluation_and_progress_is_plain_off_a_terminal(tmp_path, card_path):
+    """Without a terminal on stderr (a log), the grid line (cells, instants, engine) is printed before the
+    evaluation's first progress line, and progress lines reach 100 %; -q prints no progress, the grid line still."""
+    csv = write_csv(tmp_path / "flight.csv", flyover())
+    args = ["contour", csv, "--card", card_path, "--resolution", "40", "--margin", "100", "--ground-height", "80",
+            "--metrics", "LAmax", "--engine", "numpy"]
+    r = CliRunner().invoke(cli, [*args, "--out", str(tmp_path / "a")], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    lines = r.output.splitlines()
+    grid = [i for i, ln in enumerate(lines) if ln.startswith("grid:")]
+    prog = [i for i, ln in enumerate(lines) if ln.startswith("evaluating: ")]
+    assert len(grid) == 1 and prog and grid[0] < prog[0], r.output
+    assert lines[grid[0]].endswith("; 41 instants; engine numpy")  # 41 samples, flying throughout
+    assert r.stdout.splitlines()[0] == lines[grid[0]] and "evaluating" not in r.stdout
+    assert r.stderr.splitlines()[-1 - len([w for w in r.stderr.splitlines() if w.startswith("warning:")])] \
+        .startswith("evaluating: 100 % after ")
+    q = run(*args, "--out", str(tmp_path / "b"))
+    assert q.exit_code == 0 and "evaluating" not in q.output and q.stdout.startswith("grid: ")

@@ -146,6 +146,12 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
     """
     from gisnoise.maps import make_map
 
+    announced: list[str] = []
+
+    def say(line: str) -> None:  # before the evaluation (and before the bar), so a long map says what it does first
+        announced.append(line)
+        click.echo(line)
+
     with progress(ctx, "evaluating", 1.0) as update:
         paths = make_map(
             trajectory, list(cards) if atmosphere is None else _cards_in_atmosphere(cards, atmosphere), out,
@@ -154,13 +160,12 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
             dem_offset_m=dem_offset, uncertainty=uncertainty, plot=plot, period_s=period,
             threshold_db=threshold, snapshot_t=snapshot, substeps=substeps, background=background,
             engine=engine, progress=update, geoid_undulation_m=geoid_undulation, power_w=power_w,
-            also_written=("exposure.json", "exposure.md") if population or buildings else ())
+            also_written=("exposure.json", "exposure.md") if population or buildings else (),
+            announce=say)
     res = paths["result"]
-    g = res.grid
-    auth = g.crs.to_authority()
-    click.echo(f"grid: {g.width} x {g.height} cells of {g.resolution[0]:g} m in "
-               f"{':'.join(auth) if auth else g.crs.name}; {res.metadata['evaluation_instants']} instants; "
-               f"engine {res.metadata.get('engine', engine)}")
+    ran = res.metadata.get("engine", engine)
+    if announced and not announced[0].endswith(f"; engine {ran}"):
+        click.echo(f"engine: {ran} ran (the fast engine refused the request)")
     if population or buildings:
         from gisnoise.exposure import map_exposure, read_buildings, read_levels, read_population, write_exposure
 

@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
+import math
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import ExitStack, contextmanager
 from typing import Any
 
 import click
@@ -18,22 +22,107 @@ out_dir_option = click.option("--out", "out", required=True, type=click.Path(fil
 
 @contextmanager
 def progress(ctx: click.Context | None, description: str, total: float | None) -> Iterator[Any]:
-    """A rich progress bar yielding ``update(done)``; silent with ``-q``.
+    """Progress on stderr, yielding ``update(done)``; silent with ``-q``.
 
-    ``update`` takes the amount done so far (same unit as ``total``).
+    ``update`` takes the amount done so far (same unit as ``total``).  On a terminal: a rich progress bar,
+    drawn from the first update on (what the command prints before, e.g. the grid of a map, stays above it
+    on stdout).  Elsewhere (a log file, a pipe): plain lines (:class:`PlainProgress`), so a log shows
+    that a long command is alive.
     """
     quiet = bool(ctx and ctx.find_root().obj and ctx.find_root().obj.get("quiet"))
     if quiet:
         yield lambda done: None
         return
+    if not _stderr_is_terminal():
+        plain = PlainProgress(description, total)
+        stop = threading.Event()
+
+        def beat() -> None:  # a line every PLAIN_EVERY_S even while the work reports nothing
+            while not stop.wait(1.0):
+                plain.tick()
+
+        beater = threading.Thread(target=beat, name="gisnoise-progress", daemon=True)
+        beater.start()
+        try:
+            yield plain
+        finally:
+            stop.set()
+            beater.join()
+        return
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     # on stderr: stdout carries the results alone (a bar on stdout left an empty line in piped output)
-    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-                  TimeRemainingColumn(), transient=True, console=Console(stderr=True)) as bar:
-        task = bar.add_task(description, total=total)
-        yield lambda done: bar.update(task, completed=done)
+    bar = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                   TimeRemainingColumn(), transient=True, console=Console(stderr=True))
+    with ExitStack() as stack:
+        task: list[Any] = []
+
+        def update(done: float) -> None:
+            if not task:
+                stack.enter_context(bar)
+                task.append(bar.add_task(description, total=total))
+            bar.update(task[0], completed=done)
+
+        yield update
+
+
+def _stderr_is_terminal() -> bool:
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):  # no stderr, or a closed one
+        return False
+
+
+PLAIN_STEP = 0.1
+"""Plain progress prints a line every this fraction of the work (10 %) ..."""
+PLAIN_EVERY_S = 10.0
+"""... or when this many seconds passed since the last line."""
+
+
+class PlainProgress:
+    """Called as ``update(done)``: prints ``<description>: <percent> % after <s> s`` on stderr when the work passes a
+    further :data:`PLAIN_STEP`, or (:meth:`tick`, called by :func:`progress` every second from a thread) when
+    :data:`PLAIN_EVERY_S` seconds passed since the last line, so a long stretch between two reports still says
+    the command is alive.  ``total`` None: lines by time alone, without a percentage."""
+
+    def __init__(self, description: str, total: float | None, *, echo: Callable[[str], Any] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._say = echo if echo is not None else (lambda line: click.echo(line, err=True))
+        self._clock = clock
+        self._description, self._total = description, total
+        self._t0 = self._last = clock()
+        self._next = PLAIN_STEP
+        self._done: float | None = None
+        self._lock = threading.Lock()
+
+    def __call__(self, done: float) -> None:
+        with self._lock:
+            self._done = float(done)
+            f = self._fraction()
+            if f is not None and f >= self._next - 1e-9:
+                self._next = (math.floor(f / PLAIN_STEP + 1e-9) + 1) * PLAIN_STEP
+                self._line()
+            elif self._clock() - self._last >= PLAIN_EVERY_S:
+                self._line()
+
+    def tick(self) -> None:
+        """A line when :data:`PLAIN_EVERY_S` seconds passed since the last one."""
+        with self._lock:
+            if self._clock() - self._last >= PLAIN_EVERY_S:
+                self._line()
+
+    def _fraction(self) -> float | None:
+        return self._done / float(self._total) if self._total and self._done is not None else None
+
+    def _line(self) -> None:
+        now = self._clock()
+        self._last = now
+        f = self._fraction()
+        if f is None:
+            self._say(f"{self._description}: running after {now - self._t0:.0f} s")
+        else:
+            self._say(f"{self._description}: {100.0 * f:.0f} % after {now - self._t0:.0f} s")
 
 
 def echo_warnings(warnings: Iterable[str]) -> None:

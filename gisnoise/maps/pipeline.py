@@ -72,7 +72,8 @@ from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
 __all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground", "flight_height", "PRODUCT_FILES",
-           "stale_products", "output_folder"]
+           "stale_products", "output_folder",
+           "grid_line", "planned_instants"]
 
 DEFAULT_LEVELS = (45.0, 50.0, 55.0, 60.0)
 
@@ -107,6 +108,7 @@ def make_map(
     outputs: Sequence[str] = ("levels", "contours"),
     grid: GridSpec | None = None,
     also_written: Sequence[str] = (),
+    announce: Callable[[str], Any] | None = None,
 ) -> dict[str, Any]:
     """Noise map of a trajectory: evaluate on a grid and write GeoTIFF, GeoJSON (and PNG).
 
@@ -168,6 +170,10 @@ def make_map(
         ``exposure.json`` and ``exposure.md``): not stale.  Product files of a map (:data:`PRODUCT_FILES`)
         already in ``out_dir`` that this run does not write describe an earlier run: a warning names them
         (:func:`stale_products`); they are kept.
+    announce : callable, optional
+        Called once before the evaluation with one line naming the grid (cells, resolution, CRS), the
+        evaluation instants and the engine expected to run (:func:`grid_line`); the command line prints it,
+        so a long map says what it does before it starts.
 
     Returns
     -------
@@ -230,6 +236,8 @@ def make_map(
     kw: dict[str, Any] = dict(metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground_h,
                               dem_offset_m=dem_offset_m, threshold_db=threshold_db, background=background,
                               substeps=substeps, uncertainty=uncertainty, engine=engine, cancel=cancel)
+    if announce is not None:
+        announce(grid_line(grid, planned_instants(traj, substeps), _expected_engine(engine, cardset, uncertainty)))
     t_eval = time.perf_counter()
     result = evaluate_flying(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t, progress=eval_progress,
                              **kw)
@@ -270,6 +278,31 @@ def make_map(
     paths["trajectory"] = traj
     paths["warnings"] = warnings
     return paths
+
+
+def grid_line(grid: GridSpec, instants: int, engine: str) -> str:
+    """``grid: W x H cells of R m in CRS; N instants; engine E``: what a map evaluates, in one line."""
+    auth = grid.crs.to_authority()
+    return (f"grid: {grid.width} x {grid.height} cells of {grid.resolution[0]:g} m in "
+            f"{':'.join(auth) if auth else grid.crs.name}; {int(instants)} instants; engine {engine}")
+
+
+def planned_instants(traj: Trajectory, substeps: int = 1) -> int:
+    """The evaluation instants of a map of ``traj`` (``metadata["evaluation_instants"]`` once evaluated): those
+    of every flying stretch, ``(samples - 1) substeps + 1`` each (:func:`evaluate_flying`)."""
+    parts = [traj] if bool(np.all(traj.flying)) else flying_parts(traj)
+    k = max(int(substeps), 1)
+    return int(sum((len(p) - 1) * k + 1 for p in parts))
+
+
+def _expected_engine(engine: str, cardset: CardSet, uncertainty: bool) -> str:
+    """The engine ``evaluate_grid`` will run (``auto`` resolved as it resolves it; it may still fall back to
+    ``numpy`` when the fast engine refuses the flight, which ``metadata["engine"]`` then says)."""
+    if engine != "auto":
+        return engine
+    from gisnoise.maps.evaluate import fast_engine_serves
+
+    return "fast" if fast_engine_serves(cardset, uncertainty=uncertainty) is None else "numpy"
 
 
 def output_folder(path: str | os.PathLike[str], *, field: str = "out") -> Path:
