@@ -236,6 +236,7 @@ def make_map(
     kw: dict[str, Any] = dict(metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground_h,
                               dem_offset_m=dem_offset_m, threshold_db=threshold_db, background=background,
                               substeps=substeps, uncertainty=uncertainty, engine=engine, cancel=cancel)
+    _check_times(traj, snapshot_t, period_s, metrics)  # refused before the grid is announced
     if announce is not None:
         announce(grid_line(grid, planned_instants(traj, substeps), _expected_engine(engine, cardset, uncertainty)))
     t_eval = time.perf_counter()
@@ -429,6 +430,17 @@ def evaluate_flying(traj: Trajectory, cards: Any, grid: Any, *, period_s: float 
     return _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, progress or (lambda f: None), kw)
 
 
+def _check_times(traj: Trajectory, snapshot_t: float | None, period_s: float | None, metrics: Sequence[str]) -> None:
+    """Refuse a snapshot outside the trajectory and an LAeq period shorter than it, as evaluate_grid does."""
+    if snapshot_t is not None and not traj.t[0] <= float(snapshot_t) <= traj.t[-1]:  # as evaluate_grid refuses it
+        raise InputError(f"snapshot_t={float(snapshot_t):g} s lies outside the trajectory "
+                         f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
+    if (period_s is not None and "LAeq" in metrics
+            and float(period_s) < traj.duration_s * (1.0 - 1e-12)):  # the whole track's, as evaluate_grid asks
+        raise InputError(f"period_s ({float(period_s):g} s) must cover the trajectory's duration "
+                         f"({traj.duration_s:g} s)", field="period_s")
+
+
 def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: float | None,
                      snapshot_t: float | None, progress: Callable[[float], Any], kw: dict[str, Any]) -> MapResult:
     """Metrics over the flying stretches of ``traj`` summed in energy (see the module docstring)."""
@@ -436,13 +448,7 @@ def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: fl
     if kw.get("uncertainty") and len(parts) > 1:
         raise InputError(f"{traj.source}: uncertainty bands need one flying stretch; the track lands and takes "
                          f"off again ({len(parts)} stretches)", field="uncertainty")
-    if snapshot_t is not None and not traj.t[0] <= float(snapshot_t) <= traj.t[-1]:  # as evaluate_grid refuses it
-        raise InputError(f"snapshot_t={float(snapshot_t):g} s lies outside the trajectory "
-                         f"({traj.t[0]:g}-{traj.t[-1]:g} s)", field="snapshot_t")
-    if (period_s is not None and "LAeq" in kw.get("metrics", METRICS)
-            and float(period_s) < traj.duration_s * (1.0 - 1e-12)):  # the whole track's, as evaluate_grid asks
-        raise InputError(f"period_s ({float(period_s):g} s) must cover the trajectory's duration "
-                         f"({traj.duration_s:g} s)", field="period_s")
+    _check_times(traj, snapshot_t, period_s, kw.get("metrics", METRICS))
     period = traj.duration_s if period_s is None else period_s
     results: list[MapResult] = []
     for k, part in enumerate(parts):
