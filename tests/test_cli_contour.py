@@ -386,35 +386,45 @@ def test_an_output_folder_that_cannot_be_made_is_named(tmp_path, card_path):
 
 
 def test_plain_progress_prints_every_tenth_or_ten_seconds():
-    """Off a terminal, progress is plain lines: one when the work passes a further 10 %, or when 10 s passed since
-    the last line (a slow stretch between two tenths, or before the first report, still says it is alive)."""
+    """Off a terminal, progress is plain lines: one when the work passes a further 10 % at least 2 s after the last
+    line, or when 10 s passed since the last line (a slow stretch between two tenths, or before the first report,
+    still says it is alive); 100 % when a line came before; quick work prints none."""
     from gisnoise.cli.options import PlainProgress
 
     lines, now = [], [100.0]
     update = PlainProgress("evaluating", 1.0, echo=lines.append, clock=lambda: now[0])
     for t, done in ((100.5, 0.05), (101.0, 0.10), (101.5, 0.12), (111.0, 0.13), (111.5, 0.14), (112.0, 0.35),
-                    (113.0, 1.0)):
+                    (114.0, 0.5), (114.5, 1.0)):
         now[0] = t
         update(done)
-    assert lines == ["evaluating: 10 % after 1 s", "evaluating: 13 % after 11 s", "evaluating: 35 % after 12 s",
-                     "evaluating: 100 % after 13 s"]
+    assert lines == ["evaluating: 13 % after 11 s", "evaluating: 50 % after 14 s", "evaluating: 100 % after 14 s"]
     lines.clear()
-    now[0] = 124.0
-    update.tick()  # the heartbeat: 11 s without a report
     now[0] = 125.0
+    update.tick()  # the heartbeat: 10.5 s without a report
+    now[0] = 125.5
     update.tick()
-    assert lines == ["evaluating: 100 % after 24 s"]
+    assert lines == ["evaluating: 100 % after 25 s"]
+    quick = PlainProgress("evaluating", 1.0, echo=lines.append, clock=lambda: now[0])
+    for t, done in ((125.7, 0.3), (125.9, 0.7), (126.0, 1.0)):      # done within 2 s: no line
+        now[0] = t
+        quick(done)
+    assert lines == ["evaluating: 100 % after 25 s"]
     lines.clear()
     update = PlainProgress("reading", None, echo=lines.append, clock=lambda: now[0])
-    for t in (126.0, 130.0, 136.0, 137.0):
+    for t in (127.0, 130.0, 137.0, 138.0):                          # created at 126 s
         now[0] = t
         update.tick()
     assert lines == ["reading: running after 11 s"]
 
 
-def test_the_grid_line_comes_before_the_evaluation_and_progress_is_plain_off_a_terminal(tmp_path, card_path):
+def test_the_grid_line_comes_before_the_evaluation_and_progress_is_plain_off_a_terminal(tmp_path, card_path,
+                                                                                         monkeypatch):
     """Without a terminal on stderr (a log), the grid line (cells, instants, engine) is printed before the
-    evaluation's first progress line, and progress lines reach 100 %; -q prints no progress, the grid line still."""
+    evaluation's first progress line, and progress lines reach 100 %; -q prints no progress, the grid line still.
+    (Every tenth is printed here: this map takes well under the 2 s a further tenth waits for.)"""
+    import gisnoise.cli.options as options
+
+    monkeypatch.setattr(options, "PLAIN_MIN_GAP_S", 0.0)
     csv = write_csv(tmp_path / "flight.csv", flyover())
     args = ["contour", csv, "--card", card_path, "--resolution", "40", "--margin", "100", "--ground-height", "80",
             "--metrics", "LAmax", "--engine", "numpy"]

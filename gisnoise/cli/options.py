@@ -78,11 +78,14 @@ PLAIN_STEP = 0.1
 """Plain progress prints a line every this fraction of the work (10 %) ..."""
 PLAIN_EVERY_S = 10.0
 """... or when this many seconds passed since the last line."""
+PLAIN_MIN_GAP_S = 2.0
+"""A further tenth prints only this long after the last line (or the start): quick work stays one line or none."""
 
 
 class PlainProgress:
     """Called as ``update(done)``: prints ``<description>: <percent> % after <s> s`` on stderr when the work passes a
-    further :data:`PLAIN_STEP`, or (:meth:`tick`, called by :func:`progress` every second from a thread) when
+    further :data:`PLAIN_STEP` at least :data:`PLAIN_MIN_GAP_S` after the last line (100 % whenever a line was
+    printed before), or (:meth:`tick`, called by :func:`progress` every second from a thread) when
     :data:`PLAIN_EVERY_S` seconds passed since the last line, so a long stretch between two reports still says
     the command is alive.  ``total`` None: lines by time alone, without a percentage."""
 
@@ -94,16 +97,19 @@ class PlainProgress:
         self._t0 = self._last = clock()
         self._next = PLAIN_STEP
         self._done: float | None = None
+        self._said = False
         self._lock = threading.Lock()
 
     def __call__(self, done: float) -> None:
         with self._lock:
             self._done = float(done)
             f = self._fraction()
+            gap = self._clock() - self._last
             if f is not None and f >= self._next - 1e-9:
                 self._next = (math.floor(f / PLAIN_STEP + 1e-9) + 1) * PLAIN_STEP
-                self._line()
-            elif self._clock() - self._last >= PLAIN_EVERY_S:
+                if gap >= PLAIN_MIN_GAP_S or (f >= 1.0 and self._said):  # the end of work a log showed going on
+                    self._line()
+            elif gap >= PLAIN_EVERY_S:
                 self._line()
 
     def tick(self) -> None:
@@ -118,6 +124,7 @@ class PlainProgress:
     def _line(self) -> None:
         now = self._clock()
         self._last = now
+        self._said = True
         f = self._fraction()
         if f is None:
             self._say(f"{self._description}: running after {now - self._t0:.0f} s")
