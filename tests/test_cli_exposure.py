@@ -94,6 +94,24 @@ def test_bad_input_is_one_line_and_keeps_what_is_stored(tmp_path):
         assert (tmp_path / "map" / "exposure.json").read_text() == before
 
 
+def test_population_with_an_infinite_cell_is_refused_by_the_command(tmp_path):
+    """``gisnoise exposure`` refuses a population raster holding +inf in one line naming the file (it counted the
+    cell as 0 people before), and writes nothing."""
+    setup(tmp_path)
+    a = np.full((10, 20), 2.0, dtype=np.float32)
+    a[3, 4] = np.inf
+    with rasterio.open(tmp_path / "pop.tif") as src:
+        profile = src.profile
+    with rasterio.open(tmp_path / "pop_inf.tif", "w", **profile) as dst:
+        dst.write(a, 1)
+    r = CliRunner().invoke(cli, ["-q", "exposure", str(tmp_path / "map"), "--population", str(tmp_path / "pop_inf.tif")])
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    said = [ln for ln in lines if "pop_inf.tif" in ln]
+    assert len(said) == 1 and "first inf at row 3, column 4" in said[0], r.output
+    assert not (tmp_path / "map" / "exposure.json").exists()
+
+
 def test_contour_writes_exposure_with_population_and_buildings(tmp_path):
     cp, tp = setup(tmp_path)
     r = run("contour", tp, "--card", cp, "--out", str(tmp_path / "m2"), "--resolution", "20", "--margin", "300",

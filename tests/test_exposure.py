@@ -231,6 +231,43 @@ def test_bad_layers_are_refused_in_one_line(tmp_path):
         read_buildings(q.with_name("neg.gpkg"), dwellings="flats")
 
 
+def _population_tif(path, values, nodata=None):
+    """A 2 x 3 population raster in UTM 32N holding ``values`` (people per 10 m cell)."""
+    with rasterio.open(path, "w", driver="GTiff", width=3, height=2, count=1, dtype="float32", crs="EPSG:32632",
+                       transform=Affine(10.0, 0, 600000.0, 0, -10.0, 5790000.0), nodata=nodata) as dst:
+        dst.write(np.asarray(values, dtype=np.float32), 1)
+    return path
+
+
+@pytest.mark.parametrize(("bad", "shown"), [(np.inf, "inf"), (-np.inf, "-inf"), (np.nan, "nan"), (-2.0, "-2")])
+def test_population_cells_that_are_not_counts_are_refused_naming_the_layer(tmp_path, bad, shown):
+    """A cell that is not a finite count >= 0 (and not nodata) refuses the raster in one line naming the file,
+    the cell and its value; before, +inf, -inf and NaN were counted as 0 people without a word."""
+    p = _population_tif(tmp_path / "people.tif", [[1.0, 2.0, 3.0], [4.0, bad, 6.0]])
+    with pytest.raises(InputError) as err:
+        read_population(p)
+    msg = str(err.value)
+    assert err.value.field == "population"
+    assert "\n" not in msg and "people.tif" in msg and str(tmp_path) not in msg
+    assert f"first {shown} at row 1, column 1" in msg
+
+
+def test_population_nodata_cells_are_no_people(tmp_path):
+    """Cells holding the raster's nodata value (a negative number or NaN) are 0 people: the others are summed."""
+    p = _population_tif(tmp_path / "neg_nodata.tif", [[1.0, -9999.0, 3.0], [4.0, 5.0, -9999.0]], nodata=-9999.0)
+    assert read_population(p).total == 13.0
+    q = _population_tif(tmp_path / "nan_nodata.tif", [[1.0, np.nan, 3.0], [4.0, 5.0, 6.0]], nodata=np.nan)
+    assert read_population(q).total == 19.0
+
+
+def test_unreadable_population_names_the_file_not_its_folder(tmp_path):
+    p = tmp_path / "garbage.tif"
+    p.write_bytes(b"not a tiff at all")
+    with pytest.raises(InputError) as err:
+        read_population(p)
+    assert "garbage.tif" in str(err.value) and str(tmp_path) not in str(err.value)
+
+
 def test_facade_levels_leave_out_samples_on_the_ground():
     """Façade levels follow the map's rule: a flight's samples on the ground (landed flag) make no noise.  60 s parked
     at the pad, then 60 s hovering 60 m above it: at a point 4 m above ground 80 m away LAmax is the hover's level

@@ -1,7 +1,8 @@
 """Exposure layers: a population raster, buildings with residents, and a written levels raster.
 
 * :func:`read_population`: a GeoTIFF (any CRS, any driver rasterio reads) whose band 1
-  holds people per cell; nodata and negative values count as no people.
+  holds people per cell; nodata cells count as no people, and any other cell that is not a
+  finite count >= 0 (negative, NaN, infinite) refuses the raster.
 * :func:`read_buildings`: polygons (GeoPackage, GeoJSON, Shapefile, anything pyogrio reads)
   with optional attributes for residents, dwellings and height.
 * :func:`read_levels`: the ``levels.tif`` a map wrote, back as bands on its grid.
@@ -108,10 +109,15 @@ def _north_up(t: Affine, fld: str) -> None:
 def read_population(path: str | os.PathLike[str], *, band: int = 1) -> Population:
     """Read a population raster: people per cell of band ``band``.
 
+    Cells holding the raster's nodata value are no people.  Every other cell must be a finite
+    count >= 0: a negative, NaN or infinite value is refused, not counted as 0 (an infinite
+    count would otherwise vanish from every total, a NaN one hide a hole in the data).
+
     Raises
     ------
     InputError
-        No such file, no CRS, a rotated raster, or negative counts other than nodata.
+        No such file, no CRS, a rotated raster, or a cell other than nodata that is not a finite
+        count >= 0 (the first one named with its row, column and value).
     """
     import rasterio
     from rasterio.errors import RasterioIOError
@@ -125,15 +131,19 @@ def read_population(path: str | os.PathLike[str], *, band: int = 1) -> Populatio
                 raise InputError(f"population: band {band} not in 1..{src.count}", field="population")
             a = src.read(band, masked=True).astype(np.float64)
             t, crs = src.transform, CRS.from_wkt(src.crs.to_wkt())
-    except RasterioIOError as exc:
-        raise InputError(f"population: cannot read {p}: {exc}", field="population") from None
+    except RasterioIOError as exc:  # the file's name only: its folder may be a server's
+        raise InputError(f"population: cannot read {p.name}: {str(exc).replace(str(p), p.name)}",
+                         field="population") from None
     _north_up(t, "population")
-    counts = np.ma.filled(a, 0.0)
-    counts = np.where(np.isfinite(counts), counts, 0.0)
-    if (counts < 0).any():
-        raise InputError(f"population: {p.name} has negative people per cell (min {counts.min():g})",
-                         field="population")
-    return Population(counts, t, crs, source=str(p))
+    data, nodata = np.ma.getdata(a), np.ma.getmaskarray(a)
+    with np.errstate(invalid="ignore"):
+        bad = ~nodata & ~(np.isfinite(data) & (data >= 0))
+    if bad.any():
+        r, c = (int(i) for i in np.argwhere(bad)[0])
+        raise InputError(f"population: {p.name} has {int(bad.sum())} cell(s) that are not a number of people >= 0 "
+                         f"(first {data[r, c]:g} at row {r}, column {c}); people per cell must be finite and >= 0, "
+                         "cells without data must hold the raster's nodata value", field="population")
+    return Population(np.where(nodata, 0.0, data), t, crs, source=str(p))
 
 
 def _pick(columns: list[str], wanted: str | None, names: tuple[str, ...], what: str) -> str | None:
@@ -178,7 +188,8 @@ def read_buildings(path: str | os.PathLike[str], *, layer: str | None = None, re
     try:
         df = gpd.read_file(p, layer=layer, engine="pyogrio")
     except Exception as exc:  # pyogrio's errors are many; the message names the file
-        raise InputError(f"buildings: cannot read {p.name}: {str(exc).splitlines()[0]}", field="buildings") from None
+        said = str(exc).splitlines()[0].replace(str(p), p.name)  # the file's name only: its folder may be a server's
+        raise InputError(f"buildings: cannot read {p.name}: {said}", field="buildings") from None
     if df.crs is None:
         raise InputError(f"buildings: {p.name} has no CRS", field="buildings")
     if len(df) == 0:

@@ -124,8 +124,8 @@ def _check_layer(kind: str, folder: Path, name: str) -> tuple[str, dict[str, Any
                                "crs": pop.crs.to_string()}
         b = read_buildings(path)
         return path.name, {"buildings": b.n, "fields": b.fields, "crs": b.crs.to_string()}
-    except InputError as exc:
-        raise ApiError(422, f"file: {exc}", field="file") from None
+    except InputError as exc:  # the upload is named by its file name, never by the server's folder
+        raise ApiError(422, f"file: {str(exc).replace(str(folder) + '/', '')}", field="file") from None
 
 
 @router.post("/layers", status_code=201, dependencies=WRITE, summary="Upload an exposure layer (new version)")

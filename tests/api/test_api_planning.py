@@ -98,6 +98,29 @@ def test_compare_refusals_name_the_field(make_client, tmp_path):
     assert client.get("/layers").json() == [{"id": "town", "version": 1, "kind": "population", "file": "pop.tif"}]
 
 
+def test_rejected_layer_uploads_name_the_file_only_and_store_nothing(make_client, tmp_path):
+    """A layer the core's readers refuse is 422 on ``file`` naming the uploaded file by its name, never by the
+    server's temporary folder (it said 'cannot read layer-7d2kbgpp/f/garbage.tif'); a population raster with an
+    infinite cell is refused (it was stored, the cell counted as 0 people)."""
+    client = make_client()
+    a = np.ones((20, 20), dtype=np.float32)
+    a[2, 5] = np.inf
+    with rasterio.open(tmp_path / "pop_inf.tif", "w", driver="GTiff", width=20, height=20, count=1, dtype="float32",
+                       crs=CRS.from_user_input(TMERC).to_wkt(), transform=Affine(10.0, 0, -100, 0, -10.0, 100)) as d:
+        d.write(a, 1)
+    cases = [("population", "garbage.tif", b"not a tiff at all"),
+             ("buildings", "garbage.geojson", b"not json at all"),
+             ("population", "pop_inf.tif", (tmp_path / "pop_inf.tif").read_bytes())]
+    for kind, name, data in cases:
+        body = assert_names_field(upload(client, kind, "x", name, data), 422, "file")
+        assert name in body["detail"], body
+        assert "/" not in body["detail"], body  # no folder of the server, relative or absolute
+        assert "layer-" not in body["detail"], body
+    said = upload(client, "population", "x", "pop_inf.tif", cases[2][2]).json()["detail"]
+    assert "first inf at row 2, column 5" in said
+    assert client.get("/layers").json() == []
+
+
 def town_tif(path: Path) -> bytes:
     """5 km x 4 km at 20 m: 0.2 people per cell, 8 in the 600 m block at the centre."""
     x = -2500.0 + 20.0 * (np.arange(250) + 0.5)
