@@ -28,6 +28,10 @@ receiver height            0 .. 1000 m      above ground, never below it
 sound level at a mic       -50 .. 200 dB    ``MEASURED_LEVEL_RANGE_DB``: below any microphone's self-noise,
                                             above a jet engine at 1 m (a band may lie lower, down
                                             to -inf: silence)
+level asked of a map       -50 .. 200 dB(A) :func:`check_map_level`: contour levels, time-above
+                                            thresholds, ranking levels; the range a microphone
+                                            records, so a level outside it is no level a
+                                            measurement could ever show (a typo: -1000, 1e308)
 flights per day            <= 100,000       ``max_daily_count``
 =========================  ===============  ==============================================
 
@@ -59,7 +63,7 @@ from gisnoise.errors import InputError
 __all__ = ["Limits", "WorkLimitError", "DEFAULTS", "current", "override", "check_range", "check_array", "check_lonlat",
            "check_attitude", "check_power", "check_track", "check_heights", "check_times", "check_samples", "check_count",
            "check_receiver_height", "check_ground_below", "check_receivers", "GROUND_TOLERANCE_M", "MAX_UAV_SPEED_M_S", "SAFE_ID_PATTERN", "CARD_REF_PATTERN", "check_id",
-           "MIN_SAMPLES", "check_work", "MEASURED_LEVEL_RANGE_DB", "check_levels"]
+           "MIN_SAMPLES", "check_work", "MEASURED_LEVEL_RANGE_DB", "check_levels", "check_map_level"]
 
 
 @dataclass(frozen=True)
@@ -296,6 +300,31 @@ def check_levels(values: Any, *, field: str, source: str = "", error: type[Input
         a = np.where(a < MEASURED_LEVEL_RANGE_DB[0], MEASURED_LEVEL_RANGE_DB[0], a)  # -inf and any quieter band: silence
     check_array(field, a, *MEASURED_LEVEL_RANGE_DB, unit="dB", source=source, error=error,
                 why="no microphone records this level")
+
+
+def check_map_level(field: str, value: Any, *, source: str = "", error: type[InputError] = InputError) -> float:
+    """One A-weighted level asked of a map (a contour level, a time-above threshold, a ranking level), dB(A):
+    finite and within :data:`MEASURED_LEVEL_RANGE_DB`, the levels a microphone records.
+
+    A level outside that range is one no measurement could show (below the self-noise of any measurement
+    microphone, above a jet engine at 1 m): a typo, never a map's question.
+
+    Examples
+    --------
+    >>> check_map_level("levels", 55)
+    55.0
+    >>> check_map_level("levels", -1000)
+    Traceback (most recent call last):
+    ...
+    gisnoise.errors.InputError: levels: -1000 dB(A) is outside [-50, 200] dB(A) (the A-weighted levels a microphone records: below any measurement microphone's self-noise, above a jet engine at 1 m)
+    """
+    return check_range(field, value, *MEASURED_LEVEL_RANGE_DB, unit="dB(A)", source=source, error=error,
+                       why=MAP_LEVEL_WHY)
+
+
+MAP_LEVEL_WHY = ("the A-weighted levels a microphone records: below any measurement microphone's self-noise, above a "
+                 "jet engine at 1 m")
+"""Why a level asked of a map lies within :data:`MEASURED_LEVEL_RANGE_DB` (the words of its refusals)."""
 
 
 def check_count(field: str, value: float, hi: float, *, source: str = "",

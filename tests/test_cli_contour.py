@@ -157,6 +157,20 @@ def test_phase_without_card_and_bad_levels(tmp_path, card_path):
     assert r.exit_code == 2 and "--levels" in (r.stderr if hasattr(r, "stderr") else r.output)
 
 
+def test_levels_outside_the_range_a_microphone_records_are_refused(tmp_path, card_path):
+    """``--levels 60,45,45,-1000`` is a usage error whose one error line names --levels, the value and the range, and
+    writes nothing (it drew a band 'LAmax -1000-45 dB(A)'); ``--threshold -1000`` likewise."""
+    csv = write_csv(tmp_path / "f.csv", flyover())
+    for option, value in (("--levels", "60,45,45,-1000"), ("--threshold", "-1000")):
+        r = run("contour", csv, "--card", card_path, "--out", str(tmp_path / "o"), option, value)
+        assert r.exit_code == 2, r.output
+        err = r.stderr if hasattr(r, "stderr") else r.output
+        said = [ln for ln in err.splitlines() if ln.startswith("Error:")]
+        assert len(said) == 1 and option in said[0] and "-1000 dB(A) is outside [-50, 200] dB(A)" in said[0], err
+        assert "Traceback" not in r.output
+        assert not (tmp_path / "o").exists()
+
+
 def test_missing_card_file(tmp_path):
     csv = write_csv(tmp_path / "f.csv", flyover())
     one_line_error(run("contour", csv, "--card", str(tmp_path / "nope.json"), "--out", str(tmp_path / "o")),

@@ -106,6 +106,8 @@ def test_compare_refuses_bad_requests(comparison):
         compare_routes([northwards(0.0), northwards(50.0)], [omni()], population=pop, rank_level_db=52.0)
     with pytest.raises(InputError, match="population"):
         compare_routes([northwards(0.0), northwards(50.0)], [omni()])
+    with pytest.raises(InputError, match=r"levels: -1000 dB\(A\) is outside \[-50, 200\] dB\(A\)"):
+        compare_routes([northwards(0.0), northwards(50.0)], [omni()], population=pop, levels=(-1000.0, 55.0))
 
 
 def test_cli_compare(tmp_path):

@@ -134,3 +134,20 @@ def test_parse_levels_errors():
         with pytest.raises(InputError) as exc:
             parse_levels(bad)
         assert exc.value.field == "levels"
+
+
+@pytest.mark.parametrize("bad", [-1000.0, -50.5, 200.5, 1e308])
+def test_parse_levels_refuses_levels_no_microphone_records(bad):
+    """A contour level outside [-50, 200] dB(A) (gisnoise.limits.MEASURED_LEVEL_RANGE_DB) is refused in one line
+    naming the field, the value, the range and why; before, -1000 drew a band 'LAmax -1000-45 dB(A)'."""
+    with pytest.raises(InputError) as exc:
+        parse_levels([60, 45, bad])
+    msg = str(exc.value)
+    assert exc.value.field == "levels" and "\n" not in msg
+    assert msg.startswith(f"levels: {bad:g} dB(A) is outside [-50, 200] dB(A)")
+    assert "microphone" in msg
+
+
+def test_parse_levels_keeps_the_ends_of_the_range_and_merges_duplicates():
+    assert parse_levels([200, -50, 45, 45.0, "45"]) == [-50.0, 45.0, 200.0]
+    assert parse_levels("60,45,45") == [45.0, 60.0]

@@ -75,8 +75,9 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
               help="Margin around the track, m [default: from the cards, so the lowest level's LAmax and LAeq "
                    "contours close]; contours the grid's edge cuts carry \"clipped\": true and a warning.")
 @click.option("--levels", "levels", default="45,50,55,60", show_default=True, callback=_levels,
-              help="Contour levels, dB(A), comma-separated.  SEL is contoured 10 dB higher (a flyover's SEL "
-                   "exceeds its LAmax by about 10 dB): the default SEL contours are 55-70 dB(A).")
+              help="Contour levels, dB(A), comma-separated, each within -50..200 (the levels a microphone "
+                   "records); sorted, a level given twice is drawn once.  SEL is contoured 10 dB higher (a flyover's "
+                   "SEL exceeds its LAmax by about 10 dB): the default SEL contours are 55-70 dB(A).")
 @click.option("--dem", "dem", type=click.Path(dir_okay=False), default=None,
               help="DEM GeoTIFF: receivers stand on it (heights in the trajectory's vertical datum, "
                    "see --dem-offset).")
@@ -100,7 +101,7 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
 @click.option("--period", "period", type=float, default=None,
               help="LAeq period, s [default: the trajectory's duration].")
 @click.option("--threshold", "threshold", default=None, callback=_levels,
-              help="Levels for time-above bands TA<level> (s), dB(A), comma-separated.")
+              help="Levels for time-above bands TA<level> (s), dB(A), comma-separated, each within -50..200.")
 @click.option("--snapshot", "snapshot", type=float, default=None,
               help="Add the level at this instant (s) as band LA@<t>s.")
 @click.option("--substeps", "substeps", type=click.IntRange(min=1), default=1, show_default=True,

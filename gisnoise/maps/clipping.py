@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gisnoise.errors import InputError
+from gisnoise.limits import check_map_level
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.sel import metric_levels
 
@@ -25,10 +26,16 @@ __all__ = ["parse_levels", "edge_max", "cut_maxima", "clipped_levels", "clip_war
 
 
 def parse_levels(levels: Any, *, field: str = "levels") -> list[float]:
-    """Sorted unique finite levels from a sequence or a comma-separated string (dB).
+    """The contour levels of a map, dB(A), from a sequence or a comma-separated string: sorted, a level given
+    twice merged into one (a map draws each level once), each finite and within [-50, 200] dB(A)
+    (:func:`gisnoise.limits.check_map_level`: the A-weighted levels a microphone records).
 
-    >>> parse_levels("60, 45,50")
+    >>> parse_levels("60, 45,50,45")
     [45.0, 50.0, 60.0]
+    >>> parse_levels([60, 45, -1000])
+    Traceback (most recent call last):
+    ...
+    gisnoise.errors.InputError: levels: -1000 dB(A) is outside [-50, 200] dB(A) (the A-weighted levels a microphone records: below any measurement microphone's self-noise, above a jet engine at 1 m)
     """
     if isinstance(levels, str):
         parts = [p.strip() for p in levels.split(",") if p.strip()]
@@ -36,7 +43,7 @@ def parse_levels(levels: Any, *, field: str = "levels") -> list[float]:
         parts = [levels]
     else:
         parts = list(levels)
-    out = [as_float(p, field) for p in parts]
+    out = [check_map_level(field, as_float(p, field)) for p in parts]
     if not out:
         raise InputError(f"{field}: give at least one level", field=field)
     return sorted(set(out))

@@ -29,6 +29,7 @@ import numpy as np
 from gisnoise.errors import CardError, InputError, TrajectoryError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import Dem, GridSpec, LocalFrame, read_dem, resample_dem
+from gisnoise.limits import check_map_level
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.result import METRICS, band_unit, snapshot_name, threshold_name
@@ -157,7 +158,7 @@ def requested(cards: Any, metrics: Sequence[str] | str, threshold_db: Any,
     thresholds: list[float] = []
     if threshold_db is not None:
         seq = [threshold_db] if np.ndim(threshold_db) == 0 else list(threshold_db)
-        thresholds = [as_float(v, "threshold_db") for v in seq]
+        thresholds = [check_map_level("threshold_db", as_float(v, "threshold_db")) for v in seq]
     if not metrics and not thresholds and snapshot_t is None:
         raise InputError("metrics: nothing to compute (no metric, threshold or snapshot)", field="metrics")
     return cardset, metrics, thresholds

@@ -40,6 +40,7 @@ from gisnoise.exposure import (
 from gisnoise.flight import Trajectory, ground_from_track, read_route
 from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
+from gisnoise.limits import check_map_level
 from gisnoise.maps import (
     SEL_OFFSET_DB,
     CardSet,
@@ -176,7 +177,7 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         raise InputError("compare: give a population raster or buildings (or both)", field="population")
     if metric not in ("LAmax", "LAeq", "SEL"):
         raise InputError(f"metric must be LAmax, LAeq or SEL, got {metric!r}", field="metric")
-    lv = [float(v) for v in levels]
+    lv = [check_map_level("levels", v) for v in levels]
     if not lv or any(b <= a for a, b in zip(lv, lv[1:], strict=False)):
         raise InputError(f"levels must be ascending, got {levels!r}", field="levels")
     if float(rank_level_db) not in lv:

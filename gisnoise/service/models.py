@@ -17,7 +17,7 @@ from gisnoise.model import EFFECT_NAMES, PHASES, ansatz_names, get_ansatz
 __all__ = [
     "MediaType", "ErrorBody", "FieldError", "CardDocument", "CardInfo", "CardList", "CardVersions",
     "JobInfo", "JobList", "JobError", "GridRequest", "ContourRequest", "Health", "PhaseName",
-    "TrajectoryInput", "LogTrajectory", "Metric", "OutputFormat", "SafeId", "CardRef", "FileName", "AnsatzName", "CARD_SCHEMAS",
+    "TrajectoryInput", "LogTrajectory", "Metric", "MapLevel", "OutputFormat", "SafeId", "CardRef", "FileName", "AnsatzName", "CARD_SCHEMAS",
     "TRAJECTORY_COLUMNS",
 ]
 
@@ -106,6 +106,21 @@ def _length(lo: int, hi: int) -> Any:
         return value
 
     return AfterValidator(check)
+
+
+def _map_level(value: float) -> float:
+    """A level asked of a map within :data:`gisnoise.limits.MEASURED_LEVEL_RANGE_DB` (the core's
+    :func:`~gisnoise.limits.check_map_level`, said with its reason)."""
+    lo, hi = _limits.MEASURED_LEVEL_RANGE_DB
+    if not lo <= value <= hi:
+        raise ValueError(f"a level must lie within [{lo:g}, {hi:g}] dB(A) ({_limits.MAP_LEVEL_WHY})")
+    return value
+
+
+MapLevel = Annotated[float, AfterValidator(_map_level),
+                     WithJsonSchema({"type": "number", "minimum": _limits.MEASURED_LEVEL_RANGE_DB[0],
+                                     "maximum": _limits.MEASURED_LEVEL_RANGE_DB[1], "description": "dB(A)"})]
+"""An A-weighted level asked of a map (contour level, time-above threshold), dB(A), within [-50, 200]."""
 
 
 _Vehicle = Annotated[str, _length(1, 200), WithJsonSchema({"type": "string", "minLength": 1, "maxLength": 200})]
@@ -410,15 +425,18 @@ class ContourRequest(BaseModel):
     metrics: list[Metric] = Field(default=["LAmax", "LAeq", "SEL"], max_length=3,
                                   description="Bands LAmax, LAeq, SEL (dB(A)); time above and snapshot are asked "
                                               "for with threshold_db and snapshot_t.")
-    levels: list[float] = Field(default=[45.0, 50.0, 55.0, 60.0], min_length=1, max_length=40,
-                                description="Contour levels, dB(A).")
+    levels: list[MapLevel] = Field(default=[45.0, 50.0, 55.0, 60.0], min_length=1, max_length=40,
+                                   description="Contour levels, dB(A), each within [-50, 200] (the A-weighted "
+                                               "levels a microphone records); drawn in ascending order, a level "
+                                               "given twice is drawn once (gisnoise.levels of the GeoJSON lists "
+                                               "the levels drawn).")
     receiver_height_m: float = Field(default=1.5, ge=0, le=1000, description="Receiver height above ground, m.")
     ground_h_m: float | None = Field(default=None, ge=-1000, le=9000,
                                      description="Flat ground's ellipsoidal height, m; default the trajectory's "
                                                  "lowest point.")
     background: bool = Field(default=False, description="Add the card's background level (Eq. 8).")
     period_s: float | None = Field(default=None, gt=0, le=1e7, description="LAeq period, s (default duration).")
-    threshold_db: list[Annotated[float, Field(ge=-50, le=200)]] | None = Field(
+    threshold_db: list[MapLevel] | None = Field(
         default=None, max_length=10, description="Levels of time-above bands TA<level> (s), dB(A).")
     snapshot_t: float | None = Field(default=None, ge=-1e7, le=1e7,
                                      description="Instant of a snapshot band LA@<t>s, s (within the trajectory).")

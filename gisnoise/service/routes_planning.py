@@ -35,7 +35,15 @@ from pydantic import BaseModel, ConfigDict, Field
 from gisnoise.errors import GridTooLargeError, InputError
 from gisnoise.service.deps import WRITE, State, StateDep
 from gisnoise.service.errors import ApiError
-from gisnoise.service.models import CardDocument, CardRef, GridRequest, MediaType, PhaseName, TrajectoryInput
+from gisnoise.service.models import (
+    CardDocument,
+    CardRef,
+    GridRequest,
+    MapLevel,
+    MediaType,
+    PhaseName,
+    TrajectoryInput,
+)
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 from gisnoise.service.routes_contours import build_trajectory
 
@@ -176,7 +184,8 @@ class CompareRequest(BaseModel):
     population: str | None = Field(default=None, max_length=160, description="Population layer id ('id[@version]').")
     buildings: str | None = Field(default=None, max_length=160, description="Buildings layer id ('id[@version]').")
     metric: Literal["LAmax", "LAeq", "SEL"] = "LAmax"
-    levels: list[float] = Field(default=[45.0, 50.0, 55.0, 60.0, 65.0], min_length=1, max_length=20)
+    levels: list[MapLevel] = Field(default=[45.0, 50.0, 55.0, 60.0, 65.0], min_length=1, max_length=20,
+                                   description="Levels for 'people above', dB(A), ascending, each within [-50, 200].")
     rank_level_db: float = Field(default=55.0, ge=-50, le=200)
     grid: GridRequest = Field(default_factory=lambda: GridRequest(resolution_m=20.0))
     receiver_height_m: float = Field(default=1.5, ge=0, le=1000)

@@ -274,6 +274,22 @@ def test_bad_requests_name_the_field(client, change, status, field):
     assert body["detail"]
 
 
+def test_levels_outside_the_range_a_microphone_records_are_refused_and_duplicates_drawn_once(client):
+    """levels [60, 45, 45, -1000] is 422 on levels.3 stating the range [-50, 200] dB(A) and why (it was 200 with a band
+    'LAmax -1000-45 dB(A)'); a time-above threshold likewise; [60, 45, 45] draws 45 and 60 once each, in order."""
+    body = assert_names_field(client.post("/contours", json=_request(levels=[60, 45, 45, -1000])), 422, "levels.3")
+    assert "[-50, 200] dB(A)" in body["detail"] and "microphone" in body["detail"] and "-1000" in body["detail"]
+    assert_names_field(client.post("/contours", json=_request(levels=[45, 1e308])), 422, "levels.1")
+    assert_names_field(client.post("/contours", json=_request(threshold_db=[-1000])), 422, "threshold_db.0")
+    r = client.post("/contours", json=_request(levels=[60, 45, 45], metrics=["LAmax"]))
+    assert r.status_code == 200, r.text
+    fc = r.json()
+    assert fc["gisnoise"]["levels"] == [45.0, 60.0]
+    bands = [(f["properties"]["level"], f["properties"]["level_max"]) for f in fc["features"]
+             if f["properties"]["kind"] == "isoband"]
+    assert bands == [(45.0, 60.0), (60.0, None)]
+
+
 def test_phase_cards_bind_a_card_to_a_phase(client):
     # demo-climb states phases climb and hover; bound to horizontal it maps the level flight
     r = client.post("/contours", json=_request(cards=[], phase_cards={"horizontal": "demo-climb"},

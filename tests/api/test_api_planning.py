@@ -93,6 +93,8 @@ def test_compare_refusals_name_the_field(make_client, tmp_path):
     assert_names_field(client.post("/routes/compare", json={**base, "buildings": "town"}), 422, "buildings")
     assert_names_field(client.post("/routes/compare", json={**base, "grid": {"resolution_m": 0.5}}), 413,
                        "grid.resolution_m")
+    body = assert_names_field(client.post("/routes/compare", json={**base, "levels": [-1000, 55]}), 422, "levels.0")
+    assert "[-50, 200] dB(A)" in body["detail"]
     assert_names_field(upload(client, "population", "bad id", "pop.tif", b"x"), 422, "id")
     assert_names_field(upload(client, "population", "t2", "pop.tif", b"not a tiff"), 422, "file")
     assert client.get("/layers").json() == [{"id": "town", "version": 1, "kind": "population", "file": "pop.tif"}]

@@ -171,7 +171,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             self.MARGIN, "Margin around the trajectory (m; empty: from the cards, so the lowest level closes)",
             QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterString(
-            self.LEVELS, "Contour levels (dB(A), comma separated)", "45,50,55,60,65"))
+            self.LEVELS, "Contour levels (dB(A), comma separated, each within -50..200)", "45,50,55,60,65"))
         self.addParameter(QgsProcessingParameterEnum(
             self.METRICS, "Metrics (raster bands)", options=list(METRICS), allowMultiple=True,
             defaultValue=[0, 1, 2]))
