@@ -129,6 +129,31 @@ def test_parse_levels_sorts_and_dedups(levels):
     assert out == sorted(set(levels))
 
 
+@pytest.mark.parametrize("metrics", [("LAeq", "LAmax"), ("SEL", "LAeq"), ("SEL", "LAmax", "LAeq")])
+def test_geojson_lists_the_contoured_metrics_in_band_order_even_without_contours(metrics, tmp_path):
+    """gisnoise.metrics of contours.geojson is the GeoTIFF's band descriptions in their order (SPEC 5: LAmax, LAeq,
+    SEL), also when no level is reached (199 dB(A): no feature); it was sorted (LAeq before LAmax), and empty
+    without a contour."""
+    import rasterio
+
+    from gisnoise.maps import contours_text, write_geotiff
+
+    res = hover_result(metrics)
+    with rasterio.open(write_geotiff(res, tmp_path / "levels.tif")) as ds:
+        bands = list(ds.descriptions)
+    assert bands == [m for m in ("LAmax", "LAeq", "SEL") if m in metrics]
+    for levels, no_feature in (([45.0, 60.0], False), ([199.0], True)):
+        doc = contours_geojson(res, levels)
+        assert doc["gisnoise"]["metrics"] == bands
+        assert json.loads(contours_text(res, levels))["gisnoise"]["metrics"] == bands
+        written = json.loads(write_geojson(res, tmp_path / "c.geojson", levels).read_text())
+        assert written["gisnoise"]["metrics"] == bands
+        if no_feature:
+            assert doc["features"] == []
+        else:  # the features follow the same order
+            assert list(dict.fromkeys(f["properties"]["metric"] for f in doc["features"])) == bands
+
+
 def test_parse_levels_errors():
     for bad in ("", "55,abc", "inf"):
         with pytest.raises(InputError) as exc:

@@ -441,11 +441,20 @@ def contours_geojson(result: MapResult, levels: Any, *, metrics: Sequence[str] |
 
 
 def _collection(result: MapResult, levels: Any, metrics: Sequence[str] | None, feats: list[dict]) -> dict:
+    """The FeatureCollection of ``feats``; its ``gisnoise`` member: the levels drawn, the map's warnings, the
+    bands contoured (``metrics``: in the order of the features, the order of the map's bands and so of the
+    GeoTIFF's unless ``metrics`` says otherwise, each listed even when none of its levels is reached) and the
+    grid."""
     return {"type": "FeatureCollection", "features": feats,
             "gisnoise": {"levels": parse_levels(levels),
                          "warnings": geojson_warnings(result, levels, metrics),
-                         "metrics": sorted({f["properties"]["metric"] for f in feats}),
+                         "metrics": _contoured(result, metrics),
                          "grid": result.grid.to_dict()}}
+
+
+def _contoured(result: MapResult, metrics: Sequence[str] | None) -> list[str]:
+    """The bands :func:`contour_features` contours, in its order."""
+    return result.level_bands() if metrics is None else list(dict.fromkeys(metrics))
 
 
 def write_geojson(result: MapResult, path: str | os.PathLike[str], levels: Any, *,

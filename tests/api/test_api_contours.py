@@ -290,6 +290,17 @@ def test_levels_outside_the_range_a_microphone_records_are_refused_and_duplicate
     assert bands == [(45.0, 60.0), (60.0, None)]
 
 
+def test_geojson_metrics_are_the_geotiff_bands_in_order_even_without_contours(client):
+    """gisnoise.metrics lists the computed metrics in the order of the GeoTIFF's bands for the same request, also when
+    no contour exists (199 dB(A)); it was sorted (['LAeq', 'LAmax']) and [] without a contour."""
+    for levels in ([45, 50], [199]):
+        req = _request(metrics=["SEL", "LAeq"], levels=levels)
+        meta, _ = _read_tif(client.post("/contours", json=dict(req, output="geotiff")).content)
+        fc = client.post("/contours", json=req).json()
+        assert fc["gisnoise"]["metrics"] == list(meta["descriptions"]) == ["LAeq", "SEL"]
+        assert (fc["features"] == []) == (levels == [199])
+
+
 def test_phase_cards_bind_a_card_to_a_phase(client):
     # demo-climb states phases climb and hover; bound to horizontal it maps the level flight
     r = client.post("/contours", json=_request(cards=[], phase_cards={"horizontal": "demo-climb"},
