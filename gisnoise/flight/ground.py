@@ -24,10 +24,15 @@ from gisnoise.flight.rest import REST_SPEED_M_S
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.limits import GROUND_TOLERANCE_M
 
-__all__ = ["ground_from_track", "flying_parts", "flying_segments", "GROUND_TOLERANCE_M", "REST_SPEED_M_S", "GROUND_RULE"]
+__all__ = ["ground_from_track", "flying_parts", "flying_segments", "GROUND_TOLERANCE_M", "REST_SPEED_M_S", "GROUND_RULE",
+           "GROUND_HINT_CLI"]
 
 GROUND_RULE = ("without --dem or --ground-height, the ground is taken from the track only when it starts or "
                "ends on the ground (take-off or landing)")
+
+GROUND_HINT_CLI = "--ground-height M (field ground_h_m) or --dem DEM.tif"
+"""How a map's user gives the ground when the track does not (the command line's options and the request's
+field); the service names its own field instead (:data:`gisnoise.service.errors.CLI_WORDS`)."""
 
 
 def ground_from_track(traj: Trajectory) -> float | None:

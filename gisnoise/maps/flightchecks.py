@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.flight import Trajectory, track_warning
+from gisnoise.flight import GROUND_HINT_CLI, Trajectory, track_warning
 from gisnoise.geo import centre_lon, scale_factor
 from gisnoise.limits import GROUND_TOLERANCE_M
 from gisnoise.maps.cardset import CardSet
@@ -43,8 +43,6 @@ __all__ = ["CRS_SCALE_TOLERANCE", "FlightFindings", "airborne_without_power", "b
 GROUND_FROM_OWN = "its take-off or landing point"
 """Where a map's ground came from when the track gave it (the words of :func:`below_track_ground`)."""
 
-GROUND_HINT_CLI = "--ground-height M (field ground_h_m) or --dem DEM.tif"
-"""How a map's user gives the ground instead (the command line's options and the request's field)."""
 
 
 @dataclass(frozen=True)

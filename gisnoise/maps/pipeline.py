@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.flight import Trajectory, flying_parts, ground_from_track, read_route
+from gisnoise.flight import GROUND_HINT_CLI, Trajectory, flying_parts, ground_from_track, read_route
 from gisnoise.geo import GridSpec
 from gisnoise.limits import check_receivers, check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
@@ -368,7 +368,7 @@ def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: flo
     if g is None:
         lo = float(np.min(traj.h))
         raise InputError(f"{traj.source}: ground unknown: the track neither starts nor ends on the ground (lowest "
-                         f"point {lo:.1f} m); give --ground-height M (field ground_h_m) or --dem DEM.tif",
+                         f"point {lo:.1f} m); give {GROUND_HINT_CLI}",
                          field="ground_h")
     return g
 

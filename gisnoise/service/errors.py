@@ -8,12 +8,14 @@ plus ``errors`` listing every invalid field of a rejected request body.
 from __future__ import annotations
 
 import logging
+import math
 import re
 import struct
 import tempfile
 import zipfile
 import zlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -37,12 +39,13 @@ from gisnoise.errors import (
     SchemaVersionError,
     TrajectoryError,
 )
+from gisnoise.flight import GROUND_HINT_CLI
 from gisnoise.limits import WorkLimitError
 from gisnoise.service import models as _models
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 
 __all__ = ["STATUS", "ApiError", "status_for", "error_body", "install_handlers", "scrub_paths", "UNREADABLE",
-           "allowed_methods"]
+           "allowed_methods", "request_fields", "request_words", "CLI_WORDS", "core_detail"]
 
 log = logging.getLogger(__name__)
 
@@ -112,6 +115,54 @@ def scrub_paths(message: str, roots: Iterable[str | object] = (), *, any_path: b
     return re.sub(r"(?<![\w.:/])/(?:[^\s'\"/:]+/)+([^\s'\"/:]+)", r"\1", out)
 
 
+# ------------------------------------------------------------------ the core's words -> the request's
+CLI_WORDS: tuple[tuple[str, str], ...] = (
+    (GROUND_HINT_CLI, "ground_h_m"),
+    ("--ground-height M (field ground_h_m)", "ground_h_m"),
+    ("--ground-height", "ground_h_m"),
+    ("--power-w W, field power_w", "trajectory.power_w"),
+    ("--power-w W, or power_w", "trajectory.power_w"),
+    ("--power-w W", "trajectory.power_w"),
+    ("--geoid-undulation N, field geoid_undulation_m", "trajectory.geoid_undulation_m"),
+    ("no path from --from to --to", "no path from start to goal"),
+    ("--from and --to", "start and goal"),
+    ("give --margin", "give grid.margin_m"),
+)
+"""What the core's messages say to the command line's user (its options) -> what a request says instead (its
+fields), longest phrase first: a request has no ``--dem`` or ``--from``, and the client needs the field to set."""
+
+
+def request_words(message: str) -> str:
+    """``message`` with the command line's options of :data:`CLI_WORDS` named as the request's fields."""
+    for said, field in CLI_WORDS:
+        message = message.replace(said, field)
+    return message
+
+
+@contextmanager
+def request_fields(table: Mapping[str, str], *, default: str | None = None) -> Iterator[None]:
+    """Core errors raised inside name the request's field: the core's field (an argument or an option of the
+    command line) -> the request's by ``table``; a field the table lacks becomes ``default`` (when given) or
+    stays (it is the request's already)."""
+    try:
+        yield
+    except GisnoiseError as exc:
+        fld = exc.field or ""
+        exc.field = table.get(fld, fld if default is None else default) or default
+        raise
+
+
+def core_detail(message: str, field: str | None) -> str:
+    """The ``detail`` of a core error: its message in the request's words (:func:`request_words`), led by the
+    field when the message does not name it (``trajectory.data_base64: x.ulg: not a readable ULog``)."""
+    msg = request_words(message)
+    if field:
+        leaf = re.split(r"[.\[]", field)[-1] or field
+        if not re.search(rf"(?<![\w-]){re.escape(leaf)}(?![\w-])", msg):
+            msg = f"{field}: {msg}"
+    return msg
+
+
 def allowed_methods(app: FastAPI, path: str) -> list[str]:
     """Every method the OpenAPI schema of ``app`` states for ``path`` (the ``Allow`` header of a 405).
 
@@ -151,27 +202,30 @@ def error_body(message: str, field: str | None, errors: Sequence[dict[str, Any]]
     return body
 
 
-_TRAJECTORY_TAGS = {"csv", "columns", "rows", "geojson", "waypoints"}
+_TRAJECTORY_TAGS = {"csv", "columns", "rows", "geojson", "waypoints", "log"}
 _MODEL_NAMES = {n for n, v in vars(_models).items() if isinstance(v, type) and issubclass(v, BaseModel)}
 
 
-def _is_tag(part: str, previous: str | None) -> bool:
-    """A union member's name that pydantic puts in the location (not a field the client wrote)."""
+def _is_tag(part: str, before: Sequence[str]) -> bool:
+    """A union member's name that pydantic puts in the location (not a field the client wrote); ``before``: the
+    location up to it."""
     if part == "[key]" or part.startswith(("constrained-", "function-")) or part in ("str", "float", "int", "bool"):
         return True
     if part in _MODEL_NAMES:  # a model class name (CardDocument, ...)
         return True
-    return previous == "trajectory" and part in _TRAJECTORY_TAGS
+    # the format tag of a trajectory: the request's trajectory, or one of a comparison's routes
+    return part in _TRAJECTORY_TAGS and (before[-1:] == ["trajectory"] or
+                                         (before[-2:-1] == ["routes"] and before[-1].isdigit()))
 
 
 def _loc_field(loc: Sequence[Any]) -> str:
     parts: list[str] = []
-    previous = None
+    before: list[str] = []
     for p in loc:
         s = str(p)
-        if not _is_tag(s, previous):
+        if not _is_tag(s, before):
             parts.append(s)
-        previous = s
+        before.append(s)
     if parts and parts[0] in ("body", "query", "path", "header", "cookie"):
         where, rest = parts[0], parts[1:]
         # a tagged union adds the tag name to the location; users know the field, not the tag
@@ -179,8 +233,11 @@ def _loc_field(loc: Sequence[Any]) -> str:
     return ".".join(parts)
 
 
-_PATH_FIELDS = {"card_id": "id"}
-"""Path parameters named as the other errors about them name them."""
+_STORE_NAMES = {"card_id": "id"}
+"""Path parameter -> the name a store's errors give it (the card store says ``id``, as a card document does):
+an error about the parameter names it as the URL template does (``/cards/{card_id}``)."""
+
+_COMPARISONS = {"greater_than", "greater_than_equal", "less_than", "less_than_equal", "multiple_of"}
 
 
 def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
@@ -196,10 +253,11 @@ def _validation_errors(exc: RequestValidationError) -> list[dict[str, Any]]:
         fld = _loc_field(loc)
         if e.get("type") == "json_invalid":
             fld = "body"
-        elif loc[:1] == ("path",):
-            fld = _PATH_FIELDS.get(fld, fld)
         msg = str(e.get("msg", "invalid")).removeprefix("Value error, ")
         got = e.get("input")
+        if e.get("type") in _COMPARISONS and isinstance(got, float) and not math.isfinite(got):
+            msg, e["type"] = "Input should be a finite number", "finite_number"  # NaN is not 'above 100000'
+
         if e.get("type") != "missing" and isinstance(got, (int, float, str)) and len(repr(got)) <= 40:
             msg += f", got {got!r}"  # the bad value, as every other refusal names it
         out.append({"field": fld, "message": msg, "type": str(e.get("type", ""))})
@@ -218,13 +276,18 @@ def install_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(ApiError)
     async def _api_error(request: Request, exc: ApiError) -> JSONResponse:
-        return JSONResponse(error_body(scrub_paths(str(exc), roots(), any_path=False), exc.field), status_code=exc.status,
+        fld, msg = exc.field, str(exc)
+        for param, said in _STORE_NAMES.items():
+            if fld == said and param in request.path_params:
+                fld, msg = param, (param + msg[len(said):] if msg.startswith(f"{said}:") else msg)
+        return JSONResponse(error_body(scrub_paths(msg, roots(), any_path=False), fld), status_code=exc.status,
                             headers=exc.headers)
 
     @app.exception_handler(GisnoiseError)
     async def _core_error(request: Request, exc: GisnoiseError) -> JSONResponse:
         status = status_for(exc)
-        return JSONResponse(error_body(scrub_paths(str(exc), roots()), exc.field or "body"), status_code=status)
+        fld = exc.field or "body"
+        return JSONResponse(error_body(core_detail(scrub_paths(str(exc), roots()), fld), fld), status_code=status)
 
     @app.exception_handler(Exception)
     async def _last_resort(request: Request, exc: Exception) -> JSONResponse:

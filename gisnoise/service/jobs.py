@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from gisnoise.errors import Cancelled, GisnoiseError
-from gisnoise.service.errors import UNREADABLE, scrub_paths, status_for
+from gisnoise.service.errors import UNREADABLE, core_detail, scrub_paths, status_for
 
 __all__ = ["Job", "JobContext", "JobStore", "WorkerPool", "STATES", "FINAL_STATES", "Handler"]
 
@@ -459,6 +459,8 @@ class WorkerPool:
             msg = str(exc) or type(exc).__name__
             if isinstance(exc, UNREADABLE):
                 msg = f"{fld}: a file cannot be read ({type(exc).__name__}: {msg})"
+            elif isinstance(exc, GisnoiseError):  # the detail a synchronous request would answer
+                msg = core_detail(msg, fld)
             # the server's folders mean nothing to the client
             for folder in (ctx.input_dir.resolve(), ctx.input_dir):
                 msg = msg.replace(str(folder), "upload")

@@ -245,7 +245,7 @@ class Health(BaseModel):
 class CsvTrajectory(BaseModel):
     """A flight CSV (SPEC section 3 columns) as text."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     format: Literal["csv"]
     text: str = Field(min_length=1, max_length=100_000_000,
                       description="Flight CSV text: t, lat, lon, h, roll, pitch, yaw, power_w[, phase]")
@@ -270,7 +270,7 @@ TRAJECTORY_COLUMNS = (*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS)
 class FlightColumns(BaseModel):
     """Flight-CSV columns as arrays of equal length (at least two samples, times strictly increasing)."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     t: list[_T] = _N
     lat: list[_LAT] = _N
     lon: list[_LON] = _N
@@ -290,7 +290,7 @@ class FlightColumns(BaseModel):
 class FlightRow(BaseModel):
     """One log sample (the flight-CSV columns of one row)."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     t: _T
     lat: _LAT
     lon: _LON
@@ -311,7 +311,7 @@ assert set(FlightColumns.model_fields) == set(TRAJECTORY_COLUMNS) == set(FlightR
 class ColumnsTrajectory(BaseModel):
     """Flight-CSV columns as arrays."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     format: Literal["columns"]
     columns: FlightColumns = Field(description="Column name -> values (" + ", ".join(TRAJECTORY_COLUMNS) + ")")
 
@@ -319,7 +319,7 @@ class ColumnsTrajectory(BaseModel):
 class RowsTrajectory(BaseModel):
     """Flight-CSV rows as objects."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     format: Literal["rows"]
     rows: list[FlightRow] = Field(min_length=_limits.MIN_SAMPLES, max_length=_LIM.max_samples,
                                   description="One object per log sample (the same fields in each).")
@@ -354,7 +354,7 @@ _ROUTE_DATA_SCHEMA: dict[str, Any] = {"anyOf": [
 class GeoJSONTrajectory(BaseModel):
     """A GeoJSON LineString with Z and times, or waypoints (SPEC section 7) as GeoJSON or JSON."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     format: Literal["geojson", "waypoints"]
     data: Annotated[dict[str, Any], WithJsonSchema(_ROUTE_DATA_SCHEMA)] = Field(
         description="GeoJSON object (Feature, FeatureCollection, LineString) or waypoint document, as read by "
@@ -369,7 +369,7 @@ class LogTrajectory(BaseModel):
     a log without battery current needs ``power_w``.
     """
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     format: Literal["log"]
     name: str = Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,99}\.([uU][lL][gG]|[bB][iI][nN])$",
                       description="File name; its suffix (.ulg or .bin, any case) selects the reader.")
@@ -386,7 +386,7 @@ TrajectoryInput = Annotated[CsvTrajectory | ColumnsTrajectory | RowsTrajectory |
 
 
 class GridRequest(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     resolution_m: float = Field(default=10.0, ge=0.1, le=100_000, description="Cell size, m (0.1 m or more).")
     margin_m: float | None = Field(
         default=None, ge=0, le=1_000_000,
@@ -409,7 +409,7 @@ _ROUTE_EXAMPLE: dict[str, Any] = {"type": "FeatureCollection", "route": {"altitu
 class ContourRequest(BaseModel):
     """A noise map of one trajectory."""
 
-    model_config = ConfigDict(extra="forbid", strict=True, json_schema_extra={"example": {
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, json_schema_extra={"example": {
         "trajectory": {"format": "waypoints", "data": _ROUTE_EXAMPLE},
         "cards": ["demo-horizontal", "demo-climb", "demo-sink"], "grid": {"resolution_m": 20, "margin_m": 400},
         "metrics": ["LAmax", "LAeq"], "levels": [45, 50, 55, 60]}})

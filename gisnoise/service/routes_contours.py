@@ -33,7 +33,7 @@ from gisnoise.model import ModelCard
 from gisnoise.model import cards as gcards
 from gisnoise.service.cardstore import CardStore
 from gisnoise.service.deps import WRITE, State, StateDep, require_key
-from gisnoise.service.errors import ApiError
+from gisnoise.service.errors import ApiError, request_fields
 from gisnoise.service.jobs import JobContext
 from gisnoise.service.models import (
     CardDocument,
@@ -75,17 +75,8 @@ def _prefixed(prefix: str) -> Iterator[None]:
 
 _CORE_FIELDS = {"resolution_m": "grid.resolution_m", "margin_m": "grid.margin_m", "crs": "grid.crs",
                 "ground_h": "ground_h_m", "receiver_height": "receiver_height_m", "card": "cards", "phase": "cards",
-                "trajectory": "trajectory", "out": "body"}
-"""Core argument names -> request fields, for the errors of ``make_map``."""
-
-
-@contextmanager
-def _core_fields() -> Iterator[None]:
-    try:
-        yield
-    except GisnoiseError as exc:
-        exc.field = _CORE_FIELDS.get(exc.field or "", exc.field or "body")
-        raise
+                "trajectory": "trajectory", "out": "body", "power_w": "trajectory.power_w", "": "body"}
+"""Core argument names -> request fields, for the errors of ``make_map`` (:func:`~gisnoise.service.errors.request_fields`)."""
 
 
 def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
@@ -107,7 +98,8 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
                 assert ref is not None
                 raise TrajectoryError(f"trajectory: column '{bad[0]}' has {lengths[bad[0]]} values, column "
                                       f"'{ref}' has {lengths[ref]}", field=f"columns.{bad[0]}")
-            traj = from_columns(_numeric_columns(cols), source="trajectory")
+            with _prefixed("columns"):  # a column's fault is the request's trajectory.columns.<name>
+                traj = from_columns(_numeric_columns(cols), source="trajectory")
         elif isinstance(spec, RowsTrajectory):
             rows = [r.model_dump(exclude_none=True) for r in spec.rows]
             keys = list(rows[0])
@@ -117,12 +109,14 @@ def build_trajectory(spec: Any, *, max_samples: int) -> Trajectory:
                     raise TrajectoryError(f"trajectory: rows[{i}] has different fields than rows[0] "
                                           f"({', '.join(missing)})", field=f"rows[{i}].{missing[0]}")
             cols = {k: [r[k] for r in rows] for k in keys}
-            traj = from_columns(_numeric_columns(cols), source="trajectory")
+            with _prefixed("rows"):
+                traj = from_columns(_numeric_columns(cols), source="trajectory")
         elif isinstance(spec, GeoJSONTrajectory):
             from gisnoise.flight import routes
 
-            traj = ROUTE_CACHE.get(route_key(spec.data, spec.format, max_samples, repr(limits.current())),
-                                   lambda: routes.read_trajectory(spec.data))
+            with _prefixed("data"):  # what the route reader names lies in the request's trajectory.data
+                traj = ROUTE_CACHE.get(route_key(spec.data, spec.format, max_samples, repr(limits.current())),
+                                       lambda: routes.read_trajectory(spec.data))
         elif isinstance(spec, LogTrajectory):
             traj = _read_log(spec)
         else:  # pragma: no cover - the request model admits no other
@@ -140,7 +134,7 @@ def _read_log(spec: LogTrajectory) -> Trajectory:
     try:
         raw = base64.b64decode(spec.data_base64, validate=True)
     except (binascii.Error, ValueError):
-        raise TrajectoryError("trajectory: data_base64 is not valid base64", field="data_base64") from None
+        raise TrajectoryError("trajectory.data_base64: not valid base64 (RFC 4648)", field="data_base64") from None
     with tempfile.TemporaryDirectory(prefix="gisnoise-log-") as tmp:
         path = Path(tmp) / spec.name
         path.write_bytes(raw)
@@ -148,8 +142,14 @@ def _read_log(spec: LogTrajectory) -> Trajectory:
             traj = read_route(path, geoid_undulation_m=spec.geoid_undulation_m, power_w=spec.power_w).trajectory
         except GisnoiseError as exc:
             msg = str(exc).replace(str(path), spec.name).replace(tmp, "")
-            raise type(exc)(msg, field=exc.field) from None
+            # what the log's bytes hold (a topic, a message, its times, the file itself) is data_base64's fault
+            fld = exc.field if exc.field in _LOG_FIELDS else "data_base64"
+            raise type(exc)(msg, field=fld) from None
     return dataclasses.replace(traj, source=spec.name)
+
+
+_LOG_FIELDS = {"power_w", "geoid_undulation_m"}
+"""The fields of a log trajectory besides its bytes that the log reader's errors may name."""
 
 
 def _numeric_columns(cols: Mapping[str, list[Any]]) -> dict[str, Any]:
@@ -191,7 +191,7 @@ def _auto_margin(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, 
         return req
     from gisnoise.maps import CardSet, auto_margin
 
-    with _core_fields():
+    with request_fields(_CORE_FIELDS):
         margin, _ = auto_margin(traj, CardSet(cards), min(req.levels), resolution_m=req.grid.resolution_m,
                                 crs=req.grid.crs, background=req.background, cell_limit=max_cells,
                                 sel="SEL" in req.metrics)
@@ -248,10 +248,10 @@ def _make_map(traj: Trajectory, cards: list[ModelCard], req: ContourRequest, out
         # lowest point recomputed from the flown heights (which differs from it by rounding)
         from gisnoise.flight import routes
 
-        with _prefixed("trajectory"):
+        with _prefixed("trajectory.data"):
             route = routes.read_route(req.trajectory.data)
         ground_h = route.ground_h_m
-    with _core_fields():
+    with request_fields(_CORE_FIELDS):
         paths = make_map(traj, cards, out_dir, resolution_m=req.grid.resolution_m, margin_m=req.grid.margin_m,
                          levels=tuple(req.levels), metrics=tuple(req.metrics), crs=req.grid.crs, dem=None,
                          receiver_height=req.receiver_height_m, ground_h=ground_h,

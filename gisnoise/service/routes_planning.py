@@ -34,7 +34,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from gisnoise.errors import GridTooLargeError, InputError
 from gisnoise.service.deps import WRITE, State, StateDep
-from gisnoise.service.errors import ApiError
+from gisnoise.service.errors import ApiError, request_fields
 from gisnoise.service.models import (
     CardDocument,
     CardRef,
@@ -175,7 +175,7 @@ def list_layers(state: StateDep) -> JSONResponse:
 class CompareRequest(BaseModel):
     """Candidate routes ranked by the people they expose."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     routes: list[TrajectoryInput] = Field(min_length=2, max_length=20, description="Candidate routes.")
     names: list[Annotated[str, Field(min_length=1, max_length=64)]] | None = Field(
         default=None, description="Names of the routes (default route1, route2, ...).")
@@ -194,6 +194,12 @@ class CompareRequest(BaseModel):
                                                                            "difference GeoTIFF.")
 
 
+_COMPARE_FIELDS = {"rank_level": "rank_level_db", "ground_h": "ground_h_m", "receiver_height": "receiver_height_m",
+                   "resolution_m": "grid.resolution_m", "margin_m": "grid.margin_m", "crs": "grid.crs",
+                   "card": "cards", "phase": "cards", "power_w": "routes", "": "body"}
+"""The names ``compare_routes`` gives its arguments -> the fields of a compare request."""
+
+
 def _compare(req: CompareRequest, state: State) -> tuple[bytes, str]:
     from gisnoise.exposure import read_buildings, read_population
     from gisnoise.geo import grid_for_points
@@ -209,8 +215,9 @@ def _compare(req: CompareRequest, state: State) -> tuple[bytes, str]:
     for i, r in enumerate(req.routes):
         try:
             trajs.append(build_trajectory(r, max_samples=s.max_trajectory_samples))
-        except (InputError, ApiError) as exc:
-            exc.field = f"routes[{i}].{exc.field}" if exc.field else f"routes[{i}]"
+        except (InputError, ApiError) as exc:  # build_trajectory names the field of a contour request's trajectory
+            rest = (exc.field or "").removeprefix("trajectory").lstrip(".")
+            exc.field = f"routes[{i}].{rest}" if rest else f"routes[{i}]"
             raise
     cards = resolve_cards(req, state.cards)  # type: ignore[arg-type]  # same card fields as ContourRequest
     import numpy as np
@@ -234,7 +241,7 @@ def _compare(req: CompareRequest, state: State) -> tuple[bytes, str]:
     st = _store(state)
     pop = read_population(st.resolve(req.population, "population", field="population")) if req.population else None
     b = read_buildings(st.resolve(req.buildings, "buildings", field="buildings")) if req.buildings else None
-    with _slots:
+    with _slots, request_fields(_COMPARE_FIELDS):
         cmp = compare_routes(trajs, cards, population=pop, buildings=b, names=req.names, metric=req.metric,
                              levels=req.levels, rank_level_db=req.rank_level_db, grid=grid,
                              receiver_height=req.receiver_height_m, ground_h=req.ground_h_m)
@@ -258,7 +265,7 @@ async def compare(req: CompareRequest, state: StateDep) -> Response:
 class OptimizeRequest(BaseModel):
     """A quieter route between two pads."""
 
-    model_config = ConfigDict(extra="forbid", strict=True)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
     start: list[float] = Field(min_length=2, max_length=2, description="Take-off pad [lon, lat], deg.")
     goal: list[float] = Field(min_length=2, max_length=2, description="Landing pad [lon, lat], deg.")
     cards: list[CardRef | CardDocument] = Field(min_length=1, max_length=32, description="Cards by id or inline.")
@@ -295,6 +302,13 @@ def _avoid_polygons(doc: dict[str, Any] | None) -> list[Any]:
     return out
 
 
+_OPTIMIZE_FIELDS = {"from": "start", "to": "goal", "altitude": "altitude_m", "max_detour": "max_detour_pct",
+                    "turn_radius": "turn_radius_m", "rank_level": "rank_level_db", "ground_h": "ground_h_m",
+                    "card": "cards", "phase": "cards", "": "body"}
+"""The names ``optimize_route`` gives its arguments (the command line's options) -> the fields of an optimize
+request."""
+
+
 def _optimize(req: OptimizeRequest, state: State) -> dict[str, Any]:
     from gisnoise.exposure import read_buildings, read_population
     from gisnoise.planning import optimize_route, waypoints_geojson
@@ -318,7 +332,7 @@ def _optimize(req: OptimizeRequest, state: State) -> dict[str, Any]:
     st = _store(state)
     pop = read_population(st.resolve(req.population, "population", field="population")) if req.population else None
     b = read_buildings(st.resolve(req.buildings, "buildings", field="buildings")) if req.buildings else None
-    with _slots:
+    with _slots, request_fields(_OPTIMIZE_FIELDS):
         res = optimize_route((req.start[0], req.start[1]), (req.goal[0], req.goal[1]), cards, population=pop, buildings=b,
                              avoid=_avoid_polygons(req.avoid), altitude_m=req.altitude_m,
                              max_detour_pct=req.max_detour_pct, turn_radius_m=req.turn_radius_m,

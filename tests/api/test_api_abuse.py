@@ -55,14 +55,14 @@ def test_tiny_sample_step_is_refused_before_the_route_is_sampled(server):
     for dt in (1e-5, 1e-6):
         body = {"trajectory": {"format": "waypoints", "data": _route(sample_dt_s=dt)}, "cards": ["demo-horizontal"]}
         r = httpx.post(server.url + "/contours", json=body, timeout=60)
-        b = assert_names_field(r, 413, "trajectory.sample_dt_s")
+        b = assert_names_field(r, 413, "trajectory.data.sample_dt_s")
         assert "200000" in b["detail"]
     for props, field in (({"hold_s": 1e12}, "hold_s"), ({"speed": 1e-9}, "sample_dt_s")):
         doc = _route()
         doc["features"][2]["properties"].update(props)
         r = httpx.post(server.url + "/contours", json={"trajectory": {"format": "waypoints", "data": doc},
                                                        "cards": ["demo-horizontal"]}, timeout=60)
-        assert r.status_code in (413, 422) and r.json()["field"] == f"trajectory.{field}", r.text
+        assert r.status_code in (413, 422) and r.json()["field"] == f"trajectory.data.{field}", r.text
     assert httpx.get(server.url + "/health", timeout=5).status_code == 200
     assert _peak_rss_bytes(server.proc.pid) < GB
 
@@ -177,8 +177,8 @@ def test_unsafe_card_ids_are_refused_on_upload(client, card_id):
 
 
 def test_ids_in_urls_follow_the_one_pattern_and_headers_stay_valid(client):
-    assert_names_field(client.get("/cards/x%0A"), 422, "id")
-    assert_names_field(client.get("/cards/con"), 422, "id")
+    assert_names_field(client.get("/cards/x%0A"), 422, "card_id")
+    assert_names_field(client.get("/cards/con"), 422, "card_id")
     assert_names_field(client.get("/jobs/x%0A"), 422, "job_id")
     r = client.post("/cards", json=_card("ok.card-1_a"))
     assert r.status_code == 201

@@ -89,12 +89,16 @@ def test_cards_with_chained_effects_are_stored(client):
 
 
 def test_get_and_delete_errors(client):
-    assert_names_field(client.get("/cards/nope"), 404, "id")
+    """Errors about the path parameter name it as the URL template does, card_id (they said 'id', a field of the
+    card document; the job paths already said job_id)."""
+    assert_names_field(client.get("/cards/nope"), 404, "card_id")
     assert_names_field(client.get("/cards/demo-sink", params={"version": 7}), 404, "version")
     assert_names_field(client.get("/cards/demo-sink", params={"version": 0}), 422, "version")
-    assert_names_field(client.get("/cards/bad id!"), 422, "id")
-    assert_names_field(client.delete("/cards/nope"), 404, "id")
-    assert_names_field(client.get("/cards/nope/versions"), 404, "id")
+    assert_names_field(client.get("/cards/bad id!"), 422, "card_id")
+    assert_names_field(client.delete("/cards/nope"), 404, "card_id")
+    assert_names_field(client.get("/cards/nope/versions"), 404, "card_id")
+    body = client.get("/cards/nope").json()
+    assert body["detail"].startswith("card_id: ") and "nope" in body["detail"]
 
 
 def test_delete_one_version_then_all(client):

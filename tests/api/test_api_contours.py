@@ -319,6 +319,26 @@ def test_phase_cards_bind_a_card_to_a_phase(client):
     assert np.nanmax(lamax) == pytest.approx(P0 - 20 * math.log10(98.5 / 40.0), abs=0.03)
 
 
+@pytest.mark.parametrize("path, text", [("grid.resolution_m", '"resolution_m": NaN'),
+                                        ("grid.resolution_m", '"resolution_m": Infinity'),
+                                        ("ground_h_m", '"ground_h_m": NaN'), ("levels.1", '"levels": [45, -Infinity]'),
+                                        ("receiver_height_m", '"receiver_height_m": NaN')])
+def test_non_finite_numbers_are_said_to_be_no_finite_number(client, path, text):
+    """NaN and infinities (which Python's JSON reads) are refused as 'not a finite number' naming the field; NaN
+    was reported as 'should be less than or equal to 100000, got nan'."""
+    req = _request(grid={"resolution_m": 10, "margin_m": 200}, receiver_height_m=1.5)
+    key = text.split(":")[0].strip('"')
+    raw = json.dumps(req).replace(f'"{key}": ' + json.dumps(_path_value(req, key)), text, 1)
+    assert text in raw
+    r = client.post("/contours", content=raw, headers={"content-type": "application/json"})
+    body = assert_names_field(r, 422, path)
+    assert body["detail"].startswith(f"{path}: Input should be a finite number"), body
+
+
+def _path_value(req: dict, key: str):
+    return req["grid"][key] if key in req["grid"] else req[key]
+
+
 def test_malformed_json_is_422_naming_the_body(client):
     r = client.post("/contours", content=b'{"trajectory": ', headers={"content-type": "application/json"})
     assert_names_field(r, 422, "body")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from service_helpers import CARDS, assert_names_field
+from service_helpers import CARDS, assert_names_field, wait_job
 from test_api_contours import _omni_card, _request
 
 
@@ -26,10 +26,13 @@ def test_contour_with_an_implausible_inline_card_is_422_naming_p2(client):
 
 
 def test_contour_of_an_airborne_track_without_ground_is_422_naming_ground_h_m(client):
+    """The refusal names the request's field, not the command line's options (it said 'give --ground-height M
+    (field ground_h_m) or --dem DEM.tif'; a request has no DEM)."""
     req = _request()
     del req["ground_h_m"]
     body = assert_names_field(client.post("/contours", json=req), 422, "ground_h_m")
-    assert "--dem" in body["detail"] or "dem" in body["detail"]
+    assert body["detail"].endswith("give ground_h_m"), body
+    assert "--" not in body["detail"] and "dem" not in body["detail"].lower(), body
 
 
 def _stored_without_the_guard(client, doc: dict) -> None:
@@ -59,3 +62,19 @@ def test_a_card_stated_at_1e_9_m_is_refused_by_upload_and_map_naming_reference_d
     r = client.post("/cards", params={"new_version": "true"}, json=fixed)
     assert r.status_code == 201 and r.json()["version"] == 2, r.text
     assert client.post("/contours", json=_request(cards=["absurd6"])).status_code == 200
+
+
+def test_linestring_without_ground_names_ground_h_m_not_the_command_line(client):
+    """A LineString in the air without ground_h_m: 422 on ground_h_m saying to give it (it said --ground-height or
+    --dem); the same request as a job fails with the same detail, field and status."""
+    line = {"type": "Feature", "properties": {"times": [0, 60]},
+            "geometry": {"type": "LineString", "coordinates": [[10.54, 52.243, 60], [10.55, 52.25, 60]]}}
+    req = {"trajectory": {"format": "geojson", "data": line}, "cards": ["demo-horizontal"],
+           "grid": {"resolution_m": 20, "margin_m": 100}}
+    body = assert_names_field(client.post("/contours", json=req), 422, "ground_h_m")
+    assert "give ground_h_m" in body["detail"] and "--" not in body["detail"], body
+    r = client.post("/jobs/contours", json=req)
+    assert r.status_code == 202, r.text
+    info = wait_job(client, r.json()["id"])
+    assert info["status"] == "failed"
+    assert info["error"] == {"detail": body["detail"], "field": "ground_h_m", "status": 422}

@@ -93,6 +93,10 @@ def test_compare_refusals_name_the_field(make_client, tmp_path):
     assert_names_field(client.post("/routes/compare", json={**base, "buildings": "town"}), 422, "buildings")
     assert_names_field(client.post("/routes/compare", json={**base, "grid": {"resolution_m": 0.5}}), 413,
                        "grid.resolution_m")
+    garbage = {"format": "log", "name": "x.ulg", "data_base64": "AAAAAAAA"}
+    body = assert_names_field(client.post("/routes/compare", json={**base, "routes": [route_csv(0.0), garbage]}),
+                              422, "routes[1].data_base64")
+    assert "x.ulg" in body["detail"] and "trajectory" not in body["field"]
     body = assert_names_field(client.post("/routes/compare", json={**base, "levels": [-1000, 55]}), 422, "levels.0")
     assert "[-50, 200] dB(A)" in body["detail"]
     assert_names_field(upload(client, "population", "bad id", "pop.tif", b"x"), 422, "id")
@@ -153,3 +157,6 @@ def test_optimize_goes_around_the_block(make_client, tmp_path):
     assert_names_field(client.post("/routes/optimize", json={**body, "resolution_m": 5.0, "max_detour_pct": 300.0,
                                                               "goal": [11.5, 53.0]}), 413, "resolution_m")
     assert_names_field(client.post("/routes/optimize", json={**body, "avoid": {"type": "Point"}}), 422, "avoid")
+    # pads closer than 4 turn radii: the request's fields start and goal, not the command line's --from/--to
+    near = assert_names_field(client.post("/routes/optimize", json={**body, "goal": body["start"]}), 422, "goal")
+    assert near["detail"].startswith("start and goal are 0 m apart;") and "--" not in near["detail"], near

@@ -1,4 +1,5 @@
-"""POST /contours: a card without power term at another power is 422 naming power_w (gisnoise.model.power_range)."""
+"""POST /contours: a card without power term at another power is 422 naming trajectory.power_w
+(gisnoise.model.power_range)."""
 
 from __future__ import annotations
 
@@ -24,6 +25,8 @@ def test_card_without_power_term_at_another_power_is_422(client):
            "grid": {"resolution_m": 20, "margin_m": 200}, "ground_h_m": 0.0}
     r = client.post("/contours", json=req)
     assert r.status_code == 422, r.text
-    assert r.json()["field"] == "power_w" and "(2400-2400 W" in r.json()["detail"]
+    # the request's field: the trajectory's power (a column here, a log's power_w) (it said 'power_w')
+    assert r.json()["field"] == "trajectory.power_w" and "(2400-2400 W" in r.json()["detail"]
+    assert "--power-w" not in r.json()["detail"]
     ok = client.post("/contours", json=dict(req, trajectory={"format": "csv", "text": _flyover_csv(2400.0)}))
     assert ok.status_code == 200, ok.text
