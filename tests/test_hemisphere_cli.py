@@ -143,3 +143,15 @@ def test_an_existing_card_is_kept_and_the_refusal_names_force(m300_json, tmp_pat
     assert out.read_text() == "{}"
     r = run("card", "fit-hemisphere", str(m300_json), "--out", str(out), "--force")
     assert r.exit_code == 0 and cards.load(out).ansatz == "paper-offset"
+
+
+def test_diagnose_refuses_a_hemisphere_card_before_reading_the_campaign(m300_json, tmp_path):
+    """``gisnoise diagnose --card HEMISPHERE`` is one usage error naming the card, before the campaign is read (the
+    campaign folder here does not exist: the card is what is refused)."""
+    r = CliRunner().invoke(cli, ["-q", "diagnose", str(tmp_path / "no-campaign"), "--card", str(m300_json),
+                                 "--out", str(tmp_path / "out")])
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "'m300' is a measured hemisphere" in lines[0], r.output
+    assert not (tmp_path / "out").exists()
+

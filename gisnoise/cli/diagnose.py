@@ -36,11 +36,12 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
     candidate effect with its significance and held-out shrinkage, the verdict)
     and OUT/report.html with the figures.
     """
-    from gisnoise.diagnose import run_diagnosis, with_mic_heights, write_diagnosis, write_report
+    from gisnoise.diagnose import check_diagnosable, run_diagnosis, with_mic_heights, write_diagnosis, write_report
     from gisnoise.measure import campaign_log_warnings, read_campaign
 
     quiet = bool((ctx.find_root().obj or {}).get("quiet"))
     card = load(card_path)
+    check_diagnosable(card)  # before the campaign is read
     camp = read_campaign(campaign, absorption=absorption)
     echo_warnings(campaign_log_warnings(camp))  # a log cut short is diagnosed up to its cut, and said
     samples = with_mic_heights(camp.samples(), campaign)

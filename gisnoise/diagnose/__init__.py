@@ -10,6 +10,7 @@ from gisnoise.diagnose.diagnosis import (
     DIAGNOSIS_FILE,
     SCHEMA,
     Diagnosis,
+    check_diagnosable,
     diagnose,
     run_diagnosis,
     write_diagnosis,
@@ -56,7 +57,7 @@ from gisnoise.diagnose.verdict import (
 )
 
 __all__ = ['CLOCK_RANGE_S', 'DIAGNOSIS_FILE', 'Diagnosis', 'EFFECT_INPUT', 'HEIGHT_RANGE_M', 'MAX_EFFECTS',
-           'MIN_IMPROVEMENT_DB2', 'SCHEMA', 'before_after_data', 'candidate_inputs', 'clocks_disagree', 'diagnose',
+           'MIN_IMPROVEMENT_DB2', 'SCHEMA', 'before_after_data', 'candidate_inputs', 'check_diagnosable', 'clocks_disagree', 'diagnose',
            'estimate_clock_offsets', 'estimate_mic_heights', 'fold_labels', 'forward_selection', 'inputs_data',
            'load_samples', 'localize', 'measurement_noise', 'metadata_overrides', 'mic_clock_effect',
            'register_evidence', 'residual_events', 'run_diagnosis', 'sample_regimes', 'shift_inputs',

@@ -74,7 +74,8 @@ from gisnoise.measure import Samples, series_ids
 from gisnoise.model import HemisphereCard, ModelCard
 from gisnoise.model import effects as _effects
 
-__all__ = ["SCHEMA", "DIAGNOSIS_FILE", "Diagnosis", "diagnose", "run_diagnosis", "write_diagnosis"]
+__all__ = ["SCHEMA", "DIAGNOSIS_FILE", "Diagnosis", "check_diagnosable", "diagnose", "run_diagnosis",
+           "write_diagnosis"]
 
 SCHEMA = "gisnoise/diagnosis/1"
 """Schema name of the diagnosis document."""
@@ -137,6 +138,16 @@ def diagnose(campaign_or_samples: Any, card: ModelCard, *, progress: ProgressFn 
     return run_diagnosis(campaign_or_samples, card, progress=progress, cancel=cancel, **kw).result
 
 
+def check_diagnosable(card: Any) -> None:
+    """Refuse a card a diagnosis cannot extend (before any campaign is read): not a card, or a measured hemisphere
+    (:class:`~gisnoise.model.HemisphereCard`: a table of levels, no parameters); :class:`InputError` on ``card``."""
+    if not isinstance(card, ModelCard):
+        raise InputError(f"card must be a ModelCard, got {type(card).__name__}", field="card")
+    if isinstance(card, HemisphereCard):
+        raise InputError(f"card {card.id!r} is a measured hemisphere: it has no parameters to extend; diagnose a "
+                         "parametric card (gisnoise card fit-hemisphere makes one from it)", field="card")
+
+
 def run_diagnosis(
     campaign_or_samples: Any,
     card: ModelCard,
@@ -177,11 +188,7 @@ def run_diagnosis(
         The stated radius around its listed position within which each microphone's position is
         estimated from the data, m (:mod:`gisnoise.diagnose.positions`); 0 takes the positions as listed.
     """
-    if not isinstance(card, ModelCard):
-        raise InputError(f"card must be a ModelCard, got {type(card).__name__}", field="card")
-    if isinstance(card, HemisphereCard):
-        raise InputError(f"card {card.id!r} is a measured hemisphere: it has no parameters to extend; diagnose a "
-                         "parametric card (gisnoise card fit-hemisphere makes one from it)", field="card")
+    check_diagnosable(card)
     if not (0.0 < alpha < 1.0):
         raise InputError(f"alpha must be in (0, 1), got {alpha!r}", field="alpha")
     for name, v in (("window_s", window_s), ("z", z), ("block_s", block_s), ("bias_z", bias_z),

@@ -16,7 +16,7 @@ from fastapi.concurrency import run_in_threadpool
 from gisnoise.jsonio import write_json
 from gisnoise.model import cards as gcards
 from gisnoise.service.deps import WRITE, State, StateDep
-from gisnoise.service.errors import ApiError
+from gisnoise.service.errors import ApiError, request_fields
 from gisnoise.service.jobs import JobContext
 from gisnoise.service.models import CardRef, JobInfo, PhaseName, SafeId
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
@@ -156,6 +156,10 @@ async def diagnose_job(request: Request, state: StateDep,
     else:
         assert card_id is not None
         mc = state.cards.resolve(card_id, field="card_id")
+    from gisnoise.diagnose import check_diagnosable
+
+    with request_fields({"card": "card_id" if card is None else "card"}):
+        check_diagnosable(mc)  # the card is known now: a hemisphere is refused before the upload is read
     folder = await _receive_campaign(state, campaign)
     return _submit(request, state, "diagnose", {"card": mc.id, "report": report}, folder,
                    {"card.json": gcards.dumps(mc).encode()})

@@ -76,3 +76,25 @@ def test_an_implausible_hemisphere_is_refused_on_upload_naming_levels_db_and_by_
     r = client.post("/contours", json=dict(req, cards=["hemi-bad1"]))
     assert r.status_code == 422 and r.json()["field"] == "cards[0]", r.text
     assert "levels_db" in r.json()["detail"] and "hemi-bad1@1" in r.json()["detail"]
+
+
+def test_diagnose_job_with_a_hemisphere_card_is_refused_at_submission(client, m300):
+    """A measured hemisphere has no parameters to extend: POST /jobs/diagnose refuses it at once (422 naming card_id,
+    or card for a card file), and no job is queued; before, it answered 202 and the job failed later."""
+    from test_api_campaign_jobs import _campaign_zip
+
+    doc = json.loads(dumps(m300))
+    assert client.post("/cards", json=doc).status_code == 201
+    zipped = _campaign_zip()
+    for data, files, field in (
+        ({"card_id": "m300"}, {}, "card_id"),
+        ({}, {"card": ("m300.json", dumps(m300).encode(), "application/json")}, "card"),
+    ):
+        r = client.post("/jobs/diagnose", data=data,
+                        files={"campaign": ("c.zip", zipped, "application/zip"), **files})
+        assert r.status_code == 422, r.text
+        body = r.json()
+        assert body["field"] == field and body["detail"].startswith(f"{field}")
+        assert "card 'm300' is a measured hemisphere" in body["detail"]
+    assert client.get("/jobs").json()["total"] == 0
+
