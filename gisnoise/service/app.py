@@ -11,7 +11,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
 
-from fastapi import Depends, FastAPI, Request
+from fastapi import Depends, FastAPI, Request, params
 
 from gisnoise import __version__
 from gisnoise.service import routes_campaign, routes_cards, routes_contours, routes_jobs, routes_planning, routes_web
@@ -22,7 +22,7 @@ from gisnoise.service.deps import State, key_problem
 from gisnoise.service.errors import ApiError, install_handlers
 from gisnoise.service.jobs import Handler, JobStore, WorkerPool
 from gisnoise.service.limits import BodySizeLimit, KeyBeforeBody
-from gisnoise.service.models import ErrorBody
+from gisnoise.service.models import ErrorBody, MediaType
 from gisnoise.service.responses import AsciiJSONResponse
 from gisnoise.service.settings import Settings, get_settings
 from gisnoise.service.timing import ServerTiming
@@ -36,7 +36,8 @@ STATIC_DIR = Path(__file__).resolve().parent / "static"
 ERROR_RESPONSES: dict[int | str, dict] = {
     s: {"model": ErrorBody, "description": d}
     for s, d in [(400, "Bad request"), (401, "API key missing"), (403, "API key not valid"), (404, "Not found"),
-                 (409, "Conflict"), (413, "Too large (body, upload or grid)"), (422, "Invalid input")]
+                 (409, "Conflict"), (413, "Too large (body, upload or grid)"),
+                 (415, "Body not sent as application/json"), (422, "Invalid input")]
 }
 
 
@@ -50,6 +51,26 @@ async def single_query_values(request: Request) -> None:
         if k in seen:
             raise ApiError(422, f"{k}: given more than once in the query string", field=k)
         seen.add(k)
+
+
+async def json_media_type(request: Request) -> None:
+    """A body the operation reads as JSON must be sent as JSON: another ``Content-Type`` (or none) is 415 naming
+    ``application/json``, not a 422 saying the body is 'not a valid dictionary' (FastAPI leaves such a body
+    unparsed).  Forms and uploads (multipart) are not JSON bodies; ``+json`` types (``application/geo+json``) are.
+    """
+    route = request.scope.get("route")
+    body = getattr(route, "body_field", None)
+    if body is None or isinstance(body.field_info, params.Form):
+        return
+    given = request.headers.get("content-type")
+    if given is None and not await request.body():
+        return  # no body: the body's own validation names what is missing
+    media = (given or "").split(";", 1)[0].strip().lower()
+    if media == MediaType.json.value or (media.startswith("application/") and media.endswith("+json")):
+        return
+    said = f"{media!r}" if media else "none"
+    raise ApiError(415, f"Content-Type: {said} is not read here; send the body as {MediaType.json.value}",
+                   field="Content-Type", headers={"Accept-Post": MediaType.json.value})
 
 
 def _handlers() -> dict[str, Handler]:
@@ -98,7 +119,7 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
                     "when the service has keys.",
         lifespan=lifespan,
         responses=ERROR_RESPONSES,
-        dependencies=[Depends(single_query_values)],
+        dependencies=[Depends(single_query_values), Depends(json_media_type)],
         default_response_class=AsciiJSONResponse,
         docs_url=None,  # served below from the installed swagger-ui-bundle: no network needed
         redoc_url=None,

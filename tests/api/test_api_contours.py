@@ -339,6 +339,26 @@ def _path_value(req: dict, key: str):
     return req["grid"][key] if key in req["grid"] else req[key]
 
 
+@pytest.mark.parametrize("path", ["/contours", "/cards", "/routes/compare", "/routes/optimize"])
+@pytest.mark.parametrize("content_type", ["text/plain", "application/x-www-form-urlencoded", None])
+def test_a_json_body_sent_as_another_media_type_is_415_naming_application_json(client, path, content_type):
+    """Valid JSON sent as text/plain (or form-encoded, or without Content-Type) is 415 naming the media type the
+    operation reads; it was 422 'body: Input should be a valid dictionary'."""
+    raw = json.dumps(_request()).encode()
+    headers = {} if content_type is None else {"content-type": content_type}
+    req = client.build_request("POST", path, content=raw, headers=headers)
+    assert req.headers.get("content-type") == content_type
+    r = client.send(req)
+    body = assert_names_field(r, 415, "Content-Type")
+    assert "application/json" in body["detail"] and (content_type or "none") in body["detail"]
+
+
+def test_geo_json_media_type_is_read_as_json(client):
+    r = client.post("/contours", content=json.dumps(_request(levels=[50])),
+                    headers={"content-type": "application/geo+json; charset=utf-8"})
+    assert r.status_code == 200, r.text
+
+
 def test_malformed_json_is_422_naming_the_body(client):
     r = client.post("/contours", content=b'{"trajectory": ', headers={"content-type": "application/json"})
     assert_names_field(r, 422, "body")
