@@ -24,7 +24,7 @@ import traceback
 import uuid
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -97,9 +97,11 @@ class JobContext:
     progress: Callable[..., None]
     cancel: Callable[[], bool]
     """Returns True when the job should stop; handlers pass it to the core as ``cancel=``."""
-    warnings: list[str] = field(default_factory=list)
-    """What the handler found to say about its input before the work (e.g. a campaign's cut logs): kept in the
-    summary of a job that then fails (``{"warnings": [...]}``), where they may explain the failure."""
+    warnings: list[str] | None = None
+    """What the handler found to say about its input before the work (e.g. a campaign's cut logs), set once it
+    has read that input (an empty list: nothing to say): kept as the summary of a job that then fails
+    (``{"warnings": [...]}``, empty or not), where they may explain the failure; None until the input is read
+    (a job failing before has no summary)."""
 
     @property
     def params(self) -> Mapping[str, Any]:
@@ -466,7 +468,7 @@ class WorkerPool:
                 msg = msg.replace(str(folder), "upload")
             msg = scrub_paths(msg, [store.jobs_dir.resolve(), store.jobs_dir])
             store.finish(job.id, "failed", error=msg, error_field=fld, error_status=status_for(exc), message="failed",
-                         summary={"warnings": list(ctx.warnings)} if ctx.warnings else None)
+                         summary=None if ctx.warnings is None else {"warnings": list(ctx.warnings)})
             return
         except Exception as exc:  # noqa: BLE001 - a job's bug must not kill the worker
             shutil.rmtree(partial, ignore_errors=True)

@@ -223,7 +223,8 @@ class JobInfo(BaseModel):
     summary: dict[str, Any] | None = Field(
         description="The result of a succeeded job: the numbers its kind reports.  Fit and diagnose jobs carry "
                     "`warnings` (list of str, empty when none): what the command line says about the campaign's "
-                    "flight logs (a log cut short, say), one line each.")
+                    "flight logs (a log cut short, say), one line each.  A fit or diagnose job that fails after "
+                    "reading the campaign has the summary {\"warnings\": [...]} (empty or not); null otherwise.")
     files: list[str] = Field(description="Result files, downloadable at /jobs/{id}/files/{name}.")
     url: str
     result_url: str | None

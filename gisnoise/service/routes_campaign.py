@@ -202,7 +202,7 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
     ctx.progress(0.0, "reading the campaign")
     camp = _read_campaign(ctx)
     warnings = _log_warnings(ctx, camp)
-    ctx.warnings.extend(warnings)  # a job that then fails keeps them
+    ctx.warnings = warnings  # the campaign is read: a job that then fails keeps them (none: an empty list)
     result = fit_campaign(camp, p["phase"], ansatz=p["ansatz"], max_iter=max_iter, progress=progress,
                           cancel=ctx.cancel)
     ctx.check_cancel()
@@ -251,7 +251,7 @@ def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
     ctx.progress(0.0, "reading the campaign")
     camp = _read_campaign(ctx)
     warnings = _log_warnings(ctx, camp)
-    ctx.warnings.extend(warnings)  # a job that then fails keeps them
+    ctx.warnings = warnings  # the campaign is read: a job that then fails keeps them (none: an empty list)
 
     def progress(done: int, total: int, what: str = "") -> None:
         ctx.progress(0.9 * done / max(total, 1), what or "diagnosing")

@@ -66,6 +66,22 @@ def test_fit_job_failing_in_the_core_reports_the_field(client, campaign_zip):
     assert "cannot be told apart" in detail or ("implausible card" in detail and "p0" in detail), detail
     assert info["error"]["field"] in ("p0", "p1", "p2", "p3", "p4", "p5", "p6", "p7", "parameters")
     assert_names_field(client.get(f"/jobs/{info['id']}/result"), 409, "job_id")
+    # it read the campaign (CSV flights: nothing to say of their logs): its summary says so, as the docs state;
+    # it was null
+    assert info["summary"] == {"warnings": []}, info
+
+
+def test_a_job_failing_before_the_campaign_is_read_has_no_summary(client):
+    """An unreadable campaign.json fails the job before any log is read: no summary (null), the error names it."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        z.writestr("campaign.json", "{not json")
+    for kind, data in (("fit", {"phase": "horizontal"}), ("diagnose", {"card_id": "demo-horizontal"})):
+        r = client.post(f"/jobs/{kind}", files={"campaign": ("c.zip", buf.getvalue(), "application/zip")}, data=data)
+        assert r.status_code == 202, r.text
+        info = wait_job(client, r.json()["id"], timeout=60)
+        assert info["status"] == "failed" and info["error"]["status"] == 422, info
+        assert info["summary"] is None, info
 
 
 def test_diagnose_job_finds_the_injected_effect(client, campaign_zip, tmp_path):
