@@ -251,10 +251,10 @@ class JobStore:
                     con.execute("UPDATE jobs SET status = 'cancelled', finished = ?, message = 'cancelled' "
                                 "WHERE id = ?", (time.time(), r["id"]))
                 elif r["attempts"] >= self.max_attempts:
-                    con.execute(
+                    con.execute(  # the message says failed, as every failed job's (not its last progress)
                         "UPDATE jobs SET status = 'failed', finished = ?, error = ?, error_field = 'job', "
-                        "error_status = 500 WHERE id = ?",
-                        (time.time(), f"job interrupted {r['attempts']} times; not retried", r["id"]))
+                        "error_status = 500, message = 'failed' WHERE id = ?",
+                        (time.time(), f"job: interrupted {r['attempts']} times; not retried", r["id"]))
                 else:
                     con.execute("UPDATE jobs SET status = 'queued', progress = 0, message = 'interrupted; re-queued' "
                                 "WHERE id = ?", (r["id"],))

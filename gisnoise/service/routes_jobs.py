@@ -75,7 +75,9 @@ def _file_response(path: Path) -> FileResponse:
 def _result_path(state: State, job: Job, name: str) -> Path:
     if job.status != "succeeded":
         if job.status == "failed":
-            raise ApiError(409, f"job_id: job {job.id} failed: {job.error}", field="job_id")
+            raise ApiError(409, f"job_id: job {job.id} failed, it has no result: {job.error}", field="job_id")
+        if job.status == "cancelled":
+            raise ApiError(409, f"job_id: job {job.id} was cancelled; it has no result", field="job_id")
         raise ApiError(409, f"job_id: job {job.id} is {job.status}; no result yet", field="job_id")
     # the name is looked up in the job's listing, never joined to a path as given
     listed = {f: f for f in job.files}

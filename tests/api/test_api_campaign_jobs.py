@@ -65,7 +65,9 @@ def test_fit_job_failing_in_the_core_reports_the_field(client, campaign_zip):
     detail = info["error"]["detail"]
     assert "cannot be told apart" in detail or ("implausible card" in detail and "p0" in detail), detail
     assert info["error"]["field"] in ("p0", "p1", "p2", "p3", "p4", "p5", "p6", "p7", "parameters")
-    assert_names_field(client.get(f"/jobs/{info['id']}/result"), 409, "job_id")
+    body = assert_names_field(client.get(f"/jobs/{info['id']}/result"), 409, "job_id")
+    assert body["detail"].startswith(f"job_id: job {info['id']} failed, it has no result: "), body
+    assert info["message"] == "failed", info
     # it read the campaign (CSV flights: nothing to say of their logs): its summary says so, as the docs state;
     # it was null
     assert info["summary"] == {"warnings": []}, info

@@ -57,9 +57,11 @@ def test_interrupted_jobs_are_requeued_then_failed_after_max_attempts(tmp_path):
     assert j.status == "queued" and j.attempts == 1 and "re-queued" in j.message
     assert not (s.job_dir(jid) / "result.partial").exists()
     s.claim_next()
+    s.set_progress(jid, 0.4, "evaluating the grid")
     assert s.requeue_interrupted() == 0
     j = s.get(jid)
     assert j.status == "failed" and j.error_field == "job" and "2 times" in j.error
+    assert j.message == "failed"  # not the last progress message ('evaluating the grid'), as it was
 
 
 def test_cancel_of_a_queued_job_is_immediate(tmp_path):
@@ -252,7 +254,11 @@ def test_cancel_over_http(fake_client):
     r = c.post(f"/jobs/{running}/cancel")
     assert r.status_code == 200 and r.json()["cancel_requested"]
     assert wait_job(c, running)["status"] == "cancelled"
-    assert_names_field(c.get(f"/jobs/{running}/result"), 409, "job_id")
+    for jid in (running, queued):  # a cancelled job never has a result: said so, not 'no result yet'
+        body = assert_names_field(c.get(f"/jobs/{jid}/result"), 409, "job_id")
+        assert body["detail"] == f"job_id: job {jid} was cancelled; it has no result", body
+        body = assert_names_field(c.get(f"/jobs/{jid}/files/levels.tif"), 409, "job_id")
+        assert "was cancelled" in body["detail"], body
     assert c.get("/health").json()["running"] == 0
 
 
