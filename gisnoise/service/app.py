@@ -142,8 +142,8 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
 
     app.add_middleware(BodySizeLimit, limit_for=limit_for)
 
-    def refusal(method: str, path: str, key: str | None) -> tuple[int, str, dict[str, str]] | None:
-        if not any(m == method and rx.fullmatch(path) for m, rx in _WRITES):
+    def refusal(method: str, path: str, query: str, key: str | None) -> tuple[int, str, dict[str, str]] | None:
+        if not is_write(method, path, query):
             return None
         problem = key_problem(settings.api_keys, key)
         return None if problem is None else (problem.status, str(problem), problem.headers or {})
@@ -155,5 +155,24 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
 
 _WRITES = [(m, re.compile(p)) for m, p in (
     ("POST", r"/cards"), ("DELETE", r"/cards/[^/]+"), ("POST", r"/jobs/(contours|fit|diagnose)"),
-    ("POST", r"/jobs/[^/]+/cancel"), ("DELETE", r"/jobs/[^/]+"))]
+    ("POST", r"/jobs/[^/]+/cancel"), ("DELETE", r"/jobs/[^/]+"), ("POST", r"/layers"))]
 """The writes (method, path) that need a key when the service has keys: refused from the headers."""
+
+_TRUE = {"1", "true", "t", "yes", "y", "on"}
+"""The query values a boolean parameter reads as true (pydantic's)."""
+
+
+def is_write(method: str, path: str, query: str = "") -> bool:
+    """Whether a request is a write that needs a key, from its method, path and query string alone (before its
+    body): the operations of :data:`_WRITES`, and ``POST /contours?job=true``, which always queues a job.
+
+    (``POST /contours`` without ``job`` becomes a job only when the map is large, which its body decides: that
+    case is checked once the request is prepared.)
+    """
+    if any(m == method and rx.fullmatch(path) for m, rx in _WRITES):
+        return True
+    if method == "POST" and path == "/contours" and query:
+        from urllib.parse import parse_qsl
+
+        return any(k == "job" and v.strip().lower() in _TRUE for k, v in parse_qsl(query, keep_blank_values=True))
+    return False

@@ -23,18 +23,19 @@ class _TooLarge(HTTPException):
 class KeyBeforeBody:
     """Refuse a write without a valid ``X-API-Key`` from its headers, before a byte of its body is read.
 
-    ``refusal(method, path, key)`` returns ``(status, message, extra headers)`` or None.
+    ``refusal(method, path, query string, key)`` returns ``(status, message, extra headers)`` or None.
     """
 
-    def __init__(self, app: Any, refusal: Callable[[str, str, str | None], tuple[int, str, dict[str, str]] | None]
-                 ) -> None:
+    def __init__(self, app: Any,
+                 refusal: Callable[[str, str, str, str | None], tuple[int, str, dict[str, str]] | None]) -> None:
         self.app = app
         self.refusal = refusal
 
     async def __call__(self, scope: Scope, receive: Any, send: Any) -> None:
         if scope["type"] == "http":
             key = next((v.decode("latin-1") for k, v in scope.get("headers", []) if k == b"x-api-key"), None)
-            no = self.refusal(scope.get("method", ""), scope.get("path", ""), key)
+            query = scope.get("query_string", b"").decode("latin-1")
+            no = self.refusal(scope.get("method", ""), scope.get("path", ""), query, key)
             if no is not None:
                 status, message, headers = no
                 body = json.dumps({"detail": message, "field": "X-API-Key"}).encode()

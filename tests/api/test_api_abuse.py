@@ -85,6 +85,58 @@ def test_unauthenticated_upload_is_refused_from_its_headers(server):
     assert _peak_rss_bytes(server.proc.pid) < GB
 
 
+def _asgi(app, method: str, path: str, query: bytes = b"", headers: tuple = (), body: bytes = b"{}",
+          content_type: bytes = b"application/json"):
+    """Call ``app`` once over ASGI; returns (status, body, whether the app asked for the request's body)."""
+    import asyncio
+
+    asked = []
+    sent: list[dict] = []
+
+    async def receive():
+        asked.append(True)
+        return {"type": "http.request", "body": body, "more_body": False}
+
+    async def send(msg):
+        sent.append(msg)
+
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": method, "scheme": "http",
+             "path": path, "raw_path": path.encode(), "query_string": query, "root_path": "",
+             "headers": [(b"host", b"x"), (b"content-type", content_type),
+                         (b"content-length", str(len(body)).encode()), *headers],
+             "client": ("127.0.0.1", 1), "server": ("x", 80)}
+    asyncio.run(app(scope, receive, send))
+    status = next(m["status"] for m in sent if m["type"] == "http.response.start")
+    return status, b"".join(m.get("body", b"") for m in sent if m["type"] == "http.response.body"), bool(asked)
+
+
+@pytest.mark.parametrize("path, query", [("/layers", b""), ("/contours", b"job=true"), ("/contours", b"job=1"),
+                                         ("/jobs/contours", b"")])
+def test_writes_without_a_key_are_refused_before_their_body_is_read(make_client, path, query):
+    """POST /layers (uploads up to 500 MB) and POST /contours?job=true without a key are 401 from the headers: not a
+    byte of the body is read (POST /layers read the whole upload, /contours?job=true prepared the map first)."""
+    c = make_client(api_keys=[KEY], start_workers=False)
+    kw = {}
+    if path == "/layers":  # an upload: a multipart form, which FastAPI reads before any dependency
+        kw = {"content_type": b"multipart/form-data; boundary=b",
+              "body": b'--b\r\nContent-Disposition: form-data; name="kind"\r\n\r\npopulation\r\n--b--\r\n'}
+    status, body, asked = _asgi(c.app, "POST", path, query, **kw)
+    assert status == 401 and not asked, (status, body, asked)
+    assert json.loads(body)["field"] == "X-API-Key"
+    status, body, asked = _asgi(c.app, "POST", path, query, headers=((b"x-api-key", b"wrong"),), **kw)
+    assert status == 403 and not asked, (status, body)
+
+
+def test_a_map_that_stays_synchronous_needs_no_key(make_client):
+    """Reads need no key: POST /contours without job (a small map) or with job=false is answered without one."""
+    from test_api_contours import _request
+
+    c = make_client(api_keys=[KEY], start_workers=False)
+    for params in ({}, {"job": "false"}):
+        r = c.post("/contours", json=_request(levels=[50]), params=params)
+        assert r.status_code == 200, r.text
+
+
 # ------------------------------------------------------------------ the six 500s
 def _zip(files: dict[str, bytes | str]) -> bytes:
     buf = io.BytesIO()
