@@ -189,7 +189,8 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
     """Fit the stored campaign; writes card.json (the fitted card) and fit.json (a summary).
 
     The summary (the job's result and fit.json) carries ``warnings``: the campaign's log warnings
-    (:func:`_log_warnings`), empty when there are none.
+    (:func:`_log_warnings`), then the fit's own (a microphone the model misses alone, as ``gisnoise fit`` prints
+    them), empty when there are none.
     """
     from gisnoise.identify import fit_campaign
 
@@ -206,6 +207,7 @@ def run_fit_job(ctx: JobContext) -> dict[str, Any]:
     result = fit_campaign(camp, p["phase"], ansatz=p["ansatz"], max_iter=max_iter, progress=progress,
                           cancel=ctx.cancel)
     ctx.check_cancel()
+    warnings = warnings + [str(w) for w in result.info.get("warnings") or []]
     data = result.info.get("data")
     if isinstance(data, dict):  # the server's folder means nothing to the client
         data["campaign"] = f"uploaded campaign (job {ctx.job.id})"

@@ -55,6 +55,35 @@ def test_fit_job_returns_the_librarys_card(client, campaign_zip, tmp_path):
                        headers={"content-type": "application/json"}).status_code == 201
 
 
+def test_fit_job_warns_of_a_microphone_listed_50_m_off_as_gisnoise_fit_does(client, tmp_path):
+    """tests/test_fit.py's campaign (the model's own levels, white noise) with m2 listed 50 m east of where its
+    levels were measured: the fit names it (the model misses it alone); the job's summary says it too, in the
+    words fit_campaign gives (before: only in card.json)."""
+    from test_fit import make_campaign_folder
+
+    from gisnoise.geo import LocalFrame
+    from gisnoise.identify import fit_campaign
+
+    folder = make_campaign_folder(tmp_path / "campaign")
+    doc = json.loads((folder / "campaign.json").read_text())
+    m = doc["microphones"][1]
+    m["lat"], m["lon"], m["h"] = (float(v) for v in LocalFrame(m["lat"], m["lon"], m["h"]).to_wgs84(50.0, 0.0, 0.0))
+    (folder / "campaign.json").write_text(json.dumps(doc))
+    said = fit_campaign(folder, "horizontal").info["warnings"]
+    assert len(said) == 1 and said[0].startswith("microphone 'm2'") and "gisnoise diagnose" in said[0]
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        for p in sorted(folder.rglob("*")):
+            if p.is_file():
+                z.write(p, f"campaign/{p.relative_to(folder)}")
+    r = client.post("/jobs/fit", files={"campaign": ("c.zip", buf.getvalue(), "application/zip")},
+                    data={"phase": "horizontal"})
+    assert r.status_code == 202, r.text
+    info = wait_job(client, r.json()["id"], timeout=300)
+    assert info["status"] == "succeeded", info
+    assert info["summary"]["warnings"] == said
+
+
 def test_fit_job_failing_in_the_core_reports_the_field(client, campaign_zip):
     r = client.post("/jobs/fit", files={"campaign": ("c.zip", campaign_zip, "application/zip")},
                     data={"phase": "transition"})  # a few transition samples cannot identify the model
