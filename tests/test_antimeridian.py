@@ -12,6 +12,8 @@ import rasterio
 from click.testing import CliRunner
 from pyproj import Geod
 from shapely.geometry import MultiPolygon, Point, Polygon, shape
+from test_evaluate import G0 as OMNI_G0
+from test_evaluate import omni_card
 
 from gisnoise.cli.main import cli
 from gisnoise.errors import CRSError, InvalidGridError
@@ -19,9 +21,9 @@ from gisnoise.flight import Trajectory
 from gisnoise.geo import LocalFrame, centre_lon, grid_for_points, scale_factor
 from gisnoise.maps import crs_scale_warning
 from gisnoise.maps.antimeridian import split_at_antimeridian
-from gisnoise.model import ModelCard, save
+from gisnoise.model import save
 
-G0, HEIGHT, SPEED, HALF = 70.0, 60.0, 10.0, 600.0
+G0, HEIGHT, SPEED, HALF = OMNI_G0, 60.0, 10.0, 600.0
 LEVELS = (50.0, 60.0)
 GEOD = Geod(ellps="WGS84")
 
@@ -38,10 +40,7 @@ def flyover(frame, dt=1.0):
 
 @pytest.fixture()
 def card(tmp_path):
-    c = ModelCard(id="omni", vehicle="test", phase="horizontal", ansatz="paper-offset",
-                  parameters=dict(p0=G0, p1=20.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
-                  reference_power_w=3000.0)
-    return str(save(c, tmp_path / "omni.json"))
+    return str(save(omni_card(), tmp_path / "omni.json"))   # 70 dB(A) at 40 m (G0), spherical spreading
 
 
 def contour(tmp_path, card, traj, *extra):
