@@ -75,3 +75,19 @@ def test_reading_a_damaged_ulog_in_a_thread_keeps_other_threads_output(tmp_path,
     t.join(60)
     assert capsys.readouterr().out == "the service's own line\n"
     assert "log_corrupt" in out["traj"].metadata
+
+
+def test_a_bin_file_without_a_dataflash_header_is_refused_and_prints_nothing(tmp_path, capfd):
+    """Six zero bytes named .BIN: pymavlink's indexer (compiled, its prints beyond Python's reach) printed 'bad header
+    0x0000 at N' for every byte on the process's stdout (C's buffer, flushed at exit: seen in the service's log) and
+    the refusal said "message 'GPS' missing"; the file holds no message header (A3 95) at all, so it is not a
+    DataFlash log and is refused before the parser sees it."""
+    from gisnoise.errors import TrajectoryError
+
+    bad = tmp_path / "x.BIN"
+    bad.write_bytes(bytes(6))
+    with pytest.raises(TrajectoryError, match=r"x.BIN: not a DataFlash log \(no message header") as e:
+        read_flight(bad)
+    assert e.value.field == "path"
+    out = capfd.readouterr()
+    assert out.out == "" and out.err == ""

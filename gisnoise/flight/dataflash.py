@@ -69,6 +69,9 @@ def read_dataflash(path: str | os.PathLike[str], *, start_utc: Any = None, geoid
     if not Path(src).is_file():
         raise TrajectoryError(f"{src}: no such file", field="path")
     data = Path(src).read_bytes()
+    if b"\xa3\x95" not in data:   # pymavlink's indexer would print a line per byte (from C: not capturable)
+        raise TrajectoryError(f"{src}: not a DataFlash log (no message header, bytes A3 95, in its {len(data)} bytes)",
+                              field="path")
     # pymavlink skips damaged bytes without a flag, reading garbage first, and stops at a cut message without a word
     clean, damage, cut = framing(data, dataflash_damage, dataflash_cut)
     refuse_cut_definitions(src, cut, "FMT messages")
