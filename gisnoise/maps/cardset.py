@@ -11,7 +11,7 @@ import numpy as np
 from gisnoise.errors import CardError
 from gisnoise.model import HemisphereCard, ModelCard, load
 
-__all__ = ["CardSet", "as_cardset"]
+__all__ = ["CardSet", "as_cardset", "flying_cards"]
 
 
 class CardSet:
@@ -119,3 +119,9 @@ class CardSet:
 def as_cardset(cards: CardSet | Iterable[ModelCard | str | os.PathLike[str]] | ModelCard) -> CardSet:
     """``cards`` as a :class:`CardSet` (itself when it is one)."""
     return cards if isinstance(cards, CardSet) else CardSet(cards)
+
+
+def flying_cards(traj: Any, cardset: CardSet) -> np.ndarray:
+    """The index in ``cardset.cards`` of the card serving each flying sample of ``traj`` (``traj.flying``)."""
+    fly = traj.flying
+    return cardset.assign(traj.phase[fly], traj.t[fly], source=traj.source, rows=np.flatnonzero(fly))

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.flight import Trajectory, smoothed_speed
-from gisnoise.maps.cardset import CardSet
+from gisnoise.maps.cardset import CardSet, flying_cards
 from gisnoise.model import HemisphereCard
 
 __all__ = ["SPEED_TOLERANCE_M_S", "check_hemisphere_speeds"]
@@ -31,8 +31,10 @@ SPEED_TOLERANCE_M_S = 5 * 1852 / 3600
 (5 kt: 14 CFR Part 36 Appendix H's airspeed tolerance of a helicopter noise test flight)."""
 
 
-def check_hemisphere_speeds(traj: Trajectory, cardset: CardSet) -> tuple[list[str], dict[str, Any]]:
-    """Warn about hemisphere cards flown away from their stated speed (module docstring).
+def check_hemisphere_speeds(traj: Trajectory, cardset: CardSet, *, cards_flying: np.ndarray | None = None
+                            ) -> tuple[list[str], dict[str, Any]]:
+    """Warn about hemisphere cards flown away from their stated speed (module docstring); ``cards_flying`` as
+    :func:`~gisnoise.maps.powers.check_power_ranges` takes it.
 
     Returns the warnings (one per card) and, per such card, ``{"stated_m_s": v, "flown_m_s": [[min, max], ...],
     "samples": n, "of": m, "speed": "airspeed" | "ground speed"}`` for the map's metadata (``n`` of the card's
@@ -48,7 +50,7 @@ def check_hemisphere_speeds(traj: Trajectory, cardset: CardSet) -> tuple[list[st
         speed, what = traj.airspeed_m_s, "airspeed"
     else:
         speed, what = smoothed_speed(traj.t, np.column_stack(traj.enu(traj.origin()))), "ground speed"
-    idx = cardset.assign(traj.phase[fly], traj.t[fly], source=traj.source, rows=np.flatnonzero(fly))
+    idx = cards_flying if cards_flying is not None else flying_cards(traj, cardset)
     flown = speed[fly]
     warnings: list[str] = []
     meta: dict[str, Any] = {}

@@ -32,7 +32,7 @@ from gisnoise.errors import InputError
 from gisnoise.flight import GROUND_HINT_CLI, Trajectory, track_warning
 from gisnoise.geo import centre_lon, scale_factor
 from gisnoise.limits import GROUND_TOLERANCE_M
-from gisnoise.maps.cardset import CardSet
+from gisnoise.maps.cardset import CardSet, flying_cards
 from gisnoise.maps.conditions import check_hemisphere_speeds
 from gisnoise.maps.powers import check_power_ranges
 
@@ -68,8 +68,9 @@ def flight_findings(traj: Trajectory, cards: CardSet, *, ground_h: float | None 
     below = below_track_ground(traj, ground_h, ground_from=ground_from, hint=ground_hint)
     unpowered = airborne_without_power(traj)
     lying = lying_upside_down(traj)
-    power_warnings, outside = check_power_ranges(traj, cards)
-    speed_warnings, speed_outside = check_hemisphere_speeds(traj, cards)
+    served = flying_cards(traj, cards) if traj.flying.any() else None  # once for both checks
+    power_warnings, outside = check_power_ranges(traj, cards, cards_flying=served)
+    speed_warnings, speed_outside = check_hemisphere_speeds(traj, cards, cards_flying=served)
     warnings = [w for w in (track_warning(traj), below, unpowered, lying) if w is not None] + power_warnings
     return FlightFindings(warnings + speed_warnings, outside, speed_outside)
 

@@ -8,14 +8,17 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
-from gisnoise.maps.cardset import CardSet
+from gisnoise.maps.cardset import CardSet, flying_cards
 from gisnoise.model import power_range_finding
 
 __all__ = ["check_power_ranges"]
 
 
-def check_power_ranges(traj: Trajectory, cardset: CardSet) -> tuple[list[str], dict[str, Any]]:
+def check_power_ranges(traj: Trajectory, cardset: CardSet, *, cards_flying: np.ndarray | None = None
+                       ) -> tuple[list[str], dict[str, Any]]:
     """Refuse a card without power term used outside its power range; warn about extrapolating ones.
+
+    ``cards_flying``: the card of each flying sample (:func:`~gisnoise.maps.cardset.flying_cards`), if known.
 
     Returns the warnings and, per card used outside its range, ``{"range_w": [lo, hi], "used_w":
     [min, max], "samples": n}`` for the map's metadata.
@@ -28,7 +31,7 @@ def check_power_ranges(traj: Trajectory, cardset: CardSet) -> tuple[list[str], d
     fly = traj.flying
     if not fly.any():
         return [], {}
-    idx = cardset.assign(traj.phase[fly], traj.t[fly], source=traj.source, rows=np.flatnonzero(fly))
+    idx = cards_flying if cards_flying is not None else flying_cards(traj, cardset)
     pw = traj.power_w[fly]
     warnings: list[str] = []
     meta: dict[str, Any] = {}
