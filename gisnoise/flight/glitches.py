@@ -35,7 +35,7 @@ import numpy as np
 from gisnoise.geo import LocalFrame
 from gisnoise.limits import MAX_UAV_SPEED_M_S, current
 
-__all__ = ["GLITCH_MAX_S", "Glitches", "glitch_warning", "mend_glitches"]
+__all__ = ["GLITCH_MAX_S", "Glitches", "glitch_warning", "mend_glitches", "step_lengths"]
 
 GLITCH_MAX_S = 10.0
 """Longest glitch mended, s: a track that stays away longer is refused (the flight there is not known)."""
@@ -93,9 +93,7 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any) -> Glitches:
         return same  # a value out of range is refused by the trajectory's checks, naming it, not mended
     if not _may_be_fast(t, lat, lon, h):
         return same
-    frame = LocalFrame(float(np.median(lat)), float(np.median(lon)), float(np.median(h)))
-    p = np.stack(frame.to_enu(lat, lon, h), axis=-1)
-    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    frame, p, step = step_lengths(lat, lon, h)
     fast = np.flatnonzero(step > MAX_UAV_SPEED_M_S * np.diff(t))
     if fast.size == 0:
         return same
@@ -149,6 +147,15 @@ def mend_glitches(t: Any, lat: Any, lon: Any, h: Any) -> Glitches:
 
 _R_CURVATURE_MAX_M = 6_399_593.6
 """The WGS84 ellipsoid's largest radius of curvature (meridional and prime vertical, at the poles), m."""
+
+
+def step_lengths(lat: Any, lon: Any, h: Any) -> tuple[LocalFrame, np.ndarray, np.ndarray]:
+    """A local frame at a track's median point, the track's positions in it, m (shape (n, 3)), and the straight
+    distance between consecutive samples, m (shape (n - 1,))."""
+    lat, lon, h = (np.asarray(a, dtype=float) for a in (lat, lon, h))
+    frame = LocalFrame(float(np.median(lat)), float(np.median(lon)), float(np.median(h)))
+    p = np.stack(frame.to_enu(lat, lon, h), axis=-1)
+    return frame, p, np.linalg.norm(np.diff(p, axis=0), axis=1)
 
 
 def _may_be_fast(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray) -> bool:

@@ -36,12 +36,12 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import TrajectoryError
+from gisnoise.flight.glitches import step_lengths
 from gisnoise.flight.logs import read_flight
 from gisnoise.flight.paths import trajectory_from_path
 from gisnoise.flight.trajectory import Trajectory, read_flight_csv
 from gisnoise.flight.vehicle import VehicleModel
 from gisnoise.flight.waypoints import _WP_PREFIX, WAYPOINTS_SCHEMA, Route, _heights, _settings, route_from_waypoints
-from gisnoise.geo import LocalFrame
 from gisnoise.limits import MAX_UAV_SPEED_M_S, check_samples
 
 __all__ = ["read_trajectory", "read_route", "trajectory_to_geojson", "LOG_MAP_RATE_HZ"]
@@ -264,8 +264,7 @@ def _check_leg_speeds(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.nda
     coordinates are wrong (the power derived from it would be refused as out of range, misleadingly)."""
     if t.size < 2:
         return
-    e, n, u = LocalFrame(float(lat[0]), float(lon[0]), float(h.min())).to_enu(lat, lon, h)
-    length = np.sqrt(np.diff(e) ** 2 + np.diff(n) ** 2 + np.diff(u) ** 2)
+    _, _, length = step_lengths(lat, lon, h)
     speed = length / np.diff(t)
     if np.any(speed > MAX_UAV_SPEED_M_S):
         i = int(np.argmax(speed > MAX_UAV_SPEED_M_S))
