@@ -197,6 +197,10 @@ def make_map(
         from gisnoise.maps.plots import require_matplotlib
 
         require_matplotlib()
+    if dem is not None and not isinstance(dem, np.ndarray):
+        from gisnoise.geo import Dem, read_dem
+
+        dem = dem if isinstance(dem, Dem) else read_dem(dem)  # read once: the route, the height check, the grid
     route = read_route(trajectory, dem=dem, dem_offset_m=dem_offset_m, geoid_undulation_m=geoid_undulation_m,
                        power_w=power_w)
     traj = route.trajectory
