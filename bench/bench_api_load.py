@@ -25,6 +25,10 @@ without the client's HTTP stack, the connection and the server's HTTP parser).
 and this tree's side by side, one client, request by request alternating, and prints both, their
 ratio and whether the answers are byte-identical.
 
+``--during-job`` times single small maps (one client) with the service idle and while one large
+contour job runs (interleaved: idle, job, idle, ...), and prints both and their ratio: route
+planners' requests should not wait behind a job's work.
+
 ``--compare-stacks`` runs uvicorn's plain stack (``--loop asyncio --http h11``) and its fast
 one (``uvloop``, ``httptools``; what ``gisnoise serve`` picks when they are installed) side by
 side in one run, single-client rounds interleaved, and prints both and their ratio.
@@ -277,6 +281,59 @@ def compare_stacks(requests: int, max_s: float) -> int:
     return 1 if errors else 0
 
 
+def during_job(requests: int, tree: Path = REPO) -> int:
+    """Small maps (one client) with the service idle and while one large job runs, in alternating rounds."""
+    lat: dict[str, list[float]] = {"idle": [], "job": []}
+    errors: list[str] = []
+    rounds = max(2, requests // 10)
+    with tempfile.TemporaryDirectory(prefix="gisnoise-bench-") as tmp:
+        proc, url = start_server(Path(tmp) / "data", tree=tree)
+        client = httpx.Client(timeout=120)
+        try:
+            for _ in range(5):
+                client.post(url + "/contours", json=typical_request())  # warm-up
+            for i in range(2 * rounds):
+                state = "idle" if i % 2 == 0 else "job"
+                jid = None
+                if state == "job":
+                    big = large_request(i)
+                    big["grid"] = {"resolution_m": 2, "margin_m": 800 + i}  # ~4 M cells: seconds of work
+                    jid = client.post(url + "/jobs/contours", json=big).json()["id"]
+                    while client.get(f"{url}/jobs/{jid}").json()["status"] == "queued":
+                        time.sleep(0.01)
+                    time.sleep(0.3)  # the job's blocks are in the pool
+                for _ in range(10):
+                    t0 = time.perf_counter()
+                    r = client.post(url + "/contours", json=typical_request())
+                    dt = time.perf_counter() - t0
+                    if r.status_code != 200:
+                        errors.append(f"{r.status_code} {r.text[:200]}")
+                    else:
+                        lat[state].append(dt)
+                if jid is not None:
+                    running = client.get(f"{url}/jobs/{jid}").json()["status"] == "running"
+                    if not running:
+                        errors.append("the large job ended before the small maps did: make it larger")
+                    client.post(f"{url}/jobs/{jid}/cancel")
+                    while client.get(f"{url}/jobs/{jid}").json()["status"] in ("queued", "running"):
+                        time.sleep(0.05)
+        finally:
+            client.close()
+            stop([proc])
+    print(f"load average after: {load_line()}")
+    print(f"POST /contours (small map, one client), {len(lat['idle'])} with the service idle, {len(lat['job'])} while "
+          "one large contour job runs, alternating rounds of 10:")
+    for k, v in lat.items():
+        if v:
+            print(f"  {k}: p50 {pct(v, 50) * 1000:.1f} ms, p95 {pct(v, 95) * 1000:.1f} ms, max {max(v) * 1000:.1f} ms")
+    if lat["idle"] and lat["job"]:
+        print(f"ratio while a job runs / idle: p50 {pct(lat['job'], 50) / pct(lat['idle'], 50):.2f}, "
+              f"p95 {pct(lat['job'], 95) / pct(lat['idle'], 95):.2f}")
+    for e in errors[:5]:
+        print("error:", e)
+    return 1 if errors else 0
+
+
 def compare_trees(baseline: Path, requests: int) -> int:
     """POST /contours from one client to the service of ``baseline`` (another source tree, e.g. a worktree of an
     earlier commit) and of this tree, request by request in alternating order."""
@@ -340,6 +397,10 @@ def main() -> int:
     ap.add_argument("--skip-jobs", action="store_true", help="skip the queued large jobs (part 3)")
     ap.add_argument("--compare-stacks", action="store_true",
                     help="only POST /contours, one client: uvicorn's asyncio+h11 against uvloop+httptools, interleaved")
+    ap.add_argument("--during-job", action="store_true",
+                    help="only POST /contours, one client: idle against while one large contour job runs")
+    ap.add_argument("--tree", type=Path, default=REPO,
+                    help="with --during-job: the source tree whose service runs (default this one)")
     ap.add_argument("--baseline-tree", type=Path, default=None,
                     help="only POST /contours, one client: the service of another source tree (a worktree of an "
                          "earlier commit) against this tree's, request by request alternating")
@@ -353,6 +414,8 @@ def main() -> int:
     print(f"load average before: {load_line()}")
     if args.compare_stacks:
         return compare_stacks(args.requests, args.max_seconds)
+    if args.during_job:
+        return during_job(args.requests, args.tree.resolve())
     if args.baseline_tree is not None:
         return compare_trees(args.baseline_tree, args.requests)
     direct_baseline(1)  # imports, kernels loaded

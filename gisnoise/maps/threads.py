@@ -3,31 +3,86 @@
 The kernel releases the GIL, so blocks of rows (one map) or tiles (a day of operations)
 run in parallel on threads of one process.  :func:`default_threads` reads
 ``GISNOISE_THREADS`` (default: the CPUs this process may use).
+
+Work started inside :func:`background` (the service's jobs) runs on pools of its own whose threads
+have a lower scheduling priority (:data:`BACKGROUND_NICE`), so that a small map asked for meanwhile
+(a route planner's request) neither queues behind a job's blocks nor shares the CPUs evenly with
+them.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+from contextlib import contextmanager
 from typing import Any
 
 from gisnoise.errors import InputError
 
-__all__ = ["default_threads", "map_threads", "row_blocks", "thread_pool"]
+__all__ = ["background", "BACKGROUND_NICE", "default_threads", "in_background", "lower_priority", "map_threads",
+           "row_blocks", "thread_pool"]
 
+log = logging.getLogger(__name__)
 
-_POOLS: dict[int, ThreadPoolExecutor] = {}
+#: Nice value added to the threads of background work (Linux: per thread; CFS gives a thread of nice 0
+#: about nine times the CPU of one at nice 10).
+BACKGROUND_NICE = 10
+
+_POOLS: dict[tuple[int, bool], ThreadPoolExecutor] = {}
 _POOLS_LOCK = threading.Lock()
+_LOCAL = threading.local()
 
 
-def thread_pool(n: int) -> ThreadPoolExecutor:
-    """A process-wide pool of ``n`` threads, kept for reuse (its threads keep their pyproj transformers)."""
+def lower_priority(nice: int = BACKGROUND_NICE) -> bool:
+    """Lower the calling thread's scheduling priority by ``nice`` (Linux; True when it took effect).
+
+    Where threads have no priority of their own (not Linux) or the system refuses, nothing changes
+    and a debug line says so: the results are the same, only who gets the CPUs first differs.
+    """
+    if not hasattr(os, "setpriority") or not hasattr(threading, "get_native_id"):  # pragma: no cover
+        log.debug("thread priorities are not available here; background work runs at normal priority")
+        return False
+    tid = threading.get_native_id()
+    try:
+        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + int(nice)))
+    except OSError as exc:  # pragma: no cover - a system that refuses even a lower priority
+        log.debug("could not lower the priority of thread %s: %s", tid, exc)
+        return False
+    return True
+
+
+@contextmanager
+def background() -> Iterator[None]:
+    """Within the block, maps started in the calling thread run their blocks on low-priority pools."""
+    prev = in_background()
+    _LOCAL.background = True
+    try:
+        yield
+    finally:
+        _LOCAL.background = prev
+
+
+def in_background() -> bool:
+    """Whether the calling thread is inside :func:`background`."""
+    return bool(getattr(_LOCAL, "background", False))
+
+
+def thread_pool(n: int, *, low_priority: bool | None = None) -> ThreadPoolExecutor:
+    """A process-wide pool of ``n`` threads, kept for reuse (its threads keep their pyproj transformers).
+
+    ``low_priority`` (default: :func:`in_background`): a pool of its own whose threads run at
+    :data:`BACKGROUND_NICE`.
+    """
+    bg = in_background() if low_priority is None else bool(low_priority)
     with _POOLS_LOCK:
-        pool = _POOLS.get(n)
+        pool = _POOLS.get((n, bg))
         if pool is None:
-            pool = _POOLS[n] = ThreadPoolExecutor(max_workers=n, thread_name_prefix=f"gisnoise-fast{n}")
+            pool = _POOLS[(n, bg)] = ThreadPoolExecutor(
+                max_workers=n, thread_name_prefix=f"gisnoise-{'bg' if bg else 'fast'}{n}",
+                initializer=lower_priority if bg else None)
         return pool
 
 

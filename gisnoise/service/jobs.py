@@ -411,12 +411,17 @@ class WorkerPool:
         return self._stop.is_set()
 
     def _loop(self) -> None:
-        while not self._stop.is_set():
-            job = self.store.claim_next()
-            if job is None:
-                self.store.wait_for_work(self.poll_s)
-                continue
-            self.run(job)
+        # jobs are background work: a small map asked for meanwhile runs first
+        from gisnoise.maps.threads import background, lower_priority
+
+        lower_priority()
+        with background():
+            while not self._stop.is_set():
+                job = self.store.claim_next()
+                if job is None:
+                    self.store.wait_for_work(self.poll_s)
+                    continue
+                self.run(job)
 
     def _cancel_fn(self, job_id: str) -> Callable[[], bool]:
         last = [0.0, False]
