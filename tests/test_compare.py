@@ -198,3 +198,16 @@ def test_a_grid_that_cuts_a_level_flags_the_counts_above_it(tmp_path):
                                  "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "c"),
                                  "--ground-height", "0", "--margin", "100"])
     assert r.exit_code == 0 and "warning: r0: LAmax reaches" in r.output
+
+
+def test_a_band_cut_by_cells_without_a_level_is_flagged_as_at_the_grid_edge():
+    """Counts above a level that reaches cells without a level (a DEM's gap) are lower bounds, as at the
+    outer edge: the edge rule is the maps' (``gisnoise.maps.clipping.edge_max``)."""
+    from gisnoise.planning.compare import _clipped
+
+    band = np.full((5, 5), 40.0)
+    band[2, 2] = 60.0
+    assert _clipped("r", band, [45.0, 55.0], "LAmax") is None  # closed inside the grid
+    band[2, 3] = np.nan
+    msg = _clipped("r", band, [45.0, 55.0, 65.0], "LAmax")
+    assert msg is not None and "60.0 dB(A)" in msg and "45, 55 dB(A)" in msg

@@ -51,6 +51,7 @@ from gisnoise.maps import (
     flight_findings,
     write_geotiff,
 )
+from gisnoise.maps.clipping import edge_max
 
 __all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
 
@@ -262,10 +263,8 @@ def _margin(trajs: Any, cards: CardSet, metric: str, lowest_db: float, resolutio
 def _clipped(name: str, band: np.ndarray, levels: Sequence[float], metric: str) -> str | None:
     """The warning for a route whose band reaches a level at the grid's edge: the counts above it miss the people
     beyond the edge (as a map flags its clipped contours)."""
-    edge = np.concatenate([band[0], band[-1], band[:, 0], band[:, -1]])
-    edge = edge[np.isfinite(edge)]
-    top = float(edge.max()) if edge.size else -np.inf
-    cut = [v for v in levels if top >= v]
+    top = edge_max(band)  # the outer cells and those next to a cell without a level, as a map's contours
+    cut = [v for v in levels if np.isfinite(top) and top >= v]
     if not cut:
         return None
     return (f"{name}: {metric} reaches {top:.1f} dB(A) at the grid's edge: the people, buildings and areas above "
