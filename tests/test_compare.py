@@ -211,3 +211,15 @@ def test_a_band_cut_by_cells_without_a_level_is_flagged_as_at_the_grid_edge():
     band[2, 3] = np.nan
     msg = _clipped("r", band, [45.0, 55.0, 65.0], "LAmax")
     assert msg is not None and "60.0 dB(A)" in msg and "45, 55 dB(A)" in msg
+
+
+def test_coarse_cells_for_the_routes_are_named(tmp_path):
+    """Routes 58.5 m above the receivers on 200 m cells: LAmax under a track may be low by
+    10 lg(1 + (200 / sqrt 2 / 58.5)^2) = 8.35 dB, and the counts with it; the comparison says so as a map does."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    routes = [northwards(0.0), northwards(400.0)]
+    coarse = GridSpec(TMERC, Affine(200.0, 0, -1400.0, 0, -200.0, 1800.0), 15, 19)
+    cmp = compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=coarse)
+    (w,) = [w for w in cmp.doc["warnings"] if "resolution:" in w]
+    assert w.startswith("routes route1, route2: resolution: cells of 200 m are coarse for a flight 58.5 m above "
+                        "the receivers") and "up to 8.4 dB" in w

@@ -308,3 +308,21 @@ def test_samples_on_the_ground_make_no_noise_in_a_day_of_operations():
         assert res.bands["LAmax"][r, c] == pytest.approx(la, abs=1e-3)
         assert res.bands["Lday"][r, c] == pytest.approx(la + 10 * np.log10(10 * 60.0 / (12 * HOUR)), abs=1e-3)
         assert res.bands["NA40_day"][r, c] == 10
+
+
+def test_a_day_on_cells_coarse_for_its_flights_says_so(day):
+    """A day's LAmax and N-above need the footprint under each flight: cells whose centres can lie half a diagonal
+    beside the track lose up to 10 lg(1 + (res / sqrt 2 / H)^2) dB under it, as a map of one flight warns.
+    Flight A hovers 30 m above the receivers, B 50 m: on 50 m cells 3.78 and 1.76 dB."""
+    from gisnoise.ops.operations import schedule_findings
+
+    sched, res = day
+    coarse = [w for w in res.metadata["warnings"] if "resolution:" in w]
+    assert len(coarse) == 1 and coarse[0].startswith("flights A, B: resolution: cells of 50 m are coarse for a "
+                                                     "flight 30.0 m above the receivers")
+    assert "up to 3.8 dB" in coarse[0]
+    fine = GridSpec(TMERC, Affine(20.0, 0.0, -425.0, 0.0, -20.0, 425.0), 43, 43)  # 20 m: 0.87 dB at 30 m
+    assert not [w for w in schedule_findings(sched, fine)[0] if "resolution:" in w]
+    only_a = GridSpec(TMERC, Affine(30.0, 0.0, -425.0, 0.0, -30.0, 425.0), 29, 29)  # 30 m: 1.76 and 0.72 dB
+    (w,) = [w for w in schedule_findings(sched, only_a)[0] if "resolution:" in w]
+    assert w.startswith("flight A: resolution: cells of 30 m")

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -50,7 +50,7 @@ from gisnoise.model import HemisphereCard, ModelCard, get_ansatz
 
 __all__ = ["grid_for_trajectory", "grid_for_map", "auto_margin", "audible_distance", "level_table", "MAX_DISTANCE_M",
            "SIZED_METRICS", "RESOLUTION_TOLERANCE_DB", "coarse_cell_loss_db", "finest_needed_resolution",
-           "resolution_warning"]
+           "resolution_warning", "resolution_warning_of"]
 
 MAX_DISTANCE_M = 100_000.0
 """Largest distance the bound looks at, m."""
@@ -117,6 +117,25 @@ def resolution_warning(resolution_m: float, height_m: float | None,
             f"cell's diagonal) beside the track, so LAmax under it may be low by up to {loss:.1f} dB "
             f"(10 lg(1 + (resolution / sqrt(2) / height)^2)); cells of "
             f"{finest_needed_resolution(height_m, tolerance_db):g} m or finer keep that within {tolerance_db:g} dB")
+
+
+def resolution_warning_of(resolution_m: float, heights: Mapping[str, float | None], noun: str = "flight",
+                          tolerance_db: float = RESOLUTION_TOLERANCE_DB) -> str | None:
+    """:func:`resolution_warning` for several flights on one grid: one line naming every flight (by its key in
+    ``heights``, its median height above the receivers) whose cells are coarse, judged at the lowest of them.
+
+    >>> print(resolution_warning_of(200.0, {"a": 400.0, "b": 60.0, "c": 40.0}, "route"))  # doctest: +ELLIPSIS
+    routes b, c: resolution: cells of 200 m are coarse for a flight 40.0 m above the receivers ...
+    >>> resolution_warning_of(10.0, {"a": 150.0, "b": None}) is None
+    True
+    """
+    coarse = {n: float(h) for n, h in heights.items()
+              if h is not None and math.isfinite(h) and h > 0.0
+              and float(coarse_cell_loss_db(resolution_m, h)) > tolerance_db}
+    if not coarse:
+        return None
+    said = resolution_warning(resolution_m, min(coarse.values()), tolerance_db)
+    return f"{noun}{'s' if len(coarse) > 1 else ''} {', '.join(coarse)}: {said}"
 
 
 _DISTANCES = np.geomspace(1.0, MAX_DISTANCE_M, 241)

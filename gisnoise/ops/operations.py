@@ -46,6 +46,8 @@ import numpy as np
 from gisnoise.errors import InputError
 from gisnoise.geo import GridSpec
 from gisnoise.maps import CardSet, MapResult, band_unit, crs_scale_warning, default_threads, flight_findings
+from gisnoise.maps.grids import resolution_warning_of
+from gisnoise.maps.pipeline import flight_height
 from gisnoise.ops.accumulate import new_accumulators, period_bands
 from gisnoise.ops.periods import PENALTY_DB, PERIOD_HOURS, PERIOD_START_H, PERIODS
 from gisnoise.ops.scale import SCHEDULER_ENV, run_on_dask
@@ -198,6 +200,11 @@ def schedule_findings(schedule: Schedule, grid: GridSpec) -> tuple[list[str], di
         if found.power_outside:
             outside[f.id] = found.power_outside
     warnings = [f"flight{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {w}" for w, ids in said.items()]
+    flat = schedule.ground_h_m if schedule.ground_h_m is not None else ground
+    heights = {f.id: flight_height(f.trajectory, flat, schedule.dem, schedule.dem_offset_m, schedule.receiver_height_m)
+               for f in schedule.flights if f.total > 0}
+    coarse = resolution_warning_of(float(grid.resolution[0]), heights)  # the day's LAmax, N-above need the footprint
+    warnings += [coarse] if coarse is not None else []
     lon = np.concatenate([f.trajectory.lon for f in schedule.flights])
     lat = np.concatenate([f.trajectory.lat for f in schedule.flights])
     scale = crs_scale_warning(grid, lon, lat)

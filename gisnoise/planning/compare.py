@@ -52,6 +52,8 @@ from gisnoise.maps import (
     write_geotiff,
 )
 from gisnoise.maps.clipping import edge_max
+from gisnoise.maps.grids import resolution_warning_of
+from gisnoise.maps.pipeline import flight_height
 
 __all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
 
@@ -212,6 +214,9 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         grid = grid_for_points(lon, lat, resolution_m, margin_m, crs)
     scale = crs_scale_warning(grid, lon, lat)
     warnings += [scale] if scale is not None else []
+    coarse = resolution_warning_of(float(grid.resolution[0]), {
+        n: flight_height(t, ground_h, None, 0.0, receiver_height) for n, t in trajs.items()}, "route")
+    warnings += [coarse] if coarse is not None else []
     pts = population_points(population, grid) if population is not None else None
     bands: dict[str, np.ndarray] = {}
     rows: list[dict[str, Any]] = []
