@@ -13,6 +13,7 @@ from gisnoise.errors import GisnoiseError
 from gisnoise.flight import OPTIONAL_COLUMNS, REQUIRED_COLUMNS
 from gisnoise.limits import CARD_REF_PATTERN, SAFE_ID_PATTERN
 from gisnoise.model import EFFECT_NAMES, PHASES, ansatz_names, get_ansatz
+from gisnoise.model.plausibility import REFERENCE_DISTANCE_RANGE_M
 
 __all__ = [
     "MediaType", "ErrorBody", "FieldError", "CardDocument", "CardInfo", "CardList", "CardVersions",
@@ -168,7 +169,11 @@ class CardDocument(BaseModel):
     parameters: dict[Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")], float] = Field(
         max_length=64, description="Parameter name -> value; exactly the parameters of the ansatz.")
     reference_power_w: float = Field(gt=0, le=1e9, description="Reference electric power, W.")
-    reference_distance_m: float = Field(default=40.0, gt=0, le=1e6, description="Reference distance, m.")
+    reference_distance_m: float = Field(
+        default=40.0, gt=0, le=1e6, json_schema_extra={"minimum": REFERENCE_DISTANCE_RANGE_M[0],
+                                                       "maximum": REFERENCE_DISTANCE_RANGE_M[1]},
+        description="Reference distance, m: 1 m to 1 km; the card's plausibility check refuses a card stated "
+                    "outside it (422 naming reference_distance_m).")
     covariance: list[Annotated[list[float], Field(max_length=64)]] | None = Field(
         default=None, max_length=64, description="Covariance of the parameters (their order), or null.")
     statistics: dict[str, Any] = Field(default_factory=dict)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from service_helpers import CARDS, assert_names_field, wait_job
 from test_api_contours import _omni_card, _request
 
@@ -78,3 +79,17 @@ def test_linestring_without_ground_names_ground_h_m_not_the_command_line(client)
     info = wait_job(client, r.json()["id"])
     assert info["status"] == "failed"
     assert info["error"] == {"detail": body["detail"], "field": "ground_h_m", "status": 422}
+
+
+@pytest.mark.parametrize("distance", [0.5, 1500.0])
+def test_the_schema_states_the_reference_distance_range_the_guard_keeps(client, distance):
+    """The OpenAPI schema says which reference distances a card may have; the plausibility guard refuses one
+    outside exactly that range, naming the field."""
+    from gisnoise.model.plausibility import REFERENCE_DISTANCE_RANGE_M
+
+    spec = client.get("/openapi.json").json()
+    prop = spec["components"]["schemas"]["CardDocument"]["properties"]["reference_distance_m"]
+    assert (prop["minimum"], prop["maximum"]) == REFERENCE_DISTANCE_RANGE_M == (1.0, 1000.0)
+    doc = json.loads((CARDS / "demo_horizontal.json").read_text())
+    doc.update(id="range", reference_distance_m=distance)
+    assert_names_field(client.post("/cards", json=doc), 422, "reference_distance_m")
