@@ -190,6 +190,37 @@ def test_background_never_reached_is_not_guessed(tmp_path):
     assert {b["source"] for b in s.meta["background"]} == {"none"}
 
 
+def hover_track(enu: np.ndarray, yaw_deg_per_s: float = 0.0, t0: float = -10.0, t1: float = 60.0,
+                dt: float = 0.5) -> dict[str, np.ndarray]:
+    """Flight-CSV columns of a hover at ``enu`` (m), turning at ``yaw_deg_per_s``."""
+    t = np.arange(t0, t1 + dt / 2, dt)
+    lat, lon, h = FRAME.to_wgs84(np.full(t.size, enu[0]), np.full(t.size, enu[1]), np.full(t.size, enu[2]))
+    n = len(t)
+    return {"t": t, "lat": lat, "lon": lon, "h": h, "roll": np.zeros(n), "pitch": np.zeros(n),
+            "yaw": (yaw_deg_per_s * t) % 360.0, "power_w": np.full(n, 3000.0), "phase": np.full(n, "hover")}
+
+
+@pytest.mark.parametrize("turning", [False, True])
+def test_a_hover_at_a_steady_distance_does_not_take_the_uav_for_the_background(tmp_path, turning):
+    """A hover 50 m up holds each microphone at one distance: a steady level there is the UAV's as well as a
+    plateau's, and the quiet directions of a turning UAV are no background.  The levels stand 30-38 dB above the
+    true 40 dB background, so no row is low_snr; without background_db and quiet blocks the background is not
+    determined.  (Before, the plateau fit took 80 dB, or the turning UAV's quiet directions at 70.9 dB, for the
+    background and masked most rows low_snr.)"""
+    rng = np.random.default_rng(3)
+    pos = np.array([0.0, 0.0, 50.0])
+
+    def levels(mic, t_r, d):
+        yaw = np.radians(6.0 * t_r) if turning else 0.0
+        return 75.0 + (3.0 * np.cos(yaw) if turning else 0.0) + rng.normal(0.0, 0.5, t_r.size)
+
+    root = make_campaign(tmp_path / "c", track=hover_track(pos, 6.0 if turning else 0.0), level_fn=levels)
+    s = read_campaign(root).samples()
+    assert np.all(np.isnan(s.background_db))
+    assert {b["source"] for b in s.meta["background"]} == {"none"}
+    assert np.all(s.valid)
+
+
 def test_background_from_blocks_before_the_flight(tmp_path):
     """Blocks whose emission precedes the log (UAV not yet flying) hold the background only."""
     rng = np.random.default_rng(5)

@@ -5,7 +5,8 @@ Per microphone and flight the background is, in this order: ``background_db`` of
 campaign.json; the median level of the blocks whose emission lies outside the flight
 log (8 or more; the UAV is not flying then, and the value must not exceed the quiet
 end of the in-flight levels); the plateau ``B`` of :func:`fit_level_trend` when the
-levels show it; else NaN, and then no row is masked ``low_snr``.
+levels show it and the distances vary enough to tell it from the UAV; else NaN, and
+then no row is masked ``low_snr``.
 :func:`fit_level_trend` (spreading with distance, loudness with power, an offset per
 phase, power-summed with the background) also gives each row's expected level; the
 level minus it, on every microphone at once, is what :func:`detect_events` examines.
@@ -20,13 +21,34 @@ import numpy as np
 
 from gisnoise.measure.samples import series_ids
 
-__all__ = ["detect_events", "fit_level_trend", "DEFAULT_SNR_DB", "DEFAULT_EVENT_DB"]
+__all__ = ["detect_events", "fit_level_trend", "spreading_span_db", "DEFAULT_SNR_DB", "DEFAULT_EVENT_DB",
+           "PLATEAU_SPAN_DB"]
 
 DEFAULT_SNR_DB = 3.0
 """Rows whose level is below the background plus this, dB, are masked ``low_snr``."""
 DEFAULT_EVENT_DB = 6.0
 """Joint rise on all microphones above the geometric trend that flags an ``event``, dB."""
 EVENT_SMOOTHING_S = 0.5
+PLATEAU_SPAN_DB = 10.0
+"""Spherical spreading the distances of a series must span (``20 lg(d_95 / d_5)``, dB: a factor 3.2) before a
+background plateau is estimated from its levels alone."""
+
+
+def spreading_span_db(d: np.ndarray) -> float:
+    """``20 lg(d_95 / d_5)``: the spherical spreading the distances ``d`` span between their 5th and 95th
+    percentiles, dB (0 for fewer than two distances).
+
+    >>> round(spreading_span_db(np.geomspace(30.0, 3000.0, 201)), 2)
+    36.0
+    >>> spreading_span_db(np.full(50, 58.3))
+    0.0
+    """
+    d = np.asarray(d, dtype=float)
+    d = d[np.isfinite(d) & (d > 0.0)]
+    if d.size < 2:
+        return 0.0
+    lo, hi = np.percentile(d, [5.0, 95.0])
+    return float(20.0 * np.log10(hi / lo))
 
 
 def detect_events(t: Sequence[np.ndarray], excess_db: Sequence[np.ndarray], *, event_db: float = DEFAULT_EVENT_DB,
@@ -118,7 +140,11 @@ def fit_level_trend(level: Any, d: Any, power_w: Any, *, phase: Any = None, use:
     rows shares the offset of the most common phase.
 
     The plateau is accepted only where the data show it: at least 10 % of the rows
-    within 2 dB above ``B`` and at most 2 % more than 3 dB below it.  Otherwise the
+    within 2 dB above ``B`` and at most 2 % more than 3 dB below it, and only where the
+    distances vary enough to tell it from the UAV's own level (their spherical spreading
+    spans :data:`PLATEAU_SPAN_DB` or more, :func:`spreading_span_db`): at a steady
+    distance (a hover) a steady level is the UAV's as well as a background's, and the
+    quiet directions of a turning UAV would be taken for the background.  Otherwise the
     background is not determined (``B`` is NaN) and the trend is refitted alone.
 
     Parameters
@@ -200,6 +226,9 @@ def fit_level_trend(level: Any, d: Any, power_w: Any, *, phase: Any = None, use:
 
     if background_db is not None:
         x, b = solve(float(background_db))
+    elif spreading_span_db(np.asarray(d, dtype=float)[use]) < PLATEAU_SPAN_DB:
+        x, b = solve(-np.inf)  # the UAV's level cannot be told from a plateau at a steady distance
+        b = float("nan")
     else:
         x, b = solve(None)
         if np.mean(lv < b + 2.0) < 0.10 or np.mean(lv < b - 3.0) > 0.02:
