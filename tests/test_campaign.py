@@ -17,8 +17,10 @@ from gisnoise.errors import CampaignError
 from gisnoise.geo import LocalFrame
 from gisnoise.measure import (
     Exclusion,
+    campaign_log_warnings,
     check_campaign,
     emission_time,
+    inspect_campaign,
     read_campaign,
     read_level_csv,
     write_level_csv,
@@ -250,6 +252,34 @@ def test_background_from_campaign_json(tmp_path):
     np.testing.assert_array_equal(s.mask_reason[m1] == "low_snr", s.level[m1] < 50.0)
 
 
+def test_a_microphone_whose_airborne_blocks_are_all_masked_is_named(tmp_path):
+    """m1 states a background of 80 dB(A); the UAV reaches at most 66.5 dB(A) there (70 dB at 40 m, nearest
+    59.8 m): every block is below background + 3 dB and masked low_snr, lost to the fit.  The campaign's warnings
+    name m1 (only), the masks and the stated background; before, check said "no problems found"."""
+    root = make_campaign(tmp_path / "c")
+    doc = json.loads((root / "campaign.json").read_text())
+    doc["microphones"][0]["background_db"] = 80.0
+    (root / "campaign.json").write_text(json.dumps(doc))
+    camp = read_campaign(root)
+    lines = [w for w in campaign_log_warnings(camp) if "airborne blocks are masked" in w]
+    n = int(np.sum(camp.samples().mic == "m1"))
+    assert len(lines) == 1 and lines[0].startswith(f"microphone 'm1', flight 'f1': {n} of its {n} airborne blocks")
+    assert f"low_snr {n}" in lines[0] and "the background 80.0 dB(A) (campaign.json)" in lines[0]
+    assert not [w for w in campaign_log_warnings(read_campaign(make_campaign(tmp_path / "clean")))
+                if "masked" in w]
+
+
+def test_a_hole_in_the_flight_csv_is_named_not_bridged_silently(tmp_path):
+    """Rows 5.0-14.5 s cut from the flight CSV (a 10 s hole, the track's step 0.5 s): the campaign is read (the
+    state is interpolated straight across) and its warnings name the hole, 4.5 -> 15.0 s."""
+    track = straight_track()
+    keep = (track["t"] < 4.9) | (track["t"] > 14.9)
+    root = make_campaign(tmp_path / "c", track={k: v[keep] for k, v in track.items()})
+    (line,) = [w for w in campaign_log_warnings(read_campaign(root)) if "hole" in w]
+    assert "f1.csv: the track has a hole without samples (10.5 s from t = 4.5 s)" in line
+    assert not [w for w in campaign_log_warnings(read_campaign(make_campaign(tmp_path / "whole"))) if "hole" in w]
+
+
 def test_joint_rise_on_all_mics_is_an_event_one_mic_is_not(tmp_path):
     def levels(mic, t_r, d):
         la = uav_level(d)
@@ -420,11 +450,41 @@ def test_campaign_with_a_px4_log_aligned_by_gps_time(tmp_path):
     s = camp.samples()
     assert np.all((s.t_r - s.t_e) > 0) and np.all((s.t_r - s.t_e) < 0.2)   # 10-60 m at 340 m/s
     np.testing.assert_allclose(s.t_r - s.t_e, s.d / 340.0, atol=1e-9)
-    # outside the log, or while the log's landed flag says the vehicle stands on the ground
-    out = (s.t_e < tr.t[0]) | (s.t_e > tr.t[-1]) | ~tr.flying_at(s.t_e)
+    # outside the log; within it while the log's landed flag says the vehicle stands on the ground
+    out = (s.t_e < tr.t[0]) | (s.t_e > tr.t[-1])
+    ground = ~out & ~tr.flying_at(s.t_e)
     assert out.sum() >= 8 and set(s.mask_reason[out]) == {"outside_flight"}
-    assert not np.any(s.mask_reason[~out] == "outside_flight")
+    assert ground.sum() >= 8 and set(s.mask_reason[ground]) == {"on_ground"}
+    assert not np.any(np.isin(s.mask_reason[~out & ~ground], ("outside_flight", "on_ground")))
     assert s.power_w.min() > 0.0 and s.power_w.max() > 100.0   # the hop, then idle after landing
+
+
+def test_a_recording_that_ends_before_take_off_is_not_blamed_on_the_clock(tmp_path):
+    """The real VTOL log: its GPS time is right, the log spans 0.8-6.6 s of the campaign's clock and the vehicle
+    flies at about 3.0-3.8 s.  A recording of 2.5 s falls within the log but finds the vehicle on the ground: the
+    check says so and names the airborne stretch, not "check start_utc"."""
+    import shutil
+
+    root = tmp_path / "c"
+    (root / "flights").mkdir(parents=True)
+    shutil.copy(DATA / "pyulog_sample_log_small_vtol.ulg", root / "flights" / "f1.ulg")
+    frame = LocalFrame(63.4170, 10.4082, 100.0)
+    lat, lon, h = frame.to_wgs84(10.0, 0.0, 1.5)
+    doc = {"schema": "gisnoise/campaign/1", "origin": {"lat": 63.4170, "lon": 10.4082, "h": 100.0},
+           "speed_of_sound_m_s": 340.0, "weather": {"temperature_c": 10.0},
+           "vehicle": {"name": "vtol", "reference_power_w": 500.0},
+           "microphones": [{"id": "m1", "lat": float(lat), "lon": float(lon), "h": float(h), "mount": "free_field"}],
+           "flights": [{"id": "f1", "start_utc": "2021-04-21T06:30:58Z"}]}
+    (root / "campaign.json").write_text(json.dumps(doc))
+    t_r = np.arange(0.0625, 2.5, 0.125)
+    write_levels(root / "mics" / "m1" / "f1.csv", t_r, np.full(len(t_r), 60.0))
+    camp, problems = inspect_campaign(root)
+    tr = camp.trajectories["f1"]
+    fly = tr.t[tr.flying]
+    assert fly.min() > 2.5  # the vehicle takes off after the recording ends
+    (msg,) = [p.message for p in problems if "airborne" in p.message]
+    assert "start_utc" in msg and "find the vehicle on the ground" in msg
+    assert f"flies at {fly.min():.1f}-" in msg and "check start_utc" not in msg.split(";")[0]
 
 
 def test_campaign_with_an_ardupilot_log_needs_the_geoid_undulation(tmp_path, no_geoid_grid):

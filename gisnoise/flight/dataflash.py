@@ -35,6 +35,7 @@ from gisnoise.flight._logkernels import (
     msl_to_ellipsoid_undulation,
 )
 from gisnoise.flight.clock import gps_to_unix
+from gisnoise.flight.gaps import gap_metadata
 from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.logcut import dataflash_cut, framing, read_cut, refuse_cut_definitions
 from gisnoise.flight.logdamage import dataflash_damage, record_damage
@@ -190,7 +191,7 @@ def _dataflash_trajectory(src: str, reader: Any, start_utc: Any, geoid_undulatio
             **geoid_meta,
             "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}
     traj = _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)
-    traj.metadata.update(glitches.metadata(traj.t))
+    traj.metadata.update({**glitches.metadata(traj.t), **gap_metadata(traj.t)})
     return traj
 
 

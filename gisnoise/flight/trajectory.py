@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import MissingColumnError, TrajectoryError
+from gisnoise.flight.gaps import gap_metadata
 from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.phases import PHASES
 from gisnoise.flight.rest import lying_inverted
@@ -250,7 +251,7 @@ def from_columns(cols: Mapping[str, Any], *, source: str = "trajectory") -> Traj
     kw["phase"] = np.asarray(cols["phase"], dtype=str) if "phase" in cols else np.full(n, "horizontal")
     glitches = mend_glitches(kw["t"], kw["lat"], kw["lon"], kw["h"])  # unchanged without glitches
     kw.update(lat=glitches.lat, lon=glitches.lon, h=glitches.h)
-    return Trajectory(**kw, source=source, metadata=glitches.metadata(kw["t"]))
+    return Trajectory(**kw, source=source, metadata={**glitches.metadata(kw["t"]), **gap_metadata(kw["t"])})
 
 
 def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str | None = None) -> Trajectory:

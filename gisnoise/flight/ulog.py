@@ -38,6 +38,7 @@ from gisnoise.flight._logkernels import (
     msl_height_datum,
     msl_to_ellipsoid_undulation,
 )
+from gisnoise.flight.gaps import gap_metadata
 from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.logcut import framing, read_cut, refuse_cut_definitions, ulog_cut
 from gisnoise.flight.logdamage import record_damage, ulog_damage
@@ -222,7 +223,7 @@ def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: fl
         utc_offset = gps_cols["utc_offset"]
     meta = {"height_datum": datum, **height_meta, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
     traj = _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
-    traj.metadata.update(glitches.metadata(traj.t))
+    traj.metadata.update({**glitches.metadata(traj.t), **gap_metadata(traj.t)})
     return traj
 
 

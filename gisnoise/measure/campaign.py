@@ -152,7 +152,9 @@ def campaign_log_warnings(camp: Campaign) -> list[str]:
     :data:`QUIET_PERCENTILE` percentile over its files, user exclusions left out, 50
     blocks or more) more than :data:`BACKGROUND_MARGIN_DB` below its ``background_db``.
     A measured level holds the background, so this says the levels are too low (a
-    calibration or sensitivity error) or the stated background too high.  The one list
+    calibration or sensitivity error) or the stated background too high.  Then each
+    microphone and flight whose airborne blocks are :data:`MOSTLY_MASKED` or more masked
+    (``low_snr``, ``event``): they are lost to fit and diagnosis.  The one list
     every face shows: the command line prints each line on stderr as
     ``warning: <line>``; the service's fit and diagnose jobs carry them in their
     result's ``warnings``.
@@ -173,7 +175,44 @@ def campaign_log_warnings(camp: Campaign) -> list[str]:
         w = track_warning(traj) if traj is not None else None
         if w is not None:
             out.append(w)
-    return out + _background_warnings(camp)
+    return out + _background_warnings(camp) + _masked_warnings(camp)
+
+
+MOSTLY_MASKED = 0.9
+"""Share of a microphone's airborne blocks masked (``low_snr``, ``event``) that :func:`campaign_log_warnings` names."""
+
+
+def _masked_warnings(camp: Campaign) -> list[str]:
+    """One line per microphone and flight whose airborne blocks (not excluded by the user) are mostly masked.
+
+    Their levels are then lost to fit and diagnosis: a background stated or estimated too high, a calibration
+    error or events everywhere; the line names the masks and the background with where it came from.
+    """
+    if not camp.levels:
+        return []
+    try:
+        s = camp.samples()
+    except GisnoiseError:  # a campaign whose samples cannot be built has its problems said elsewhere
+        return []
+    how = {(b["mic"], b["flight"]): b for b in s.meta.get("background", [])}
+    out = []
+    for (mic, flight), b in how.items():
+        rows = (s.mic == mic) & (s.flight == flight) & ~np.isin(s.mask_reason, ("outside_flight", "on_ground",
+                                                                                 "excluded"))
+        n = int(rows.sum())
+        masked = rows & ~s.valid
+        if n < 8 or masked.sum() < MOSTLY_MASKED * n:
+            continue
+        reasons = ", ".join(f"{k} {v}" for k, v in sorted(zip(*np.unique(s.mask_reason[masked], return_counts=True),
+                                                                strict=True)))
+        bg = b.get("background_db")
+        bg_text = (f"the background {bg:.1f} dB(A) ({b['source']})" if bg is not None and np.isfinite(bg)
+                   else "no background")
+        out.append(f"microphone '{mic}', flight '{flight}': {int(masked.sum())} of its {n} airborne blocks are masked "
+                   f"({reasons}; {bg_text}, levels {float(np.nanmin(s.level[rows])):.1f}-"
+                   f"{float(np.nanmax(s.level[rows])):.1f} dB(A)) and are lost to fit and diagnose: check the stated "
+                   "background_db, the calibration or the exclusions")
+    return out
 
 
 def _background_warnings(camp: Campaign) -> list[str]:
@@ -211,11 +250,31 @@ def _outside_problems(camp: Campaign, s: Any, col: _Collector) -> None:
     from the microphones (farther than :data:`FAR_TRACK_M`: another place's log)."""
     for lv in camp.levels:
         m = (s.mic == lv.mic) & (s.flight == lv.flight)
-        if m.any() and np.all(s.mask_reason[m] == "outside_flight"):
-            far = _track_distance_m(camp.trajectories[lv.flight], camp.microphones)
-            hint = (f"the flight track is {far / 1000.0:,.0f} km from the microphones; check that the log is this "
-                    "campaign's" if far > FAR_TRACK_M else "check start_utc")
-            col.add(lv.source, "t", f"{lv.source}: no block falls within the flight log of '{lv.flight}' ({hint})")
+        if not m.any() or not np.all(np.isin(s.mask_reason[m], ("outside_flight", "on_ground"))):
+            continue
+        traj = camp.trajectories[lv.flight]
+        grounded = s.mask_reason[m] == "on_ground"
+        if grounded.any():  # the clock can be right: the recording misses only the airborne part
+            te = s.t_e[m][grounded]
+            col.add(lv.source, "t", f"{lv.source}: no block falls while flight '{lv.flight}' is airborne: its "
+                    f"{int(grounded.sum())} block(s) emitted within the log ({te.min():.1f}-{te.max():.1f} s) find "
+                    f"the vehicle on the ground, and it flies at {_airborne_text(traj)} s of the log; the recording "
+                    "misses the flight, or check start_utc")
+            continue
+        far = _track_distance_m(traj, camp.microphones)
+        hint = (f"the flight track is {far / 1000.0:,.0f} km from the microphones; check that the log is this "
+                "campaign's" if far > FAR_TRACK_M else "check start_utc")
+        col.add(lv.source, "t", f"{lv.source}: no block falls within the flight log of '{lv.flight}' ({hint})")
+
+
+def _airborne_text(traj: Trajectory) -> str:
+    """The log's airborne stretches, ``a-b, c-d`` (s of the log), or ``no time`` when it never flies."""
+    fly = np.asarray(traj.flying, bool)
+    if not fly.any():
+        return "no time"
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], fly.astype(np.int8), [0]])))
+    t = np.asarray(traj.t, float)
+    return ", ".join(f"{t[a]:.1f}-{t[b - 1]:.1f}" for a, b in zip(edges[::2], edges[1::2], strict=True))
 
 
 def _track_distance_m(traj: Trajectory, mics: tuple[Microphone, ...]) -> float:

@@ -14,8 +14,9 @@ One row per microphone and block:
    ``10 log10(10^(LA/10) + sum_b 10^(LA_b/10) (10^(alpha_b d / 10) - 1))`` with ``LA_b``
    the A-weighted band level.  ``bands`` stay as measured;
 4. masks, one reason per row, in this priority: ``outside_flight`` (emission time
-   outside the flight log, or while the vehicle is not flying: on the ground, no
-   current; :meth:`~gisnoise.flight.Trajectory.flying_at`), ``excluded`` (user intervals), ``event`` (see
+   outside the flight log), ``on_ground`` (within the log while the vehicle is not flying: on
+   the ground, no current; :meth:`~gisnoise.flight.Trajectory.flying_at`), ``excluded`` (user
+   intervals), ``event`` (see
    :func:`~gisnoise.measure.events.detect_events`), ``low_snr`` (level below
    background + ``snr_db``); background and events as :mod:`gisnoise.measure.events`
    finds them.
@@ -97,6 +98,7 @@ def build_samples(camp: Campaign) -> Samples:
             "rpm": st.get("rpm", np.full(n, np.nan)), "airspeed_m_s": st.get("airspeed_m_s", np.full(n, np.nan)),
             "bands": bands,
             "outside": (t_e < tr.t[0]) | (t_e > tr.t[-1]) | ~tr.flying_at(t_e),  # on the ground: no UAV sound
+            "on_ground": (t_e >= tr.t[0]) & (t_e <= tr.t[-1]) & ~tr.flying_at(t_e),
             "has_bands": lv.bands is not None,
         })
     if not parts:
@@ -161,6 +163,7 @@ def build_samples(camp: Campaign) -> Samples:
     reason[event] = "event"
     reason[excluded] = "excluded"
     reason[outside] = "outside_flight"
+    reason[cat["on_ground"]] = "on_ground"
     reason = reason.astype(str)
 
     rpm = cat["rpm"] if np.isfinite(cat["rpm"]).any() else None

@@ -81,7 +81,9 @@ def test_fit_job_warns_of_a_microphone_listed_50_m_off_as_gisnoise_fit_does(clie
     assert r.status_code == 202, r.text
     info = wait_job(client, r.json()["id"], timeout=300)
     assert info["status"] == "succeeded", info
-    assert info["summary"]["warnings"] == said
+    # after the campaign's own lines: the racetrack's legs are logged 5 s apart (holes the track bridges straight)
+    *log_lines, last = info["summary"]["warnings"]
+    assert last == said[0] and log_lines and all("the track has 3 holes without samples" in w for w in log_lines)
 
 
 def test_fit_job_failing_in_the_core_reports_the_field(client, campaign_zip):
