@@ -5,6 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from gisnoise.cli.main import cli, load_all
@@ -51,6 +52,14 @@ def test_lazy_help_lists_the_same_commands_and_lines_as_the_imported_ones():
 def test_unknown_command_is_a_usage_error():
     res = CliRunner().invoke(cli, ["nosuch"])
     assert res.exit_code == 2 and "No such command 'nosuch'" in res.output
+
+
+@pytest.mark.parametrize("opt", ["-q", "--verbose"])
+def test_a_global_option_after_the_command_says_where_it_goes(opt):
+    """`gisnoise contour route.csv -q` is a usage error that shows the right order (it said only "No such option")."""
+    res = CliRunner().invoke(cli, ["contour", "route.csv", opt])
+    assert res.exit_code == 2
+    assert f"goes before it: gisnoise {opt} contour ..." in res.output
 
 
 def test_files_named_in_help_texts_exist():

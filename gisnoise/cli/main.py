@@ -102,6 +102,12 @@ class GisnoiseGroup(click.Group):
         except MemoryError:
             click.echo("Error: out of memory; use a coarser --resolution or a smaller grid", err=True)
             ctx.exit(2)
+        except click.NoSuchOption as exc:
+            if exc.option_name in _GROUP_OPTIONS:  # `gisnoise contour ... -q`: say where it goes
+                exc.message = (f"{exc.message.rstrip('.')} for the command: {exc.option_name} is an option of gisnoise "
+                               f"itself and goes before it: gisnoise {exc.option_name} "
+                               f"{ctx.invoked_subcommand or 'COMMAND'} ...")
+            raise
         except (click.exceptions.Exit, click.ClickException, click.Abort, KeyboardInterrupt, SystemExit):
             raise
         except BrokenPipeError:
@@ -114,6 +120,10 @@ class GisnoiseGroup(click.Group):
             click.echo(f"Error: {fld + ': ' if isinstance(fld, str) else ''}cannot read the input "
                        f"({type(exc).__name__}: {exc})", err=True)
             ctx.exit(2)
+
+
+_GROUP_OPTIONS = ("-q", "--quiet", "-v", "--verbose")
+"""Options of ``gisnoise`` itself, which users also type after the command."""
 
 
 @click.group(cls=GisnoiseGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
