@@ -104,9 +104,9 @@ class GisnoiseGroup(click.Group):
             ctx.exit(2)
         except click.NoSuchOption as exc:
             if exc.option_name in _GROUP_OPTIONS:  # `gisnoise contour ... -q`: say where it goes
-                exc.message = (f"{exc.message.rstrip('.')} for the command: {exc.option_name} is an option of gisnoise "
-                               f"itself and goes before it: gisnoise {exc.option_name} "
-                               f"{ctx.invoked_subcommand or 'COMMAND'} ...")
+                raise click.UsageError(f"{exc.format_message().rstrip('.')} for the command: {exc.option_name} is an "
+                                       f"option of gisnoise itself and goes before it: gisnoise {exc.option_name} "
+                                       f"{ctx.invoked_subcommand or 'COMMAND'} ...", ctx=exc.ctx) from None
             raise
         except (click.exceptions.Exit, click.ClickException, click.Abort, KeyboardInterrupt, SystemExit):
             raise
