@@ -27,6 +27,16 @@ class MissingColumnError(InputError, KeyError):
         return str(self.args[0]) if self.args else ""
 
 
+class RecordingError(InputError):
+    """An audio recording holds stretches that are not sound (clipped, dropped out); ``spans``: their times,
+    ``(t0, t1)`` s from the first sample, the ones the message names."""
+
+    def __init__(self, message: str, *, field: str | None = None,
+                 spans: tuple[tuple[float, float], ...] = ()) -> None:
+        super().__init__(message, field=field)
+        self.spans = tuple(spans)
+
+
 class CardError(InputError):
     """A model card is invalid or has an unknown schema."""
 

@@ -492,3 +492,160 @@ def test_a_clipped_recording_is_refused_not_read_too_quiet(tmp_path, dtype):
     wavfile.write(path, fs, (0.5 * v).astype(np.float32))
     acoustics.read_wav(path, 0.05)
     acoustics.wav_band_levels(path, 0.05)
+
+
+# --------------------------------------------------------------------------- dropouts
+
+
+def _dropout_wav(path, fs, seconds, gaps, dtype="float32", value=0.0):
+    """A 1 kHz sine of 1 Pa rms (94.0 dB) at 0.05 V/Pa, its samples set to ``value`` over each ``(t0, t1)``."""
+    from scipy.io import wavfile
+
+    v = 0.05 * _sine(1000.0, fs, seconds)
+    for a, b in gaps:
+        v[int(round(a * fs)):int(round(b * fs))] = value
+    data = v.astype(np.float32) if dtype == "float32" else np.round(v * 32768).astype(np.int16)
+    wavfile.write(path, fs, data)
+
+
+@pytest.mark.parametrize("dtype", ["float32", "int16"])
+def test_a_dropout_is_refused_naming_the_file_and_its_times(tmp_path, dtype):
+    """1 s of exact zeros (3-4 s) in a 94 dB 1 kHz recording at 16 kHz: no sound holds one value for 10 ms,
+    so the blocks there would hold the filters' decay (70.5, 0.8, ... -47.6 dB(A) before), never a level.
+    Refused, one line naming the file, 'dropout' and the stretch 3.000-4.000 s."""
+    from gisnoise.errors import RecordingError
+
+    path = tmp_path / "gap.wav"
+    _dropout_wav(path, 16000, 10.0, [(3.0, 4.0)], dtype)
+    for call in (lambda: acoustics.read_wav(path, 0.05), lambda: acoustics.wav_band_levels(path, 0.05)):
+        with pytest.raises(RecordingError) as err:
+            call()
+        msg = str(err.value)
+        assert err.value.field == "samples" and "\n" not in msg
+        assert "gap.wav" in msg and "dropout" in msg and "3.000-4.000 s" in msg and "exactly 0" in msg
+        # 3-4 s: 16000 samples (one more where the int16 sine's own zero at 4 s follows them)
+        np.testing.assert_allclose(err.value.spans, [(3.0, 4.0)], atol=1.0 / 16000 + 1e-12)
+    # a recorder holding its last value is a dropout too, named by that value (0.25 V)
+    _dropout_wav(path, 16000, 10.0, [(3.0, 4.0)], "float32", value=0.25)
+    with pytest.raises(RecordingError, match=r"one value \(0\.25 V\) from 3\.000 s"):
+        acoustics.wav_band_levels(path, 0.05)
+
+
+def test_a_recording_of_zeros_only_is_refused(tmp_path):
+    """An all-zero WAV gave LA = -inf: it holds no sound, and there is no stretch to exclude (no spans)."""
+    from scipy.io import wavfile
+
+    from gisnoise.errors import RecordingError
+
+    path = tmp_path / "zeros.wav"
+    wavfile.write(path, 48000, np.zeros(96000, dtype=np.int16))
+    for call in (lambda: acoustics.read_wav(path), lambda: acoustics.wav_band_levels(path, 0.05)):
+        with pytest.raises(RecordingError, match=r"zeros\.wav: the recording holds no sound: all its 96000 samples "
+                                                 r"\(2 s\) are exactly 0") as err:
+            call()
+        assert err.value.spans == ()
+
+
+def test_the_dropout_length_rule(tmp_path):
+    """Shorter than DROPOUT_S (10 ms) of zeros reads; 10 ms is refused.  A 1 kHz sine at 48 kHz repeats no value
+    twice in a row (48 samples a period), so exactly the inserted zeros form the stretch."""
+    fs = 48000
+    assert acoustics.DROPOUT_S == 0.010
+    path = tmp_path / "short.wav"
+    _dropout_wav(path, fs, 1.0, [(0.5, 0.5 + 479 / fs)])  # samples 24000-24478: 9.98 ms
+    acoustics.read_wav(path, 0.05)
+    _dropout_wav(path, fs, 1.0, [(0.5, 0.5 + 481 / fs)])  # samples 24000-24480: 10.02 ms
+    with pytest.raises(InputError, match="dropout"):
+        acoustics.read_wav(path, 0.05)
+
+
+def test_a_dropout_across_a_chunk_of_the_scan_is_one_stretch(tmp_path, monkeypatch):
+    """Long files are screened chunk by chunk (here 1000 samples): a stretch crossing chunk boundaries is found
+    whole.  At 16 kHz the 1 kHz sine is zero at every 8th sample only, so the zeros set are the stretch."""
+    from gisnoise.acoustics import wav as wavmod
+    from gisnoise.errors import RecordingError
+
+    monkeypatch.setattr(wavmod, "_SCAN_CHUNK", 1000)
+    fs = 16000
+    path = tmp_path / "gap.wav"
+    _dropout_wav(path, fs, 4.0, [(32010 / fs, 47990 / fs)])  # samples 32010-47989, over 17 chunks
+    with pytest.raises(RecordingError, match=r"from 2\.001 s \(sample 32010\), over 2\.001-2\.999 s") as err:
+        acoustics.read_wav(path, 0.05)
+    assert err.value.spans == ((32010 / fs, 47990 / fs),)
+    _dropout_wav(path, fs, 4.0, [(31950 / fs, 32110 / fs)])  # 160 samples (10 ms) across sample 32000
+    with pytest.raises(RecordingError, match="dropout"):
+        acoustics.read_wav(path, 0.05)
+    _dropout_wav(path, fs, 4.0, [(31950 / fs, 32109 / fs)])  # 159 samples
+    acoustics.read_wav(path, 0.05)
+
+
+def test_an_excluded_dropout_leaves_its_blocks_out_and_the_rest_reads_94_db(tmp_path):
+    """With the stretch in ``excluded_s``, the blocks whose levels depend on it (from the bands' largest group
+    delay before it to the filters' 60 dB decay after it) are NaN, and every other block is sound: 1 Pa rms at
+    1 kHz, 20 lg(1 / 20e-6) = 94.0 dB, in the 1 kHz band and A-weighted (A(1 kHz) = 0)."""
+    fs = 16000
+    path = tmp_path / "gap.wav"
+    _dropout_wav(path, fs, 10.0, [(3.0, 4.0)])
+    t, f, L = acoustics.wav_band_levels(path, 0.05, excluded_s=[(2.9, 4.1)])
+    out = np.isnan(L).any(axis=1)
+    assert np.all(np.isnan(L[out]))  # a block is left out whole
+    gone = t[out]
+    assert gone.min() < 3.0 and gone.max() > 4.0 + 1.0  # the decay of the 25 Hz band's filters: over 1 s
+    assert np.all(np.diff(gone) == pytest.approx(0.125))  # one stretch of blocks
+    la = np.asarray(acoustics.overall_a_level(L[~out], f))
+    steady = t[~out] > 0.5  # the first blocks hold the filters' start from rest
+    np.testing.assert_allclose(la[steady], 20 * np.log10(1 / 20e-6), atol=0.1)
+    # an exclusion that does not hold the whole stretch still refuses it
+    with pytest.raises(InputError, match="3.000-4.000 s"):
+        acoustics.wav_band_levels(path, 0.05, excluded_s=[(3.2, 4.1)])
+
+
+# --------------------------------------------------------------------------- sample rates below 44.1 kHz
+
+
+def _pink_volts(fs, seconds, sens=0.05, seed=3):
+    """Pink noise of 1 Pa rms over the bands 25 Hz-20 kHz (22.4 Hz-22.4 kHz; equal energy per one-third octave,
+    power spectral density ~ 1/f) as a recorder at ``fs`` takes it: the same sinusoids (amplitude, phase) for
+    every rate, up to its Nyquist frequency."""
+    n48 = int(48000 * seconds)
+    f48 = np.fft.rfftfreq(n48, 1 / 48000)
+    phase = np.random.default_rng(seed).uniform(0, 2 * np.pi, f48.size)
+    lo, hi = 1000 * 10 ** (-1.5 - 0.05), 1000 * 10 ** (1.3 + 0.05)
+    a2 = np.where((f48 >= lo) & (f48 < hi), 1 / np.maximum(f48, 1.0), 0.0)
+    a2 *= 2.0 / a2.sum()  # sum of a^2 / 2 = 1 Pa^2
+    n = int(fs * seconds)
+    x = np.fft.irfft(np.sqrt(a2[:n // 2 + 1]) * n / 2 * np.exp(1j * phase[:n // 2 + 1]), n)
+    return x * sens
+
+
+def _pink_table_loss(top_nominal):
+    """A-weighted level a pink spectrum loses without the bands above ``top_nominal``, dB, from the A-weighting
+    of IEC 61672-1 Table 3 at the 30 bands 25 Hz-20 kHz (equal energy in each)."""
+    rows = [(f, a) for f, a in IEC61672_TABLE3_A if f >= 25]
+    w = np.array([10 ** (a / 10) for _, a in rows])
+    kept = np.array([f <= top_nominal for f, _ in rows])
+    return 10 * np.log10(w.sum() / w[kept].sum())
+
+
+def test_a_pink_recording_below_44k_loses_the_a_weighted_energy_of_its_missing_bands(tmp_path):
+    """Pink noise recorded at 48, 16 and 8 kHz (the same sound below each Nyquist frequency): the bands stop at
+    20 kHz, 6.3 kHz and 3.15 kHz, and the A-weighted level reads lower by the A-weighted energy of the missing
+    bands, IEC 61672-1 Table 3: 0.61 dB at 16 kHz, 1.85 dB at 8 kHz (the tester measured 0.6 and 1.8);
+    pink_band_loss_db states it."""
+    from scipy.io import wavfile
+
+    la = {}
+    for fs, top in ((48000, "L_20000"), (16000, "L_6300"), (8000, "L_3150")):
+        path = tmp_path / f"pink{fs}.wav"
+        wavfile.write(path, fs, _pink_volts(fs, 10.0).astype(np.float32))
+        t, f, L = acoustics.wav_band_levels(path, 0.05)
+        assert acoustics.band_name(f[-1]) == top
+        blocks = np.asarray(acoustics.overall_a_level(L, f))[t > 1.5]  # past the 25 Hz filters' start
+        la[fs] = 10 * np.log10(np.mean(10 ** (blocks / 10)))
+    for fs, top in ((16000, 6300), (8000, 3150)):
+        expected = _pink_table_loss(top)
+        assert la[48000] - la[fs] == pytest.approx(expected, abs=0.05)
+        assert float(acoustics.pink_band_loss_db(top)) == pytest.approx(expected, abs=0.02)
+    assert _pink_table_loss(6300) == pytest.approx(0.61, abs=0.01)
+    assert _pink_table_loss(3150) == pytest.approx(1.85, abs=0.01)
+    assert float(acoustics.pink_band_loss_db(20000)) == 0.0

@@ -75,7 +75,8 @@ def test_binary_microphone_csv_in_fit_is_one_line(tmp_path):
 
 
 def _wav(path, fs=48000, n=4800, declared=None):
-    data = np.zeros(n, dtype="<i2").tobytes()
+    # low noise, not zeros: a recording of one value throughout is refused (a dropout, no sound)
+    data = np.random.default_rng(0).integers(-300, 300, n).astype("<i2").tobytes()
     size = len(data) if declared is None else declared
     fmt = struct.pack("<HHIIHH", 1, 1, fs, fs * 2, 2, 16)
     path.write_bytes(b"RIFF" + struct.pack("<I", 36 + size) + b"WAVE" + b"fmt " + struct.pack("<I", 16) + fmt

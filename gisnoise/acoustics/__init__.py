@@ -41,6 +41,7 @@ from gisnoise.acoustics.bands import (
     third_octave_centres,
 )
 from gisnoise.acoustics.wav import (
+    DROPOUT_S,
     calibrate,
     check_wav_header,
     read_wav,
@@ -51,6 +52,7 @@ from gisnoise.acoustics.weighting import (
     a_weighting,
     mount_correction,
     overall_a_level,
+    pink_band_loss_db,
 )
 
 if TYPE_CHECKING:
@@ -68,4 +70,4 @@ def __getattr__(name: str) -> Any:
     globals()[name] = value
     return value
 
-__all__ = ['MOUNT_CORRECTIONS_DB', 'P_REF', 'a_weighting', 'absorption_corrected_level', 'absorption_correction', 'atmospheric_absorption', 'background_levels', 'band_edges', 'band_frequency', 'band_levels', 'band_name', 'calibrate', 'check_wav_header', 'exact_frequency', 'is_band_name', 'mount_correction', 'nominal_frequency', 'overall_a_level', 'read_wav', 'speed_of_sound', 'third_octave_centres', 'wav_band_levels', 'write_wav']
+__all__ = ['DROPOUT_S', 'MOUNT_CORRECTIONS_DB', 'P_REF', 'a_weighting', 'absorption_corrected_level', 'absorption_correction', 'atmospheric_absorption', 'background_levels', 'band_edges', 'band_frequency', 'band_levels', 'band_name', 'calibrate', 'check_wav_header', 'exact_frequency', 'is_band_name', 'mount_correction', 'nominal_frequency', 'overall_a_level', 'pink_band_loss_db', 'read_wav', 'speed_of_sound', 'third_octave_centres', 'wav_band_levels', 'write_wav']

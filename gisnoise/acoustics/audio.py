@@ -27,7 +27,7 @@ import numpy as np
 from gisnoise.acoustics import _filterbank
 from gisnoise.acoustics._checks import _array, _positive_scalar, _scalar
 from gisnoise.acoustics.bands import third_octave_centres
-from gisnoise.acoustics.wav import _check_clipping, _check_rate, _wav_open, _wav_scale
+from gisnoise.acoustics.wav import _check_rate, _scan, _screen, _wav_open, _wav_scale
 from gisnoise.errors import InputError
 
 __all__ = ["P_REF", "band_levels", "wav_band_levels"]
@@ -74,15 +74,21 @@ def _filtered_levels(
     progress: Callable[[float], None] | None,
     *,
     scale: float = 1.0,
-    check: Callable[[np.ndarray, int], None] | None = None,
+    blank: list[tuple[float, float]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Block times, mid-band frequencies and band levels of samples ``x`` (times ``scale``) at ``fs``."""
+    """Block times, mid-band frequencies and band levels of samples ``x`` (times ``scale``) at ``fs``; NaN in
+    the blocks whose levels depend on a stretch of ``blank`` (s; :func:`_filterbank.memory_s`)."""
     f = _bands_for(fs, _scalar(f_min, "f_min"), None if f_max is None else _scalar(f_max, "f_max"))
     block_len, n_blocks = _block_grid(len(x), fs, blk)
     bank = _filterbank.design(fs, f)
-    ms = _filterbank.run(bank, x, block_len, n_blocks, scale=scale, check=check, progress=progress)
+    ms = _filterbank.run(bank, x, block_len, n_blocks, scale=scale, progress=progress)
     t = (np.arange(n_blocks) + 0.5) * blk
-    return t, f.copy(), _levels_from_ms(ms)
+    levels = _levels_from_ms(ms)
+    if blank:
+        before, after = _filterbank.memory_s(bank)
+        for a, b in blank:
+            levels[(t + 0.5 * blk > a - before) & (t - 0.5 * blk < b + after)] = np.nan
+    return t, f.copy(), levels
 
 def band_levels(
     pressure_pa: Any,
@@ -159,8 +165,16 @@ def wav_band_levels(
     f_min: float = 25.0,
     f_max: float | None = None,
     progress: Callable[[float], None] | None = None,
+    excluded_s: Any = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`band_levels` of a WAV file, read chunk by chunk (memory-mapped when possible).
+
+    The samples are screened first, as :func:`~gisnoise.acoustics.read_wav` does: a clipped stretch (two
+    samples in a row at digital full scale) or a dropout (:data:`~gisnoise.acoustics.wav.DROPOUT_S` or more
+    of one exact value: a recorder that lost its input writes zeros, and the filters would give their
+    decay, not sound) is refused, unless ``excluded_s`` holds it; then the blocks whose levels depend on it
+    (from the bands' largest group delay before it to their chains' longest 60 dB decay after it, about
+    0.17 s and 1.3 s with the 25 Hz band) are NaN.
 
     Parameters
     ----------
@@ -172,11 +186,20 @@ def wav_band_levels(
         As in :func:`band_levels`.
     expected_fs_hz : float, optional
         Required sample rate, Hz.
+    excluded_s : array_like, shape (k, 2), optional
+        Intervals ``(t0, t1)``, s from the first sample, in which clipped or dropped-out stretches are
+        accepted (and their blocks left NaN).
 
     Returns
     -------
     t_s, f_hz, L_dB
-        As in :func:`band_levels`; ``t_s`` counts from the first sample.
+        As in :func:`band_levels`; ``t_s`` counts from the first sample; NaN rows for the blocks of the
+        stretches ``excluded_s`` holds.
+
+    Raises
+    ------
+    RecordingError
+        A clipped or dropped-out stretch outside ``excluded_s`` (field ``samples``; its ``spans``, s).
     """
     name = os.fspath(path)
     s = _positive_scalar(sensitivity_v_per_pa, "sensitivity_v_per_pa")
@@ -186,12 +209,10 @@ def wav_band_levels(
     if len(data) < blk * fs:  # a file's levels: at least one block, never an empty result
         raise InputError(f"block_s: {blk:g} s is longer than the recording {name} ({len(data)} samples, "
                          f"{len(data) / fs:g} s): no block of levels", field="block_s")
-    scale = _wav_scale(data, name) / s
-
-    def check(chunk: np.ndarray, start: int) -> None:
-        if not np.all(np.isfinite(chunk)):
-            bad = start + int(np.argmin(np.isfinite(chunk)))
-            raise InputError(f"{name}: non-finite sample at index {bad}", field="samples")
-        _check_clipping(chunk, start, fs, data.dtype, name)
-
-    return _filtered_levels(data, fs, blk, f_min, f_max, progress, scale=scale, check=check)
+    ex = None if excluded_s is None else _array(excluded_s, "excluded_s")
+    if ex is not None and (ex.ndim != 2 or ex.shape[1] != 2 or not np.all(ex[:, 0] <= ex[:, 1])):
+        raise InputError(f"excluded_s must be (t0, t1) pairs with t0 <= t1, s, got {excluded_s!r}",
+                         field="excluded_s")
+    volts = _wav_scale(data, name)
+    blank = _screen(_scan(data, fs, name), data, fs, name, volts, ex)
+    return _filtered_levels(data, fs, blk, f_min, f_max, progress, scale=volts / s, blank=blank)

@@ -1,10 +1,15 @@
 """WAV audio: mono recordings in volts, their calibration to pascals, and writing sound pressure as WAV.
 
 Stored values are volts: float WAV as is, integer PCM scaled so that full scale is 1 V.
+A recording is refused, in one line naming the file and the times, where its samples are not sound:
+clipped (two samples in a row at digital full scale) or dropped out (:data:`DROPOUT_S` or more of one
+exact value, digital zeros among them); the band levels of a WAV file can leave such stretches out
+instead (``excluded_s`` of :func:`gisnoise.acoustics.wav_band_levels`).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import warnings
 from typing import Any
@@ -12,9 +17,9 @@ from typing import Any
 import numpy as np
 
 from gisnoise.acoustics._checks import _array, _finite, _positive_scalar, _scalar
-from gisnoise.errors import InputError
+from gisnoise.errors import InputError, RecordingError
 
-__all__ = ["calibrate", "read_wav", "write_wav", "check_wav_header"]
+__all__ = ["calibrate", "read_wav", "write_wav", "check_wav_header", "DROPOUT_S"]
 
 
 def calibrate(volts: Any, sensitivity_v_per_pa: float) -> np.ndarray:
@@ -134,19 +139,146 @@ def _at_full_scale(chunk: np.ndarray, dtype: np.dtype[Any]) -> np.ndarray:
     return np.abs(chunk) == 1.0
 
 
-def _check_clipping(chunk: np.ndarray, start: int, fs_hz: float, dtype: np.dtype[Any], name: str) -> None:
-    """Refuse a recording that reached digital full scale in two consecutive samples (clipped).
+DROPOUT_S = 0.010
+"""Shortest stretch of exactly equal samples taken for a dropout (the recorder lost its input), s.
 
-    A recorder driven past full scale flattens the peaks: the levels of those blocks would be too
-    low, silently.  ``chunk`` holds stored values (before calibration) from sample ``start``.
+No sound a microphone picks up holds one sample value this long: the microphone's self-noise and the
+converter's own noise (about one least significant bit rms even at 16 bits, the noise that dither hides;
+many at 24 bits) change the stored value from one sample to the next more often than not, so 10 ms of one
+value (80 samples at 8 kHz, 480 at 48 kHz) has a chance below 0.5^80 in a real recording.  A recorder that
+drops samples (a buffer overrun, a loose cable, a muted input) writes exact zeros, or holds its last value.
+A shorter stretch takes at most 10 ms of a 0.125 s block, its level at most 0.35 dB low."""
+
+_JOIN_S = 0.5
+"""Stretches of one kind closer than this (s) are named as one: the clipped peaks of a loud passage come
+every half period of its sound, under 20 ms apart above 25 Hz."""
+
+_SCAN_CHUNK = 1 << 20
+"""Samples per chunk of :func:`_scan` (memory-mapped files are read chunk by chunk)."""
+
+
+class _Runs:
+    """Maximal runs of samples over which ``cont`` holds, found chunk by chunk: ``cont[i]`` says that sample
+    ``i`` continues the run of sample ``i - 1``.  Keeps ``(first, last)`` of each run of ``min_len`` samples
+    or more."""
+
+    def __init__(self, min_len: int) -> None:
+        self.min_len = max(int(min_len), 2)
+        self.open: int | None = None  # first sample of a run still going at the end of the last chunk
+        self.found: list[np.ndarray] = []
+
+    def add(self, cont: np.ndarray, start: int) -> None:
+        """Take ``cont`` of samples ``start, start + 1, ...`` (``cont[0]`` relates to sample ``start - 1``)."""
+        if self.open is not None and not cont[0]:
+            self._keep(np.array([self.open]), np.array([start - 1]))
+            self.open = None
+        d = np.diff(np.concatenate(([0], cont.astype(np.int8), [0])))
+        rises, falls = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+        first, last = start + rises - 1, start + falls - 1
+        if rises.size and rises[0] == 0 and self.open is not None:
+            first[0] = self.open
+        self.open = None
+        if falls.size and falls[-1] == cont.size:  # still going at the chunk's end
+            self.open = int(first[-1])
+            first, last = first[:-1], last[:-1]
+        self._keep(first, last)
+
+    def close(self, n: int) -> np.ndarray:
+        """End at sample ``n``: the runs found, shape (k, 2) (first and last sample)."""
+        if self.open is not None:
+            self._keep(np.array([self.open]), np.array([n - 1]))
+            self.open = None
+        return np.concatenate(self.found) if self.found else np.zeros((0, 2), dtype=np.int64)
+
+    def _keep(self, first: np.ndarray, last: np.ndarray) -> None:
+        ok = last - first + 1 >= self.min_len
+        if ok.any():
+            self.found.append(np.column_stack([first[ok], last[ok]]).astype(np.int64))
+
+
+def _scan(data: Any, fs_hz: float, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Stretches of a recording that are not sound, as ``(first, last)`` sample rows: clipped runs (two
+    samples or more in a row at digital full scale) and dropouts (:data:`DROPOUT_S` or more of one exact
+    value, full scale excepted: that is clipping).  ``data`` holds stored values (a memory map is read chunk
+    by chunk); a non-finite sample is refused."""
+    n = len(data)
+    clip, hold = _Runs(2), _Runs(math.ceil(DROPOUT_S * fs_hz - 1e-9))
+    prev_at, prev = False, math.nan
+    for pos in range(0, n, _SCAN_CHUNK):
+        c = np.asarray(data[pos:pos + _SCAN_CHUNK], dtype=np.float64)
+        bad = ~np.isfinite(c)
+        if bad.any():  # float WAV holding NaN or infinity: not a recording
+            raise InputError(f"{name}: non-finite sample at index {pos + int(np.argmax(bad))}", field="samples")
+        at = _at_full_scale(c, data.dtype)
+        clip.add(np.concatenate(([prev_at and bool(at[0])], at[1:] & at[:-1])), pos)
+        hold.add(np.concatenate(([c[0] == prev], c[1:] == c[:-1])), pos)
+        prev_at, prev = bool(at[-1]), float(c[-1])
+    held = hold.close(n)
+    if held.size:
+        held = held[~_at_full_scale(np.asarray(data[held[:, 0]], dtype=np.float64), data.dtype)]
+    return clip.close(n), held
+
+
+def _spans(runs: np.ndarray, fs_hz: float) -> list[tuple[float, float]]:
+    """Times (s) of sample runs, ``(first sample, end of the last)``, those closer than ``_JOIN_S`` joined."""
+    out: list[tuple[float, float]] = []
+    for a, b in zip(runs[:, 0] / fs_hz, (runs[:, 1] + 1) / fs_hz, strict=True):
+        if out and a - out[-1][1] < _JOIN_S:
+            out[-1] = (out[-1][0], float(b))
+        else:
+            out.append((float(a), float(b)))
+    return out
+
+
+def _span_text(spans: list[tuple[float, float]]) -> str:
+    """``a-b s`` of the first spans; how many more."""
+    shown = ", ".join(f"{a:.3f}-{b:.3f} s" for a, b in spans[:3])
+    return shown + (f" and {len(spans) - 3} more" if len(spans) > 3 else "")
+
+
+def _screen(runs: tuple[np.ndarray, np.ndarray], data: Any, fs_hz: float, name: str, volts_per_unit: float,
+            excluded_s: Any = None) -> list[tuple[float, float]]:
+    """Refuse a recording with clipped or dropped-out stretches (:func:`_scan`) outside ``excluded_s``.
+
+    One line names the file, the kind, the times and the way out; a :class:`~gisnoise.errors.RecordingError`
+    whose ``spans`` are those times (none for a recording of one value throughout: no part of it is sound).
+
+    Returns
+    -------
+    list of (float, float)
+        Times (s) of the stretches ``excluded_s`` holds, for their blocks to be left out.
     """
-    at = _at_full_scale(chunk, dtype)
-    run = at[1:] & at[:-1]
-    if run.any():
-        i = start + int(np.argmax(run))
-        raise InputError(f"{name}: clipped recording: samples at digital full scale from {i / fs_hz:.3f} s "
-                         f"(sample {i}); its levels would be too low, re-record with less gain or cut the "
-                         "clipped part out", field="samples")
+    ex = np.zeros((0, 2)) if excluded_s is None else np.asarray(excluded_s, dtype=float).reshape(-1, 2)
+    tol = 0.5 / fs_hz
+    accepted: list[tuple[float, float]] = []
+    refused = []
+    for kind, r in zip(("clipped", "dropout"), runs, strict=True):
+        t0, t1 = r[:, 0] / fs_hz, (r[:, 1] + 1) / fs_hz
+        inside = np.any((t0[:, None] >= ex[None, :, 0] - tol) & (t1[:, None] <= ex[None, :, 1] + tol), axis=1)
+        accepted += _spans(r[inside], fs_hz)
+        if not inside.all():
+            refused.append((int(r[~inside][0, 0]), kind, r[~inside]))
+    if not refused:
+        return sorted(accepted)
+    i, kind, r = min(refused, key=lambda x: x[0])
+    spans = _spans(r, fs_hz)
+    n = len(data)
+    if kind == "clipped":
+        raise RecordingError(
+            f"{name}: clipped recording: samples at digital full scale from {i / fs_hz:.3f} s (sample {i}), over "
+            f"{_span_text(spans)}; its levels would be too low, re-record with less gain or exclude these times",
+            field="samples", spans=tuple(spans))
+    v = float(data[i]) * volts_per_unit
+    what = "exactly 0 (digital silence)" if v == 0.0 else f"held at one value ({v:.6g} V)"
+    if r[0, 0] == 0 and r[0, 1] == n - 1:
+        raise RecordingError(f"{name}: the recording holds no sound: all its {n} samples ({n / fs_hz:g} s) are "
+                             f"{what.replace('held at ', '')}; a recorder writes this only without an input, "
+                             "re-record", field="samples")
+    raise RecordingError(
+        f"{name}: dropout: samples {what} from {i / fs_hz:.3f} s (sample {i}), over {_span_text(spans)}; no "
+        f"microphone's or converter's noise holds one value for {1000 * DROPOUT_S:g} ms: the recorder lost its "
+        "input there and the levels would be its filters' decay, not sound; re-record, or exclude these times",
+        field="samples", spans=tuple(spans))
 
 
 def _check_rate(fs: float, expected: float | None, name: str) -> None:
@@ -180,16 +312,22 @@ def read_wav(
         Volts, or pascals with a sensitivity.
     fs_hz : float
         Sample rate, Hz.
+
+    Raises
+    ------
+    RecordingError
+        Field ``samples``: a clipped recording (two samples in a row at digital full scale) or a dropout
+        (:data:`DROPOUT_S` or more of one exact value, zeros among them), naming the file and the times;
+        :func:`gisnoise.acoustics.wav_band_levels` can leave such stretches out.
+    InputError
+        A file that is no mono WAV, a non-finite sample, another rate than ``expected_fs_hz``.
     """
     name = os.fspath(path)
     fs, data = _wav_open(name, mmap=False)
     _check_rate(fs, expected_fs_hz, name)
-    raw = data.astype(np.float64)
-    v = raw * _wav_scale(data, name)
-    bad = ~np.isfinite(v)
-    if bad.any():  # float WAV holding NaN or infinity: not a recording
-        raise InputError(f"{name}: non-finite sample at index {int(np.argmax(bad))}", field="samples")
-    _check_clipping(raw, 0, fs, data.dtype, name)
+    scale = _wav_scale(data, name)
+    _screen(_scan(data, fs, name), data, fs, name, scale)
+    v = data.astype(np.float64) * scale
     if sensitivity_v_per_pa is not None:
         v = calibrate(v, sensitivity_v_per_pa)
     return v, fs

@@ -13,9 +13,10 @@ from typing import Any
 import numpy as np
 
 from gisnoise.acoustics._checks import _bands_of, _positive
+from gisnoise.acoustics.bands import third_octave_centres
 from gisnoise.errors import InputError
 
-__all__ = ["MOUNT_CORRECTIONS_DB", "a_weighting", "overall_a_level", "mount_correction"]
+__all__ = ["MOUNT_CORRECTIONS_DB", "a_weighting", "overall_a_level", "mount_correction", "pink_band_loss_db"]
 
 # IEC 61672-1:2013 equations (E.1)-(E.6): pole frequencies and the 1 kHz normalisation
 _F1, _F2, _F3, _F4 = 20.598997, 107.65265, 737.86223, 12194.217
@@ -100,6 +101,41 @@ def overall_a_level(L_bands: Any, f_hz: Any) -> np.ndarray:
     nan = np.any(np.isnan(L), axis=-1)
     out = _energy_sum(np.where(np.isnan(L), -np.inf, L) + a_weighting(f), axis=-1)
     return np.where(nan, np.nan, out)
+
+
+def pink_band_loss_db(f_top_hz: Any, f_min_hz: float = 25.0, f_max_hz: float = 20000.0) -> np.ndarray:
+    """How much lower the A-weighted level of a pink spectrum reads without the bands above ``f_top_hz``, dB.
+
+    Pink sound carries equal energy in every one-third-octave band; over the bands from ``f_min_hz`` to
+    ``f_max_hz`` (nominal) its A-weighted level is ``10 lg sum_b 10^(A(f_b)/10)`` plus a constant, each band
+    weighted at its exact mid-band frequency.  The loss is that sum over all the bands over the sum over
+    those up to ``f_top_hz``:  what a recording whose sample rate carries the bands up to ``f_top_hz``
+    only misses of a broadband source (less for a source whose energy falls off faster with frequency, as
+    most do; none for one that is silent above ``f_top_hz``).
+
+    Parameters
+    ----------
+    f_top_hz : float or array_like
+        Mid-band frequency of the highest band kept (exact or nominal), Hz.
+    f_min_hz, f_max_hz : float
+        Nominal frequencies of the lowest and the highest band of the full set, Hz.
+
+    Returns
+    -------
+    ndarray
+        Loss, dB (0 when every band is kept).
+
+    Examples
+    --------
+    >>> np.round(pink_band_loss_db([3150, 6300, 16000, 20000]), 2).tolist()
+    [1.85, 0.61, 0.03, 0.0]
+    """
+    top = _positive(f_top_hz, "f_top_hz")
+    f = third_octave_centres(f_min_hz, f_max_hz)
+    w = 10.0 ** (a_weighting(f) / 10.0)
+    kept = np.sum(np.where(f < top[..., None] * 10.0 ** 0.05, w, 0.0), axis=-1)  # up to the band holding f_top
+    with np.errstate(divide="ignore"):
+        return np.asarray(10.0 * np.log10(np.sum(w) / kept))
 
 
 def mount_correction(mount: str) -> float:

@@ -112,7 +112,11 @@ def levels(ctx: click.Context, campaign: str, block_s: float | None, force: bool
     """Compute level CSVs (LA and one-third-octave bands) from the WAV files of CAMPAIGN.
 
     Each mics/<mic>/<flight>.wav becomes mics/<mic>/<flight>.csv beside it, free
-    field (mount correction applied), with columns t, LA and L_<nominal Hz>.
+    field (mount correction applied), with columns t, LA and L_<nominal Hz>, and
+    <flight>.source.json, the calibration and WAV it was computed from (campaign
+    check refuses the CSV once campaign.json's calibration or the WAV changes).  A
+    clipped or dropped-out recording (digital zeros) is refused naming its times,
+    unless campaign.json's exclusions hold them: their blocks are left out.
 
     \b
     Example:
@@ -120,9 +124,11 @@ def levels(ctx: click.Context, campaign: str, block_s: float | None, force: bool
     """
     if block_s is not None and not block_s > 0:
         raise click.BadParameter(f"must be positive, got {block_s:g}", param_hint="--block")
+    warnings: list[str] = []
     with progress(ctx, "audio -> levels", 1.0) as update:
         written = write_levels(campaign, block_s=block_s, force=force,
-                               progress=lambda done, total: update(done / max(total, 1e-12)))
+                               progress=lambda done, total: update(done / max(total, 1e-12)), warn=warnings.append)
+    echo_warnings(warnings)  # a sample rate that cannot carry the bands up to 16 kHz: written, and said
     for p in written:
         click.echo(str(p))
     click.echo(f"wrote {len(written)} level file(s)")

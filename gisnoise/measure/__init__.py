@@ -22,8 +22,10 @@ from gisnoise.measure.events import (
     fit_level_trend,
 )
 from gisnoise.measure.levels import (
+    CLASS1_TOP_HZ,
     DEFAULT_BLOCK_S,
     band_column,
+    band_limit_warnings,
     read_level_csv,
     wav_levels,
     write_level_csv,
@@ -36,6 +38,11 @@ from gisnoise.measure.parts import (
     LevelSeries,
     Microphone,
     Problem,
+)
+from gisnoise.measure.provenance import (
+    SOURCE_SUFFIX,
+    source_record_path,
+    stale_source,
 )
 from gisnoise.measure.samples import (
     Samples,
@@ -53,4 +60,4 @@ from gisnoise.measure.table import (
     build_samples,
 )
 
-__all__ = ['DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'OUTLIER_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'WINDOW_S', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'build_samples', 'campaign_log_warnings', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'spreading_notes', 'spreading_outliers', 'wav_levels', 'write_level_csv', 'write_levels']
+__all__ = ['CLASS1_TOP_HZ', 'DEFAULT_BLOCK_S', 'DEFAULT_EVENT_DB', 'DEFAULT_SNR_DB', 'OUTLIER_DB', 'SCHEMA', 'SIGNAL_BAND_MARGIN_DB', 'SOURCE_SUFFIX', 'WINDOW_S', 'Campaign', 'Exclusion', 'Flight', 'LevelSeries', 'Microphone', 'Problem', 'Samples', 'band_column', 'band_limit_warnings', 'build_samples', 'campaign_log_warnings', 'check_campaign', 'detect_events', 'emission_time', 'fit_level_trend', 'inspect_campaign', 'read_campaign', 'read_level_csv', 'series_ids', 'series_key', 'source_record_path', 'spreading_notes', 'spreading_outliers', 'stale_source', 'wav_levels', 'write_level_csv', 'write_levels']

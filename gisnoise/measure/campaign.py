@@ -13,7 +13,9 @@ problem; :func:`check_campaign` collects every problem instead.  What is read bu
 should be said (a flight log cut short) is not a problem: :func:`campaign_log_warnings`
 gives it, one line per log, for every face to show.  Where both a level
 CSV and a WAV exist for a microphone and flight, the CSV is read (``gisnoise
-campaign levels`` writes it from the WAV).
+campaign levels`` writes it from the WAV), unless its source record says it was computed
+with another calibration of the microphone or from another WAV: then it is refused
+(:func:`gisnoise.measure.provenance.stale_source`).
 
 Optional keys of ``campaign.json`` beyond the specification: ``sample_rate_hz`` (all
 WAV files must have it; otherwise they must share one rate), ``block_s`` (averaging
@@ -22,7 +24,8 @@ digital full scale of integer or float WAV samples, default 1 V) and
 ``background_db`` (the A-weighted background level, dB, replacing the estimate),
 per flight ``geoid_undulation_m`` (for logs that give heights above mean sea level
 only; default the EGM96 grid, :mod:`gisnoise.geo.geoid`) and ``power_w`` (a constant electric power, W, for logs without battery current), and ``exclusions``: ``[{"flight": .., "t0": .., "t1": .., "mic": ..}]``
-(reception times, s since the flight's start; ``mic`` optional).
+(reception times, s since the flight's start; ``mic`` optional).  An exclusion also lets the
+levels of a WAV file leave out a clipped or dropped-out stretch it holds (otherwise refused).
 
 :meth:`Campaign.samples <gisnoise.measure.parts.Campaign.samples>` turns the levels into one
 row per microphone and block at emission time (:mod:`gisnoise.measure.table`), with
@@ -33,6 +36,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -51,8 +55,16 @@ from gisnoise.measure.document import (
     _read_document,
 )
 from gisnoise.measure.events import DEFAULT_EVENT_DB, DEFAULT_SNR_DB
-from gisnoise.measure.levels import DEFAULT_BLOCK_S, _most_common_rate, _wav_rate, read_level_csv, wav_levels
+from gisnoise.measure.levels import (
+    DEFAULT_BLOCK_S,
+    _most_common_rate,
+    _wav_rate,
+    band_limit_warnings,
+    read_level_csv,
+    wav_levels,
+)
 from gisnoise.measure.parts import Campaign, Flight, LevelSeries, Microphone, Problem, ProgressFn
+from gisnoise.measure.provenance import read_source_record, source_record_path, stale_source
 from gisnoise.measure.spreading import spreading_notes
 
 __all__ = ["read_campaign", "check_campaign", "inspect_campaign", "campaign_log_warnings", "FAR_TRACK_M",
@@ -154,7 +166,11 @@ def campaign_log_warnings(camp: Campaign) -> list[str]:
     A measured level holds the background, so this says the levels are too low (a
     calibration or sensitivity error) or the stated background too high.  Then each
     microphone and flight whose airborne blocks are :data:`MOSTLY_MASKED` or more masked
-    (``low_snr``, ``event``): they are lost to fit and diagnosis.  The one list
+    (``low_snr``, ``event``): they are lost to fit and diagnosis.  Then the levels of WAV
+    recordings whose sample rate cannot carry the one-third-octave bands up to 16 kHz
+    (below 44.1 kHz; :func:`gisnoise.measure.levels.band_limit_warnings`: the files, their
+    rate, their highest band and what a pink source's A-weighted level loses without the
+    bands above).  The one list
     every face shows: the command line prints each line on stderr as
     ``warning: <line>``; the service's fit and diagnose jobs carry them in their
     result's ``warnings``.
@@ -167,7 +183,8 @@ def campaign_log_warnings(camp: Campaign) -> list[str]:
     Returns
     -------
     list of str
-        One line per flight whose log needs one; empty when none does.
+        One line per flight whose log needs one, per microphone below its background, per microphone
+        and flight mostly masked, per sample rate below 44.1 kHz; empty when none does.
     """
     out = []
     for f in camp.flights:
@@ -175,7 +192,7 @@ def campaign_log_warnings(camp: Campaign) -> list[str]:
         w = track_warning(traj) if traj is not None else None
         if w is not None:
             out.append(w)
-    return out + _background_warnings(camp) + _masked_warnings(camp)
+    return out + _background_warnings(camp) + _masked_warnings(camp) + band_limit_warnings(camp.levels)
 
 
 MOSTLY_MASKED = 0.9
@@ -420,11 +437,14 @@ def _load(folder: str | os.PathLike[str], *, strict: bool, exclusions: Iterable[
     for k, (m, f, p) in enumerate(pairs):
         if p in bad_rate:
             continue
+        stale = stale_source(p, m, root) if p.suffix == ".csv" else None
         try:
+            if stale is not None:  # computed from its WAV with another calibration, or from another WAV
+                raise CampaignError(stale[1], field=stale[0])
             if p.suffix == ".csv":
-                levels.append(read_level_csv(p, mic=m.id, flight=f.id))
+                levels.append(_recorded_rate(read_level_csv(p, mic=m.id, flight=f.id)))
             else:
-                levels.append(wav_levels(p, m, block_s=float(block_s), flight=f.id))
+                levels.append(wav_levels(p, m, block_s=float(block_s), flight=f.id, exclusions=excl))
         except GisnoiseError as exc:
             col.error(str(p), exc)
         else:
@@ -441,6 +461,13 @@ def _load(folder: str | os.PathLike[str], *, strict: bool, exclusions: Iterable[
                     exclusions=tuple(excl), absorption=bool(absorption), snr_db=float(snr_db),
                     event_db=float(event_db))
     return camp, col
+
+
+def _recorded_rate(lv: LevelSeries) -> LevelSeries:
+    """A level CSV's series with the sample rate of the WAV file its source record names (if it has one)."""
+    rec = read_source_record(source_record_path(lv.source))
+    fs: Any = rec.get("sample_rate_hz") if rec is not None else None
+    return replace(lv, sample_rate_hz=float(fs)) if _is_number(fs) and fs > 0 else lv
 
 
 def _common_rate(root: Path, flight_ids: set[str], rates: Mapping[Path, int]) -> int:

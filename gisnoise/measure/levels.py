@@ -4,29 +4,40 @@ turned into level CSVs.
 A level CSV has the columns ``t`` (reception time at the block centre, s since the
 flight's start), ``LA`` (A-weighted level, free field, dB(A)) and optionally one
 ``L_<nominal Hz>`` column per one-third-octave band (unweighted, free field, dB).
+One computed from a WAV file has a source record beside it (:mod:`gisnoise.measure.provenance`).
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import json
+import math
 import os
 import re
 import struct
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gisnoise import acoustics, limits
-from gisnoise.errors import CampaignError
-from gisnoise.measure.document import _Collector, _is_number, _parse_mics, _read_document
-from gisnoise.measure.parts import LevelSeries, Microphone, ProgressFn
+from gisnoise.errors import CampaignError, RecordingError
+from gisnoise.measure.document import _Collector, _is_number, _parse_exclusions, _parse_mics, _read_document
+from gisnoise.measure.parts import Exclusion, LevelSeries, Microphone, ProgressFn
+from gisnoise.measure.provenance import write_source_record
 
-__all__ = ["read_level_csv", "write_level_csv", "wav_levels", "write_levels", "band_column", "DEFAULT_BLOCK_S"]
+__all__ = ["read_level_csv", "write_level_csv", "wav_levels", "write_levels", "band_column", "band_limit_warnings",
+           "DEFAULT_BLOCK_S", "CLASS1_TOP_HZ"]
 
 DEFAULT_BLOCK_S = 0.125
+
+CLASS1_TOP_HZ = 16000.0
+"""Highest one-third-octave band (nominal, Hz) an A-weighted level needs: IEC 61672-1 class 1 allows a sound
+level meter +3.5/-17 dB at 16 kHz and +4/-inf dB at 20 kHz, so a meter may miss the 20 kHz band, not the
+16 kHz one.  A recording whose sample rate cannot carry it (below 44.1 kHz: the bands stop at 12.5 kHz at
+32 kHz, 6.3 kHz at 16 kHz) is named by :func:`band_limit_warnings`."""
 _BAND_RE = re.compile(r"^L_")
 
 
@@ -163,14 +174,18 @@ def _most_common_rate(rates: Iterable[int]) -> int:
 
 
 def wav_levels(path: str | os.PathLike[str], mic: Microphone, *, block_s: float = DEFAULT_BLOCK_S,
-               flight: str = "", sample_rate_hz: float | None = None) -> LevelSeries:
+               flight: str = "", sample_rate_hz: float | None = None,
+               exclusions: Iterable[Exclusion] = ()) -> LevelSeries:
     """Levels of a WAV recording: bands, A-weighted level per block, mount correction.
 
     Sample values (float, or integer PCM with full scale 1) times ``mic.full_scale_v``
     are volts; divided by ``mic.sensitivity_v_per_pa`` they are pascals
     (:func:`gisnoise.acoustics.wav_band_levels`).  The mount correction of ``mic.mount``
     is added to the bands, and the overall level is their A-weighted sum, so the result
-    is free field.
+    is free field.  A clipped or dropped-out stretch of the recording (digital zeros, say) is
+    refused, naming the file and its times and giving the exclusion that would leave it out;
+    inside an exclusion of this flight and microphone it is accepted, and the blocks whose
+    levels depend on it are left out of the result.
 
     Parameters
     ----------
@@ -184,6 +199,9 @@ def wav_levels(path: str | os.PathLike[str], mic: Microphone, *, block_s: float 
         Flight id recorded in the result.
     sample_rate_hz : float, optional
         Required sample rate, Hz.
+    exclusions : iterable of Exclusion
+        The campaign's excluded intervals (reception time, s since the flight's start); those of ``flight``
+        and of ``mic`` (or of every microphone) are where clipped or dropped-out stretches are accepted.
     """
     p = Path(path)
     rate = _wav_rate(p)
@@ -193,19 +211,74 @@ def wav_levels(path: str | os.PathLike[str], mic: Microphone, *, block_s: float 
     if mic.sensitivity_v_per_pa is None:
         raise CampaignError(f"microphone '{mic.id}': field 'sensitivity_v_per_pa' is needed for WAV input ({p})",
                             field="sensitivity_v_per_pa")
-    t, f, lev = acoustics.wav_band_levels(p, mic.sensitivity_v_per_pa / mic.full_scale_v, block_s)
+    excluded = [(e.t0, e.t1) for e in exclusions if e.flight == flight and e.mic in (None, mic.id)]
+    try:
+        t, f, lev = acoustics.wav_band_levels(p, mic.sensitivity_v_per_pa / mic.full_scale_v, block_s,
+                                              excluded_s=excluded or None)
+    except RecordingError as exc:
+        raise CampaignError(f"{exc}{_exclusion_hint(exc.spans, flight, mic.id)}", field=exc.field) from None
     bands = np.asarray(lev, dtype=float) + acoustics.mount_correction(mic.mount)
+    keep = ~np.isnan(bands).any(axis=1)  # blocks of an excluded clipped or dropped-out stretch
+    if not keep.any():
+        raise CampaignError(f"{p}: no block of levels is left outside its excluded clipped or dropped-out "
+                            "stretches", field="exclusions")
+    bands = bands[keep]
     la = acoustics.overall_a_level(bands, f)
-    return LevelSeries(mic=mic.id, flight=flight, source=str(p), t=np.asarray(t, dtype=float),
-                       la=np.asarray(la, dtype=float), band_f=np.asarray(f, dtype=float), bands=bands)
+    return LevelSeries(mic=mic.id, flight=flight, source=str(p), t=np.asarray(t, dtype=float)[keep],
+                       la=np.asarray(la, dtype=float), band_f=np.asarray(f, dtype=float), bands=bands,
+                       sample_rate_hz=float(rate))
+
+
+def _exclusion_hint(spans: tuple[tuple[float, float], ...], flight: str, mic: str) -> str:
+    """The exclusions of campaign.json that would leave the stretches out (whole milliseconds, outwards)."""
+    if not spans:
+        return ""
+    if len(spans) > 3:
+        return (f": campaign.json \"exclusions\" with flight '{flight}', mic '{mic}', t0 and t1 (s) for each of "
+                f"its {len(spans)} stretches")
+    ex = [{"flight": flight, "mic": mic, "t0": math.floor(a * 1000.0 + 1e-6) / 1000.0,
+           "t1": math.ceil(b * 1000.0 - 1e-6) / 1000.0} for a, b in spans]
+    return f": campaign.json \"exclusions\": {json.dumps(ex)}"
+
+
+def band_limit_warnings(series: Iterable[LevelSeries]) -> list[str]:
+    """One line per sample rate of the WAV recordings whose bands stop below :data:`CLASS1_TOP_HZ`.
+
+    Names the files (the first three, and how many more), the rate, the highest band the rate carries
+    and what the A-weighted level of a broadband source with a pink spectrum (equal energy per
+    one-third octave) loses without the bands above it, up to 20 kHz
+    (:func:`gisnoise.acoustics.pink_band_loss_db`, IEC 61672-1 A-weighting): 0.6 dB at 16 kHz, 1.8 dB at
+    8 kHz.  A source whose energy falls off faster above loses less.  Levels a user brings (no sample
+    rate known) are not judged.
+    """
+    groups: dict[tuple[float, float], list[str]] = {}
+    for lv in series:
+        if lv.sample_rate_hz is None or lv.band_f is None or not lv.band_f.size:
+            continue
+        top = float(acoustics.nominal_frequency(float(np.max(lv.band_f))))
+        if top < CLASS1_TOP_HZ:
+            groups.setdefault((lv.sample_rate_hz, top), []).append(lv.source)
+    out = []
+    for (fs, top), files in sorted(groups.items()):
+        loss = float(acoustics.pink_band_loss_db(top))
+        names = ", ".join(files[:3]) + (f" and {len(files) - 3} more" if len(files) > 3 else "")
+        out.append(f"{names}: recorded at {fs:g} Hz, which carries the one-third-octave bands up to "
+                   f"{top / 1000.0:g} kHz, not 20 kHz: its A-weighted levels leave out the bands above, and a "
+                   f"broadband source with a pink spectrum (equal energy per band) would read {loss:.1f} dB(A) low "
+                   "(less if its energy falls off faster above); record at 44.1 kHz or more")
+    return out
 
 
 def write_levels(folder: str | os.PathLike[str], *, block_s: float | None = None, force: bool = False,
-                 progress: ProgressFn | None = None) -> list[Path]:
+                 progress: ProgressFn | None = None, warn: Callable[[str], None] | None = None) -> list[Path]:
     """Turn every WAV of a campaign into a level CSV beside it (``mics/<mic>/<flight>.csv``).
 
     The CSV holds ``t`` (block centre, s), ``LA`` (free field, dB(A)) and the free-field
-    band levels ``L_<nominal>`` (dB).  Existing CSVs are refused unless ``force``.
+    band levels ``L_<nominal>`` (dB); its source record ``<flight>.source.json`` beside it
+    keeps the calibration and the WAV it was computed from
+    (:mod:`gisnoise.measure.provenance`).  Existing CSVs are refused unless ``force``.
+    A recording with a clipped or dropped-out stretch is refused (nothing is written)
+    unless campaign.json's ``exclusions`` hold that stretch; its blocks are then left out.
 
     Parameters
     ----------
@@ -217,11 +290,14 @@ def write_levels(folder: str | os.PathLike[str], *, block_s: float | None = None
         Overwrite existing level CSVs.
     progress : callable, optional
         ``progress(done_s, total_s)`` in seconds of audio.
+    warn : callable, optional
+        Called with each one-line warning about the levels written (:func:`band_limit_warnings`:
+        a sample rate that cannot carry the bands up to 16 kHz).
 
     Returns
     -------
     list of Path
-        The files written.
+        The level files written.
     """
     col = _Collector(strict=True)
     root = Path(folder)
@@ -229,6 +305,7 @@ def write_levels(folder: str | os.PathLike[str], *, block_s: float | None = None
     doc = _read_document(cj, col)
     assert doc is not None  # a strict collector raises
     mics = _parse_mics(str(cj), doc, col)
+    exclusions = _parse_exclusions(str(cj), doc.get("exclusions"), col, "exclusions")
     flights = [f.get("id") for f in doc.get("flights", []) if isinstance(f, dict)]
     if block_s is None:
         block_s = doc.get("block_s", DEFAULT_BLOCK_S)
@@ -263,13 +340,18 @@ def write_levels(folder: str | os.PathLike[str], *, block_s: float | None = None
     done = 0.0
     series = []  # every recording is read before any file is written: a refused one leaves the campaign as it was
     for m, fid, wav in jobs:
-        series.append((wav, wav_levels(wav, m, block_s=float(block_s), flight=fid, sample_rate_hz=common)))
+        series.append((m, wav, wav_levels(wav, m, block_s=float(block_s), flight=fid, sample_rate_hz=common,
+                                          exclusions=exclusions)))
         done += durations[wav]
         if progress is not None:
             progress(done, total)
     written = []
-    for wav, lv in series:
+    for m, wav, lv in series:
         target = wav.with_suffix(".csv")
         write_level_csv(target, lv.t, lv.la, lv.band_f, lv.bands)
+        write_source_record(target, wav, m, sample_rate_hz=common, block_s=float(block_s))
         written.append(target)
+    if warn is not None:
+        for w in band_limit_warnings(lv for _, _, lv in series):
+            warn(w)
     return written

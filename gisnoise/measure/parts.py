@@ -93,6 +93,9 @@ class LevelSeries:
         Exact mid-band frequencies, Hz.
     bands : ndarray or None
         Unweighted band levels, free field, dB, shape (n, nb).
+    sample_rate_hz : float or None
+        Sample rate of the WAV recording the levels were computed from, Hz (read from it, or from the level
+        file's source record); None for levels a user brings.
     """
 
     mic: str
@@ -102,6 +105,7 @@ class LevelSeries:
     la: np.ndarray
     band_f: np.ndarray | None = None
     bands: np.ndarray | None = None
+    sample_rate_hz: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
