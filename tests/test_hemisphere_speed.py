@@ -8,9 +8,10 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_evaluate import omni_card, straight_flight
+from test_evaluate import FRAME, omni_card, straight_flight
 from test_hemisphere import M300
 
+from gisnoise.flight import Trajectory
 from gisnoise.maps import pipeline
 from gisnoise.maps.cardset import CardSet
 from gisnoise.maps.conditions import SPEED_TOLERANCE_M_S, check_hemisphere_speeds
@@ -43,8 +44,8 @@ def test_flown_beyond_five_knots_every_sample_is_named(m300, v):
     found = flight_findings(traj, CardSet([m300]))
     (w,) = found.warnings
     n = len(traj)
-    assert f"hemisphere 'm300' was measured at 5 m/s; {n} of its {n} samples fly at {v:.1f}-{v:.1f} m/s ground " \
-           "speed, more than 5 kt from it" in w
+    assert f"hemisphere 'm300' was measured at 5 m/s; {n} of the {n} flying samples it serves fly at " \
+           f"{v:.1f}-{v:.1f} m/s ground speed, more than 5 kt from it" in w
     meta = found.speed_outside["m300"]
     assert meta["samples"] == meta["of"] == n and meta["speed"] == "ground speed"
     assert meta["flown_m_s"] == [pytest.approx([v, v], abs=1e-3)]
@@ -79,6 +80,24 @@ def test_only_the_samples_the_hemisphere_serves_count(m300):
     traj = fast.with_(phase=phase)
     _, meta = check_hemisphere_speeds(traj, CardSet([m300, omni_card("hover")]))
     assert meta["m300"]["of"] == len(traj) - 10 and meta["m300"]["samples"] == len(traj) - 10
+
+
+def test_samples_on_the_ground_or_lying_after_a_crash_do_not_count(m300):
+    """Only the samples the map evaluates count: 10 on the ground before take-off (no power), 40 flying at 15 m/s
+    airspeed, 20 lying upside down at rest after a crash (power drawn, airspeed 0): 40 of 40, at 15-15 m/s."""
+    t = np.arange(70) * 0.5
+    fly = (t >= 5.0) & (t < 25.0)
+    north = 15.0 * np.clip(t - 5.0, 0.0, 17.0)                         # still before 5 s and from 22 s
+    lat, lon, h = FRAME.to_wgs84(0 * t, north, np.full(t.size, 30.0))  # (it came to lie on a roof)
+    traj = Trajectory(t=t, lat=lat, lon=lon, h=h, roll=np.where(t >= 25.0, 178.0, 0.0), pitch=0 * t, yaw=0 * t,
+                      power_w=np.where(t < 5.0, 0.0, 3000.0), phase=np.full(t.size, "horizontal"),
+                      airspeed_m_s=np.where(fly, 15.0, 0.0), source="crash")
+    assert traj.flying.sum() == 40 and traj.lying.sum() == 20            # the construction's truth
+    (w,) = flight_findings(traj, CardSet([m300])).warnings[-1:]
+    _, meta = check_hemisphere_speeds(traj, CardSet([m300]))
+    assert meta["m300"] == {"stated_m_s": 5.0, "flown_m_s": [[15.0, 15.0]], "samples": 40, "of": 40,
+                            "speed": "airspeed"}
+    assert "40 of the 40 flying samples it serves fly at 15.0-15.0 m/s airspeed" in w
 
 
 def test_a_map_says_it_in_its_warnings_and_metadata(m300, tmp_path):

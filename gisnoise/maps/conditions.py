@@ -9,6 +9,8 @@ The tolerance is that of a noise certification flight: 14 CFR Part 36, Appendix 
 lets the airspeed of a test flight vary from its reference airspeed by at most 5 kt
 (:data:`SPEED_TOLERANCE_M_S`, 2.57 m/s) for the measurement to stand for that reference condition.
 Samples flown farther from the stated speed are named in one warning per card; the map is made.
+Only the samples the map evaluates count: those that fly (:attr:`~gisnoise.flight.Trajectory.flying`; samples
+on the ground or lying upside down after a crash are silent on the map) and that the card serves.
 The speed is the logged airspeed when the trajectory has one (``airspeed_m_s``; routes from
 waypoints carry their speed there), else the speed over the ground from the positions, smoothed
 over :data:`~gisnoise.flight.phases.PHASE_SMOOTHING_S` as the phase rule smooths it.
@@ -62,9 +64,9 @@ def check_hemisphere_speeds(traj: Trajectory, cardset: CardSet, *, cards_flying:
         card = cardset.cards[k]
         slow, fast = off[off < v0], off[off > v0]
         ranges = " and ".join(f"{a.min():.1f}-{a.max():.1f}" for a in (slow, fast) if a.size)
-        warnings.append(f"{traj.source}: hemisphere {card.id!r} was measured at {v0:g} m/s; {off.size} of its "
-                        f"{s.size} samples fly at {ranges} m/s {what}, more than 5 kt from it: the map gives them "
-                        f"the {v0:g} m/s levels")
+        warnings.append(f"{traj.source}: hemisphere {card.id!r} was measured at {v0:g} m/s; {off.size} of the "
+                        f"{s.size} flying samples it serves fly at {ranges} m/s {what}, more than 5 kt from it: the "
+                        f"map gives them the {v0:g} m/s levels")
         meta[card.id] = {"stated_m_s": v0, "flown_m_s": [[round(float(a.min()), 2), round(float(a.max()), 2)]
                                                          for a in (slow, fast) if a.size],
                          "samples": int(off.size), "of": int(s.size), "speed": what}
