@@ -195,3 +195,70 @@ def test_a_phase_no_card_serves_names_the_way_a_hemisphere_serves_it(m300):
     with pytest.raises(CardError) as e:
         CardSet([omni_card("horizontal")]).assign(phase)
     assert "--also-phase" not in str(e.value)
+
+
+def _one_level_table(phi, theta, card_id, phase="horizontal"):
+    """80 dB at 1 m in one band (1 kHz) at every node, every node measured."""
+    from gisnoise.model import HemisphereCard
+
+    return HemisphereCard(id=card_id, vehicle="v", phase=phase, ansatz="hemisphere", parameters={},
+                          reference_power_w=1.0, reference_distance_m=1.0, phi_deg=phi, theta_deg=theta,
+                          bands_hz=[1000.0], levels_db=np.full((1, len(phi), len(theta)), 80.0),
+                          measured=np.ones((len(phi), len(theta)), bool))
+
+
+def _passes(n_passes):
+    """Passes at 30 m over the grid's centre line at 15 m/s (6 m between samples; none level with a cell centre),
+    north, then south after 5 s without power; phases horizontal, then hover."""
+    from test_evaluate import FRAME
+
+    from gisnoise.flight import Trajectory
+
+    n = np.arange(-150.0, 150.1, 6.0)
+    parts = [n, np.full(13, 150.0), n[::-1]][:2 * n_passes - 1]
+    north = np.concatenate(parts)
+    t = np.arange(north.size) * 0.4
+    power = np.concatenate([np.full(p.size, 0.0 if k == 1 else 3000.0) for k, p in enumerate(parts)])
+    phase = np.concatenate([np.full(p.size, "hover" if k == 2 else "horizontal") for k, p in enumerate(parts)])
+    lat, lon, h = FRAME.to_wgs84(0 * t, north, np.full(t.size, 30.0))
+    return Trajectory(t=t, lat=lat, lon=lon, h=h, roll=0 * t, pitch=0 * t, yaw=0 * t, power_w=power, phase=phase,
+                      source="passes")
+
+
+def test_a_map_mostly_from_unmeasured_directions_says_so(tmp_path):
+    """A table of the quarter phi, theta 0..90 deg (behind and starboard) at one level: over a grid symmetric about a
+    straight pass, fore and aft, port and starboard give the same energy, so 3/4 of it comes from the directions
+    beyond the table (its edge values, filled): above the half that makes the map say so; the full table: none."""
+    from test_evaluate import centred_grid
+
+    from gisnoise.maps import make_map
+    from gisnoise.maps.hemifill import FILLED_SHARE_WARNING
+
+    grid = centred_grid(10.0, 20, 20)  # even: no cell centre on the track or level with a sample
+    kw = dict(metrics=["LAmax", "SEL"], ground_h=0.0, grid=grid, engine="numpy")
+    quarter = _one_level_table([0.0, 45.0, 90.0], [0.0, 45.0, 90.0], "quarter")
+    out = make_map(_passes(1), [quarter], tmp_path / "q", **kw)
+    meta = out["result"].metadata
+    assert meta["hemisphere_filled_energy_share"] == pytest.approx(0.75, abs=0.005)
+    (w,) = [w for w in out["warnings"] if w.startswith("hemisphere: ")]
+    assert "75 % of the map's sound energy came from table directions that were not measured" in w
+    assert meta["warnings"] == out["warnings"]
+    full = _one_level_table([-90.0, 0.0, 90.0], [-90.0, 0.0, 90.0], "full")
+    out = make_map(_passes(1), [full], tmp_path / "f", **kw)
+    assert out["result"].metadata["hemisphere_filled_energy_share"] == 0.0
+    assert not [w for w in out["warnings"] if w.startswith("hemisphere: ")] and FILLED_SHARE_WARNING == 0.5
+
+
+def test_the_filled_share_of_a_flight_that_lands_between_passes_weighs_both_passes():
+    """Pass 1 with the quarter table (share 3/4), pass 2 with the full table at the same level (share 0) over the
+    same line: the two passes bring the same energy, so the map's share is 3/8 (it was the first pass's alone)."""
+    from test_evaluate import centred_grid
+
+    from gisnoise.maps import evaluate_flying
+
+    traj = _passes(2)
+    assert not traj.flying.all() and traj.flying.sum() == 2 * 51
+    cards = [_one_level_table([0.0, 45.0, 90.0], [0.0, 45.0, 90.0], "quarter"),
+             _one_level_table([-90.0, 0.0, 90.0], [-90.0, 0.0, 90.0], "full", phase="hover")]
+    res = evaluate_flying(traj, cards, centred_grid(10.0, 20, 20), metrics=["SEL"], ground_h=0.0, engine="numpy")
+    assert res.metadata["hemisphere_filled_energy_share"] == pytest.approx(0.375, abs=0.003)

@@ -2,6 +2,10 @@
 
 Shared by both engines (the NumPy reference and the numba hemisphere kernel) for the map's
 metadata on the energy that came from filled (not measured) cells of a hemisphere.
+
+A map whose energy came for more than :data:`FILLED_SHARE_WARNING` (half) from filled nodes,
+directions outside the table's angles or above the horizon says so in its warnings
+(:func:`filled_share_warning`): more of it then repeats the table's fill than its measurement.
 """
 
 from __future__ import annotations
@@ -13,7 +17,11 @@ import numpy as np
 from gisnoise.geo import emission_angles
 from gisnoise.model import HemisphereCard
 
-__all__ = ["has_hemisphere", "filled_weights", "hemisphere_atmospheres"]
+__all__ = ["FILLED_SHARE_WARNING", "filled_share_warning", "filled_weights", "has_hemisphere", "hemisphere_atmospheres"]
+
+FILLED_SHARE_WARNING = 0.5
+"""Share of a map's energy from filled hemisphere directions above which the map warns: more than half of it is then
+fill, not measurement (the M300 flyover at 10 m: 0.32)."""
 
 
 def has_hemisphere(cards: Any) -> bool:
@@ -41,3 +49,15 @@ def filled_weights(rcv: np.ndarray, src: np.ndarray, att: np.ndarray, card_idx: 
             sel = np.flatnonzero(card_idx == k)
             fw[:, sel] = c.interpolation(phi[:, sel], theta[:, sel])[1]
     return fw
+
+
+def filled_share_warning(metadata: dict[str, Any]) -> str | None:
+    """The map's warning when ``metadata["hemisphere_filled_energy_share"]`` exceeds :data:`FILLED_SHARE_WARNING`
+    (module docstring); None otherwise or when the map has no share (no hemisphere card, or neither LAeq nor SEL)."""
+    share = metadata.get("hemisphere_filled_energy_share")
+    if share is None or not share > FILLED_SHARE_WARNING:
+        return None
+    return (f"hemisphere: {100.0 * share:.0f} % of the map's sound energy came from table directions that were not "
+            "measured (filled nodes, directions beyond the table's angles, which take its edge values, or above the "
+            "horizon, mirrored): the map shows the table's fill more than its measurement "
+            "(metadata hemisphere_filled_energy_share)")

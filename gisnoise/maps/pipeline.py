@@ -40,6 +40,8 @@ Two rules hold for every face:
   outside the powers it was fitted at gives a warning and ``metadata["power_outside_card_range"]``;
 * speeds against the speed a hemisphere card was measured at (:mod:`gisnoise.maps.conditions`): samples
   more than 5 kt from it give a warning and ``metadata["hemisphere_speed_outside_condition"]``;
+* a map whose energy came for more than half from hemisphere directions that were not measured
+  (:func:`gisnoise.maps.hemifill.filled_share_warning`; with LAeq or SEL) gives a warning;
 * cells coarse for the flight's height (:func:`gisnoise.maps.grids.resolution_warning`): the receivers are
   cell centres, the nearest up to half a cell's diagonal beside the track, so LAmax under it may fall short by
   up to 10 lg(1 + (res / sqrt(2) / H)^2) dB, H the flight's median height above the receivers while flying
@@ -67,6 +69,7 @@ from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.flightchecks import crs_scale_warning, flight_findings
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map, resolution_warning
+from gisnoise.maps.hemifill import filled_share_warning
 from gisnoise.maps.prepare import dem_nodata_warning
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
@@ -259,7 +262,8 @@ def make_map(
         result.metadata["hemisphere_speed_outside_condition"] = found.speed_outside
     result.metadata["levels_db"] = lv
     dem_gap = dem_nodata_warning(result.metadata)
-    warnings = warnings + ([dem_gap] if dem_gap is not None else []) + clip_warnings(result, lv)
+    filled = filled_share_warning(result.metadata)
+    warnings = warnings + [w for w in (dem_gap, filled) if w is not None] + clip_warnings(result, lv)
     result.metadata["warnings"] = warnings
     paths: dict[str, Any] = {}
     if out is None:  # levels and plot were refused above
@@ -445,6 +449,21 @@ def _check_times(traj: Trajectory, snapshot_t: float | None, period_s: float | N
                          f"({traj.duration_s:g} s)", field="period_s")
 
 
+def _merged_filled_share(results: list[MapResult]) -> float:
+    """The filled-energy share of the stretches' maps together: each stretch's share weighted by its energy (the sum
+    over cells of its SEL or LAeq energy; the stretches share the LAeq period)."""
+    num = den = 0.0
+    for r in results:
+        band = r.bands.get("SEL", r.bands.get("LAeq"))
+        if band is None:
+            continue
+        lv = band[np.isfinite(band)]
+        e = float(np.sum(10.0 ** ((lv - lv.max()) / 10.0))) * 10.0 ** (float(lv.max()) / 10.0) if lv.size else 0.0
+        num += e * float(r.metadata.get("hemisphere_filled_energy_share", 0.0))
+        den += e
+    return num / den if den > 0 else 0.0
+
+
 def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: float | None,
                      snapshot_t: float | None, progress: Callable[[float], Any], kw: dict[str, Any]) -> MapResult:
     """Metrics over the flying stretches of ``traj`` summed in energy (see the module docstring)."""
@@ -482,6 +501,8 @@ def _evaluate_flying(traj: Trajectory, cardset: CardSet, grid: Any, period_s: fl
     meta["flying_stretches"] = [[float(p.t[0]), float(p.t[-1])] for p in parts]
     meta["samples_on_ground"] = int(np.sum(~traj.flying))
     meta["evaluation_instants"] = int(sum(r.metadata.get("evaluation_instants", 0) for r in results))
+    if "hemisphere_filled_energy_share" in meta:  # the stretches' shares, weighted by their energy
+        meta["hemisphere_filled_energy_share"] = _merged_filled_share(results)
     if "period_s" in meta:
         meta["period_s"] = period
     return MapResult(bands, first.grid, meta)
