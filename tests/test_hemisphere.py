@@ -193,6 +193,19 @@ def test_fore_is_negative_phi_and_starboard_positive_theta():
     assert float(b) == pytest.approx(-30.0)
 
 
+def test_the_logged_pitch_turns_the_table(card):
+    """The table is read in the body frame: nose down by 10 deg, the receiver straight below lies 10 deg ahead of the
+    body's vertical (phi_t = -10 deg), and the level is the table's there, not at (0, 0) (docs/hemispheres.md)."""
+    from gisnoise.geo import emission_angles
+
+    d, ph, th = emission_angles(0.0, 0.0, -10.0, 0.0, math.radians(-10.0), 0.0)
+    a, b, _ = table_angles(ph, th)
+    assert float(a) == pytest.approx(-10.0, abs=1e-9) and float(b) == pytest.approx(0.0, abs=1e-9)
+    at = level(card, 10.0, *product_angles(-10.0, 0.0))
+    assert level(card, float(d), float(ph), float(th)) == pytest.approx(at, abs=1e-9)
+    assert (round(level(card, 10.0, 0.0, -math.pi / 2), 2), round(at, 2)) == (64.73, 64.58)
+
+
 def test_between_nodes_the_level_lies_between_its_neighbours(card, sheets):
     phi, theta, _ = sheets["1000"]
     rng = np.random.default_rng(3)
@@ -244,7 +257,7 @@ def test_summary_sound_power_and_the_file_s_own(card):
     p2 = (10.0 ** (card.levels_db / 10.0)).sum(axis=0)
     assert 10 * np.log10(p2.mean() * 2 * np.pi * card.reference_distance_m ** 2) == pytest.approx(91.0, abs=0.05)
     # the card's own: the intensity integrated by solid angle over the lower half, the upper half mirrored;
-    # a table of one level L at 1 m everywhere is L + 10 lg(4 pi) dB
+    # a table of one level L at 1 m everywhere is L + 10 lg(4 pi) dB (more in test_hemisphere_power.py)
     flat = dataclasses.replace(card, levels_db=np.full_like(card.levels_db, 60.0))
     assert flat.sound_power_db()["overall_z"] == pytest.approx(60.0 + 10 * np.log10(card.levels_db.shape[0] * 4 * np.pi),
                                                                abs=1e-9)

@@ -44,6 +44,9 @@ def test_show_summarises_power_and_loudest_direction(m300_json):
     assert f"phi {top['phi_t_deg']:g} deg (ahead)" in r.output  # -18.4 deg: ahead of the drone
     assert "135 of 273 nodes" in r.output
     assert f"sound power {c.sound_power_db()['overall_z']:.1f} dB" in r.output
+    # the values an independent integration gives (tests/test_hemisphere_power.py); the file's 91.0 dB is the lower half
+    assert "sound power 94.4 dB, 92.6 dB(A)" in r.output and "the lower half alone 91.4 dB" in r.output
+    assert "the file states 91.0 dB for the lower half" in r.output and "coverage" not in r.output
 
 
 def test_plot_draws_the_hemisphere(m300_json, tmp_path):

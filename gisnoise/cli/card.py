@@ -8,9 +8,10 @@ import math
 import click
 import numpy as np
 
+from gisnoise.cli.options import echo_warnings
 from gisnoise.errors import InputError
 from gisnoise.jsonio import to_jsonable
-from gisnoise.model import HemisphereCard, fit_hemisphere, import_hemisphere, sample_card
+from gisnoise.model import HemisphereCard, fit_hemisphere, import_hemisphere, import_warnings, sample_card
 from gisnoise.model import cards as gcards
 
 
@@ -108,11 +109,14 @@ def _show_hemisphere(c: HemisphereCard) -> None:
                "(ISO 9613-1 absorption)")
     w = c.sound_power_db()
     click.echo(f"sound power {w['overall_z']:.1f} dB, {w['overall_a']:.1f} dB(A) (re 1 pW: the table over the whole "
-               "sphere by solid angle, its upper half mirrored)")
+               f"sphere by solid angle, its upper half mirrored; the lower half alone {w['lower_half_z']:.1f} dB, "
+               f"{w['lower_half_a']:.1f} dB(A))")
     own = c.statistics.get("file_sound_power_db", {}).get("Overall")
     if own is not None:
-        click.echo(f"          the file states {own:.1f} dB (its SWL_Bands: the nodes' mean square pressure times the "
-                   "lower hemisphere's area, not weighted by solid angle)")
+        click.echo(f"          the file states {own:.1f} dB for the lower half (its SWL_Bands: the nodes' mean square "
+                   "pressure times 2 pi r^2, every node weighted alike, not by solid angle)")
+    for w_ in import_warnings(c):
+        click.echo(f"coverage  {w_}")
     top = c.loudest_direction()
     click.echo(f"max level {top['level_db_a']:.1f} dB(A) at {c.reference_distance_m:g} m, phi {top['phi_t_deg']:g} deg "
                f"({'ahead' if top['phi_t_deg'] < 0 else 'behind' if top['phi_t_deg'] > 0 else 'below'}), "
@@ -129,7 +133,7 @@ def _show_hemisphere(c: HemisphereCard) -> None:
 @click.option("--phase", default="horizontal", show_default=True, help="Flight phase the hemisphere stands for.")
 @click.option("--also-phase", "also", multiple=True, help="Further phases the card serves (repeatable).")
 @click.option("--radius", "radius", type=float, default=None,
-              help="Radius of the table, m (default: the file's, else 1 m).")
+              help="Radius of the table, m (default: the file's, else 1 m; refused against a radius the file states).")
 @click.option("--temperature", type=float, default=None,
               help="Temperature of the back-propagation, C (Salford files: 25).")
 @click.option("--humidity", type=float, default=None, help="Relative humidity of the back-propagation, %.")
@@ -146,7 +150,15 @@ def import_hemisphere_cmd(file: str, out: str, card_id: str | None, vehicle: str
 
     CSV columns: band (nominal one-third-octave Hz), phi_deg (along the track, negative ahead),
     theta_deg (across it, positive starboard), level_db (SPL at the radius), optional radius_m
-    and measured (1/0).  Angles as in the Salford hemispheres: 0 straight below, +-90 at the horizon.
+    and measured (1/0).  Angles in degrees as in the Salford hemispheres: 0 straight below, +-90 at
+    the horizon.  Refused before anything is written: angles in radians, a band missing between the
+    lowest and the highest, bands below 10 Hz, a card the maps would refuse (radius 1 m - 1 km,
+    levels at 40 m -20..160 dB(A)).
+
+    Maps read the table in the body frame: the flight's logged roll and pitch turn it.  A
+    Salford table's angles are geometric, relative to the track, with the measured flight's own
+    attitude inside them; a flight logged with a strong pitch reads other nodes than the
+    measurement did at that geometry (pitch -10 deg: straight below reads phi -10 deg).
     """
     atm = None
     if (temperature is None) != (humidity is None):
@@ -158,6 +170,7 @@ def import_hemisphere_cmd(file: str, out: str, card_id: str | None, vehicle: str
     path = gcards.save(c, out, overwrite=force)
     click.echo(f"wrote {path}: {c.phi_deg.size} x {c.theta_deg.size} nodes, {c.bands_hz.size} bands, "
                f"{int(c.measured.sum())} nodes measured")
+    echo_warnings(import_warnings(c))
 
 
 @command.command("set-atmosphere")

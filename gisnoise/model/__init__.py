@@ -62,12 +62,14 @@ from gisnoise.model.hemisphere import (
     HEMISPHERE_SCHEMA,
     HemisphereCard,
     hemisphere_from_dict,
+    hemisphere_quadrature,
     table_angles,
 )
 from gisnoise.model.hemisphere_fit import fit_hemisphere, node_directions, sample_card
 from gisnoise.model.hemisphere_io import (
     SALFORD_ATMOSPHERE,
     import_hemisphere,
+    import_warnings,
     read_hemisphere_csv,
     read_salford_xlsx,
 )
@@ -96,7 +98,7 @@ __all__ = [
     "Effect", "GROUND_REFLECTION", "HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "HemisphereCard", "MIN_REFLECTION_HEIGHT_M", "ModelCard", "PAPER", "PAPER_OFFSET", "PHASES",
     "REFERENCE_DISTANCE_M", "RPM", "SALFORD_ATMOSPHERE", "SCHEMA", "THIRD_OCTAVE", "WIND", "add_background", "additive", "ansatz_names",
     "band_cos", "bind", "check_testable", "dump", "dumps", "effect_names", "emission_covariates", "extend", "fit_hemisphere",
-    "from_dict", "get_ansatz", "get_effect", "hemisphere_from_dict", "import_hemisphere", "level_sum", "load", "load_card", "loads", "mach_towards",
+    "from_dict", "get_ansatz", "get_effect", "hemisphere_from_dict", "hemisphere_quadrature", "import_hemisphere", "import_warnings", "level_sum", "load", "load_card", "loads", "mach_towards",
     "mic_height_agl", "node_directions", "read_hemisphere_csv", "read_salford_xlsx", "reflection_delay", "sample_card", "register_ansatz", "register_card_schema", "register_effect", "save", "series_ids",
     "shifted_inputs", "speed_of_sound", "table_angles", "with_parameters",
 ]

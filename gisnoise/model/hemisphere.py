@@ -49,7 +49,8 @@ from gisnoise.errors import CardError
 from gisnoise.model.ansatz import Ansatz
 from gisnoise.model.cards import ModelCard, _check_card_identity, register_card_schema
 
-__all__ = ["HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "HemisphereCard", "hemisphere_from_dict", "table_angles"]
+__all__ = ["HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "HemisphereCard", "hemisphere_from_dict",
+           "hemisphere_quadrature", "table_angles"]
 
 HEMISPHERE_SCHEMA = "gisnoise/hemisphere-card/1"
 HEMISPHERE_ANSATZ = "hemisphere"
@@ -97,6 +98,57 @@ def _axis_weights(grid: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarr
     i = np.clip(np.searchsorted(grid, ac, side="right") - 1, 0, n - 2)
     w = (ac - grid[i]) / (grid[i + 1] - grid[i])
     return i, w, outside
+
+
+def _bilinear(grid_a: np.ndarray, grid_b: np.ndarray, a: np.ndarray, b: np.ndarray
+              ) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """Bilinear stencil at table angles ``a``, ``b`` (deg): ``[(flat node index, weight)] x 4`` and outside."""
+    i, wi, out_i = _axis_weights(grid_a, a)
+    j, wj, out_j = _axis_weights(grid_b, b)
+    nt = grid_b.size
+    i1 = np.minimum(i + 1, grid_a.size - 1)
+    j1 = np.minimum(j + 1, nt - 1)
+    return [(i * nt + j, (1 - wi) * (1 - wj)), (i * nt + j1, (1 - wi) * wj),
+            (i1 * nt + j, wi * (1 - wj)), (i1 * nt + j1, wi * wj)], out_i | out_j
+
+
+def hemisphere_quadrature(phi_deg: Any, theta_deg: Any, n: int = 16) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points ``(phi_t, theta_t)`` (deg) and solid-angle weights (sr) integrating over the lower hemisphere.
+
+    ``phi_t = atan2(-x_b, z_b)`` is the longitude of a direction about the body y axis, and
+    ``lambda = asin(y_b)`` its latitude: the direction is ``(-cos lambda sin phi_t, sin lambda,
+    cos lambda cos phi_t)``, the solid angle element ``cos lambda dlambda dphi_t`` and
+    ``theta_t = atan2(sin lambda, cos lambda cos phi_t)`` (so the table's column ``theta_t = b`` is
+    ``lambda = atan(tan b cos phi_t)``).  Gauss-Legendre rules of ``n`` points run over each
+    interval between the rows ``phi_deg`` (and the horizon, -90 and 90 deg) in ``phi_t`` and, at
+    each of their points, over each interval between the columns ``theta_deg`` in ``lambda``: the
+    bilinear interpolation is smooth inside every piece (only at the horizon, ``phi_t = +-90 deg``,
+    where the columns meet, is the integral over ``lambda`` not smooth in ``phi_t``).  With 16
+    points a level linear in ``theta_t`` on the M300 grid is integrated within 3e-6 dB of its
+    closed form, the M300 table within 2e-6 dB of 32 points.  The weights sum to ``2 pi``.
+
+    Examples
+    --------
+    >>> a, b, w = hemisphere_quadrature([-90.0, 0.0, 90.0], [-90.0, 0.0, 90.0])
+    >>> round(float(w.sum() / np.pi), 12)       # the lower hemisphere: 2 pi sr
+    2.0
+    >>> round(float(np.sum(w * (a < 0)) / np.pi), 12)   # phi_t is uniform in solid angle: half ahead
+    1.0
+    """
+    x, wx = np.polynomial.legendre.leggauss(int(n))
+    ends = np.radians(np.unique(np.clip(np.concatenate([[-90.0], np.ravel(phi_deg), [90.0]]), -90.0, 90.0)))
+    lo, span = ends[:-1], np.diff(ends)
+    a = (lo[:, None] + span[:, None] * (x + 1.0) / 2.0).ravel()
+    wa = (span[:, None] * wx / 2.0).ravel()
+    cols = np.radians(np.unique(np.clip(np.concatenate([[-90.0], np.ravel(theta_deg), [90.0]]), -90.0, 90.0)))
+    lam = np.arctan(np.tan(cols[None, 1:-1]) * np.cos(a)[:, None])
+    lam = np.concatenate([np.full((a.size, 1), -np.pi / 2), lam, np.full((a.size, 1), np.pi / 2)], axis=1)
+    l0, dl = lam[:, :-1, None], np.diff(lam, axis=1)[:, :, None]
+    lp = l0 + dl * (x + 1.0) / 2.0                       # (phi points, column intervals, n)
+    w = wa[:, None, None] * dl * wx / 2.0 * np.cos(lp)
+    b = np.arctan2(np.sin(lp), np.cos(lp) * np.cos(a)[:, None, None])
+    aa = np.broadcast_to(a[:, None, None], lp.shape)
+    return np.degrees(aa).ravel(), np.degrees(b).ravel(), w.ravel()
 
 
 def _fail(msg: str, fld: str) -> None:
@@ -276,16 +328,10 @@ class HemisphereCard(ModelCard):
         the horizon).
         """
         a, b, above = table_angles(phi, theta)
-        i, wi, out_i = _axis_weights(self.phi_deg, a)
-        j, wj, out_j = _axis_weights(self.theta_deg, b)
-        nt = self.theta_deg.size
-        i1 = np.minimum(i + 1, self.phi_deg.size - 1)
-        j1 = np.minimum(j + 1, nt - 1)
-        st = [(i * nt + j, (1 - wi) * (1 - wj)), (i * nt + j1, (1 - wi) * wj),
-              (i1 * nt + j, wi * (1 - wj)), (i1 * nt + j1, wi * wj)]
+        st, outside = _bilinear(self.phi_deg, self.theta_deg, a, b)
         filled = (~self.measured).ravel().astype(float)
         fw = sum(w * filled[k] for k, w in st)
-        fw = np.where(out_i | out_j | above, 1.0, fw)
+        fw = np.where(outside | above, 1.0, fw)
         return st, np.asarray(fw), above
 
     def level_direction(self, d: Any, phi: Any, theta: Any) -> np.ndarray:
@@ -320,29 +366,60 @@ class HemisphereCard(ModelCard):
 
     # ------------------------------------------------------------------ summary
     def sound_power_db(self) -> dict[str, float]:
-        """Sound power level (dB re 1 pW) from the table, lower hemisphere integrated, upper mirrored.
+        """Sound power level (dB re 1 pW) of the table: the whole sphere, its upper half mirrored.
 
-        Integrates the intensity ``p^2 / (rho c)`` with ``rho c = 400`` rayl (so that
-        ``Lw = Lp + 10 lg(area)``) over the sphere of radius ``radius_m`` on the table's
-        nodes (solid angle of each cell by the Jacobian of the table angles).  Keys:
-        ``overall_z`` (unweighted), ``overall_a``.
+        The intensity ``p^2 / (rho c)`` (``rho c = 400`` rayl, so that ``Lw = Lp + 10 lg(area)``)
+        integrated by solid angle over the lower hemisphere at the radius ``r0`` and doubled (the
+        upper half is the lower half's mirror image, as on the map); ``p^2`` follows the card's
+        interpolation, bilinear in the table angles of the nodes' overall levels (edge values
+        outside the table), integrated by :func:`hemisphere_quadrature`.  A table of one level
+        ``L`` gives ``L + 10 lg(4 pi r0^2)``.
+
+        Returns
+        -------
+        dict
+            ``overall_z`` (unweighted) and ``overall_a`` (A-weighted), dB; ``lower_half_z`` and
+            ``lower_half_a``: the lower hemisphere alone (``2 pi r0^2``; 3.01 dB less), the
+            half a Salford file's ``SWL_Bands`` states.
         """
-        a = np.radians(self.phi_deg)
-        b = np.radians(self.theta_deg)
-        # direction u ~ (-tan a, tan b, 1); solid angle element dOmega = |J| da db
-        ta, tb = np.tan(np.clip(a, -1.5607, 1.5607))[:, None], np.tan(np.clip(b, -1.5607, 1.5607))[None, :]
-        sa, sb = 1.0 / np.cos(np.clip(a, -1.5607, 1.5607)) ** 2, 1.0 / np.cos(np.clip(b, -1.5607, 1.5607)) ** 2
-        jac = sa[:, None] * sb / (1.0 + ta * ta + tb * tb) ** 1.5
-        wa = np.gradient(a) if a.size > 1 else np.array([math.pi])
-        wb = np.gradient(b) if b.size > 1 else np.array([math.pi])
-        dom = jac * wa[:, None] * wb[None, :]
-        dom *= 2.0 * math.pi / dom.sum()  # the lower hemisphere is 2 pi sr
+        a, b, w = hemisphere_quadrature(self.phi_deg, self.theta_deg)
+        st, _ = _bilinear(self.phi_deg, self.theta_deg, a, b)
         r2 = float(self.reference_distance_m) ** 2
-        z = 10.0 ** (self.levels_db / 10.0)
-        a_ = 10.0 ** (self.a_weighted_db / 10.0)
-        wz = 10.0 * math.log10(2.0 * float(np.sum(z.sum(axis=0) * dom)) * r2)
-        wa_ = 10.0 * math.log10(2.0 * float(np.sum(a_.sum(axis=0) * dom)) * r2)
-        return {"overall_z": wz, "overall_a": wa_}
+        out: dict[str, float] = {}
+        z = 10.0 * np.log10(np.sum(10.0 ** (self.levels_db / 10.0), axis=0))
+        for key, nodes in (("z", z), ("a", self.overall_a_db)):
+            flat = np.asarray(nodes, dtype=float).ravel()
+            lv = sum(wk * flat[k] for k, wk in st)
+            lower = 10.0 * math.log10(float(np.sum(w * 10.0 ** (lv / 10.0))) * r2)
+            out[f"overall_{key}"] = lower + 10.0 * math.log10(2.0)
+            out[f"lower_half_{key}"] = lower
+        return out
+
+    def uncovered(self) -> dict[str, Any]:
+        """Directions of the lower hemisphere outside the table's angles (they take its edge values).
+
+        Returns ``{"share": s, "ranges": [...]}``: ``s`` the share of the lower hemisphere's solid
+        angle outside ``phi_deg[0]..phi_deg[-1]`` x ``theta_deg[0]..theta_deg[-1]`` (exact:
+        the solid angle of a table-angle rectangle ``[a0, a1] x [b0, b1]`` is
+        ``F(a1, b1) - F(a0, b1) - F(a1, b0) + F(a0, b0)``, ``F(a, b) = asin(sin a sin b)``), and
+        the uncovered table-angle ranges in words (empty when the table reaches the horizon
+        on all four sides).
+        """
+        a0, a1 = np.radians([self.phi_deg[0], self.phi_deg[-1]])
+        b0, b1 = np.radians([self.theta_deg[0], self.theta_deg[-1]])
+
+        def f(a: float, b: float) -> float:
+            return math.asin(max(-1.0, min(1.0, math.sin(a) * math.sin(b))))
+
+        inside = f(a1, b1) - f(a0, b1) - f(a1, b0) + f(a0, b0)
+        ranges = []
+        for name, g, lo_word, hi_word in (("phi", self.phi_deg, "ahead", "behind"),
+                                          ("theta", self.theta_deg, "port", "starboard")):
+            if g[0] > -90.0:
+                ranges.append(f"{name} -90..{g[0]:g} deg ({lo_word})")
+            if g[-1] < 90.0:
+                ranges.append(f"{name} {g[-1]:g}..90 deg ({hi_word})")
+        return {"share": max(0.0, 1.0 - inside / (2.0 * math.pi)), "ranges": ranges}
 
     def loudest_direction(self) -> dict[str, float]:
         """Node of the largest A-weighted overall level: table angles (deg) and level at the radius."""

@@ -54,12 +54,16 @@ def fit_hemisphere(hemi: HemisphereCard, *, distance_m: float = REFERENCE_DISTAN
     """The ``paper-offset`` card fitted to the measured nodes of ``hemi`` (module docstring).
 
     ``statistics``: ``residual_rms_db`` and ``residual_max_db`` over the measured nodes,
-    ``n_nodes``, ``fit_distance_m``.
+    ``n_nodes``, ``fit_distance_m``.  A table with fewer measured nodes below the horizon than the
+    five free parameters is refused (field ``measured``).
     """
-    if not hemi.measured.any():
-        raise CardError("hemisphere card: no measured nodes to fit", field="measured")
     phi, theta = node_directions(hemi.phi_deg, hemi.theta_deg)
     m = hemi.measured & (np.abs(hemi.phi_deg)[:, None] < 90) & (np.abs(hemi.theta_deg)[None, :] < 90)
+    if int(m.sum()) < len(_FREE):
+        n = int(m.sum())
+        raise CardError(f"hemisphere card {hemi.id!r}: {n} measured node{'' if n == 1 else 's'} below the horizon "
+                        f"for the {len(_FREE)} free parameters of paper-offset ({', '.join(_FREE)}); the fit needs "
+                        f"at least {len(_FREE)}", field="measured")
     target = hemi.node_levels(float(distance_m))[m]
     x = {"d": np.full(target.size, float(distance_m)), "phi": phi[m], "theta": theta[m], "p_el": np.ones(target.size)}
     names = PAPER_OFFSET.params

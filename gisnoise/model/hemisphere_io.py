@@ -22,6 +22,28 @@ drone approached the microphone line), ``theta`` across it, positive to starboar
 phi row is not a constant fill: rows at either end of the table that repeat their inner
 neighbour in every band and column are fill (the Salford tool extends the outermost measured
 row to the horizon that way); the innermost row of such a run is measured.
+
+**Checks at import** (each a one-line :class:`~gisnoise.errors.CardError` naming the file and
+the field; the card written is one every other command takes):
+
+* angles in degrees: an axis of more than one angle, all within +-1.571 (pi/2 rounded up), is
+  refused as given in radians (:data:`RADIAN_LIMIT_DEG`: radians fill that range; in degrees such
+  an axis would span at most 3.1 deg about straight below, 0.55 m across at 10 m, where a measured
+  hemisphere spans tens of degrees: the Salford line of microphones +-60);
+* the rows and columns of a workbook sheet may come in any order (each carries its angle): they
+  are sorted; an angle given twice is refused naming the sheet and cells, a blank, text or
+  non-finite cell naming its cell (``C7``);
+* bands: nominal one-third-octave frequencies in Hz, none below :data:`LOWEST_BAND_HZ` (10 Hz,
+  the lowest frequency IEC 61672-1 states the A-weighting for: a table in kHz would give
+  0.02-20 "Hz"), every band between the lowest and the highest (a band missing from the table
+  would drop its energy from every level);
+* a CSV's radius: ``spl_db_at_1m`` with a ``radius_m`` other than 1, or a ``radius_m`` argument
+  other than the radius the file states, is refused (field ``radius_m``);
+* the plausibility guard of the maps and the service (:func:`gisnoise.model.check_card`: radius
+  1 m - 1 km, levels at 40 m within -20..160 dB(A)).
+
+A table that does not reach the horizon on every side is taken (the map gives the directions
+beyond it the edge values); :func:`import_warnings` says which ranges it lacks.
 """
 
 from __future__ import annotations
@@ -35,14 +57,23 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.acoustics import nominal_frequency
+from gisnoise.acoustics import exact_frequency, nominal_frequency
 from gisnoise.errors import CardError
 from gisnoise.model.hemisphere import HEMISPHERE_ANSATZ, HemisphereCard
+from gisnoise.model.plausibility import check_card
 
-__all__ = ["SALFORD_ATMOSPHERE", "fill_rows", "import_hemisphere", "read_hemisphere_csv", "read_salford_xlsx"]
+__all__ = ["LOWEST_BAND_HZ", "RADIAN_LIMIT_DEG", "SALFORD_ATMOSPHERE", "fill_rows", "import_hemisphere",
+           "import_warnings", "read_hemisphere_csv", "read_salford_xlsx"]
 
 SALFORD_ATMOSPHERE = {"temperature_c": 25.0, "humidity_pct": 70.0, "pressure_kpa": 101.325}
 """The atmosphere the Salford tool back-propagates with (25 C, 70 % RH, 29.92 inHg)."""
+
+LOWEST_BAND_HZ = 10.0
+"""Lowest one-third-octave band taken, Hz: the lowest frequency of the A-weighting in IEC 61672-1 (a band below
+it is no audio band; a table in kHz gives 0.02-20)."""
+RADIAN_LIMIT_DEG = 1.571
+"""An axis whose angles all lie within +-this many "degrees" is taken to be in radians: pi/2 rounded up to three
+decimals, so that radians written rounded (1.5708) count (module docstring)."""
 
 _SALFORD_NAME = re.compile(r"Hem_(?P<site>[A-Za-z]+)_(?P<drone>[A-Za-z0-9]+)_(?P<h>\d+)_F(?P<v>\d+)_")
 _DRONES = {"M3": "DJI Matrice 300 RTK", "M2": "DJI Mavic 2 Pro", "3p": "DJI Phantom 3"}
@@ -59,15 +90,79 @@ def _band(path: Any, v: Any) -> float:
         raise _err(path, f"band {v!r} is not a frequency in Hz", "band") from None
     if not math.isfinite(f) or f <= 0:
         raise _err(path, f"band {v!r} is not a positive frequency", "band")
+    if f < LOWEST_BAND_HZ * 10 ** -0.05:  # below the 10 Hz band's lower edge
+        raise _err(path, f"band {v!r} Hz lies below {LOWEST_BAND_HZ:g} Hz, the lowest band of the A-weighting "
+                         "(IEC 61672-1): bands are nominal frequencies in Hz (kHz given?)", "band")
     nom = float(nominal_frequency(f))
     if abs(math.log10(nom / f)) > 0.02:
         raise _err(path, f"band {v!r} Hz is no one-third-octave mid-band frequency", "band")
     return nom
 
 
+def _cell(col: int, row: int) -> str:
+    """Spreadsheet reference of 1-based column and row (``C7``)."""
+    name = ""
+    while col:
+        col, r = divmod(col - 1, 26)
+        name = chr(65 + r) + name
+    return f"{name}{row}"
+
+
+def _number(path: Any, sheet: str, v: Any, col: int, row: int, what: str) -> float:
+    """The finite number of a workbook cell, else an error naming its sheet and cell."""
+    ref = _cell(col, row)
+    if v is None or (isinstance(v, str) and not v.strip()):
+        raise _err(path, f"sheet {sheet!r}: cell {ref} is blank ({what} expected)", f"sheet {sheet}")
+    try:
+        if isinstance(v, bool):
+            raise TypeError
+        x = float(v)
+    except (TypeError, ValueError):
+        raise _err(path, f"sheet {sheet!r}: cell {ref} holds {v!r}, not a number ({what})", f"sheet {sheet}") from None
+    if not math.isfinite(x):
+        raise _err(path, f"sheet {sheet!r}: cell {ref} holds {v!r}, not a finite number ({what})", f"sheet {sheet}")
+    return x
+
+
+def _sorted_axis(path: Any, sheet: str, a: np.ndarray, refs: list[str], name: str) -> np.ndarray:
+    """The order sorting an axis ascending; an angle given twice is refused naming its cells."""
+    order = np.argsort(a, kind="stable")
+    same = np.flatnonzero(np.diff(a[order]) == 0)
+    if same.size:
+        k, m = int(order[same[0]]), int(order[same[0] + 1])
+        raise _err(path, f"sheet {sheet!r}: {name} {a[k]:g} deg given twice (cells {refs[k]} and {refs[m]})",
+                   f"sheet {sheet}")
+    return order
+
+
+def _read_sheet(path: Any, name: str, ws: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(phi, theta, table)`` of one band sheet, rows and columns sorted by their angles."""
+    rows = [(n, r) for n, r in enumerate(ws.iter_rows(values_only=True), start=1)
+            if any(v is not None and str(v).strip() for v in r)]
+    if not rows or str(rows[0][1][0]).strip().lower() != "phi":
+        raise _err(path, f"sheet {name!r}: first cell must be 'Phi'", f"sheet {name}")
+    n0, head = rows[0]
+    last = max(k for k, v in enumerate(head) if v is not None and str(v).strip())
+    if last < 1:
+        raise _err(path, f"sheet {name!r}: no theta angles after 'Phi' in row {n0}", f"sheet {name}")
+    th = np.array([_number(path, name, head[k], k + 1, n0, "theta angle") for k in range(1, last + 1)])
+    ph = np.array([_number(path, name, r[0], 1, n, "phi angle") for n, r in rows[1:]])
+    tab = np.array([[_number(path, name, r[k] if k < len(r) else None, k + 1, n, "level in dB")
+                     for k in range(1, last + 1)] for n, r in rows[1:]]).reshape(ph.size, th.size)
+    if ph.size == 0:
+        raise _err(path, f"sheet {name!r}: no phi rows below row {n0}", f"sheet {name}")
+    op = _sorted_axis(path, name, ph, [_cell(1, n) for n, _ in rows[1:]], "phi")
+    ot = _sorted_axis(path, name, th, [_cell(k + 1, n0) for k in range(1, last + 1)], "theta")
+    return ph[op], th[ot], tab[np.ix_(op, ot)]
+
+
 def read_salford_xlsx(path: str | os.PathLike[str]) -> dict[str, Any]:
     """The tables of a Salford hemisphere workbook: ``phi_deg``, ``theta_deg``, ``bands_hz``, ``levels_db``
-    ``(bands, phi, theta)``, ``overall_db`` (``band_Overall`` or None), ``swl_db`` (band -> dB)."""
+    ``(bands, phi, theta)``, ``overall_db`` (``band_Overall`` or None), ``swl_db`` (band -> dB).
+
+    Rows and columns are sorted by their angles (each row and column carries its angle, so any order is
+    unambiguous); a blank or non-numeric cell is refused naming its sheet and cell.
+    """
     try:
         import openpyxl
     except ImportError:
@@ -82,22 +177,15 @@ def read_salford_xlsx(path: str | os.PathLike[str]) -> dict[str, Any]:
     overall = None
     swl: dict[str, float] = {}
     for name in wb.sheetnames:
-        rows = [r for r in wb[name].iter_rows(values_only=True) if any(v is not None for v in r)]
         if name == "SWL_Bands":
+            rows = [r for r in wb[name].iter_rows(values_only=True) if any(v is not None for v in r)]
             for r in rows[1:]:
                 if r[0] is not None and r[1] is not None:
                     swl[str(r[0]).removeprefix("band_")] = float(r[1])
             continue
         if not name.startswith("band_"):
             continue
-        if not rows or str(rows[0][0]).strip().lower() != "phi":
-            raise _err(path, f"sheet {name!r}: first cell must be 'Phi'", f"sheet {name}")
-        try:
-            th = np.array([float(v) for v in rows[0][1:] if v is not None])
-            ph = np.array([float(r[0]) for r in rows[1:]])
-            tab = np.array([[float(v) for v in r[1:1 + th.size]] for r in rows[1:]])
-        except (TypeError, ValueError):
-            raise _err(path, f"sheet {name!r}: non-numeric angle or level", f"sheet {name}") from None
+        ph, th, tab = _read_sheet(path, name, wb[name])
         if phi is None:
             phi, theta = ph, th
         elif not (np.array_equal(ph, phi) and theta is not None and np.array_equal(th, theta)):
@@ -157,7 +245,11 @@ def read_hemisphere_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
             raise _err(path, f"line {n}: node band {key[0]:g} Hz, phi {key[1]:g}, theta {key[2]:g} given twice", lvl)
         vals[key] = v
         if "radius_m" in cols and r["radius_m"] not in (None, ""):
-            radii.add(float(r["radius_m"]))
+            try:
+                radii.add(float(r["radius_m"]))
+            except ValueError:
+                raise _err(path, f"line {n}: column 'radius_m' holds {r['radius_m']!r}, not a radius in m",
+                           "radius_m") from None
         if "measured" in cols and r["measured"] not in (None, ""):
             m = str(r["measured"]).strip().lower()
             if m not in ("0", "1", "true", "false"):
@@ -169,6 +261,9 @@ def read_hemisphere_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
         raise _err(path, f"column 'radius_m' must hold one radius, got {sorted(radii)}", "radius_m")
     if radii:
         radius = radii.pop()
+        if lvl == "spl_db_at_1m" and radius != 1.0:
+            raise _err(path, f"column 'spl_db_at_1m' gives levels at 1 m, column 'radius_m' a radius of {radius:g} m: "
+                             "name the level column 'level_db' for levels at another radius", "radius_m")
     bands = sorted({k[0] for k in vals})
     phi = sorted({k[1] for k in vals})
     theta = sorted({k[2] for k in vals})
@@ -187,6 +282,34 @@ def read_hemisphere_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
         measured = np.array([[meas.get((p, t), False) for t in theta] for p in phi])
     return {"phi_deg": np.array(phi), "theta_deg": np.array(theta), "bands_hz": np.array(bands),
             "levels_db": tab, "overall_db": None, "swl_db": {}, "radius_m": radius, "measured": measured}
+
+
+def _check_table(path: Any, t: dict[str, Any]) -> None:
+    """Refuse angles in radians and a band sequence with gaps (module docstring)."""
+    for name in ("phi_deg", "theta_deg"):
+        a = np.asarray(t[name], dtype=float)
+        if a.size > 1 and np.abs(a).max() <= RADIAN_LIMIT_DEG:
+            raise _err(path, f"{name}: all {a.size} angles lie within +-{RADIAN_LIMIT_DEG:g} ({a[0]:g}..{a[-1]:g}), "
+                             "the range of radians; table angles are degrees (-90..90, 0 straight below)", name)
+    bands = np.asarray(t["bands_hz"], dtype=float)
+    idx = np.rint(10.0 * np.log10(exact_frequency(bands) / 1000.0)).astype(int)
+    missing = sorted(set(range(int(idx.min()), int(idx.max()) + 1)) - set(idx.tolist()))
+    if missing:
+        names = ", ".join(f"{float(nominal_frequency(1000.0 * 10.0 ** (k / 10.0))):g}" for k in missing)
+        raise _err(path, f"the bands {bands[0]:g}-{bands[-1]:g} Hz lack {names} Hz: a one-third-octave table needs "
+                         "every band between its lowest and highest (a missing band drops its energy from every "
+                         "level)", "band")
+
+
+def import_warnings(card: HemisphereCard) -> list[str]:
+    """What a user should know about an imported table (none for the Salford files): the directions of the lower
+    hemisphere its angles do not reach, which the map gives the edge values of the table."""
+    cov = card.uncovered()
+    if not cov["ranges"]:
+        return []
+    return [f"hemisphere {card.id!r}: the table does not reach the horizon: {', '.join(cov['ranges'])} not "
+            f"covered ({100.0 * cov['share']:.0f} % of the lower hemisphere's solid angle); maps give those "
+            "directions the table's edge values (counted as filled)"]
 
 
 def fill_rows(levels_db: np.ndarray) -> np.ndarray:
@@ -209,7 +332,9 @@ def import_hemisphere(path: str | os.PathLike[str], *, card_id: str | None = Non
                       atmosphere: dict[str, float] | None = None, measured_theta_max: float | None = 60.0,
                       condition: dict[str, Any] | None = None, reference_power_w: float | None = None
                       ) -> HemisphereCard:
-    """A hemisphere card from a Salford xlsx or a long-form CSV (by the file's suffix).
+    """A hemisphere card from a Salford xlsx or a long-form CSV (by the file's suffix), checked as the module
+    docstring says (:class:`~gisnoise.errors.CardError` naming the file and field; the plausibility guard's
+    :class:`~gisnoise.model.ImplausibleCardError`); :func:`import_warnings` gives what it takes but should say.
 
     ``atmosphere`` (``temperature_c``, ``humidity_pct``, ``pressure_kpa``) is required for
     files not in the Salford layout.  Defaults for the Salford files: radius 1 m, atmosphere :data:`SALFORD_ATMOSPHERE`, vehicle,
@@ -227,6 +352,7 @@ def import_hemisphere(path: str | os.PathLike[str], *, card_id: str | None = Non
         t = read_hemisphere_csv(p)
     else:
         raise CardError(f"{p}: unknown hemisphere layout {suffix!r} (give .xlsx or .csv)", field="file")
+    _check_table(p, t)
     m = _SALFORD_NAME.match(p.name)
     cond: dict[str, Any] = {}
     if m:
@@ -239,6 +365,9 @@ def import_hemisphere(path: str | os.PathLike[str], *, card_id: str | None = Non
     if atmosphere is None and not salford:
         raise CardError(f"{p}: give the atmosphere the table was back-propagated with (temperature, humidity)",
                         field="atmosphere")
+    if radius_m is not None and t["radius_m"] is not None and float(radius_m) != float(t["radius_m"]):
+        raise CardError(f"{p}: radius_m = {float(radius_m):g} m contradicts the file's radius of {t['radius_m']:g} m",
+                        field="radius_m")
     radius = radius_m if radius_m is not None else t["radius_m"] if t["radius_m"] is not None else 1.0
     levels = np.asarray(t["levels_db"], dtype=float)
     if t["measured"] is not None:
@@ -254,7 +383,7 @@ def import_hemisphere(path: str | os.PathLike[str], *, card_id: str | None = Non
     notes = (f"measured hemisphere imported from {p.name}; table angles: phi along the track "
              "(negative ahead), theta across it (positive starboard); "
              f"{int(measured.sum())} of {measured.size} cells measured, the others filled by the source file")
-    return HemisphereCard(
+    card = HemisphereCard(
         id=card_id or p.stem, vehicle=vehicle or "unknown", phase=phase, phases=tuple(phases),
         ansatz=HEMISPHERE_ANSATZ, parameters={}, reference_power_w=float(reference_power_w or 1.0),
         reference_distance_m=float(radius), phi_deg=t["phi_deg"], theta_deg=t["theta_deg"],
@@ -262,3 +391,5 @@ def import_hemisphere(path: str | os.PathLike[str], *, card_id: str | None = Non
         atmosphere=dict(atmosphere or SALFORD_ATMOSPHERE), condition=cond, statistics=stats,
         provenance={"source_file": p.name, "layout": "salford-xlsx" if suffix.startswith(".xls") else "csv-long"},
         notes=notes)
+    check_card(card, source=str(p))  # the guard of maps and service: never write a card they refuse
+    return card
