@@ -885,3 +885,20 @@ def test_a_microphone_without_lat_is_said_missing(tmp_path):
     msgs = [p.message for p in check_campaign(root)]
     assert any("field 'microphones[1].lat' is missing" in m for m in msgs), msgs
     assert not any("None" in m for m in msgs)
+
+
+def test_a_misspelt_key_of_a_microphone_or_flight_is_named_not_left_out(tmp_path):
+    """`background_DB` (for background_db) was left out without a word: the background was then estimated instead of
+    the stated one.  A key gisnoise does not read is a problem naming it and the nearest known key; free-text keys
+    (name, notes, description) stay allowed."""
+    root = make_campaign(tmp_path / "c")
+    doc = json.loads((root / "campaign.json").read_text())
+    doc["microphones"][0]["background_DB"] = 47.0
+    doc["microphones"][1]["notes"] = "on the roof"
+    doc["flights"][0]["start_ut"] = START
+    (root / "campaign.json").write_text(json.dumps(doc))
+    msgs = [p.message for p in check_campaign(root)]
+    assert any("'microphones[0].background_DB' is not one gisnoise reads (did you mean 'background_db'?)" in m
+               for m in msgs)
+    assert any("'flights[0].start_ut' is not one gisnoise reads (did you mean 'start_utc'?)" in m for m in msgs)
+    assert not any("notes" in m.split(";")[0] for m in msgs)

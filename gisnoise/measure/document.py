@@ -173,10 +173,33 @@ def _named_entries(cjs: str, doc: Mapping[str, Any], key: str, kind: str,
         yield where, m, mid
 
 
+FREE_TEXT_KEYS = ("name", "notes", "description")
+"""Keys an entry of campaign.json may carry for people; gisnoise does not read them."""
+MIC_KEYS = ("id", "lat", "lon", "h", "mount", "sensitivity_v_per_pa", "full_scale_v", "background_db", "height_agl_m")
+FLIGHT_KEYS = ("id", "start_utc", "geoid_undulation_m", "power_w")
+
+
+def _unknown_keys(cjs: str, where: str, entry: Mapping[str, Any], known: tuple[str, ...], col: _Collector) -> bool:
+    """Report each key of ``entry`` gisnoise does not read (a misspelt one would be left out without a word),
+    naming the nearest known key; True when there is none."""
+    import difflib
+
+    ok = True
+    for k in entry:
+        if k in known or k in FREE_TEXT_KEYS:
+            continue
+        near = difflib.get_close_matches(str(k), known, n=1, cutoff=0.6)
+        col.add(cjs, f"{where}.{k}", f"{cjs}: field '{where}.{k}' is not one gisnoise reads"
+                f"{f' (did you mean {near[0]!r}?)' if near else ''}; known: {', '.join(known)}, and free text in "
+                f"{', '.join(FREE_TEXT_KEYS)}")
+        ok = False
+    return ok
+
+
 def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Microphone]:
     out: list[Microphone] = []
     for where, m, mid in _named_entries(cjs, doc, "microphones", "microphone", col):
-        good = True
+        good = _unknown_keys(cjs, where, m, MIC_KEYS, col)
         lim = current_limits()
         for k, (lo, hi) in (("lat", (-90.0, 90.0)), ("lon", (-180.0, 180.0)),
                             ("h", (lim.min_height_m, lim.max_height_m))):
@@ -218,6 +241,8 @@ def _parse_mics(cjs: str, doc: Mapping[str, Any], col: _Collector) -> list[Micro
 def _parse_flights(cjs: str, root: Path, doc: Mapping[str, Any], col: _Collector) -> list[Flight]:
     out: list[Flight] = []
     for where, f, fid in _named_entries(cjs, doc, "flights", "flight", col):
+        if not _unknown_keys(cjs, where, f, FLIGHT_KEYS, col):
+            continue
         try:
             start = as_unix_time(f.get("start_utc"), field=f"{where}.start_utc")
         except GisnoiseError as exc:
