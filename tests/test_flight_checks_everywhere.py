@@ -79,8 +79,8 @@ def test_a_day_of_operations_names_a_crashed_log_as_its_map_does(tmp_path, omni_
     assert said[0] == "flight crash: " + next(w for w in m["warnings"] if "lie upside down" in w)
     r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "ops")])
     assert r.exit_code == 0, r.output
-    assert f"warning: flight crash: {COPTER}: {named}" in r.stderr
-    assert "; 1 flight; " in r.stdout
+    assert f"warning: flight crash: {COPTER}: {named}" in r.stderr  # -q: a warning still says it
+    assert r.stdout == ""  # -q: no grid line, no bands' maxima, no files written
     summary = json.loads((tmp_path / "ops" / "summary.json").read_text())
     assert said[0] in summary["metadata"]["warnings"]
     geo = json.loads((tmp_path / "ops" / "contours.geojson").read_text())
@@ -193,3 +193,44 @@ def test_a_schedule_refuses_a_field_it_does_not_know(tmp_path, omni_card):
     with pytest.raises(InputError) as e:
         load_schedule(path)
     assert e.value.field == "resolution" and "grid: unknown field 'resolution'" in str(e.value)
+
+
+def test_real_logs_under_a_schedules_ground_are_refused_or_named(tmp_path, omni_card):
+    """The PX4 VTOL log flies at 103-104.5 m and the robologs quad at about 5 m: a schedule's ground at 118 m lies
+    above them, refused as `contour --ground-height 118` refuses it, naming the flight.  The ArduPilot log (heights
+    above mean sea level, made ellipsoidal with the flight's geoid_undulation_m) takes off from its own ground
+    (gisnoise.flight.ground_from_track, the maps' ground rule) about 490 m above 118 m: named, with both grounds."""
+    from gisnoise.flight import ground_from_track
+    from gisnoise.ops.operations import schedule_findings
+
+    data = Path(__file__).parent / "data"
+
+    def day(log, **flight):
+        path = tmp_path / "day.json"
+        path.write_text(json.dumps({"schema": "gisnoise/operations/1", "cards": [omni_card], "ground_h_m": 118.0,
+                                    "grid": {"resolution_m": 20, "margin_m": 100},
+                                    "flights": [{"id": "log", "trajectory": str(log), "counts": {"day": 1},
+                                                 **flight}]}))
+        return load_schedule(path)
+
+    for log in ("pyulog_sample_log_small_vtol.ulg", "robologs_test_quad_fmuv5.ulg"):
+        sched = day(data / log)
+        tr = sched.flights[0].trajectory
+        lowest = float(np.min(tr.h[tr.flying]))
+        assert lowest < 117.0
+        with pytest.raises(InputError) as err:
+            schedule_findings(sched, sched.receiver_grid())
+        with pytest.raises(InputError) as map_err:
+            make_map(data / log, [omni_card], None, ground_h=118.0, outputs=("contours",))
+        assert err.value.field == "ground_h_m"
+        assert str(err.value) == f"{tmp_path / 'day.json'}: flight 'log': ground_h_m: " + \
+            str(map_err.value).removeprefix("ground_h: ")
+    sched = day(COPTER, geoid_undulation_m=22.0)
+    own = ground_from_track(read_route(COPTER, geoid_undulation_m=22.0).trajectory)
+    assert own is not None and 480.0 < own - 118.0 < 500.0
+    said = [w for w in schedule_findings(sched, sched.receiver_grid())[0] if "own ground" in w]
+    assert len(said) == 1 and said[0].startswith(
+        f"flight log: its own ground (stated by its route, or its take-off or landing point) lies at {own:.1f} m, "
+        f"{own - 118.0:.1f} m above the schedule's ground_h_m 118.0 m: mapped over that ground, its levels under the "
+        f"track ")
+    assert "dB lower" in said[0] and "give a dem, which maps each flight over its own ground" in said[0]

@@ -185,10 +185,10 @@ def test_cli_writes_bands_contours_and_summary(tmp_path, day):
     path = write_case(tmp_path)
     out = tmp_path / "out"
     # a local Dask cluster when asked for; its bands equal the single-process reference
-    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(out), "--workers", "1"])
+    r = CliRunner().invoke(cli, ["operations", str(path), "--out", str(out), "--workers", "1"])
     assert r.exit_code == 0, r.output
     assert "Dask (1 workers" in r.output
-    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "one"), "--single-process",
+    r = CliRunner().invoke(cli, ["operations", str(path), "--out", str(tmp_path / "one"), "--single-process",
                                  "--threads", "2"])
     assert r.exit_code == 0, r.output
     assert "2 threads" in r.output
@@ -221,14 +221,14 @@ def test_cli_runs_in_one_process_by_default(tmp_path, day, monkeypatch):
     from gisnoise.cli.main import cli
 
     path = write_case(tmp_path)
-    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "a"), "--plot"])
+    r = CliRunner().invoke(cli, ["operations", str(path), "--out", str(tmp_path / "a"), "--plot"])
     assert r.exit_code == 0, r.output
     assert "threads" in r.output and "Dask" not in r.output
     png = tmp_path / "a" / "map.png"
     assert f"wrote {png}" in r.output and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # --single-process wins over a scheduler named in the environment (none runs at this address)
     monkeypatch.setenv("GISNOISE_DASK_SCHEDULER", "tcp://127.0.0.1:9")
-    r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "b"), "--single-process"])
+    r = CliRunner().invoke(cli, ["operations", str(path), "--out", str(tmp_path / "b"), "--single-process"])
     assert r.exit_code == 0, r.output
     assert "threads" in r.output
     r = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "c"), "--single-process",
@@ -326,3 +326,133 @@ def test_a_day_on_cells_coarse_for_its_flights_says_so(day):
     only_a = GridSpec(TMERC, Affine(30.0, 0.0, -425.0, 0.0, -30.0, 425.0), 29, 29)  # 30 m: 1.76 and 0.72 dB
     (w,) = [w for w in schedule_findings(sched, only_a)[0] if "resolution:" in w]
     assert w.startswith("flight A: resolution: cells of 30 m")
+
+
+def pad_hover(e, ground, up, source):
+    """On a pad at ``ground`` m (motors off at t = 0), then 60 s hovering ``up`` m above it at east ``e``."""
+    t = np.array([0.0, 1.0, 61.0])
+    lat, lon, h = FRAME.to_wgs84(np.full(3, e), np.zeros(3), np.array([ground, ground + up, ground + up]))
+    return Trajectory(t=t, lat=lat, lon=lon, h=h, roll=np.zeros(3), pitch=np.zeros(3), yaw=np.zeros(3),
+                      power_w=np.array([0.0, 3000.0, 3000.0]), phase=np.full(3, "hover"), source=source)
+
+
+def test_a_schedules_ground_above_a_flight_is_refused_as_contour_refuses_it(tmp_path, monkeypatch):
+    """A ground_h_m above a flight's lowest flying point would put the receivers above the UAV: `contour
+    --ground-height` refuses it, and so does a schedule, in the same words, naming the flight, before any
+    evaluation.  Flight A hovers at 31.5 m: a ground at 40 m is refused; one within the ground tolerance of
+    gisnoise.limits (1 m) above it is not."""
+    import gisnoise.ops.operations as ops
+    from gisnoise.cli.main import cli
+    from gisnoise.limits import GROUND_TOLERANCE_M
+    from gisnoise.maps import make_map
+    from gisnoise.ops.operations import schedule_findings
+
+    path = write_case(tmp_path)
+    doc = json.loads(path.read_text())
+    doc["ground_h_m"] = 40.0
+    path.write_text(json.dumps(doc))
+    monkeypatch.setattr(ops, "make_plan", lambda *a, **k: pytest.fail("evaluated before the refusal"))
+    with pytest.raises(InputError) as err:
+        evaluate_operations(load_schedule(path), threads=1)
+    with pytest.raises(InputError) as map_err:
+        make_map(tmp_path / "routes" / "a.csv", [tmp_path / "hover.json"], None, ground_h=40.0, outputs=("contours",))
+    assert err.value.field == "ground_h_m"
+    assert str(err.value) == (f"{path}: flight 'A': ground_h_m: ground at 40 m lies above the track's lowest point "
+                              f"31.5 m")
+    assert str(map_err.value) == "ground_h: ground at 40 m lies above the track's lowest point 31.5 m"
+    r = CliRunner().invoke(cli, ["operations", str(path), "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and r.output.strip() == f"Error: {err.value}"
+    assert not (tmp_path / "o").exists()
+    sched = load_schedule(path)
+    for g, refused in ((31.5 + GROUND_TOLERANCE_M - 0.01, False), (31.5 + GROUND_TOLERANCE_M + 0.01, True)):
+        sched = Schedule(flights=sched.flights, cards=[omni()], grid=grid(), ground_h_m=g)
+        if refused:
+            with pytest.raises(InputError, match="flight 'A': ground_h_m"):
+                schedule_findings(sched, grid())
+        else:
+            schedule_findings(sched, grid())
+
+
+def test_a_flight_taking_off_far_above_the_schedules_ground_is_named():
+    """A flight taking off from a pad 60 m above the schedule's ground (a log on another height datum, say) and
+    hovering 30 m above it is mapped 88.5 m above the receivers instead of 28.5 m: by spherical spreading its
+    LAmax under it is 20 lg(88.5 / 28.5) = 9.84 dB lower than over its own ground, which the warning says and the
+    two maps show.  A pad 3 m up (a roof) moves it by 20 lg(31.5 / 28.5) = 0.87 dB, within 1 dB: not named."""
+    far = Flight("far", pad_hover(0.0, 60.0, 30.0, "far"), {"day": 1}, ground_h_m=60.0)
+    roof = Flight("roof", pad_hover(300.0, 3.0, 30.0, "roof"), {"day": 1}, ground_h_m=3.0)
+    low = evaluate_operations(Schedule(flights=(far, roof), cards=[omni()], grid=grid(), ground_h_m=0.0), threads=1)
+    shift = 20 * np.log10(88.5 / 28.5)
+    named = [w for w in low.metadata["warnings"] if "own ground" in w]
+    assert named == [f"flight far: its own ground (stated by its route, or its take-off or landing point) lies at "
+                     f"60.0 m, 60.0 m above the schedule's ground_h_m 0.0 m: mapped over that ground, its levels under "
+                     f"the track {shift:.1f} dB lower (it flies 88.5 m above the receivers instead of 28.5 m, median "
+                     f"while flying); check the flight's heights (a log's geoid_undulation_m) and the ground, or give "
+                     f"a dem, which maps each flight over its own ground"]
+    own = evaluate_operations(Schedule(flights=(far,), cards=[omni()], grid=grid(), ground_h_m=60.0), threads=1)
+    assert not [w for w in own.metadata["warnings"] if "own ground" in w]
+    r, c = cell(grid(), 0.0, 0.0)
+    assert low.bands["LAmax"][r, c] == pytest.approx(G0 - 20 * np.log10(88.5 / 40.0), abs=1e-3)
+    assert own.bands["LAmax"][r, c] == pytest.approx(G0 - 20 * np.log10(28.5 / 40.0), abs=1e-3)
+    assert own.bands["LAmax"][r, c] - low.bands["LAmax"][r, c] == pytest.approx(shift, abs=2e-3)
+
+
+def test_flights_on_different_grounds_are_named_with_the_ground_they_share():
+    """Without the schedule's ground the day lies on the lowest of the flights' grounds.  Flight b, 30 m above its
+    pad at 20 m, is then 48.5 m above the receivers instead of 28.5 m: its LAmax under it drops by
+    20 lg(48.5 / 28.5) = 4.62 dB because flight a, 400 m away, takes off at 0 m.  Said, naming every flight's
+    ground and the one used; alone, b is mapped over its own ground and nothing is said."""
+    a = Flight("a", pad_hover(-200.0, 0.0, 30.0, "a"), {"day": 1}, ground_h_m=0.0)
+    b = Flight("b", pad_hover(200.0, 20.0, 30.0, "b"), {"day": 1}, ground_h_m=20.0)
+    both = evaluate_operations(Schedule(flights=(a, b), cards=[omni()], grid=grid()), threads=1)
+    alone = evaluate_operations(Schedule(flights=(b,), cards=[omni()], grid=grid()), threads=1)
+    assert both.metadata["ground_h_m"] == 0.0 and alone.metadata["ground_h_m"] == 20.0
+    shift = 20 * np.log10(48.5 / 28.5)
+    (said,) = [w for w in both.metadata["warnings"] if w.startswith("ground:")]
+    assert said == ("ground: the flights' own grounds (stated by their routes, or their take-off or landing points) "
+                    "differ (a 0.0 m; b 20.0 m); the day is mapped over the lowest, 0.0 m, as one flat ground: flight "
+                    f"b: its levels under the track {shift:.1f} dB lower (it flies 48.5 m above the receivers instead "
+                    "of 28.5 m, median while flying); give a dem, which maps each flight over its own ground, or the "
+                    "schedule's ground_h_m")
+    assert not [w for w in alone.metadata["warnings"] if w.startswith("ground:")]
+    r, c = cell(grid(), 200.0, 0.0)
+    assert both.bands["LAmax"][r, c] == pytest.approx(G0 - 20 * np.log10(48.5 / 40.0), abs=1e-3)
+    assert alone.bands["LAmax"][r, c] - both.bands["LAmax"][r, c] == pytest.approx(shift, abs=2e-3)
+
+
+def test_departures_and_counts_are_clock_times_and_numbers_only(tmp_path):
+    """JSON true is no departure (it was 01:00, a night flight) and no count (it was 1), nor is the string "5" a
+    count; a bad clock time names its flight.  A plain number is hours after midnight (documented): 7.5 is day,
+    23.5 night, 24 is refused."""
+    path = write_case(tmp_path)
+    base = json.loads(path.read_text())
+
+    def load(**flight_b):
+        doc = json.loads(json.dumps(base))
+        doc["flights"][1] = {"id": "B", "trajectory": "routes/b.csv", **flight_b}
+        path.write_text(json.dumps(doc))
+        return load_schedule(path)
+
+    for fb, field, said in (({"departures": [True]}, "departures", "flight 'B': departures: True is not a clock time"),
+                            ({"departures": ["25:00"]}, "departures", "flight 'B': departures: '25:00' is not a clock"),
+                            ({"departures": [24]}, "departures", "flight 'B': departures: 24 h is not within 0-24 h"),
+                            ({"counts": {"day": True}}, "counts", "flight 'B': count of 'day' must be a number, got True"),
+                            ({"counts": {"day": "5"}}, "counts", "flight 'B': count of 'day' must be a number, got '5'")):
+        with pytest.raises(InputError) as err:
+            load(**fb)
+        assert err.value.field == field and said in str(err.value), str(err.value)
+    assert dict(load(departures=[7.5, 23.5, "06:59"]).flights[1].counts) == {"day": 1.0, "evening": 0.0, "night": 2.0}
+
+
+def test_quiet_keeps_the_warnings_and_leaves_out_the_summary(tmp_path):
+    """-q: the warnings about the answers (here the day's coarse cells) still reach stderr; the grid line, the
+    bands' maxima and the files written (all in the files) are left out."""
+    from gisnoise.cli.main import cli
+
+    path = write_case(tmp_path)
+    loud = CliRunner().invoke(cli, ["operations", str(path), "--out", str(tmp_path / "a")])
+    quiet = CliRunner().invoke(cli, ["-q", "operations", str(path), "--out", str(tmp_path / "b")])
+    assert loud.exit_code == quiet.exit_code == 0
+    warned = [ln for ln in loud.stderr.splitlines() if ln.startswith("warning: ")]
+    assert warned and "resolution: cells of 50 m" in "".join(warned)
+    assert quiet.stderr.splitlines() == warned and quiet.stdout == ""
+    assert "Lden: max" in loud.stdout and "wrote" in loud.stdout

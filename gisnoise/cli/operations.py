@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from gisnoise.cli.contour import _echo_bands_and_files
-from gisnoise.cli.options import out_dir_option, progress
+from gisnoise.cli.options import echo_warnings, out_dir_option, progress
 from gisnoise.errors import InputError
 
 
@@ -39,20 +39,34 @@ from gisnoise.errors import InputError
                    "most exposed façade, in DIR/exposure.json and exposure.md (flat ground only).")
 @click.option("--facade-height", "facade_height", type=click.FloatRange(min=0.0, min_open=True), default=4.0,
               show_default=True, help="Height of façade receivers above ground, m.")
+@click.option("--layer", "layer", default=None, help="Layer of the buildings file (GeoPackage).")
+@click.option("--residents-field", "residents_field", default=None,
+              help="Attribute with the residents of a building [default: the first of residents, population, pop, "
+                   "inhabitants, persons, people; a layer with none of them is read with a warning].")
+@click.option("--dwellings-field", "dwellings_field", default=None,
+              help="Attribute with the dwellings of a building [default: dwellings, households, units, flats].")
 @click.pass_context
 def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, workers: int | None,
             single_process: bool, threads: int | None, tile_cells: int | None, memory_limit: str | None, levels: str | None,
             plot: bool, population: str | None = None, buildings: str | None = None,
-            facade_height: float = 4.0) -> None:
+            facade_height: float = 4.0, layer: str | None = None, residents_field: str | None = None,
+            dwellings_field: str | None = None) -> None:
     """Noise of a day of operations: DIR/operations.tif, DIR/contours.geojson, DIR/summary.json.
 
     SCHEDULE is a JSON file (schema gisnoise/operations/1): model cards, the receiver grid
     (or resolution and margin around the flights), ground, thresholds and the flights, each
     a trajectory file with counts per period {"day", "evening", "night"} or departure
-    clock times.  Periods and Lden follow EU Directive 2002/49/EC (day 07-19, evening
-    19-23 +5 dB, night 23-07 +10 dB).  Bands: Lden, Lday, Levening, Lnight, LAmax, and per
-    threshold L: NA<L>_<period>, NA<L> (flights with LAmax above L) and TA<L>_<period>,
-    TA<L> (time above L, s).
+    clock times ("HH:MM[:SS]", or a number of hours after midnight: 7.5 is 07:30).  Periods and
+    Lden follow EU Directive 2002/49/EC (day 07-19, evening 19-23 +5 dB, night 23-07 +10 dB).
+    Bands: Lden, Lday, Levening, Lnight, LAmax, and per threshold L: NA<L>_<period>, NA<L>
+    (flights with LAmax above L) and TA<L>_<period>, TA<L> (time above L, s).
+
+    Each flight is checked as its own map would be.  A ground_h_m above a flight's lowest
+    flying point is refused; a flight whose own ground (its route's, or its take-off or landing
+    point) lies so far from the day's flat ground that its levels under the track move by more
+    than 1 dB is named in a warning (the schedule's ground_h_m, or without it the lowest of the
+    flights' grounds); a dem maps each flight over its own ground.  Warnings go to stderr, also
+    with -q, which leaves out the grid, the bands' maxima and the files written.
 
     \b
     Examples:
@@ -86,23 +100,29 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
         if buildings and sched.dem is not None:
             raise InputError("buildings: façade levels need flat ground; the schedule gives a DEM", field="buildings")
         pop = read_population(population) if population else None
-        bld = read_buildings(buildings) if buildings else None
+        bld = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field) \
+            if buildings else None
     with progress(ctx, "operations", 1.0) as update:
         res = evaluate_operations(sched, scheduler=scheduler, workers=workers, single_process=single_process,
                                   threads=threads,
                                   tile_cells=tile_cells, memory_limit=memory_limit, progress=update)
     paths = write_operations(res, out, lv, plot=plot)
+    exposed: list[str] = []
     if pop is not None or bld is not None:
         from gisnoise.exposure import operations_exposure, write_exposure
 
         doc = operations_exposure(res, sched, population=pop, buildings=bld, facade_height_m=facade_height)
         ex = write_exposure(doc, out)
         paths["exposure"], paths["table"] = ex["exposure"], ex["table"]
+        exposed = [f"exposure: {w}" for w in doc.get("warnings", [])]
     from gisnoise.maps import clip_warnings
 
     contoured = list(lv if lv is not None else sched.levels_db)
-    for w in res.metadata["warnings"] + (clip_warnings(res, contoured, metrics=["Lden", "Lnight"]) if contoured else []):
-        click.echo(f"warning: {w}", err=True)
+    # warnings say where the answers may be wrong: printed with -q too
+    echo_warnings(res.metadata["warnings"] + (clip_warnings(res, contoured, metrics=["Lden", "Lnight"])
+                                              if contoured else []) + exposed)
+    if (ctx.find_root().obj or {}).get("quiet"):  # -q: the grid, the bands' maxima and the files are in the files
+        return
     g = res.grid
     ex = res.metadata["execution"]
     how = (f"Dask ({ex['workers']} workers, {ex['tasks']} tasks)" if ex["executor"] == "dask"

@@ -9,7 +9,10 @@ from gisnoise.ops.accumulate import (
     period_bands,
 )
 from gisnoise.ops.operations import (
+    GROUND_SHIFT_DB,
     evaluate_operations,
+    ground_shift_db,
+    schedule_findings,
 )
 from gisnoise.ops.output import (
     write_operations,
@@ -35,4 +38,4 @@ from gisnoise.ops.tiles import (
     tile_windows,
 )
 
-__all__ = ['Flight', 'PENALTY_DB', 'PERIODS', 'PERIOD_HOURS', 'SCHEMA', 'Schedule', 'add_flight', 'evaluate_operations', 'lden', 'load_schedule', 'local_cluster', 'new_accumulators', 'period_bands', 'period_of', 'schedule_from_dict', 'tile_windows', 'write_operations']
+__all__ = ['Flight', 'GROUND_SHIFT_DB', 'PENALTY_DB', 'PERIODS', 'PERIOD_HOURS', 'SCHEMA', 'Schedule', 'add_flight', 'evaluate_operations', 'ground_shift_db', 'lden', 'load_schedule', 'local_cluster', 'new_accumulators', 'period_bands', 'period_of', 'schedule_findings', 'schedule_from_dict', 'tile_windows', 'write_operations']

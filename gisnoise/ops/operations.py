@@ -33,6 +33,14 @@ cut short, a track below the ground taken from the flights, airborne samples wit
 lying upside down, powers outside a card's fitted range; the warnings are the result's ``metadata["warnings"]``
 (kept in ``summary.json`` and the contours' GeoJSON, printed by ``gisnoise operations``) and the refusals come
 before any evaluation.
+
+The day's flat ground is checked against each flight as a map checks a given ground: a schedule's ``ground_h_m``
+above a flight's lowest flying point is refused (:func:`gisnoise.limits.check_ground_below`, the words of ``contour
+--ground-height``, naming the flight).  One flat ground serves every flight, so a flight whose own ground (its
+route's, or its take-off or landing point) lies far from it is mapped as if it flew that much higher or lower
+above the receivers: where that moves its levels under the track by more than :data:`GROUND_SHIFT_DB` the day
+says so (:func:`ground_warnings`), with the schedule's ground, or, without one, naming every flight's ground and
+the lowest, which the day takes.  A DEM puts the receivers on each place's own ground.
 """
 
 from __future__ import annotations
@@ -44,17 +52,19 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
+from gisnoise.flight import ground_from_track
 from gisnoise.geo import GridSpec
+from gisnoise.limits import check_ground_below, check_receiver_height
 from gisnoise.maps import CardSet, MapResult, band_unit, crs_scale_warning, default_threads, flight_findings
 from gisnoise.maps.grids import resolution_warning_of
 from gisnoise.maps.pipeline import flight_height
 from gisnoise.ops.accumulate import new_accumulators, period_bands
 from gisnoise.ops.periods import PENALTY_DB, PERIOD_HOURS, PERIOD_START_H, PERIODS
 from gisnoise.ops.scale import SCHEDULER_ENV, run_on_dask
-from gisnoise.ops.schedule import Schedule
+from gisnoise.ops.schedule import Flight, Schedule
 from gisnoise.ops.tiles import DEFAULT_TILE_CELLS, flights_ground, make_plan, run_local, tile_windows
 
-__all__ = ["evaluate_operations", "schedule_findings"]
+__all__ = ["GROUND_SHIFT_DB", "evaluate_operations", "ground_shift_db", "schedule_findings"]
 
 _LOCAL_TILES_PER_THREAD = 8
 """Tiles per thread at least, in one process: every thread busy, the progress in steps of a few per cent."""
@@ -151,6 +161,7 @@ def evaluate_operations(
         "grid": grid.to_dict(),
         "units": units,
         "schedule": schedule.source,
+        **({"schedule_sha256": schedule.digest} if schedule.digest is not None else {}),
         "periods": {p: {"start_h": PERIOD_START_H[p], "hours": PERIOD_HOURS[p], "penalty_db": PENALTY_DB[p]}
                     for p in PERIODS},
         "lden": "EU Directive 2002/49/EC, Annex I",
@@ -178,19 +189,30 @@ GROUND_FROM_FLIGHTS = "a take-off or landing point of a flight, or a route's sta
 
 def schedule_findings(schedule: Schedule, grid: GridSpec) -> tuple[list[str], dict[str, Any]]:
     """The checks a map makes of its flight (:func:`gisnoise.maps.flight_findings`) on every flight with a count,
-    and the grid's CRS scale check at the flights.
+    the ground the day is mapped over against each flight's own (:func:`ground_warnings`), and the grid's CRS
+    scale check at the flights.
 
     Returns the warnings (a warning several flights share is one line naming them all: ``flights a, b: ...``) and,
     per flight, the cards used outside the powers they were fitted at.  Raises
-    :class:`~gisnoise.errors.InputError` as a map of the flight would (a card valid only at the power flown meets
-    other powers; no airborne sample draws power).
+    :class:`~gisnoise.errors.InputError` as a map of the flight would: a schedule's ``ground_h_m`` above a flight's
+    lowest flying point (:func:`gisnoise.limits.check_ground_below`, the check of ``contour --ground-height``,
+    naming the flight), receivers below the ground, a card valid only at the power flown meeting other powers,
+    no airborne sample drawing power.
     """
+    check_receiver_height(schedule.receiver_height_m, field="receiver_height_m")
+    flown = [f for f in schedule.flights if f.total > 0]
+    if schedule.ground_h_m is not None:
+        for f in flown:
+            tr = f.trajectory
+            try:
+                check_ground_below(schedule.ground_h_m, tr.h[tr.flying] if tr.flying.any() else tr.h,
+                                   field="ground_h_m")
+            except InputError as exc:
+                raise InputError(f"{schedule.source}: flight {f.id!r}: {exc}", field="ground_h_m") from None
     ground = flights_ground(schedule)
     said: dict[str, list[str]] = {}
     outside: dict[str, Any] = {}
-    for f in schedule.flights:
-        if f.total == 0:
-            continue
+    for f in flown:
         cards = f.cards if f.cards is not None else schedule.cards
         found = flight_findings(f.trajectory, cards if isinstance(cards, CardSet) else CardSet(cards),
                                 ground_h=ground, ground_from=GROUND_FROM_FLIGHTS,
@@ -200,12 +222,99 @@ def schedule_findings(schedule: Schedule, grid: GridSpec) -> tuple[list[str], di
         if found.power_outside:
             outside[f.id] = found.power_outside
     warnings = [f"flight{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {w}" for w, ids in said.items()]
+    warnings += ground_warnings(schedule)
     flat = schedule.ground_h_m if schedule.ground_h_m is not None else ground
     heights = {f.id: flight_height(f.trajectory, flat, schedule.dem, schedule.dem_offset_m, schedule.receiver_height_m)
-               for f in schedule.flights if f.total > 0}
+               for f in flown}
     coarse = resolution_warning_of(float(grid.resolution[0]), heights)  # the day's LAmax, N-above need the footprint
     warnings += [coarse] if coarse is not None else []
     lon = np.concatenate([f.trajectory.lon for f in schedule.flights])
     lat = np.concatenate([f.trajectory.lat for f in schedule.flights])
     scale = crs_scale_warning(grid, lon, lat)
     return warnings + ([scale] if scale is not None else []), outside
+
+
+GROUND_SHIFT_DB = 1.0
+"""How far a flight's levels under its track may move because the day's flat ground is not its own, dB, before the
+day says so (:func:`ground_warnings`).  The limit the map's resolution warning keeps LAmax under the track within.
+By spherical spreading a flight ``H`` m above the receivers on its own ground moves by 1 dB when the day's ground
+lies about ``0.12 H`` away from its own: 3.5 m for a flight 30 m up, 12 m for one 100 m up (a pad on a roof of
+that town stays silent, a log on another height datum does not)."""
+
+
+def own_ground(flight: Flight) -> float | None:
+    """A flight's own flat ground, m: the one its route states or its take-off or landing point
+    (:attr:`~gisnoise.ops.Flight.ground_h_m`, else :func:`gisnoise.flight.ground_from_track`); None when the
+    track is in the air throughout."""
+    return flight.ground_h_m if flight.ground_h_m is not None else ground_from_track(flight.trajectory)
+
+
+def ground_shift_db(flight: Flight, ground_h: float, receiver_height: float = 1.5
+                    ) -> tuple[float, float, float] | None:
+    """How a flight's levels under its track change when it is mapped over flat ground at ``ground_h`` (m) rather
+    than its own (:func:`own_ground`).
+
+    Returns ``(shift_db, height_own_m, height_used_m)``: the flight's median height above the receivers while
+    flying over each ground (:func:`gisnoise.maps.pipeline.flight_height`) and ``20 lg(height_own /
+    height_used)``, the change of a level under the track by spherical spreading (negative: lower; +inf when the
+    flight would be at or below the receivers over ``ground_h``).  None when the flight has no ground of its own,
+    or one it does not rise above the receivers over (a hover whose first sample, at rest at its lowest point, the
+    ground rule takes for a vehicle standing on the ground: no take-off).
+    """
+    own = own_ground(flight)
+    if own is None:
+        return None
+    h_own = flight_height(flight.trajectory, own, None, 0.0, receiver_height)
+    h_used = flight_height(flight.trajectory, ground_h, None, 0.0, receiver_height)
+    if h_own is None or h_used is None or h_own <= 0.0:
+        return None
+    if h_used <= 0.0:
+        return np.inf, h_own, h_used
+    return 20.0 * float(np.log10(h_own / h_used)), h_own, h_used
+
+
+def _shifted(s: float, h_own: float, h_used: float) -> str:
+    how = "lower" if s < 0 else "higher"
+    return (f"its levels under the track {abs(s):.1f} dB {how} (it flies {h_used:.1f} m above the receivers "
+            f"instead of {h_own:.1f} m, median while flying)")
+
+
+def ground_warnings(schedule: Schedule) -> list[str]:
+    """Flights mapped over a flat ground far from their own (see :data:`GROUND_SHIFT_DB`).
+
+    With the schedule's ``ground_h_m``: one line per flight whose levels under its track move by more than
+    :data:`GROUND_SHIFT_DB` over it, naming its own ground and the schedule's.  Without it (and without a DEM) the
+    day lies on the lowest of the flights' grounds (:func:`gisnoise.ops.tiles.flights_ground`): one line naming
+    every flight's ground and the one used when that moves some flight's levels by more.  A DEM puts every
+    receiver on its own ground: nothing to say.
+    """
+    if schedule.dem is not None:
+        return []
+    flown = [f for f in schedule.flights if f.total > 0]
+    used = schedule.ground_h_m if schedule.ground_h_m is not None else flights_ground(schedule)
+    if used is None:
+        return []
+    far: list[tuple[Flight, float, tuple[float, float, float]]] = []
+    for f in flown:
+        shift = ground_shift_db(f, used, schedule.receiver_height_m)
+        own = own_ground(f)
+        if shift is not None and own is not None and abs(shift[0]) > GROUND_SHIFT_DB:
+            far.append((f, own, shift))
+    if schedule.ground_h_m is not None:
+        return [f"flight {f.id}: its own ground (stated by its route, or its take-off or landing point) lies at "
+                f"{own:.1f} m, {abs(own - used):.1f} m {'above' if own > used else 'below'} the schedule's ground_h_m "
+                f"{used:.1f} m: mapped over that ground, {_shifted(*s)}; check the flight's heights (a log's "
+                f"geoid_undulation_m) and the ground, or give a dem, which maps each flight over its own ground"
+                for f, own, s in far]
+    if not far:
+        return []
+    grounds: dict[str, list[str]] = {}
+    for f in flown:
+        own = own_ground(f)
+        if own is not None:
+            grounds.setdefault(f"{own:.1f} m", []).append(f.id)
+    listed = "; ".join(f"{', '.join(ids)} {g}" for g, ids in grounds.items())
+    moved = "; ".join(f"flight {f.id}: {_shifted(*s)}" for f, _, s in far)
+    return [f"ground: the flights' own grounds (stated by their routes, or their take-off or landing points) differ "
+            f"({listed}); the day is mapped over the lowest, {used:.1f} m, as one flat ground: {moved}; give a dem, "
+            f"which maps each flight over its own ground, or the schedule's ground_h_m"]

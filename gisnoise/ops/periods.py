@@ -59,7 +59,11 @@ def lden_energy(e_day: Any, e_evening: Any, e_night: Any) -> Any:
 
 
 def period_of(clock: str | float) -> str:
-    """The period (``day``, ``evening``, ``night``) of a local clock time ``"HH:MM[:SS]"`` or hours."""
+    """The period (``day``, ``evening``, ``night``) of a local clock time ``"HH:MM[:SS]"`` or a number of hours
+    after midnight (7.5 is 07:30), within 0-24 h.  A bool (JSON ``true``) is neither: refused."""
+    if isinstance(clock, (bool, np.bool_)) or not isinstance(clock, (str, int, float, np.integer, np.floating)):
+        raise InputError(f"departures: {clock!r} is not a clock time HH:MM[:SS] nor a number of hours after midnight",
+                         field="departures")
     if isinstance(clock, str):
         parts = clock.strip().split(":")
         try:

@@ -4,7 +4,8 @@ A *schedule* lists the flights a place expects on an average day, each a traject
 (flight CSV, PX4 or ArduPilot flight log, GeoJSON LineString with times or waypoints;
 :func:`gisnoise.flight.read_route`)
 flown a number of times in each period of the day (:mod:`gisnoise.ops.periods`), given
-as counts or as departure clock times.
+as counts or as departure clock times (``"HH:MM"`` or ``"HH:MM:SS"``, local; a plain number is hours
+after midnight: 7.5 is 07:30).
 
 Schedule document (JSON, ``"schema": "gisnoise/operations/1"``; paths relative to it)::
 
@@ -29,7 +30,10 @@ A flight's ``geoid_undulation_m`` and ``power_w`` are those of ``gisnoise contou
 ``--geoid-undulation`` and ``--power-w`` (for flight logs; a source that states its power refuses
 ``power_w``).  Without ``ground_h_m`` and ``dem`` the ground is the take-off or landing point of the flights that
 start or end on the ground (the lowest of them), as for a map; a schedule whose flights are all
-in the air throughout is refused (field ``ground_h_m``).
+in the air throughout is refused (field ``ground_h_m``).  Each flight keeps its own ground
+(:attr:`Flight.ground_h_m`): a ``ground_h_m`` above a flight's lowest flying point is refused in the words
+``contour --ground-height`` refuses it with, naming the flight, and a flight mapped over a ground far from its
+own (the schedule's, or the lowest of the flights') is named in a warning (:func:`gisnoise.ops.schedule_findings`).
 
 ``grid`` may instead give ``"crs"``, ``"bounds": [left, bottom, right, top]`` (m) and
 ``"resolution_m"``; by default it covers every flight plus the margin in the local UTM zone.
@@ -38,6 +42,8 @@ Counts may be fractional (averages over a year).
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -73,9 +79,10 @@ class Flight:
     cards : sequence of ModelCard or CardSet, optional
         Cards for this flight; default the schedule's.
     ground_h_m : float, optional
-        Ground height the route states (waypoints with AGL altitudes); read from a schedule
-        without ``ground_h_m`` or ``dem``, else the track's take-off or landing point
-        (:func:`gisnoise.flight.ground_from_track`, the ground rule of the maps).
+        The flight's own ground: the ground height the route states (waypoints with AGL altitudes), else the
+        track's take-off or landing point (:func:`gisnoise.flight.ground_from_track`, the ground rule of the
+        maps); None for a track in the air throughout.  A schedule without ``ground_h_m`` or ``dem`` is mapped
+        over the lowest of them; a schedule's ground far from it is said (:func:`gisnoise.ops.schedule_findings`).
     """
 
     id: str
@@ -91,6 +98,8 @@ class Flight:
                 raise InputError(f"flight {self.id!r}: unknown period {k!r}; periods: {', '.join(PERIODS)}",
                                  field="counts")
             try:
+                if isinstance(v, (bool, np.bool_, str, bytes)):  # float(True) is 1, float("5") is 5: no counts
+                    raise TypeError
                 f = float(v)
             except (TypeError, ValueError):
                 raise InputError(f"flight {self.id!r}: count of {k!r} must be a number, got {v!r}",
@@ -131,6 +140,9 @@ class Schedule:
     substeps : int
         Sub-intervals per trajectory sample interval.
     source : str
+    digest : str or None
+        SHA-256 of the schedule file (hex; :func:`load_schedule`), kept in the day's metadata as
+        ``schedule_sha256``: the exposure of a written day refuses another schedule by it.
     """
 
     flights: tuple[Flight, ...]
@@ -149,6 +161,7 @@ class Schedule:
     substeps: int = 1
     source: str = "schedule"
     min_distance_m: float = 1.0
+    digest: str | None = None
 
     def __post_init__(self) -> None:
         if not self.flights:
@@ -292,12 +305,15 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
             raise InputError(f"{source}: flight {fid!r}: departures must be a list of clock times",
                              field="departures")
         for d in deps:
-            p = period_of(d)
+            try:
+                p = period_of(d)
+            except InputError as exc:
+                raise InputError(f"{source}: flight {fid!r}: {exc}", field="departures") from None
             counts[p] = float(counts[p]) + 1.0
         if given is None and not deps:
             raise InputError(f"{source}: flight {fid!r} needs 'counts' or 'departures'", field="counts")
-        ground = route.ground_h_m
-        if ground is None and ground_h is None and dem_path is None:
+        ground = route.ground_h_m  # the flight's own ground, also beside a schedule's (checked against it)
+        if ground is None:
             ground = ground_from_track(route.trajectory)
         flights.append(Flight(fid, route.trajectory, counts, cardset(fd.get("cards"), "cards"), ground))
     if ground_h is None and dem_path is None and all(f.ground_h_m is None for f in flights):
@@ -314,7 +330,9 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
 
 
 def load_schedule(path: str | os.PathLike[str]) -> Schedule:
-    """Read a schedule JSON file (paths in it relative to the file)."""
+    """Read a schedule JSON file (paths in it relative to the file); its :attr:`Schedule.digest` is the file's
+    SHA-256."""
     p = Path(path)
     doc = read_json_file(p, what="schedule", error=InputError, field="schedule")
-    return schedule_from_dict(doc, base_dir=p.parent, source=str(p))
+    sched = schedule_from_dict(doc, base_dir=p.parent, source=str(p))
+    return dataclasses.replace(sched, digest=hashlib.sha256(p.read_bytes()).hexdigest())
