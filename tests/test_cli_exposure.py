@@ -73,7 +73,12 @@ def test_exposure_of_a_written_map(tmp_path):
     lamax = [w for w in doc["warnings"] if w.startswith("LAmax:")]
     assert len(lamax) == 1 and "35, 40, 45, 50 dB(A) are lower bounds" in lamax[0], doc["warnings"]
     assert f"warning: {lamax[0]}" in r.stderr.splitlines()
-    assert [c["lower_bound"] for c in doc["population"]["metrics"]["LAmax"]["classes"]][:6] == [True] * 4 + [False] * 2
+    assert [a["lower_bound"] for a in doc["area_above"]["LAmax"]][:6] == [True] * 4 + [False] * 2
+    # the population raster (400 x 200 m) covers a sliver of the map along the 2 km track: the people of every
+    # class the map reaches (up to 66.7 dB(A) under the track) are lower bounds, and said
+    assert [c["lower_bound"] for c in doc["population"]["metrics"]["LAmax"]["classes"]] == [True] * 7 + [False] * 4
+    (cover,) = [w for w in doc["warnings"] if w.startswith("population: pop.tif does not cover the map")]
+    assert f"warning: {cover}" in r.stderr.splitlines()
 
 
 def test_bad_input_is_one_line_and_keeps_what_is_stored(tmp_path):
@@ -124,3 +129,27 @@ def test_contour_writes_exposure_with_population_and_buildings(tmp_path):
     lon, lat = b["most_exposed"]["lon"], b["most_exposed"]["lat"]
     e, _, _ = FRAME.to_enu(lat, lon, 0.0)
     assert abs(b["peak_facade_db"] - (G0 - 20 * math.log10(math.hypot(float(e), HEIGHT - 4.0) / 40.0))) < 0.1
+
+
+def test_a_residents_field_of_another_name_is_said_and_named_with_the_option(tmp_path):
+    """A buildings layer whose residents attribute is 'Einwohner' gave '-' in every residents cell without a word:
+    the command says which names it looked for and the option that names another; with the option the residents
+    are counted.  -q leaves out the table and the files written, never the warnings."""
+    cp, tp = setup(tmp_path)
+    x0, y0 = transformer(CRS.from_epsg(4326), UTM).transform(LON0, LAT0)
+    gpd.GeoDataFrame({"Einwohner": [20]}, geometry=[shapely.box(x0 + 50.0, y0 - 10.0, x0 + 70.0, y0 + 10.0)],
+                     crs=UTM).to_file(tmp_path / "de.gpkg", engine="pyogrio")
+    args = ["exposure", str(tmp_path / "map"), "--buildings", str(tmp_path / "de.gpkg"), "--trajectory", tp,
+            "--card", cp]
+    r = run(*args)
+    assert r.exit_code == 0, r.output
+    said = ("warning: buildings: de.gpkg has no residents attribute (looked for residents, population, pop, "
+            "inhabitants, persons, people; its attributes: Einwohner): no residents are counted; name the attribute "
+            "with --residents-field")
+    assert said in r.stderr.splitlines() and r.stdout == ""
+    doc = json.loads((tmp_path / "map" / "exposure.json").read_text())
+    assert "residents" not in doc["buildings"]["metrics"]["LAmax"]["classes"][0]
+    r = CliRunner().invoke(cli, [*args, "--residents-field", "Einwohner"])
+    assert r.exit_code == 0 and "warning: buildings" not in r.stderr and "# Exposure" in r.stdout
+    doc = json.loads((tmp_path / "map" / "exposure.json").read_text())
+    assert sum(c["residents"] for c in doc["buildings"]["metrics"]["LAmax"]["classes"]) == 20

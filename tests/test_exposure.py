@@ -302,8 +302,12 @@ def test_classes_the_map_edge_reaches_are_lower_bounds(flyover_map, tmp_path):
     m = doc["population"]["metrics"]["LAmax"]
     assert [c["lower_bound"] for c in m["classes"]] == [e < top for e in edges]
     assert [a["lower_bound"] for a in m["above"]] == [e < top for e in edges]
-    assert len(doc["warnings"]) == 1 and doc["warnings"][0].startswith("LAmax: the map's edge")
+    # the raster covers |y| <= 300 m of the map's 350: 10 of its 70 rows of strip lie outside it (1/7, the people
+    # there unknown): said as well, the classes already lower bounds
+    assert len(doc["warnings"]) == 2 and doc["warnings"][0].startswith("LAmax: the map's edge")
     assert "45, 50, 55, 60, 65 dB(A) are lower bounds" in doc["warnings"][0]
+    assert doc["population"]["coverage"]["uncovered_share"]["LAmax"] == pytest.approx(1 / 7, abs=1e-12)
+    assert "LAmax 14.3 % of the area at or above 45 dB(A)" in doc["warnings"][1]
     paths = write_exposure(doc, tmp_path / "out")
     md = paths["table"].read_text()
     assert "| 65-70 * |" in md and "| >= 70 |" in md and f"**Warning:** {doc['warnings'][0]}" in md
@@ -314,6 +318,7 @@ def test_classes_the_map_edge_reaches_are_lower_bounds(flyover_map, tmp_path):
     t = np.arange(0.0, 60.0 + 1e-9, 1.0)
     hover = evaluate_grid(flight(0 * t, 0 * t, t, "hover"), [omni_card("hover")], grid(10.0, 800.0, 800.0),
                           ground_h=0.0, metrics=("LAmax",))
+    pop = read_population(uniform_population(tmp_path / "whole.tif", TMERC, 10.0, 800.0, 800.0, 0.25))
     doc = map_exposure(as_levels(hover), population=pop, edges=edges)
     assert doc["warnings"] == [] and not any(a["lower_bound"] for a in doc["area_above"]["LAmax"])
     band = hover.bands["LAmax"].copy()
@@ -325,3 +330,79 @@ def test_classes_the_map_edge_reaches_are_lower_bounds(flyover_map, tmp_path):
     assert 60.0 < hole_top < 65.0
     assert [a["lower_bound"] for a in doc["area_above"]["LAmax"]] == [e < hole_top for e in edges]
     assert "45, 50, 55, 60 dB(A) are lower bounds" in doc["warnings"][0]
+
+
+def test_a_population_raster_covering_half_the_map_leaves_half_its_area_unknown(tmp_path):
+    """A hover 58.5 m above the receivers in the middle of an 800 m map: LAmax reaches 46.9 dB(A) at the corners,
+    so the whole map lies at or above the lowest class (35 dB(A)).  A raster covering exactly its east half (its
+    west edge on the map's middle cell edge) leaves half of that area uncovered: people there are unknown, not none.
+    The share is the geometric 1/2; the classes the map reaches (35 ... 65 dB(A)) are lower bounds, the people
+    above 55 dB(A) are the density times half the disc; a raster beside the map leaves all of it uncovered."""
+    t = np.arange(0.0, 60.0 + 1e-9, 1.0)
+    hover = evaluate_grid(flight(0 * t, 0 * t, t, "hover"), [omni_card("hover")], grid(10.0, 400.0, 400.0),
+                          ground_h=0.0, metrics=("LAmax",))
+    assert np.nanmin(hover.bands["LAmax"]) > 35.0
+    crs = CRS.from_user_input(TMERC)
+    east = tmp_path / "east.tif"
+    with rasterio.open(east, "w", driver="GTiff", width=50, height=100, count=1, dtype="float32", crs=crs.to_wkt(),
+                       transform=Affine(10.0, 0.0, 0.0, 0.0, -10.0, 500.0)) as dst:  # x 0 ... 500, y -500 ... 500 m
+        dst.write(np.full((100, 50), 0.25, dtype=np.float32), 1)
+    doc = map_exposure(as_levels(hover), population=read_population(east))
+    assert doc["population"]["coverage"]["uncovered_share"]["LAmax"] == 0.5
+    (said,) = [w for w in doc["warnings"] if w.startswith("population:")]
+    assert said.startswith("population: east.tif does not cover the map where its levels reach the classes: LAmax "
+                           "50.0 % of the area at or above 35 dB(A)")
+    assert said.endswith("lower bounds (lower_bound: true): LAmax from 35, 40, 45, 50, 55, 60, 65 dB(A)")
+    m = doc["population"]["metrics"]["LAmax"]
+    assert [c["lower_bound"] for c in m["classes"]] == [True] * 7 + [False] * 4  # 66.7 dB(A) under the hover
+    above55 = next(a["people"] for a in m["above"] if a["level_db"] == 55.0)
+    assert above55 == pytest.approx(0.25 / 100.0 * math.pi * radius_at(55.0, HEIGHT - HR) ** 2 / 2, rel=0.01)
+    md = write_exposure(doc, tmp_path / "out")["table"].read_text()
+    assert f"**Warning:** {said}" in md and "| 55-60 | ≥ " in md
+    beside = tmp_path / "beside.tif"
+    with rasterio.open(beside, "w", driver="GTiff", width=10, height=10, count=1, dtype="float32", crs=crs.to_wkt(),
+                       transform=Affine(10.0, 0.0, 2000.0, 0.0, -10.0, 50.0)) as dst:
+        dst.write(np.full((10, 10), 5.0, dtype=np.float32), 1)
+    doc = map_exposure(as_levels(hover), population=read_population(beside))
+    assert doc["population"]["coverage"]["uncovered_share"]["LAmax"] == 1.0
+    assert any("LAmax 100.0 % of the area" in w for w in doc["warnings"])
+
+
+def test_buildings_with_a_null_or_another_residents_field_are_said(flyover_map, tmp_path):
+    """A null residents value is unknown for that building, not 0 and not a reason to refuse the layer: its façade
+    is classed, its residents are not counted, its class says so (residents_unknown) and a warning names it.  Bad
+    values are shown as the layer holds them (-5, not np.int32(-5)).  A layer whose residents attribute has another
+    name is read with a warning naming the names looked for and --residents-field."""
+    import geopandas as gpd
+
+    traj, res = flyover_map
+    utm = CRS.from_user_input("EPSG:32632")
+    x0, y0 = transformer(CRS.from_user_input("EPSG:4326"), utm).transform(LON0, LAT0)
+    polys = [box(x0 + 60.0, y0, 20.0, 20.0), box(x0 + 200.0, y0, 20.0, 20.0)]
+    p = tmp_path / "null.gpkg"
+    gpd.GeoDataFrame({"residents": [12, None]}, geometry=polys, crs=utm).to_file(p, engine="pyogrio")
+    b = read_buildings(p)
+    assert b.residents.tolist() == [12.0, 0.0] and b.unknown["residents"].tolist() == [False, True]
+    (said,) = b.warnings
+    assert said.startswith("buildings: null.gpkg: 1 of 2 buildings have no value of 'residents' (residents; first "
+                           "feature 1): unknown, not 0")
+    doc = map_exposure(as_levels(res), buildings=b, trajectory=traj, cards=[omni_card()], edges=EDGES)
+    assert said in doc["warnings"]
+    lm = doc["buildings"]["metrics"]["LAmax"]
+    far = lm["per_building_db"][1]
+    (cls,) = [c for c in lm["classes"] if c["from_db"] <= far < (c["to_db"] or np.inf)]
+    assert cls["residents_unknown"] == 1 and sum(c.get("residents_unknown", 0) for c in lm["classes"]) == 1
+    assert sum(c["residents"] for c in lm["classes"]) == 12 and sum(c["buildings"] for c in lm["classes"]) == 2
+    q = tmp_path / "neg.gpkg"
+    gpd.GeoDataFrame({"residents": np.array([-5], dtype=np.int32)}, geometry=polys[:1], crs=utm).to_file(q)
+    with pytest.raises(InputError) as err:
+        read_buildings(q)
+    assert str(err.value) == "buildings: attribute 'residents' (residents) of feature 0 is -5, not a number >= 0"
+    r = tmp_path / "de.gpkg"
+    gpd.GeoDataFrame({"Einwohner": [12, 3]}, geometry=polys, crs=utm).to_file(r, engine="pyogrio")
+    b = read_buildings(r)
+    assert b.residents is None and b.warnings == [
+        "buildings: de.gpkg has no residents attribute (looked for residents, population, pop, inhabitants, persons, "
+        "people; its attributes: Einwohner): no residents are counted; name the attribute with --residents-field"]
+    b = read_buildings(r, residents="Einwohner")
+    assert b.residents.tolist() == [12.0, 3.0] and b.warnings == []

@@ -14,6 +14,7 @@ from pyproj import CRS
 pytest.importorskip("numba")
 
 from gisnoise.cli.main import cli  # noqa: E402
+from gisnoise.errors import InputError  # noqa: E402
 from gisnoise.exposure import operations_exposure, read_buildings, read_population  # noqa: E402
 from gisnoise.flight import Trajectory  # noqa: E402
 from gisnoise.geo import WGS84, GridSpec, LocalFrame, transformer  # noqa: E402
@@ -201,3 +202,47 @@ def test_facade_levels_of_a_day_equal_the_maps_cells_at_the_same_points_empty_ev
     assert math.isnan(doc["buildings"]["metrics"]["Levening"]["peak_facade_db"])
     assert doc["buildings"]["metrics"]["Lden"]["peak_facade_db"] == pytest.approx(np.max(fl["levels"]["Lden"]))
     assert "peak façade level: none (no flight in the period)" in exposure_table(doc)
+
+
+def test_exposure_of_a_day_refuses_a_schedule_that_is_not_the_folders(day, tmp_path):
+    """`gisnoise exposure OPS_DIR --schedule OTHER.json` took the façade levels from the other schedule and the areas
+    from the folder's map, and exposure.json named the other schedule beside the folder's flights.  The folder records
+    its schedule's path and SHA-256: another schedule (other counts, or other contents) is refused in one line naming
+    both, field schedule, before anything is written; the same file elsewhere is the same day."""
+    from gisnoise.exposure import read_levels
+    from gisnoise.ops import load_schedule
+
+    _, d = day
+    hover().to_csv(tmp_path / "a.csv")
+    save(omni(), tmp_path / "hover.json")
+    doc = {"schema": "gisnoise/operations/1", "cards": ["hover.json"],
+           "grid": {"crs": TMERC, "bounds": [-400, -400, 400, 400], "resolution_m": 10},
+           "ground_h_m": 0.0, "thresholds_db": [60], "flights": [{"id": "A", "trajectory": "a.csv", "counts": COUNTS}]}
+    (tmp_path / "day.json").write_text(json.dumps(doc))
+    (tmp_path / "other.json").write_text(json.dumps({**doc, "flights": [{**doc["flights"][0], "counts": {"day": 1}}]}))
+    (tmp_path / "relevelled.json").write_text(json.dumps({**doc, "levels_db": [45]}))  # same flights, other file
+    (tmp_path / "copy").mkdir()
+    (tmp_path / "copy" / "day.json").write_text((tmp_path / "day.json").read_text())
+    for f in ("a.csv", "hover.json"):
+        (tmp_path / "copy" / f).write_bytes((tmp_path / f).read_bytes())
+    out = tmp_path / "ops"
+    r = CliRunner().invoke(cli, ["-q", "operations", str(tmp_path / "day.json"), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    summary = json.loads((out / "summary.json").read_text())["metadata"]
+    assert summary["schedule"] == str(tmp_path / "day.json")
+    args = ["-q", "exposure", str(out), "--population", str(d / "pop.tif"), "--buildings", str(d / "b.gpkg")]
+    for other, why in (("other.json", "its contents differ"), ("relevelled.json", "its contents differ")):
+        r = CliRunner().invoke(cli, [*args, "--schedule", str(tmp_path / other)])
+        assert r.exit_code == 2 and len(r.output.strip().splitlines()) == 1, r.output
+        assert r.output.startswith(f"Error: schedule: {tmp_path / other} is not the schedule the day was made from "
+                                   f"({tmp_path / 'day.json'}): {why}")
+        assert not (out / "exposure.json").exists()
+    r = CliRunner().invoke(cli, [*args, "--schedule", str(tmp_path / "copy" / "day.json")])
+    assert r.exit_code == 0, r.output
+    assert json.loads((out / "exposure.json").read_text())["operations"]["schedule"] == str(tmp_path / "day.json")
+    # a schedule built in Python has no file to compare: its flights and counts are
+    sched = load_schedule(tmp_path / "other.json")
+    sched = Schedule(flights=sched.flights, cards=[omni()], ground_h_m=0.0, thresholds_db=(60.0,))
+    with pytest.raises(InputError) as err:
+        operations_exposure(read_levels(out / "operations.tif"), sched, population=read_population(d / "pop.tif"))
+    assert err.value.field == "schedule" and "its flights or their counts differ (flight A)" in str(err.value)

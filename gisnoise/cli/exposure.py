@@ -29,13 +29,16 @@ def _edges(value: str) -> list[float]:
                    "needs --trajectory and --card.")
 @click.option("--layer", "layer", default=None, help="Layer of the buildings file (GeoPackage).")
 @click.option("--residents-field", "residents_field", default=None,
-              help="Attribute with the residents of a building [default: residents, population, pop, ...].")
+              help="Attribute with the residents of a building [default: the first of residents, population, pop, "
+                   "inhabitants, persons, people; a layer with none of them is read with a warning].")
 @click.option("--dwellings-field", "dwellings_field", default=None,
               help="Attribute with the dwellings of a building [default: dwellings, households, units, flats].")
 @click.option("--trajectory", "trajectory", type=click.Path(dir_okay=False), default=None,
               help="The map's trajectory (for façade levels of --buildings).")
 @click.option("--schedule", "schedule", type=click.Path(dir_okay=False), default=None,
-              help="The schedule of a day of operations whose folder MAP_DIR is (for façade levels of --buildings).")
+              help="The schedule of a day of operations whose folder MAP_DIR is (for façade levels of --buildings); "
+                   "another schedule (other contents than the one the folder records, or other flights or counts) "
+                   "is refused.")
 @click.option("--card", "cards", multiple=True, type=click.Path(dir_okay=False),
               help="The map's model cards, one per phase (for façade levels of --buildings).")
 @click.option("--facade-height", "facade_height", type=float, default=4.0, show_default=True,
@@ -50,7 +53,8 @@ def _edges(value: str) -> list[float]:
               help="LOW,HIGH: 5 dB classes from LOW; the last class (>= HIGH) is open.")
 @click.option("--out", "out", type=click.Path(file_okay=False), default=None,
               help="Folder for exposure.json and exposure.md [default: MAP_DIR].")
-def command(map_dir: str, population: str | None, buildings: str | None, layer: str | None,
+@click.pass_context
+def command(ctx: click.Context, map_dir: str, population: str | None, buildings: str | None, layer: str | None,
             residents_field: str | None, dwellings_field: str | None, trajectory: str | None,
             cards: tuple[str, ...], facade_height: float, facade_spacing: float, ground_h: float | None,
             metrics: str | None, classes: str, out: str | None, schedule: str | None = None) -> None:
@@ -59,7 +63,14 @@ def command(map_dir: str, population: str | None, buildings: str | None, layer: 
     exposed façade (from --buildings), area above each level.  Writes exposure.json and exposure.md.
 
     A folder of `gisnoise operations` (its operations.tif) is classed by Lden, Lday, Levening,
-    Lnight, LAmax and the events of each NA<L> band; its buildings need --schedule.
+    Lnight, LAmax and the events of each NA<L> band; its buildings need --schedule, the one
+    the folder was made from.
+
+    A population raster that does not cover the map where the levels reach the classes leaves
+    those people unknown: a warning gives the share uncovered and those classes are lower bounds.
+    Buildings whose residents or dwellings are empty (null) are classed without them, said in a
+    warning.  Warnings go to stderr and atop exposure.md; with -q the table and the files written
+    are not printed.
     """
     from gisnoise.exposure import map_exposure, read_buildings, read_levels, read_population, write_exposure
 
@@ -82,20 +93,16 @@ def command(map_dir: str, population: str | None, buildings: str | None, layer: 
         if metrics:
             raise InputError("metrics: a day of operations is classed by all its level and N-above bands",
                              field="metrics")
+        if b is not None and schedule is None:
+            raise InputError("buildings: façade levels of a day of operations need --schedule", field="schedule")
         sched = None
-        if b is not None:
-            if schedule is None:
-                raise InputError("buildings: façade levels of a day of operations need --schedule", field="schedule")
+        if schedule is not None:
             from gisnoise.ops import load_schedule
 
-            sched = load_schedule(schedule)
+            sched = load_schedule(schedule)  # checked against the folder's before anything is written
         doc = operations_exposure(levels, sched, population=pop, buildings=b, edges=edges,
                                   facade_height_m=facade_height, facade_spacing_m=facade_spacing)
-        paths = write_exposure(doc, out if out is not None else (p if p.is_dir() else p.parent))
-        click.echo(paths["table"].read_text().rstrip())
-        for v in paths.values():
-            click.echo(f"wrote {v}")
-        echo_warnings(doc.get("warnings", []))
+        _written(ctx, doc, write_exposure(doc, out if out is not None else (p if p.is_dir() else p.parent)))
         return
     traj = None
     if b is not None:
@@ -109,8 +116,13 @@ def command(map_dir: str, population: str | None, buildings: str | None, layer: 
     doc = map_exposure(levels, population=pop, buildings=b, trajectory=traj, cards=list(cards) or None,
                        metrics=names, edges=edges, facade_height_m=facade_height,
                        facade_spacing_m=facade_spacing, ground_h=ground_h)
-    paths = write_exposure(doc, out if out is not None else (p if p.is_dir() else p.parent))
-    click.echo(paths["table"].read_text().rstrip())
-    for v in paths.values():
-        click.echo(f"wrote {v}")
+    _written(ctx, doc, write_exposure(doc, out if out is not None else (p if p.is_dir() else p.parent)))
+
+
+def _written(ctx: click.Context, doc: dict, paths: dict[str, Path]) -> None:
+    """The table and the files written on stdout (not with -q: they are in the files), the warnings on stderr."""
+    if not (ctx.find_root().obj or {}).get("quiet"):
+        click.echo(paths["table"].read_text().rstrip())
+        for v in paths.values():
+            click.echo(f"wrote {v}")
     echo_warnings(doc.get("warnings", []))

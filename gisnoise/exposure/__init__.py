@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from gisnoise.exposure.exposure import (
     SCHEMA,
+    coverage_warning,
     exposure_table,
     map_exposure,
     write_exposure,
@@ -30,12 +31,14 @@ from gisnoise.exposure.layers import (
 )
 from gisnoise.exposure.operations import (
     OPERATIONS_LEVELS,
+    check_schedule_of,
     operations_exposure,
     operations_facade_levels,
 )
 from gisnoise.exposure.stats import (
     CLASS_WIDTH_DB,
     EVENT_EDGES,
+    UNCOVERED_SHARE,
     area_above,
     cell_values,
     class_edges,
@@ -43,16 +46,19 @@ from gisnoise.exposure.stats import (
     fraction_above,
     level_field,
     person_db_above,
+    population_coverage,
     population_event_exposure,
     population_exposure,
     population_points,
     population_scores,
+    uncovered_shares,
 )
 
 __all__ = ['ASSESSMENT_HEIGHT_M', 'Buildings', 'CLASS_WIDTH_DB', 'DWELLING_FIELDS', 'EVENT_EDGES', 'FacadePoints',
-           'HEIGHT_FIELDS', 'LevelsRaster', 'OPERATIONS_LEVELS', 'Population', 'RESIDENT_FIELDS', 'SCHEMA', 'area_above',
-           'cell_values', 'class_edges', 'events_area_above', 'exposure_table', 'facade_levels', 'facade_points',
-           'fraction_above', 'level_field', 'map_exposure', 'most_exposed', 'operations_exposure',
-           'operations_facade_levels', 'person_db_above', 'point_levels', 'population_event_exposure',
-           'population_exposure', 'population_points', 'population_scores', 'read_buildings', 'read_levels',
-           'read_population', 'write_exposure']
+           'HEIGHT_FIELDS', 'LevelsRaster', 'OPERATIONS_LEVELS', 'Population', 'RESIDENT_FIELDS', 'SCHEMA',
+           'UNCOVERED_SHARE', 'area_above', 'cell_values', 'check_schedule_of', 'class_edges', 'coverage_warning',
+           'events_area_above', 'exposure_table', 'facade_levels', 'facade_points', 'fraction_above', 'level_field',
+           'map_exposure', 'most_exposed', 'operations_exposure', 'operations_facade_levels', 'person_db_above',
+           'point_levels', 'population_coverage', 'population_event_exposure', 'population_exposure',
+           'population_points', 'population_scores', 'read_buildings', 'read_levels', 'read_population',
+           'uncovered_shares', 'write_exposure']

@@ -13,6 +13,17 @@ people of that class go on beyond the map and are not counted.  Such classes car
 ``"lower_bound": true`` (in ``area_above`` and in the population's classes and ``above``), and
 ``warnings`` names the band, its levels and the level the edge reaches
 (:func:`gisnoise.maps.clipping.edge_max`, the rule that flags clipped contours).
+
+Where the population raster does not reach: people outside its extent are unknown, not none.  The share of each
+band's area at or above a class's lower edge that the raster leaves uncovered
+(:func:`gisnoise.exposure.stats.uncovered_shares`) is kept in ``population.coverage``; a class whose share exceeds
+:data:`~gisnoise.exposure.stats.UNCOVERED_SHARE` (1 %) is a lower bound too, and one warning
+(:func:`coverage_warning`) names each band's share above its lowest class and those classes.  In ``exposure.md``
+people counts that are lower bounds read ``≥ N``.
+
+Buildings whose residents or dwellings are null are classed without them (:func:`gisnoise.exposure.read_buildings`):
+each class counts them in ``residents_unknown`` (``dwellings_unknown``), and the reader's warnings join the
+document's.
 """
 
 from __future__ import annotations
@@ -30,18 +41,20 @@ from gisnoise.exposure.facades import ASSESSMENT_HEIGHT_M, facade_levels
 from gisnoise.exposure.layers import Buildings, LevelsRaster, Population
 from gisnoise.exposure.stats import (
     EVENT_EDGES,
+    UNCOVERED_SHARE,
     area_above,
     class_edges,
     events_area_above,
     population_event_exposure,
     population_exposure,
     population_points,
+    uncovered_shares,
 )
 from gisnoise.flight import Trajectory
 from gisnoise.jsonio import to_jsonable
 from gisnoise.maps.clipping import edge_max
 
-__all__ = ["SCHEMA", "map_exposure", "write_exposure", "exposure_table", "lower_bound_warning"]
+__all__ = ["SCHEMA", "map_exposure", "write_exposure", "exposure_table", "lower_bound_warning", "coverage_warning"]
 
 SCHEMA = "gisnoise/exposure/1"
 
@@ -131,18 +144,52 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
                              "rule": "population cells split into sub-cells of at most half a map cell; level linear "
                                      "within each sub-cell (second-order Taylor about the nearest map cell); people outside the map "
                                      "or without a level are counted in people_without_level"}
-    for n, m in doc["population"]["metrics"].items() if population is not None else ():
-        for c in m["classes"]:
-            c["lower_bound"] = bool(top[n] >= c.get("from_db", c.get("from")))
-        for a in m["above"]:
-            a["lower_bound"] = bool(top[n] >= a.get("level_db", a.get("level")))
     doc["warnings"] = [w for w in (lower_bound_warning(n, top[n], ev_edges if n in counts else edges,
                                                        doc["units"][n], population is not None) for n in names)
                        if w is not None]
+    if population is not None:
+        edges_of = {n: list(ev_edges if n in counts else edges) for n in names}
+        shares = uncovered_shares({n: levels.bands[n] for n in names}, levels.grid, population, edges_of)
+        short = {n: [s is not None and s > UNCOVERED_SHARE for s in shares[n]] for n in names}
+        doc["population"]["coverage"] = {
+            "uncovered_share": {n: shares[n][0] for n in names}, "threshold": UNCOVERED_SHARE,
+            "rule": "share of the map's area at or above the lowest class (map cells by their centres) outside the "
+                    "population raster's extent: people there are unknown, not none; a class whose share above its "
+                    f"lower edge exceeds {100 * UNCOVERED_SHARE:g} % is a lower bound"}
+        for n, m in doc["population"]["metrics"].items():
+            for c, cut in zip(m["classes"], short[n], strict=True):
+                c["lower_bound"] = bool(top[n] >= c.get("from_db", c.get("from")) or cut)
+            for a, cut in zip(m["above"], short[n], strict=True):
+                a["lower_bound"] = bool(top[n] >= a.get("level_db", a.get("level")) or cut)
+        said = coverage_warning(population.source, shares, short, edges_of, doc["units"])
+        doc["warnings"] += [said] if said is not None else []
     if buildings is not None:
+        doc["warnings"] += list(buildings.warnings)
         doc["buildings"] = _buildings_doc(levels, buildings, trajectory, cards, names, edges, facade_height_m,
                                           facade_spacing_m, ground_h, facades, ev_edges)
     return doc
+
+
+def coverage_warning(source: str, shares: dict[str, list[float | None]], short: dict[str, list[bool]],
+                     edges: dict[str, list[float]], units: dict[str, str]) -> str | None:
+    """The warning of a population raster that leaves more than :data:`UNCOVERED_SHARE` of the map's area above some
+    class uncovered (``short``: per band and class, whether it does); None when it covers them all.
+
+    >>> print(coverage_warning("pop.tif", {"Lden": [0.5, 0.5, None]}, {"Lden": [True, True, False]},
+    ...                        {"Lden": [35.0, 40.0, 45.0]}, {"Lden": "dB(A)"}))
+    population: pop.tif does not cover the map where its levels reach the classes: Lden 50.0 % of the area at or above 35 dB(A); no data there is not nobody: the people there are not counted, and the classes with more than 1 % of their area uncovered are lower bounds (lower_bound: true): Lden from 35, 40 dB(A)
+    """
+    cut = [n for n in short if any(short[n])]
+    if not cut:
+        return None
+    name = Path(source).name
+    each = ", ".join(f"{n} {100 * (shares[n][0] or 0.0):.1f} % of the area at or above {edges[n][0]:g} "
+                     f"{units.get(n, 'dB(A)')}" for n in cut)
+    which = "; ".join(f"{n} from {', '.join(f'{e:g}' for e, s in zip(edges[n], short[n], strict=True) if s)} "
+                      f"{units.get(n, 'dB(A)')}" for n in cut)
+    return (f"population: {name} does not cover the map where its levels reach the classes: {each}; no data there "
+            f"is not nobody: the people there are not counted, and the classes with more than "
+            f"{100 * UNCOVERED_SHARE:g} % of their area uncovered are lower bounds (lower_bound: true): {which}")
 
 
 def lower_bound_warning(name: str, top: float, edges: Sequence[float], unit: str = "dB(A)",
@@ -212,6 +259,10 @@ def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, 
                 continue
             for c, v in zip(entry["classes"], _building_classes(lv, w, e_m), strict=True):
                 c[what] = v
+            unknown = b.unknown.get(what)
+            if unknown is not None and unknown.any():  # no value: not counted above, so the class is a lower bound
+                for c, k in zip(entry["classes"], _building_classes(lv, unknown.astype(float), e_m), strict=True):
+                    c[f"{what}_unknown"] = int(k)
             occupied = w > 0
             entry[f"peak_db_at_{what}"] = float(np.max(lv[occupied])) if occupied.any() else None
         top = int(np.argmax(lv))
@@ -241,13 +292,19 @@ def exposure_table(doc: dict[str, Any]) -> str:
             hi = e_n[j + 1] if j + 1 < len(e_n) else None
             label = f"{lo:g}-{hi:g}" if hi is not None else f">= {lo:g}"
             label += " *" if a.get("lower_bound") else ""
-            cells = [label, f"{pop['classes'][j]['people']:.0f}" if pop else "-"]
+            low = "≥ " if pop and pop["classes"][j].get("lower_bound") else ""
+            cells = [label, f"{low}{pop['classes'][j]['people']:.0f}" if pop else "-"]
             for key in ("buildings", "residents", "dwellings"):
-                cells.append(f"{bld['classes'][j][key]:.0f}" if bld and key in bld["classes"][j] else "-")
+                c = bld["classes"][j] if bld else {}
+                cells.append(f"{'≥ ' if c.get(f'{key}_unknown') else ''}{c[key]:.0f}" if key in c else "-")
             cells.append(f"{a['area_m2'] / 1e6:.4f}")
             lines.append("| " + " | ".join(cells) + " |")
         if any(a.get("lower_bound") for a in doc["area_above"][n]):
             lines += ["", "\\* lower bound: the map's edge reaches this class, which goes on beyond the map"]
+        if (pop and any(c.get("lower_bound") for c in pop["classes"])) or \
+                (bld and any(k.endswith("_unknown") and v for c in bld["classes"] for k, v in c.items())):
+            lines += ["", "≥ lower bound: people beyond the map's edge or outside the population raster, or "
+                          "buildings without a value, are not counted (see the warnings)"]
         if pop:
             lines += ["", f"people without a level (outside the map or on cells without value): {pop['people_without_level']:.0f}"]
         if bld:

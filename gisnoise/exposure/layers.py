@@ -4,7 +4,11 @@
   holds people per cell; nodata cells count as no people, and any other cell that is not a
   finite count >= 0 (negative, NaN, infinite) refuses the raster.
 * :func:`read_buildings`: polygons (GeoPackage, GeoJSON, Shapefile, anything pyogrio reads)
-  with optional attributes for residents, dwellings and height.
+  with optional attributes for residents, dwellings and height.  A null (empty) value is unknown for
+  that building, not 0: its façade is classed, its residents are not counted and a warning says so
+  (one missing value in a city's layer should not refuse the layer, nor count as nobody); any other
+  value that is not a number >= 0 refuses the layer, naming the feature.  A layer without a residents
+  attribute (none of :data:`RESIDENT_FIELDS`, none named) is read with a warning naming the names looked for.
 * :func:`read_levels`: the ``levels.tif`` a map wrote, back as bands on its grid.
 """
 
@@ -70,10 +74,15 @@ class Buildings:
     part_of : ndarray of int
         Building index of each polygon.
     residents, dwellings, height_m : ndarray of float, one per building, or None
-        From the attributes; None when the layer has no such attribute.
+        From the attributes; None when the layer has no such attribute.  A building whose residents or
+        dwellings are null (empty) holds 0 there and is marked in ``unknown``; a null height is NaN.
     crs : pyproj.CRS
     fields : dict
         Which attribute gave residents, dwellings and height.
+    unknown : dict of str -> ndarray of bool
+        Per attribute (``residents``, ``dwellings``) that has null values, the buildings without a value.
+    warnings : list of str
+        What the reader found that the counts depend on: null values, no residents attribute.
     """
 
     polygons: list
@@ -85,6 +94,8 @@ class Buildings:
     crs: Any
     source: str = "buildings"
     fields: dict[str, str | None] = field(default_factory=dict)
+    unknown: dict[str, np.ndarray] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,16 +170,36 @@ def _pick(columns: list[str], wanted: str | None, names: tuple[str, ...], what: 
     return None
 
 
-def _numbers(df: Any, col: str | None, what: str) -> np.ndarray | None:
+def _plain(v: Any) -> str:
+    """A value of an attribute as the layer holds it, without numpy's wrapping (``-5``, not ``np.int32(-5)``)."""
+    v = v.item() if isinstance(v, np.generic) else v
+    return repr(v) if isinstance(v, (str, bytes)) else f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _numbers(df: Any, col: str | None, what: str) -> tuple[np.ndarray | None, np.ndarray]:
+    """The numbers of attribute ``col`` and which features leave it null (empty); refuses any other value that is
+    not a finite number >= 0, naming the feature and the value."""
+    import pandas as pd
+
     if col is None:
-        return None
-    v = np.asarray(df[col].to_numpy(dtype=float, na_value=np.nan), dtype=float)
-    bad = ~np.isfinite(v) | (v < 0)
+        return None, np.zeros(len(df), dtype=bool)
+    raw = df[col]
+    null = np.asarray(raw.isna(), dtype=bool)
+    kind = [isinstance(x, (bool, np.bool_)) for x in raw]  # true/false are no counts
+    v = pd.to_numeric(raw.where(~np.asarray(kind, dtype=bool)), errors="coerce").to_numpy(dtype=float, copy=True)
+    bad = ~null & (~np.isfinite(v) | (v < 0))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise InputError(f"buildings: attribute {col!r} ({what}) of feature {i} is {df[col].iloc[i]!r}, "
+        raise InputError(f"buildings: attribute {col!r} ({what}) of feature {i} is {_plain(raw.iloc[i])}, "
                          "not a number >= 0", field=what)
-    return v
+    return v, null
+
+
+def _unknown_warning(name: str, col: str, what: str, null: np.ndarray) -> str:
+    first = int(np.flatnonzero(null)[0])
+    return (f"buildings: {name}: {int(null.sum())} of {null.size} buildings have no value of {col!r} ({what}; "
+            f"first feature {first}): unknown, not 0; their façades are classed, their {what} are not counted, so "
+            f"the {what} by class are lower bounds ({what}_unknown: the buildings without a value in each class)")
 
 
 def read_buildings(path: str | os.PathLike[str], *, layer: str | None = None, residents: str | None = None,
@@ -212,10 +243,24 @@ def read_buildings(path: str | os.PathLike[str], *, layer: str | None = None, re
         for part in parts:
             polys.append(shapely.Polygon(part.exterior))  # façades are the outer walls
             part_of.append(i)
-    return Buildings(polys, np.asarray(part_of, dtype=int), len(df), _numbers(df, rc, "residents"),
-                     _numbers(df, dc, "dwellings"), _numbers(df, hc, "height"),
-                     CRS.from_wkt(df.crs.to_wkt()), source=str(p),
-                     fields={"residents": rc, "dwellings": dc, "height": hc})
+    values, unknown, warnings = {}, {}, []
+    if rc is None:
+        warnings.append(f"buildings: {p.name} has no residents attribute (looked for {', '.join(RESIDENT_FIELDS)}; "
+                        f"its attributes: {', '.join(map(str, cols)) or 'none'}): no residents are counted; name the "
+                        "attribute with --residents-field")
+    for what, col in (("residents", rc), ("dwellings", dc), ("height", hc)):
+        v, null = _numbers(df, col, what)
+        if v is not None and null.any():
+            if what == "height":  # not counted: unknown heights stay NaN
+                v[null] = np.nan
+            else:
+                v[null] = 0.0
+                unknown[what] = null
+                warnings.append(_unknown_warning(p.name, str(col), what, null))
+        values[what] = v
+    return Buildings(polys, np.asarray(part_of, dtype=int), len(df), values["residents"], values["dwellings"],
+                     values["height"], CRS.from_wkt(df.crs.to_wkt()), source=str(p),
+                     fields={"residents": rc, "dwellings": dc, "height": hc}, unknown=unknown, warnings=warnings)
 
 
 def read_levels(path: str | os.PathLike[str]) -> LevelsRaster:

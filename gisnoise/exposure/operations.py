@@ -35,7 +35,7 @@ from gisnoise.exposure.stats import EVENT_EDGES
 from gisnoise.maps import MapResult
 from gisnoise.ops import PERIODS, Schedule, add_flight, new_accumulators, period_bands
 
-__all__ = ["OPERATIONS_LEVELS", "operations_facade_levels", "operations_exposure"]
+__all__ = ["OPERATIONS_LEVELS", "check_schedule_of", "operations_facade_levels", "operations_exposure"]
 
 OPERATIONS_LEVELS = ("Lden", "Lday", "Levening", "Lnight", "LAmax")
 """Level bands of a day of operations that exposure classes (dB(A)); with them every ``NA<L>`` band."""
@@ -43,6 +43,32 @@ OPERATIONS_LEVELS = ("Lden", "Lday", "Levening", "Lnight", "LAmax")
 EMPTY_PERIOD_RULE = ("a period in which no flight of the schedule departs (an empty period) has no level: its band "
                      "is without value on the map and at the façades (null), its people are counted in "
                      "people_without_level, and it adds nothing to Lden")
+
+
+def check_schedule_of(metadata: dict[str, Any], schedule: Schedule) -> None:
+    """Refuse a schedule that is not the one a written day was made from (its ``metadata``: ``summary.json``'s, or
+    ``operations.tif``'s tags), field ``schedule``.
+
+    The façade levels come from the schedule and the areas and people from the day's map: another schedule would
+    mix two days.  A day records the schedule file's SHA-256 (``schedule_sha256``): the file given must hold the
+    same bytes (it may lie elsewhere; a schedule built in Python has no digest and is not compared by it).  Its
+    flights with a count and their counts must be those the day lists (``flights``), whatever made the day.
+    """
+    recorded = metadata.get("schedule")
+    digest = metadata.get("schedule_sha256")
+    why = None
+    if digest is not None and schedule.digest is not None and digest != schedule.digest:
+        why = f"its contents differ (SHA-256 {schedule.digest[:12]}..., the day's {digest[:12]}...)"
+    elif metadata.get("flights") is not None:
+        want = {str(f["id"]): {p: float(f["counts"].get(p, 0.0)) for p in PERIODS} for f in metadata["flights"]}
+        got = {f.id: {p: float(f.counts[p]) for p in PERIODS} for f in schedule.flights if f.total > 0}
+        if got != want:
+            diff = sorted(set(got) ^ set(want)) or sorted(i for i in got if got[i] != want[i])
+            why = f"its flights or their counts differ (flight {diff[0]})"
+    if why is not None:
+        raise InputError(f"schedule: {schedule.source} is not the schedule the day was made from ({recorded}): {why}; "
+                         f"its façade levels would mix two days: give {recorded}, or make the day anew with gisnoise "
+                         f"operations {schedule.source}", field="schedule")
 
 
 def operations_facade_levels(b: Buildings, schedule: Schedule, *, ground_h: float,
@@ -86,6 +112,8 @@ def operations_exposure(result: MapResult | LevelsRaster, schedule: Schedule | N
     ``floor_db``) hold no level: their people are counted in ``people_without_level``; so do
     all people in the band of an empty period (no flight departs in it: ``operations.empty_periods``).
     """
+    if schedule is not None:
+        check_schedule_of(result.metadata, schedule)  # before any façade is evaluated
     names = [n for n in OPERATIONS_LEVELS if n in result.bands]
     names += [n for n in result.bands if n.startswith("NA") and "_" not in n]
     units = {n: ("events" if n.startswith("NA") else "dB(A)") for n in names}
@@ -105,7 +133,7 @@ def operations_exposure(result: MapResult | LevelsRaster, schedule: Schedule | N
                        event_edges=event_edges)
     meta = result.metadata
     flights = meta.get("flights")
-    doc["operations"] = {"schedule": schedule.source if schedule is not None else meta.get("schedule"),
+    doc["operations"] = {"schedule": meta.get("schedule", schedule.source if schedule is not None else None),
                          "flights": [f["id"] for f in flights or []],
                          "lden": "EU Directive 2002/49/EC, Annex I", "floor_db": meta.get("floor_db"),
                          "empty_periods": None if flights is None else
