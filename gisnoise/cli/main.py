@@ -129,7 +129,10 @@ _GROUP_OPTIONS = ("-q", "--quiet", "-v", "--verbose")
 @click.group(cls=GisnoiseGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, prog_name="gisnoise")
 @click.option("-v", "--verbose", count=True, help="More log output (repeat for debug).")
-@click.option("-q", "--quiet", is_flag=True, help="Only errors; no progress bars.")
+@click.option("-q", "--quiet", is_flag=True,
+              help="No progress bars or log lines; errors and warnings still print (a warning says where an answer "
+                   "may be wrong); fit, design, diagnose, simulate, operations and exposure also leave out their "
+                   "summary.")
 @click.pass_context
 def cli(ctx: click.Context, verbose: int, quiet: bool) -> None:
     """Drone noise from measurements to maps.
