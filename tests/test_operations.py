@@ -386,7 +386,7 @@ def test_a_flight_taking_off_far_above_the_schedules_ground_is_named():
     assert named == [f"flight far: its own ground (stated by its route, or its take-off or landing point) lies at "
                      f"60.0 m, 60.0 m above the schedule's ground_h_m 0.0 m: mapped over that ground, its levels under "
                      f"the track {shift:.1f} dB lower (it flies 88.5 m above the receivers instead of 28.5 m, median "
-                     f"while flying); check the flight's heights (a log's geoid_undulation_m) and the ground, or give "
+                     f"while flying; more where it flies lower, at take-off and landing); check the flight's heights (a log's geoid_undulation_m) and the ground, or give "
                      f"a dem, which maps each flight over its own ground"]
     own = evaluate_operations(Schedule(flights=(far,), cards=[omni()], grid=grid(), ground_h_m=60.0), threads=1)
     assert not [w for w in own.metadata["warnings"] if "own ground" in w]
@@ -411,7 +411,7 @@ def test_flights_on_different_grounds_are_named_with_the_ground_they_share():
     assert said == ("ground: the flights' own grounds (stated by their routes, or their take-off or landing points) "
                     "differ (a 0.0 m; b 20.0 m); the day is mapped over the lowest, 0.0 m, as one flat ground: flight "
                     f"b: its levels under the track {shift:.1f} dB lower (it flies 48.5 m above the receivers instead "
-                    "of 28.5 m, median while flying); give a dem, which maps each flight over its own ground, or the "
+                    "of 28.5 m, median while flying; more where it flies lower, at take-off and landing); give a dem, which maps each flight over its own ground, or the "
                     "schedule's ground_h_m")
     assert not [w for w in alone.metadata["warnings"] if w.startswith("ground:")]
     r, c = cell(grid(), 200.0, 0.0)

@@ -276,7 +276,7 @@ def ground_shift_db(flight: Flight, ground_h: float, receiver_height: float = 1.
 def _shifted(s: float, h_own: float, h_used: float) -> str:
     how = "lower" if s < 0 else "higher"
     return (f"its levels under the track {abs(s):.1f} dB {how} (it flies {h_used:.1f} m above the receivers "
-            f"instead of {h_own:.1f} m, median while flying)")
+            f"instead of {h_own:.1f} m, median while flying; more where it flies lower, at take-off and landing)")
 
 
 def ground_warnings(schedule: Schedule) -> list[str]:
