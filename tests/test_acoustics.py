@@ -630,7 +630,7 @@ def _pink_table_loss(top_nominal):
 def test_a_pink_recording_below_44k_loses_the_a_weighted_energy_of_its_missing_bands(tmp_path):
     """Pink noise recorded at 48, 16 and 8 kHz (the same sound below each Nyquist frequency): the bands stop at
     20 kHz, 6.3 kHz and 3.15 kHz, and the A-weighted level reads lower by the A-weighted energy of the missing
-    bands, IEC 61672-1 Table 3: 0.61 dB at 16 kHz, 1.85 dB at 8 kHz (the tester measured 0.6 and 1.8);
+    bands, IEC 61672-1 Table 3: 0.61 dB at 16 kHz, 1.85 dB at 8 kHz (0.6 and 1.8 dB measured on synthesized pink noise);
     pink_band_loss_db states it."""
     from scipy.io import wavfile
 

@@ -133,7 +133,7 @@ def test_a_hemisphere_is_judged_by_its_level_at_40_m_and_refused_naming_levels_d
     loud = _one_band_table(at_1m + 0.1)
     problems = card_problems(loud)
     assert len(problems) == 1 and problems[0].startswith("levels_db:")
-    # the tester's card: every band of the M300 table at 200 dB; its reader, a card file, the map
+    # a user's card: every band of the M300 table at 200 dB; its reader, a card file, the map
     doc = json.loads(cards.dumps(_one_band_table(200.0)))
     with pytest.raises(ImplausibleCardError) as exc:
         cards.from_dict(doc)

@@ -207,7 +207,7 @@ def _notes(client, card_id: str, version: int):
 
 def test_a_deleted_version_number_is_never_issued_again(client):
     """``id@N`` names one content for good: version numbers of an id only increase, across deletes of the latest
-    version and of the whole card (the tester's sequence gave reuse@2, then reuse@1, new contents)."""
+    version and of the whole card (a user's sequence gave reuse@2, then reuse@1, new contents)."""
     doc = dict(_doc(), id="reuse")
     assert client.post("/cards", json=doc).json()["version"] == 1
     r = client.post("/cards", params={"new_version": "true"}, json=dict(doc, notes="A"))

@@ -44,7 +44,7 @@ def _stored_without_the_guard(client, doc: dict) -> None:
 
 
 def test_a_card_stated_at_1e_9_m_is_refused_by_upload_and_map_naming_reference_distance_m(client):
-    """The tester's card: demo-horizontal with reference_distance_m 1e-9 was stored (201) and mapped at -168 to
+    """A user's card: demo-horizontal with reference_distance_m 1e-9 was stored (201) and mapped at -168 to
     -149 dB(A) without a word. Upload and inline use are 422 naming it; a store that holds one from before
     refuses it by the request's reference."""
     doc = json.loads((CARDS / "demo_horizontal.json").read_text())
