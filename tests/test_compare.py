@@ -187,10 +187,11 @@ def test_a_grid_that_cuts_a_level_flags_the_counts_above_it(tmp_path):
     flagged = {w.split(":")[0] for w in cmp.doc["warnings"]}
     assert flagged == {"route1", "route2"}
     assert all("45, 50, 55, 60, 65" in w for w in cmp.doc["warnings"])
-    # both tracks and the 45 dB(A) reach around them (40 m 10^(25/20) = 711 m slant, 708 m across)
+    # both tracks and the 45 dB(A) reach around them (40 m 10^(25/20) = 711 m slant, 708 m across); the 200 m
+    # block of people covers a small part of these zones, which its own warning names
     wide = GridSpec(TMERC, Affine(20.0, 0, -800.0, 0, -20.0, 1800.0), 100, 180)
     cmp = compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=wide)
-    assert cmp.doc["warnings"] == []
+    assert not [w for w in cmp.doc["warnings"] if "grid's edge" in w]
     csvs = [tmp_path / f"r{k}.csv" for k in range(2)]
     for r, p in zip(routes, csvs, strict=True):
         r.to_csv(p)
@@ -223,3 +224,211 @@ def test_coarse_cells_for_the_routes_are_named(tmp_path):
     (w,) = [w for w in cmp.doc["warnings"] if "resolution:" in w]
     assert w.startswith("routes route1, route2: resolution: cells of 200 m are coarse for a flight 58.5 m above "
                         "the receivers") and "up to 8.4 dB" in w
+
+
+def _parked(wait_s):
+    """``northwards(0)`` after ``wait_s`` seconds on its pad (landed flag, motors running): the same flight in a
+    longer file."""
+    fly = northwards(0.0)
+    wait = np.arange(-float(wait_s), 0.0)
+    lat0, lon0, h0 = FRAME.to_wgs84(0.0, -1000.0, 0.0)
+    n, m = wait.size, wait.size + len(fly)
+    return Trajectory(t=np.concatenate([wait, fly.t]), lat=np.concatenate([np.full(n, lat0), fly.lat]),
+                      lon=np.concatenate([np.full(n, lon0), fly.lon]), h=np.concatenate([np.full(n, h0), fly.h]),
+                      roll=np.zeros(m), pitch=np.zeros(m), yaw=np.zeros(m), power_w=np.full(m, 3000.0),
+                      phase=np.full(m, "horizontal"), on_ground=np.arange(m) < n, source="parked")
+
+
+def test_laeq_routes_share_one_period_so_a_longer_file_ranks_no_better(tmp_path):
+    """The same flight, once with 60 s on its pad before it: its SEL is the same, so over one period T its LAeq is
+    too (LAeq,T = SEL - 10 lg(T / 1 s)).  T defaults to the longest route's duration, 100 + 60 = 160 s; the two tie.
+    Each file's own duration (100 s against 160 s) made the longer one 10 lg(160/100) = 2.04 dB quieter."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    grid = GridSpec(TMERC, Affine(20.0, 0, -400.0, 0, -20.0, 400.0), 40, 40)
+    routes = [northwards(0.0), _parked(60)]
+    laeq = compare_routes(routes, [omni()], population=pop, names=["plain", "parked"], metric="LAeq", ground_h=0.0,
+                          grid=grid)
+    sel = compare_routes(routes, [omni()], population=pop, names=["plain", "parked"], metric="SEL", ground_h=0.0,
+                         grid=grid)
+    rows = {r["route"]: r for r in laeq.doc["ranking"]}
+    assert rows["plain"]["people_above"] == pytest.approx(rows["parked"]["people_above"], abs=1e-6)
+    assert laeq.doc["period_s"] == pytest.approx(160.0)
+    assert "160 s" in laeq.doc["ranking_rule"] and sel.doc["period_s"] is None
+    assert rows["plain"]["rank"] == rows["parked"]["rank"] == 1 and rows["plain"]["tie"] and rows["parked"]["tie"]
+    assert rows["plain"]["people_above"]["45"] == pytest.approx(DENSITY * 200 * 200)  # the whole block: no tie of zeros
+    for n in ("plain", "parked"):
+        ok = np.isfinite(sel.bands[n])
+        assert ok.sum() > 1000
+        np.testing.assert_allclose(laeq.bands[n][ok], sel.bands[n][ok] - 10 * math.log10(160.0), atol=1e-6)
+    given = compare_routes(routes, [omni()], population=pop, metric="LAeq", ground_h=0.0, grid=grid, period_s=3600.0)
+    ok = np.isfinite(sel.bands["plain"])
+    np.testing.assert_allclose(given.bands["route1"][ok], sel.bands["plain"][ok] - 10 * math.log10(3600.0), atol=1e-6)
+    with pytest.raises(InputError, match=r"period_s: 120 s is shorter than route route2's duration 160.0 s") as e:
+        compare_routes(routes, [omni()], population=pop, metric="LAeq", ground_h=0.0, grid=grid, period_s=120.0)
+    assert e.value.field == "period_s"
+    with pytest.raises(InputError, match="period_s: an averaging period applies to the metric LAeq only"):
+        compare_routes(routes, [omni()], population=pop, metric="LAmax", ground_h=0.0, grid=grid, period_s=200.0)
+
+
+def test_cli_compare_states_the_laeq_period(tmp_path):
+    cp = str(save(omni(), tmp_path / "omni.json"))
+    block_population(tmp_path / "pop.tif")
+    files = []
+    for name, tr in (("plain", northwards(0.0)), ("parked", _parked(60))):
+        tr.to_csv(tmp_path / f"{name}.csv")
+        files.append(str(tmp_path / f"{name}.csv"))
+    r = CliRunner().invoke(cli, ["-q", "compare", *files, "--card", cp, "--population", str(tmp_path / "pop.tif"),
+                                 "--out", str(tmp_path / "out"), "--metric", "LAeq", "--period", "200",
+                                 "--margin", "300", "--ground-height", "0"], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "out" / "comparison.json").read_text())
+    assert doc["period_s"] == 200.0 and [x["rank"] for x in doc["ranking"]] == [1, 1]
+    md = (tmp_path / "out" / "comparison.md").read_text()
+    assert "(LAeq, over T = 200 s)" in md and "| 1 (tie) | parked |" in md and "| 1 (tie) | plain |" in md
+    r = CliRunner().invoke(cli, ["compare", "--help"])
+    assert "--period" in r.output and "longest route's duration" in r.output
+
+
+def _waypoints(e, ground):
+    """A waypoints route northwards at x = ``e``: vertical take-off from ground at ``ground`` m, 60 m above it."""
+    lat, lon, _ = FRAME.to_wgs84(np.array([e, e]), np.array([-1000.0, 1000.0]), np.zeros(2))
+    wps = [{"lon": float(lon[0]), "lat": float(lat[0]), "alt": 0.0}]
+    wps += [{"lon": float(x), "lat": float(y), "alt": 60.0} for x, y in zip(lon, lat, strict=True)]
+    wps.append({"lon": float(lon[1]), "lat": float(lat[1]), "alt": 0.0})
+    return {"schema": "gisnoise/waypoints/1", "altitude_reference": "agl", "ground_h_m": ground, "sample_dt_s": 1.0,
+            "waypoints": wps}
+
+
+def omni_all():
+    return ModelCard(id="omni", vehicle="test", phase="horizontal", ansatz="paper-offset",
+                     parameters=dict(p0=G0, p1=0.0, p2=0.0, p3=0.0, p4=0.0, p5=0.0, p6=1.0, p7=40.0),
+                     reference_power_w=3000.0, phases=("climb", "sink", "hover", "transition"))
+
+
+def test_a_given_ground_is_checked_against_every_route_as_a_map_checks_it(tmp_path):
+    """Routes 60 m high (ground 0): a ground given at 100 m would put the receivers above the track.  ``contour``
+    refuses it with the shared rule (gisnoise.limits.check_receivers); the comparison refuses it in the same words,
+    naming the route."""
+    from gisnoise.limits import check_receivers
+
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    routes = [northwards(400.0), northwards(0.0)]
+    with pytest.raises(InputError) as rule:
+        check_receivers(1.5, 100.0, routes[0].h)
+    with pytest.raises(InputError) as e:
+        compare_routes(routes, [omni()], population=pop, names=["east", "over"], ground_h=100.0)
+    assert str(e.value) == f"east: {rule.value}" and e.value.field == rule.value.field == "ground_h"
+    assert "ground at 100 m lies above the track's lowest point 60" in str(e.value)
+    csvs = [tmp_path / f"r{k}.csv" for k in range(2)]
+    for tr, p in zip(routes, csvs, strict=True):
+        tr.to_csv(p)
+    r = CliRunner().invoke(cli, ["-q", "compare", *map(str, csvs), "--card", str(save(omni(), tmp_path / "o.json")),
+                                 "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "c"),
+                                 "--ground-height", "100"])
+    assert r.exit_code == 2 and "r0: ground_h: ground at 100 m lies above" in r.output
+    assert not (tmp_path / "c" / "comparison.json").exists()
+
+
+def test_routes_that_state_different_grounds_are_refused_unless_one_ground_is_given(tmp_path):
+    """Two routes 60 m above grounds they state at 0 m and 32 m: over one flat ground at 0 m the second would fly
+    92 m above the receivers, 32 m higher than it does, and win by that alone.  Refused without a ground; with the
+    ground given, the route whose own ground differs is named with both grounds."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    routes = [_waypoints(0.0, 0.0), _waypoints(400.0, 32.0)]
+    with pytest.raises(InputError) as e:
+        compare_routes(routes, [omni_all()], population=pop, names=["low", "high"], margin_m=300.0)
+    assert e.value.field == "ground_h_m"
+    assert "the routes state different grounds (low 0 m, high 32 m)" in str(e.value)
+    assert "up to 32.0 m higher" in str(e.value) and "--dem" in str(e.value) and "--ground-height" in str(e.value)
+    cmp = compare_routes(routes, [omni_all()], population=pop, names=["low", "high"], margin_m=300.0, ground_h=0.0)
+    (w,) = [w for w in cmp.doc["warnings"] if w.startswith("grounds differ")]
+    assert w.startswith("grounds differ: high states 32 m; every route is evaluated over one flat ground at 0 m")
+    with pytest.raises(InputError, match=r"low: ground_h: ground at 32 m lies above the track's lowest point"):
+        compare_routes(routes, [omni_all()], population=pop, names=["low", "high"], margin_m=300.0, ground_h=32.0)
+    same = compare_routes([_waypoints(0.0, 0.0), _waypoints(400.0, 0.5)], [omni_all()], population=pop,
+                          margin_m=300.0)  # within the ground tolerance (1 m): one ground, the lower
+    assert same.doc["ground_h_m"] == 0.0 and not [w for w in same.doc["warnings"] if w.startswith("grounds differ")]
+
+
+def test_a_population_raster_that_covers_part_of_a_zone_makes_its_counts_lower_bounds(tmp_path):
+    """A raster of 0.01 people per m^2 that ends 200 m east of a route's track.  The route's zone above a level is
+    the stadium of half-width r around its 2 km track (r from LAmax = 70 - 20 lg(sqrt(r^2 + 58.5^2) / 40)); the part
+    east of x = 200 m is L (r - 200) plus the circle's segment beyond 200 m, r^2 acos(200/r) - 200 sqrt(r^2 - 200^2).
+    The warning's share is that part over the stadium 2 r L + pi r^2 (34.6 % above 45 dB(A)); the people above 45
+    dB(A) are the density times the rest, flagged lower bounds, as those above 50 and 55 (3.6 % above 55); a route
+    1 km west lies inside the raster: no flag."""
+    d, length, dens = 200.0, 2000.0, 0.01
+    w = int((d + 2500.0) / 50.0)
+    with rasterio.open(tmp_path / "half.tif", "w", driver="GTiff", width=w, height=80, count=1, dtype="float32",
+                       crs=CRS.from_user_input(TMERC).to_wkt(), transform=Affine(50.0, 0, -2500.0, 0, -50.0, 2000.0)) as f:
+        f.write(np.full((80, w), dens * 2500.0, np.float32), 1)
+    pop = read_population(tmp_path / "half.tif")
+    grid = GridSpec(TMERC, Affine(20.0, 0, -1800.0, 0, -20.0, 1800.0), 130, 180)  # holds both 45 dB(A) zones
+    cmp = compare_routes([northwards(0.0), northwards(-1000.0)], [omni()], population=pop, names=["over", "west"],
+                         ground_h=0.0, grid=grid)
+    rows = {r["route"]: r for r in cmp.doc["ranking"]}
+
+    def uncovered(level):
+        r = math.sqrt((40.0 * 10 ** ((G0 - level) / 20)) ** 2 - (HEIGHT - HR) ** 2)
+        part = length * max(r - d, 0.0) + (r * r * math.acos(min(d / r, 1.0)) - d * math.sqrt(max(r * r - d * d, 0.0)))
+        return part / (2 * r * length + math.pi * r * r), 2 * r * length + math.pi * r * r
+
+    share45, area45 = uncovered(45.0)
+    over = rows["over"]
+    assert over["population_uncovered_share"] == pytest.approx(share45, abs=1e-3)
+    assert over["uncovered_area_m2"]["55"] / over["area_above_m2"]["55"] == pytest.approx(uncovered(55.0)[0], abs=1e-3)
+    assert over["people_above"]["45"] == pytest.approx(dens * area45 * (1 - share45), rel=2e-3)
+    assert over["lower_bound"] == {"45": True, "50": True, "55": True, "60": False, "65": False}
+    assert rows["west"]["population_uncovered_share"] == 0.0 and not any(rows["west"]["lower_bound"].values())
+    (msg,) = [m for m in cmp.doc["warnings"] if "population raster" in m]
+    assert msg.startswith("over: the population raster (") and f"does not cover {100 * share45:.1f} % of its area " \
+        "above 45 dB(A) LAmax" in msg and "people above 45, 50, 55 dB(A) are lower bounds" in msg
+
+
+def test_lower_bounds_are_flagged_per_route_and_level_and_starred_in_the_table(tmp_path):
+    """A grid 600 m wide around a track at x = 0 and one at x = 150 m, the raster around all of it: the edge cells'
+    centres lie 290 m (and 140 m) from the nearest track, where LAmax = 70 - 20 lg(sqrt(290^2 + 58.5^2) / 40) =
+    52.6 dB(A) (58.4 dB(A)): the counts above 45 and 50 (and 55) dB(A) are lower bounds, the others are not."""
+    with rasterio.open(tmp_path / "pop.tif", "w", driver="GTiff", width=60, height=60, count=1, dtype="float32",
+                       crs=CRS.from_user_input(TMERC).to_wkt(), transform=Affine(100.0, 0, -3000.0, 0, -100.0, 3000.0)) as f:
+        f.write(np.full((60, 60), 100.0, np.float32), 1)
+    pop = read_population(tmp_path / "pop.tif")
+    grid = GridSpec(TMERC, Affine(20.0, 0, -300.0, 0, -20.0, 1300.0), 30, 130)
+    cmp = compare_routes([northwards(0.0), northwards(150.0)], [omni()], population=pop, names=["mid", "side"],
+                         ground_h=0.0, grid=grid)
+    rows = {r["route"]: r for r in cmp.doc["ranking"]}
+    for name, x in (("mid", 290.0), ("side", 140.0)):
+        edge = G0 - 20 * math.log10(math.hypot(x, HEIGHT - HR) / 40.0)
+        assert rows[name]["lower_bound"] == {f"{v:g}": edge >= v for v in (45.0, 50.0, 55.0, 60.0, 65.0)}
+    assert rows["side"]["lower_bound"]["55"] and not rows["mid"]["lower_bound"]["55"]
+    paths = write_comparison(cmp, tmp_path / "out")
+    assert json.loads(paths["comparison"].read_text())["ranking"][0]["lower_bound"] == cmp.doc["ranking"][0][
+        "lower_bound"]
+    md = paths["table"].read_text()
+    (mid,) = [line for line in md.splitlines() if "| mid |" in line]
+    cells = [c.strip() for c in mid.strip("|").split("|")]
+    assert [c.endswith(" *") for c in cells[2:7]] == [True, True, False, False, False]
+    assert "\\* lower bound: the zone above this level reaches the grid's edge" in md and "## Warnings" in md
+
+
+def test_equal_routes_share_a_rank_whatever_the_order_of_the_arguments(tmp_path):
+    """The same route twice: equal numbers, so rank 1 both, said a tie, in the same order either way; the tie
+    tolerance (0.5 person, 0.5 person-dB, 0.05 dB) and the next rank skipping (1, 1, 3) by the rule alone."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    grid = GridSpec(TMERC, Affine(20.0, 0, -400.0, 0, -20.0, 400.0), 40, 40)
+    orders = []
+    for names in (["a", "a_copy"], ["a_copy", "a"]):
+        cmp = compare_routes([northwards(0.0), northwards(0.0)], [omni()], population=pop, names=names,
+                             ground_h=0.0, grid=grid)
+        orders.append([(r["route"], r["rank"], r.get("tie")) for r in cmp.doc["ranking"]])
+        assert "| 1 (tie) | a |" in write_comparison(cmp, tmp_path / names[0])["table"].read_text()
+    assert orders[0] == orders[1] == [("a", 1, True), ("a_copy", 1, True)]
+    from gisnoise.planning._rules import rank_rows
+
+    def row(name, people, pdb, peak=None):
+        return {"route": name, "people_above": {"55": people}, "person_db": pdb, "peak_dwelling_db": peak}
+
+    ranked = rank_rows([row("c", 100.6, 0.0), row("b", 100.3, 400.0), row("a", 100.0, 500.0)], "55")
+    assert [(r["route"], r["rank"], r["tie"]) for r in ranked] == [("b", 1, False), ("a", 2, False), ("c", 3, False)]
+    ranked = rank_rows([row("z", 10.0, 5.0, 60.0), row("y", 10.4, 5.4, 60.04), row("x", 12.0, 0.0, 50.0)], "55")
+    assert [(r["route"], r["rank"], r["tie"]) for r in ranked] == [("y", 1, True), ("z", 1, True), ("x", 3, False)]

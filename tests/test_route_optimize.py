@@ -155,3 +155,68 @@ def test_cli_route_optimize_writes_flyable_waypoints(tmp_path):
     r = CliRunner().invoke(cli, ["-q", "route", "optimize", "--from", "10.5", "--to", "10.6,52.3", "--card", cp,
                                  "--population", str(tmp_path / "pop.tif"), "--out", str(tmp_path / "o2")])
     assert r.exit_code == 2 and "--from" in r.output
+
+
+def test_pads_outside_the_population_raster_are_refused(population):
+    """Longitude and latitude swapped put the pads in the Arabian Sea, far off the town's raster: there the search
+    would count nobody and call any route harmless; refused, naming the pad."""
+    (s_lon, s_lat), (g_lon, g_lat) = pad(-1500.0), pad(1500.0)
+    with pytest.raises(InputError) as e:
+        optimize_route((s_lat, s_lon), (g_lat, g_lon), [omni()], population=population)
+    assert e.value.field == "from" and "lies outside the population raster" in str(e.value)
+    lat, lon, _ = FRAME.to_wgs84(3000.0, 0.0, 0.0)  # the landing pad 500 m east of the raster's edge
+    with pytest.raises(InputError) as e:
+        optimize_route(pad(-1500.0), (float(lon), float(lat)), [omni()], population=population)
+    assert e.value.field == "to"
+
+
+def test_a_search_area_partly_outside_the_raster_is_said_with_its_share(tmp_path):
+    """The raster ends 100 m south of the pads' line: the search ellipse (pads 3 km apart, 25 % detour: semi-axes
+    a = 1875 m, b = 1125 m) lies outside it south of y = -100 m, the share (acos(t) - t sqrt(1 - t^2)) / pi with
+    t = 100 / b (44.3 %): said, with the share, as the search counts nobody there."""
+    crs = CRS.from_proj4(f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m")
+    with rasterio.open(tmp_path / "north.tif", "w", driver="GTiff", width=250, height=105, count=1, dtype="float32",
+                       crs=crs.to_wkt(), transform=Affine(20.0, 0, -2500.0, 0, -20.0, 2000.0)) as d:
+        d.write(np.full((105, 250), 0.2, np.float32), 1)
+    pop = read_population(tmp_path / "north.tif")
+    out = optimize_route(pad(-1500.0), pad(1500.0), [omni()], population=pop, max_detour_pct=25.0,
+                         resolution_m=25.0, eval_resolution_m=25.0)
+    t = 100.0 / math.sqrt(1875.0 ** 2 - 1500.0 ** 2)
+    share = (math.acos(t) - t * math.sqrt(1 - t * t)) / math.pi
+    assert out.summary["search_area_uncovered_share"] == pytest.approx(share, abs=0.01)
+    (w,) = [w for w in out.summary["warnings"] if "search area" in w]
+    assert "does not cover" in w and w in out.comparison.doc["warnings"]
+
+
+def test_a_search_that_finds_no_quieter_route_keeps_the_direct_one(tmp_path):
+    """At an even density the people above a level are density x the zone's area, and the zone of any path
+    between the pads (all points within r of it) covers at least the straight one's 2 r L + pi r^2: no route
+    beats the direct one.  The search's route (3 km pads, 50 m cells) is a few metres longer and counts more;
+    the command keeps the direct route (route.geojson holds it) and says so in one line."""
+    import json
+
+    from click.testing import CliRunner
+
+    from gisnoise.cli.main import cli
+    from gisnoise.model import save
+
+    crs = CRS.from_proj4(f"+proj=tmerc +lat_0={LAT0} +lon_0={LON0} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m")
+    with rasterio.open(tmp_path / "even.tif", "w", driver="GTiff", width=250, height=200, count=1, dtype="float32",
+                       crs=crs.to_wkt(), transform=Affine(20.0, 0, -2500.0, 0, -20.0, 2000.0)) as d:
+        d.write(np.full((200, 250), 4.0, np.float32), 1)
+    (s_lon, s_lat), (g_lon, g_lat) = pad(-1500.0), pad(1500.0)
+    r = CliRunner().invoke(cli, ["-q", "route", "optimize", "--from", f"{s_lon},{s_lat}", "--to", f"{g_lon},{g_lat}",
+                                 "--card", str(save(omni(), tmp_path / "omni.json")), "--population",
+                                 str(tmp_path / "even.tif"), "--out", str(tmp_path / "out"), "--max-detour", "25",
+                                 "--resolution", "50"], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    route = json.loads((tmp_path / "out" / "route.geojson").read_text())
+    direct = json.loads((tmp_path / "out" / "direct.geojson").read_text())
+    assert route["features"] == direct["features"]
+    s = json.loads((tmp_path / "out" / "optimize.json").read_text())
+    assert s["kept_direct"] is True and s["searched_length_m"] > s["direct_length_m"]
+    assert s["people_above_55_searched"] >= s["people_above_55_direct"] - 0.5
+    assert s["optimized_length_m"] == s["direct_length_m"] and s["reduction_pct"] == 0.0
+    assert s["people_above_55_optimized"] == s["people_above_55_direct"]
+    kept = [line for line in r.stdout.splitlines() if line.startswith("kept the direct route")]
+    assert len(kept) == 1 and "not better than the direct one" in kept[0]

@@ -35,18 +35,26 @@ def _floats(value: str, name: str) -> list[float]:
               help="Margin around all routes, m.")
 @click.option("--crs", "crs", default=None, help="Projected CRS of the grid [default: local UTM].")
 @click.option("--ground-height", "ground_h", type=float, default=None,
-              help="Ellipsoidal height of flat ground, m [default: stated by the routes, else the take-off or "
-                   "landing point of those that start or end on the ground].")
+              help="Ellipsoidal height of flat ground, m, checked against every route as `gisnoise contour` checks "
+                   "it [default: stated by the routes (they must agree), else the lowest take-off or landing point "
+                   "of those that start or end on the ground].")
+@click.option("--period", "period", type=float, default=None,
+              help="LAeq only: the averaging period T, s, the same for every route (LAeq,T = SEL - 10 lg T, so "
+                   "routes rank as by SEL) [default: the longest route's duration].")
 @click.option("--engine", "engine", type=click.Choice(["numpy", "fast"]), default="numpy", show_default=True,
               help="Evaluator engine.")
 def command(routes: tuple[str, ...], cards: tuple[str, ...], out: str, population: str | None,
             buildings: str | None, metric: str, levels: str, rank_level: float, resolution: float, margin: float,
-            crs: str | None, ground_h: float | None, engine: str) -> None:
+            crs: str | None, ground_h: float | None, period: float | None, engine: str) -> None:
     """Rank candidate ROUTES (two or more trajectory or waypoint files) by the people they expose.
 
-    Every route is evaluated on one grid around all of them; writes DIR/comparison.json,
+    Every route is evaluated on one grid around all of them, over one flat ground and, for LAeq,
+    over one averaging period (stated in the outputs); writes DIR/comparison.json,
     DIR/comparison.md, DIR/levels.tif (one band per route) and DIR/difference.tif (each
-    route minus the best, dB).
+    route minus the best, dB). Routes whose scores are equal as the table shows them (whole
+    people, whole person-dB, 0.1 dB) share a rank ("tie"); counts that are lower bounds (a zone cut by the grid's
+    edge or partly outside the population raster) are starred in the table and flagged
+    lower_bound in comparison.json.
     """
     from gisnoise.exposure import read_buildings, read_population
     from gisnoise.planning import compare_routes, comparison_table, write_comparison
@@ -57,9 +65,9 @@ def command(routes: tuple[str, ...], cards: tuple[str, ...], out: str, populatio
     b = read_buildings(buildings) if buildings else None
     cmp = compare_routes(list(routes), list(cards), population=pop, buildings=b, metric=metric,
                          levels=_floats(levels, "--levels"), rank_level_db=rank_level, resolution_m=resolution,
-                         margin_m=margin, crs=crs, ground_h=ground_h, engine=engine)
+                         margin_m=margin, crs=crs, ground_h=ground_h, engine=engine, period_s=period)
     paths = write_comparison(cmp, out)
-    click.echo(comparison_table(cmp.doc).rstrip())
+    click.echo(comparison_table(cmp.doc, warnings=False).rstrip())
     for w in cmp.doc["warnings"]:
         click.echo(f"warning: {w}", err=True)
     for p in paths.values():

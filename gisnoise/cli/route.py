@@ -76,6 +76,9 @@ def optimize(start: str, goal: str, cards: tuple[str, ...], out: str, population
     Writes DIR/route.geojson (waypoints of the optimized route, readable by `gisnoise contour`),
     DIR/direct.geojson, DIR/optimize.json (method, lengths, people above the level of both)
     and the comparison (comparison.json, comparison.md, levels.tif, difference.tif).
+    When the searched route is not better than the direct one by the comparison's ranking
+    (a tie is not better), the direct route is kept: route.geojson holds it and one line says so.
+    Both pads must lie within the population raster.
     """
     from gisnoise.exposure import read_buildings, read_population
     from gisnoise.planning import optimize_route, waypoints_geojson, write_comparison
@@ -98,9 +101,12 @@ def optimize(start: str, goal: str, cards: tuple[str, ...], out: str, population
         click.echo(f"warning: {w}", err=True)
     sm = res.summary
     key = f"{rank_level:g}"
-    click.echo(f"direct {sm['direct_length_m']:.0f} m, optimized {sm['optimized_length_m']:.0f} m "
-               f"(+{sm['detour_pct']:.1f} %, limit {max_detour:g} %), turn radius {sm['turn_radius_m']:.0f} m")
-    click.echo(f"people above {key} dB(A) LAmax: direct {sm[f'people_above_{key}_direct']:.0f}, "
-               f"optimized {sm[f'people_above_{key}_optimized']:.0f} ({sm['reduction_pct']:.1f} % fewer)")
+    if sm["kept_direct"]:
+        click.echo(sm["note"])
+    else:
+        click.echo(f"direct {sm['direct_length_m']:.0f} m, optimized {sm['optimized_length_m']:.0f} m "
+                   f"(+{sm['detour_pct']:.1f} %, limit {max_detour:g} %), turn radius {sm['turn_radius_m']:.0f} m")
+        click.echo(f"people above {key} dB(A) LAmax: direct {sm[f'people_above_{key}_direct']:.0f}, "
+                   f"optimized {sm[f'people_above_{key}_optimized']:.0f} ({sm['reduction_pct']:.1f} % fewer)")
     for p in [*paths.values(), o / "route.geojson", o / "direct.geojson", o / "optimize.json"]:
         click.echo(f"wrote {p}")

@@ -6,10 +6,18 @@ for every route), evaluates each with the map evaluator and measures its exposur
 (:mod:`gisnoise.exposure`): people above each level, the peak level at any dwelling
 (most exposed façade), and the total exposure in person-dB above the lowest level
 (``sum over people of max(L - L_low, 0)``).  Routes are ranked by people above the
-ranking level, then by person-dB, then by the peak dwelling level.  Each route is checked as a map
-of it is (:func:`gisnoise.maps.flight_findings`: a log cut short, a track below the ground taken from the
-routes, airborne samples without power, a crash, powers outside a card's fitted range) before any
-evaluation; its warnings, named by route, lead the document's ``warnings``.
+ranking level, then by person-dB, then by the peak dwelling level, each to the step the table shows
+(the whole person, the whole person-dB, 0.1 dB; :data:`~gisnoise.planning._rules.TIE_STEPS`); routes equal
+in all three share a rank (``tie``), and the order of the arguments never decides.
+
+Every route is judged alike: over one flat ground (a given ground is checked against every route as a
+map checks it; routes that state different grounds are refused unless the ground is given), and for
+``LAeq`` over one averaging period (``LAeq,T = SEL - 10 lg T`` with the same ``T``, by default the longest
+route's duration).  Each route is checked as a map of it is (:func:`gisnoise.maps.flight_findings`: a log
+cut short, a track below the ground taken from the routes, airborne samples without power, a crash, powers
+outside a card's fitted range) before any evaluation; its warnings, named by route, lead the document's
+``warnings``.  Counts that are lower bounds (a level's zone cut by the grid's edge, or partly outside the
+population raster) carry ``lower_bound`` per level.
 
 :func:`write_comparison` writes ``comparison.json`` (schema ``gisnoise/comparison/1``),
 ``comparison.md`` (the table), ``levels.tif`` (the metric of every route, one band per
@@ -37,7 +45,7 @@ from gisnoise.exposure import (
     population_points,
     population_scores,
 )
-from gisnoise.flight import Trajectory, ground_from_track, read_route
+from gisnoise.flight import Trajectory, read_route
 from gisnoise.geo import GridSpec, grid_for_points
 from gisnoise.jsonio import to_jsonable
 from gisnoise.limits import check_map_level
@@ -54,6 +62,15 @@ from gisnoise.maps import (
 from gisnoise.maps.clipping import edge_max
 from gisnoise.maps.grids import resolution_warning_of
 from gisnoise.maps.pipeline import flight_height
+from gisnoise.planning._rules import (
+    TIE_STEPS,
+    UNCOVERED_SHARE_LIMIT,
+    common_ground,
+    common_period,
+    outside_raster,
+    rank_rows,
+    uncovered_area,
+)
 
 __all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
 
@@ -100,8 +117,8 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
                 buildings: Buildings | None = None, metric: str = "LAmax",
                 levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), receiver_height: float = 1.5,
                 ground_h: float = 0.0, engine: str = "numpy",
-                points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None
-                ) -> tuple[dict[str, Any], np.ndarray]:
+                points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None,
+                period_s: float | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """The exposure scores of one route on a given grid, and its band of ``metric``.
 
     One evaluator call for ``metric`` alone (no GeoTIFF, no contours), then people above each
@@ -111,10 +128,12 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
 
     ``points`` are the population's sub-cells on this grid
     (:func:`gisnoise.exposure.population_points`), computed once when several routes share the grid.
+    ``period_s``: the averaging period of ``LAeq``, s (default the route's own duration; routes compared on
+    ``LAeq`` share one, :func:`compare_routes`).
     """
     lv = [float(v) for v in levels]
     res = evaluate_flying(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
-                          ground_h=ground_h, engine=engine)  # samples on the ground make no noise
+                          ground_h=ground_h, engine=engine, period_s=period_s)  # samples on the ground make no noise
     band = res.bands[metric]
     lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
                                                                "period_s": res.metadata.get("period_s")})
@@ -145,7 +164,7 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
                    levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), rank_level_db: float = 55.0,
                    resolution_m: float = 20.0, margin_m: float | None = 500.0, crs: Any = None,
                    receiver_height: float = 1.5, ground_h: float | None = None, engine: str = "numpy",
-                   grid: GridSpec | None = None) -> Comparison:
+                   grid: GridSpec | None = None, period_s: float | None = None) -> Comparison:
     """Evaluate candidate routes on one grid and rank them by exposure (see the module docstring).
 
     Parameters
@@ -156,7 +175,9 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         Serving every phase of every route.
     population, buildings : optional
         Exposure layers (:func:`gisnoise.exposure.read_population`, :func:`~gisnoise.exposure.read_buildings`);
-        at least one.
+        at least one.  A route whose area above a level lies more than 1 % outside the population raster
+        (:data:`~gisnoise.planning._rules.UNCOVERED_SHARE_LIMIT`) is named in a warning with that share, and its
+        people above that level are flagged ``lower_bound``: outside the raster people are unknown, not none.
     metric : str
         ``LAmax``, ``LAeq`` or ``SEL``: the metric judged.
     levels : sequence of float
@@ -168,11 +189,25 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         largest over the routes of the margin at which no edge cell reaches the lowest level
         (:func:`gisnoise.maps.auto_margin`; for ``SEL`` its SEL bound), so no count is cut by the edge.
     ground_h : float, optional
-        Flat ground's ellipsoidal height, m; default the height the routes state (waypoints),
-        else the lowest take-off or landing point of the routes that start or end on the ground
-        (:func:`gisnoise.flight.ground_from_track`); routes all in the air throughout are refused.
+        Flat ground's ellipsoidal height, m, checked against every route as ``gisnoise contour`` checks it (at
+        or below the lowest flying point; refused naming the route).  Default the ground the routes state
+        (waypoints; routes that state grounds more than :data:`~gisnoise.limits.GROUND_TOLERANCE_M` apart are
+        refused: over one flat ground the route on higher ground would be judged as flying higher), else the
+        lowest take-off or landing point of the routes that start or end on the ground
+        (:func:`gisnoise.flight.ground_from_track`); routes all in the air throughout are refused.  Routes
+        whose own ground differs from the one used are named in a warning.
     grid : GridSpec, optional
         A given common grid instead of one around the routes.
+    period_s : float, optional
+        ``LAeq`` only: the averaging period T, s, the same for every route (``LAeq,T = SEL - 10 lg(T / 1 s)``,
+        so the routes rank as by SEL); default the longest route's duration; shorter than a route is refused.
+
+    Returns
+    -------
+    Comparison
+        Its ``doc`` (``comparison.json``): ``ranking`` (rows best first: ``rank``, ``tie``, ``people_above``,
+        ``lower_bound`` and ``uncovered_area_m2`` per level, ``population_uncovered_share``, ``person_db``,
+        ...), ``period_s``, ``ground_h_m``, the rules and ``warnings``.
     """
     if len(routes) < 2:
         raise InputError(f"routes: give at least two candidate routes, got {len(routes)}", field="routes")
@@ -189,22 +224,21 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     rs = [read_route(r) for r in routes]
     cardset = cards if isinstance(cards, CardSet) else CardSet(cards if isinstance(cards, (list, tuple)) else [cards])
     trajs = {n: r.trajectory for n, r in zip(nm, rs, strict=True)}
-    taken = None  # the ground when the routes gave it: each route is checked against it
-    if ground_h is None:  # the ground rule of the maps: stated by a route, else a take-off or landing point
-        stated = [r.ground_h_m for r in rs if r.ground_h_m is not None]
-        known = stated or [g for g in map(ground_from_track, trajs.values()) if g is not None]
-        if not known:
-            raise InputError("ground unknown: no route states its ground or starts or ends on the ground (a take-off "
-                             "or landing); give --ground-height M (field ground_h_m)", field="ground_h_m")
-        ground_h = taken = min(known)
-    warnings: list[str] = []
+    period = common_period(trajs, metric, period_s)
+    stated = {n: r.ground_h_m if r.ground_h_m is not None else r.trajectory.metadata.get("ground_h_m")
+              for n, r in zip(nm, rs, strict=True)}
+    # one flat ground for all: given (checked against every route), else stated by the routes, else a take-off
+    # or landing point; ``taken`` is the ground when the routes gave it: each track is checked against it
+    ground_h, taken, warnings = common_ground(nm, trajs, stated, ground_h, receiver_height)
     outside: dict[str, Any] = {}
+    found_said: list[str] = []
     for n, traj in trajs.items():  # each route as a map of it is checked, before any evaluation
         found = flight_findings(traj, cardset, ground_h=taken, ground_from=GROUND_FROM_ROUTES,
                                 ground_hint="--ground-height M (field ground_h_m)")
-        warnings += [f"{n}: {w}" for w in found.warnings]
+        found_said += [f"{n}: {w}" for w in found.warnings]
         if found.power_outside:
             outside[n] = found.power_outside
+    warnings = found_said + warnings
     lon = np.concatenate([t.lon for t in trajs.values()])
     lat = np.concatenate([t.lat for t in trajs.values()])
     if grid is None:
@@ -218,35 +252,68 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         n: flight_height(t, ground_h, None, 0.0, receiver_height) for n, t in trajs.items()}, "route")
     warnings += [coarse] if coarse is not None else []
     pts = population_points(population, grid) if population is not None else None
+    off_raster = outside_raster(population, grid) if population is not None else None
     bands: dict[str, np.ndarray] = {}
     rows: list[dict[str, Any]] = []
     for n, traj in trajs.items():
         row, band = score_route(traj, cardset, grid, population=population, buildings=buildings, metric=metric,
                                 levels=lv, receiver_height=receiver_height, ground_h=ground_h, engine=engine,
-                                points=pts)
+                                points=pts, period_s=period)
         row["route"] = n
         bands[n] = band
         rows.append(row)
-    warnings += [w for w in (_clipped(n, b, lv, metric) for n, b in bands.items()) if w is not None]
-    key = f"{float(rank_level_db):g}"
-
-    def score(r: dict[str, Any]) -> tuple[float, float, float]:
-        people = r["people_above"][key] if "people_above" in r else (r.get("residents_above") or {}).get(key, 0.0)
-        peak = r.get("peak_dwelling_db")
-        return (round(people, 6), round(r.get("person_db", 0.0), 6), peak if peak is not None else -np.inf)
-
-    ranked = sorted(rows, key=score)
-    for i, r in enumerate(ranked, start=1):
-        r["rank"] = i
+    for row in rows:
+        warnings += _lower_bounds(row, bands[row["route"]], grid, lv, metric, off_raster, population)
+    ranked = rank_rows(rows, f"{float(rank_level_db):g}")
+    over = f" over T = {period:g} s" if period is not None else ""
     doc = {"schema": COMPARISON_SCHEMA, "metric": metric, "levels_db": lv, "rank_level_db": float(rank_level_db),
-           "ranking_rule": f"people above {rank_level_db:g} dB(A) {metric}, then person-dB above {lv[0]:g} dB(A), "
-                           "then peak level at a dwelling; lower is better",
+           "ranking_rule": f"people above {rank_level_db:g} dB(A) {metric}{over}, then person-dB above {lv[0]:g} "
+                           "dB(A), then peak level at a dwelling; lower is better",
+           "tie_rule": f"scores rounded to {TIE_STEPS[0]:g} person above {rank_level_db:g} dB(A), "
+                       f"{TIE_STEPS[1]:g} person-dB and {TIE_STEPS[2]:g} dB of peak dwelling level (as the table "
+                       "shows them); routes with equal scores share a rank (tie: true), listed by name, and the "
+                       "next rank skips",
            "dose_metric": f"person-dB: sum over people of max({metric} - {lv[0]:g} dB, 0)",
+           "period_s": period,
+           "period_rule": None if period is None else (
+               "LAeq,T = SEL - 10 lg(T / 1 s) with one T for every route: the longest route's duration unless "
+               "given (period_s, --period)"),
+           "lower_bound_rule": "a route's counts above a level are a lower bound (lower_bound: true) when its "
+                               "values at the grid's edge (or next to cells without a level) reach that level, "
+                               f"or when more than {UNCOVERED_SHARE_LIMIT:.0%} of its area above that level lies "
+                               "outside the population raster (people above it)",
            "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked,
            "warnings": warnings}
     if outside:
         doc["power_outside_card_range"] = outside
     return Comparison(nm, grid, bands, metric, doc, trajs)
+
+
+def _lower_bounds(row: dict[str, Any], band: np.ndarray, grid: GridSpec, levels: Sequence[float], metric: str,
+                  off_raster: np.ndarray | None, population: Population | None) -> list[str]:
+    """Set the row's ``lower_bound``, ``uncovered_area_m2`` and ``population_uncovered_share`` (the share of its
+    area above the lowest level outside the population raster) and return the warnings of a cut grid edge and of
+    a raster that does not cover the route."""
+    name = row["route"]
+    top = edge_max(band)  # the outer cells and those next to a cell without a level, as a map's contours
+    flags = {f"{v:g}": bool(np.isfinite(top) and top >= v) for v in levels}
+    said = [w for w in [_clipped(name, band, levels, metric)] if w is not None]
+    if population is not None:
+        gone = uncovered_area(band, grid, off_raster, levels)
+        area = [row["area_above_m2"][f"{v:g}"] for v in levels]
+        share = [g / a if a > 0 else 0.0 for g, a in zip(gone, area, strict=True)]
+        row["uncovered_area_m2"] = {f"{v:g}": g for v, g in zip(levels, gone, strict=True)}
+        row["population_uncovered_share"] = share[0]
+        cut = [v for v, s in zip(levels, share, strict=True) if s > UNCOVERED_SHARE_LIMIT]
+        for v in cut:
+            flags[f"{v:g}"] = True
+        if cut:
+            said.append(f"{name}: the population raster ({population.source}) does not cover {100 * share[0]:.1f} % "
+                        f"of its area above {levels[0]:g} dB(A) {metric}: people there are unknown, not none; the "
+                        f"people above {', '.join(f'{v:g}' for v in cut)} dB(A) are lower bounds (a raster that "
+                        "covers the route's zone counts them)")
+    row["lower_bound"] = flags
+    return said
 
 
 def _margin(trajs: Any, cards: CardSet, metric: str, lowest_db: float, resolution_m: float,
@@ -292,20 +359,38 @@ def _cumulative(classes: list[dict[str, Any]], what: str) -> dict[str, float] | 
     return {f"{c['from_db']:g}": float(v) for c, v in zip(classes, cum, strict=True)}
 
 
-def comparison_table(doc: dict[str, Any]) -> str:
-    """The ranking as a Markdown table."""
+def comparison_table(doc: dict[str, Any], *, warnings: bool = True) -> str:
+    """The ranking as a Markdown table: tied ranks say so, counts that are lower bounds carry a star and a
+    footnote, and the warnings follow the table (``warnings=False``: not, for a terminal that prints them apart)."""
     lv = [f"{v:g}" for v in doc["levels_db"]]
     m = doc["metric"]
+    period = doc.get("period_s")
+    over = f", over T = {period:g} s" if period is not None else ""
     head = ["rank", "route"] + [f"people > {v}" for v in lv] + ["person-dB", "peak dwelling dB(A)", "length km"]
-    lines = [f"# Candidate routes by exposure ({m})", "", doc["ranking_rule"], "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = [f"# Candidate routes by exposure ({m}{over})", "", doc["ranking_rule"], ""]
+    if period is not None:
+        lines += [f"{m} of every route over the same period T = {period:g} s: {doc.get('period_rule', '')}", ""]
+    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    starred = False
     for r in doc["ranking"]:
         pa = r.get("people_above") or r.get("residents_above") or {}
+        low = r.get("lower_bound") or {}
         peak = r.get("peak_dwelling_db")
-        cells = [str(r["rank"]), r["route"]] + [f"{pa.get(v, float('nan')):.0f}" for v in lv]
+        rank = f"{r['rank']} (tie)" if r.get("tie") else str(r["rank"])
+        cells = [rank, r["route"]]
+        for v in lv:
+            cells.append(f"{pa.get(v, float('nan')):.0f}" + (" *" if low.get(v) else ""))
+            starred = starred or bool(low.get(v))
         cells += [f"{r.get('person_db', float('nan')):.0f}", "-" if peak is None else f"{peak:.1f}",
                   f"{r['track_length_m'] / 1000:.2f}"]
         lines.append("| " + " | ".join(cells) + " |")
+    if starred:
+        lines += ["", "\\* lower bound: the zone above this level reaches the grid's edge (a wider --margin counts it "
+                  "whole) or lies partly outside the population raster (people there are unknown); see the warnings. A route ranked by a starred count may rank too well"]
+    if any(r.get("tie") for r in doc["ranking"]):
+        lines += ["", f"(tie): {doc.get('tie_rule', 'equal scores share a rank')}"]
+    if warnings and doc.get("warnings"):
+        lines += ["", "## Warnings", ""] + [f"* {w}" for w in doc["warnings"]]
     return "\n".join(lines) + "\n"
 
 

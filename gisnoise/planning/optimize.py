@@ -21,7 +21,14 @@ The method (stated):
    ``R tan(delta / 2)``), choosing each time the drop that adds the least exposure.
 5. **Re-evaluation.**  Direct and optimized route are flown from waypoints (vertical
    take-off, climb to altitude, cruise, descent, landing) and compared with the full
-   evaluator on one grid (:func:`gisnoise.planning.compare_routes`).
+   evaluator on one grid (:func:`gisnoise.planning.compare_routes`).  When the optimized
+   route is not better than the direct one by the comparison's ranking (people above the
+   level, then person-dB, then peak dwelling level; a tie is not better), the direct route
+   is kept and returned, and the summary says so (``kept_direct``, ``note``).
+
+The population raster must hold both pads (a pad outside it is refused: there the search
+would count nobody); when more than 1 % of the search area lies outside it, a warning says
+so (the search takes nobody there and may be drawn into it).
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ from gisnoise.exposure import Buildings, Population, point_levels, population_po
 from gisnoise.flight import GRAVITY, WAYPOINTS_SCHEMA, VehicleModel, route_from_waypoints
 from gisnoise.geo import WGS84, GridSpec, LocalFrame, transformer, utm_crs
 from gisnoise.maps import CardSet
+from gisnoise.planning._rules import UNCOVERED_SHARE_LIMIT, outside_raster, pad_outside
 from gisnoise.planning.compare import Comparison, compare_routes
 
 __all__ = ["Optimized", "optimize_route", "corridor_half_width", "waypoints_geojson"]
@@ -238,8 +246,12 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
     """Least-exposure flyable route from ``start`` to ``goal`` (lon, lat in deg); see the module docstring.
 
     ``avoid`` are no-fly polygons in WGS84 (shapely).  The result's ``summary`` states the
-    corridor width, turn radius, lengths, detour and the re-evaluated people above each
-    level of both routes.
+    corridor width, turn radius, lengths, detour and the re-evaluated people above the ranking
+    level of the direct and the returned route; ``kept_direct`` is true (with a one-line ``note``) when
+    the searched route was not better than the direct one, which is then returned
+    (``searched_length_m``, ``people_above_<level>_searched`` state the searched route); ``warnings``
+    (also appended to the comparison's) name a search area partly outside the population raster.
+    A pad outside the population raster is refused (field ``from`` or ``to``).
     """
     from gisnoise.geo import shapes as shapely
 
@@ -247,6 +259,12 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
         raise InputError(f"altitude must be in (0, 1000] m, got {altitude_m!r}", field="altitude")
     if not (isinstance(max_detour_pct, (int, float)) and 0 <= max_detour_pct <= 300):
         raise InputError(f"max_detour must be in [0, 300] %, got {max_detour_pct!r}", field="max_detour")
+    if population is not None:
+        for fld, pt in (("from", start), ("to", goal)):
+            if pad_outside(population, pt):
+                raise InputError(f"{fld}: the pad {pt[0]:g},{pt[1]:g} (lon,lat) lies outside the population raster "
+                                 f"({population.source}): there the search would count nobody (lon and lat "
+                                 "swapped?)", field=fld)
     veh = VehicleModel.from_dict(vehicle)
     radius = veh.cruise_speed_m_s ** 2 / (GRAVITY * math.tan(math.radians(veh.max_bank_deg)))
     if turn_radius_m is not None:
@@ -275,6 +293,16 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
     closed = ~inside | _closed_cells(grid, avoid_m)
     avoid_grown = shapely.union_all(avoid_m) if avoid_m else None
     people = _people_field(grid, population, buildings)
+    warnings: list[str] = []
+    share = 0.0  # of the search area (its cells' 2 x 2 sub-cells) outside the population raster
+    off = outside_raster(population, grid) if population is not None else None
+    if off is not None and population is not None:
+        ins = np.repeat(np.repeat(inside, 2, axis=0), 2, axis=1)
+        share = float(np.sum(off & ins) / max(int(np.sum(ins)), 1))
+        if share > UNCOVERED_SHARE_LIMIT:
+            warnings.append(f"route optimize: the population raster ({population.source}) does not cover "
+                            f"{100 * share:.1f} % of the search area (the ellipse the detour limit allows): the search "
+                            "counts nobody there, so the route may be drawn into it; give a raster that covers it")
     cost = _cost_field(people, resolution_m, max(r, resolution_m))
     t = grid.transform
 
@@ -341,14 +369,27 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
         x = rows[n]
         return float((x.get("people_above") or x.get("residents_above") or {}).get(key, 0.0))
 
+    searched = length(best)
+    kept = rows["optimized"]["rank"] >= rows["direct"]["rank"]  # a tie is not better: the direct route is simpler
+    note = None
+    if kept:
+        note = (f"kept the direct route: the searched route ({searched:.0f} m, {above('optimized'):.0f} people above "
+                f"{key} dB(A) LAmax) is not better than the direct one ({direct:.0f} m, {above('direct'):.0f}) by "
+                "the ranking rule")
+        lonlat, o_doc, best = np.array([start, goal], dtype=float), d_doc, np.array([[sx, sy], [gx, gy]])
+    returned = "direct" if kept else "optimized"
+    cmp.doc["warnings"] += warnings
     summary = {
         "method": "least-exposure graph search on a cost grid, smoothed into fly-by waypoints; re-evaluated",
         "corridor_half_width_m": r, "turn_radius_m": radius, "cost_resolution_m": resolution_m,
         "direct_length_m": direct, "optimized_length_m": length(best), "max_detour_pct": max_detour_pct,
         "detour_pct": 100.0 * (length(best) / direct - 1.0), "altitude_m": altitude_m,
         "rank_level_db": rank_level_db, "waypoints": int(len(best)),
-        f"people_above_{key}_direct": above("direct"), f"people_above_{key}_optimized": above("optimized"),
-        "reduction_people": above("direct") - above("optimized"),
-        "reduction_pct": 100.0 * (1 - above("optimized") / above("direct")) if above("direct") > 0 else 0.0,
+        f"people_above_{key}_direct": above("direct"), f"people_above_{key}_optimized": above(returned),
+        "reduction_people": above("direct") - above(returned),
+        "reduction_pct": 100.0 * (1 - above(returned) / above("direct")) if above("direct") > 0 else 0.0,
+        "kept_direct": kept, "note": note, "searched_length_m": searched,
+        f"people_above_{key}_searched": above("optimized"), "search_area_uncovered_share": share,
+        "warnings": warnings,
     }
     return Optimized(lonlat, d_doc, o_doc, cmp, summary)

@@ -1,0 +1,206 @@
+"""The comparison's rules: one ground, one LAeq period, the population's reach, ranks with ties.
+
+Private helpers of :mod:`gisnoise.planning.compare`; the rules are stated in ``docs/planning.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from gisnoise.errors import InputError
+from gisnoise.exposure import Population, fraction_above, level_field
+from gisnoise.flight import Trajectory, ground_from_track
+from gisnoise.geo import GridSpec, apply_affine, transformer
+from gisnoise.limits import GROUND_TOLERANCE_M, check_receivers
+
+UNCOVERED_SHARE_LIMIT = 0.01
+"""Share of a level's area outside the population raster above which the people above it are a lower bound.
+
+1 %: at an even density the count misses about that share of its people, as much as the counts' own
+discretization error on the zone's boundary (sub-cells of half a map cell); a raster that ends exactly at a
+zone's edge leaves a few boundary sub-cells uncovered and stays below it."""
+
+TIE_STEPS = (1.0, 1.0, 0.1)
+"""The steps to which routes are scored before ranking: people (or residents) above the ranking level to the whole
+person, person-dB to the whole person-dB, the peak level at a dwelling to 0.1 dB, as the table shows them.  Routes
+equal at these steps tie (people within half a person of each other may tie: no count is finer than a person);
+rounding, unlike a tolerance between pairs, orders any number of routes one way."""
+
+DEM_HINT = ("compare has no DEM: map each route over its own ground with gisnoise contour --dem, or give the "
+            "common ground with --ground-height M (field ground_h_m)")
+
+
+def common_ground(names: Sequence[str], trajs: Mapping[str, Trajectory], stated: Mapping[str, float | None],
+                  ground_h: float | None, receiver_height: float) -> tuple[float, float | None, list[str]]:
+    """The flat ground of a comparison: ``(ground, taken, warnings)``.
+
+    A given ``ground_h`` is checked for every route as a map checks it (:func:`gisnoise.limits.check_receivers`:
+    at or below the lowest flying point; the error names the route), and routes that state another ground are
+    named in a warning.  Without it: the routes' stated grounds (they must agree within
+    :data:`~gisnoise.limits.GROUND_TOLERANCE_M`, else refused), else the lowest take-off or landing point;
+    routes whose own ground differs from the one taken are named in a warning.  ``taken`` is the ground when it
+    came from the routes (each track is then checked against it), else None.
+    """
+    own: dict[str, tuple[float, str]] = {n: (float(g), "states") for n in names if (g := stated[n]) is not None}
+    if ground_h is not None:
+        for n in names:
+            t = trajs[n]
+            try:
+                check_receivers(receiver_height, ground_h, t.h[t.flying] if t.flying.any() else t.h)
+            except InputError as exc:
+                raise type(exc)(f"{n}: {exc}", field=exc.field) from None
+        g = float(ground_h)
+        return g, None, _differ(own, g, "the given ground")
+    if own:
+        lo, hi = min(v for v, _ in own.values()), max(v for v, _ in own.values())
+        if hi - lo > GROUND_TOLERANCE_M:
+            said = ", ".join(f"{n} {v:g} m" for n, (v, _) in own.items())
+            raise InputError(f"ground_h_m: the routes state different grounds ({said}): over one flat ground a route "
+                             f"on higher ground is judged up to {hi - lo:.1f} m higher above the receivers than it "
+                             f"flies; {DEM_HINT}", field="ground_h_m")
+    for n in names:
+        if n not in own:
+            g_track = ground_from_track(trajs[n])
+            if g_track is not None:
+                own[n] = (g_track, "takes off or lands at")
+    if not own:
+        raise InputError("ground unknown: no route states its ground or starts or ends on the ground (a take-off "
+                         "or landing); give --ground-height M (field ground_h_m)", field="ground_h_m")
+    stated_only = [v for n, (v, how) in own.items() if how == "states"]
+    g = min(stated_only or [v for v, _ in own.values()])
+    return g, g, _differ(own, g, "the lowest ground the routes give")
+
+
+def _differ(own: Mapping[str, tuple[float, str]], used: float, which: str) -> list[str]:
+    """The warning naming the routes whose own ground lies farther than the tolerance from the ground used."""
+    off = {n: v for n, (v, _) in own.items() if abs(v - used) > GROUND_TOLERANCE_M}
+    if not off:
+        return []
+    said = "; ".join(f"{n} {own[n][1]} {v:g} m" for n, v in off.items())
+    return [f"grounds differ: {said}; every route is evaluated over one flat ground at {used:g} m ({which}), so a "
+            f"route is judged by its height above that plane, not above its own ground; {DEM_HINT}"]
+
+
+def common_period(trajs: Mapping[str, Trajectory], metric: str, period_s: float | None) -> float | None:
+    """One averaging period for every route's ``LAeq`` (s): ``period_s``, else the longest route's duration.
+
+    ``LAeq,T = SEL - 10 lg(T / 1 s)`` with the same ``T`` ranks the routes as their SEL does; each route's own
+    duration would favour the longer file.  None for ``LAmax`` and ``SEL``, which have no period.
+    """
+    if metric != "LAeq":
+        if period_s is not None:
+            raise InputError(f"period_s: an averaging period applies to the metric LAeq only, not {metric} "
+                             f"(got {period_s!r})", field="period_s")
+        return None
+    longest = max(trajs, key=lambda n: trajs[n].duration_s)
+    d = float(trajs[longest].duration_s)
+    if period_s is None:
+        return d
+    try:
+        p = float(period_s)
+    except (TypeError, ValueError):
+        raise InputError(f"period_s: not a number: {period_s!r}", field="period_s") from None
+    if not math.isfinite(p) or p < d * (1.0 - 1e-12):
+        raise InputError(f"period_s: {p:g} s is shorter than route {longest}'s duration {d:.1f} s (LAeq over a common "
+                         "period holds every route's whole flight)", field="period_s")
+    return p
+
+
+def outside_raster(pop: Population, grid: GridSpec) -> np.ndarray | None:
+    """Which 2 x 2 sub-cells of the grid (shape ``(2 H, 2 W)``, the sub-cells of ``area_above``) lie outside the
+    population raster's extent; None when none does.
+
+    The raster's nodata cells are no people by the reader's rule (:func:`gisnoise.exposure.read_population`), so
+    only its extent is judged.  When the grid's boundary, at sub-cell spacing, maps inside the raster the whole grid
+    does (a projection maps the grid's inside within the image of its boundary).
+    """
+    t = grid.transform
+    h2, w2 = 2 * grid.height, 2 * grid.width
+    tr = transformer(grid.crs, pop.crs)
+    inv = ~pop.transform
+    ph, pw = pop.counts.shape
+
+    def out(col2: np.ndarray, row2: np.ndarray) -> np.ndarray:
+        x, y = t.c + t.a * (col2 + 0.5) / 2, t.f + t.e * (row2 + 0.5) / 2
+        c, r = apply_affine(inv, *tr.transform(x, y))
+        c, r = np.asarray(c), np.asarray(r)
+        with np.errstate(invalid="ignore"):
+            return np.asarray(~((c >= 0) & (c < pw) & (r >= 0) & (r < ph)))
+
+    cols, rows = np.arange(w2, dtype=float), np.arange(h2, dtype=float)
+    edge_c = np.concatenate([cols, cols, np.zeros(h2), np.full(h2, w2 - 1.0)])
+    edge_r = np.concatenate([np.zeros(w2), np.full(w2, h2 - 1.0), rows, rows])
+    if not out(edge_c, edge_r).any():
+        return None
+    rr, cc = np.meshgrid(rows, cols, indexing="ij")
+    return out(cc.ravel(), rr.ravel()).reshape(h2, w2)
+
+
+def uncovered_area(band: np.ndarray, grid: GridSpec, outside: np.ndarray | None, levels: Sequence[float]
+                   ) -> list[float]:
+    """Area (m^2) above each level on the sub-cells ``outside`` the population raster (:func:`outside_raster`):
+    the rule of :func:`gisnoise.exposure.area_above` (each sub-cell linear, :func:`~gisnoise.exposure.level_field`)
+    on those sub-cells alone, so it is a part of that area."""
+    if outside is None or not outside.any():
+        return [0.0 for _ in levels]
+    t = grid.transform
+    rx, ry = grid.resolution
+    r2, c2 = np.nonzero(outside)
+    x, y = t.c + t.a * (c2 + 0.5) / 2, t.f + t.e * (r2 + 0.5) / 2
+    L, gx, gy = level_field(band, grid, x, y)
+    side = 0.5 * math.sqrt(rx * ry)
+    with np.errstate(invalid="ignore"):  # a square whose highest level lies below every level adds nothing
+        ok = L + 0.5 * side * (np.abs(gx) + np.abs(gy)) >= min(levels)
+    return [float(np.sum(fraction_above(L[ok], gx[ok], gy[ok], side, e))) * rx * ry / 4.0 for e in levels]
+
+
+def pad_outside(pop: Population, lonlat: tuple[float, float]) -> bool:
+    """Whether a point (lon, lat, deg) lies outside the population raster's extent."""
+    from gisnoise.geo import WGS84
+
+    x, y = transformer(WGS84, pop.crs).transform(lonlat[0], lonlat[1])
+    c, r = apply_affine(~pop.transform, np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    ph, pw = pop.counts.shape
+    return not (math.isfinite(float(c)) and math.isfinite(float(r)) and 0 <= float(c) < pw and 0 <= float(r) < ph)
+
+
+def _score(r: Mapping[str, Any], key: str) -> tuple[float, float, float]:
+    """The row's ranking key: people above the ranking level, person-dB, peak dwelling level (None: lowest),
+    each rounded to its step of :data:`TIE_STEPS`."""
+    people = r["people_above"][key] if "people_above" in r else (r.get("residents_above") or {}).get(key, 0.0)
+    peak = r.get("peak_dwelling_db")
+
+    def step(v: float, s: float) -> float:
+        return v if not math.isfinite(v) else math.floor(v / s + 0.5) * s
+
+    return (step(float(people), TIE_STEPS[0]), step(float(r.get("person_db", 0.0)), TIE_STEPS[1]),
+            -math.inf if peak is None else step(float(peak), TIE_STEPS[2]))
+
+
+def rank_rows(rows: Sequence[dict[str, Any]], rank_key: str) -> list[dict[str, Any]]:
+    """The rows best first (by :func:`_score`, then by name), each with ``rank`` (routes with equal scores share
+    the rank, the next rank skips: 1, 1, 3) and ``tie`` (true when it shares its rank).  The order of the
+    arguments never decides.
+
+    Examples
+    --------
+    >>> rows = [{"route": "b", "people_above": {"55": 10.2}, "person_db": 3.0},
+    ...         {"route": "a", "people_above": {"55": 9.9}, "person_db": 3.4},
+    ...         {"route": "c", "people_above": {"55": 10.6}, "person_db": 0.0}]
+    >>> [(r["route"], r["rank"], r["tie"]) for r in rank_rows(rows, "55")]
+    [('a', 1, True), ('b', 1, True), ('c', 3, False)]
+    """
+    ranked = sorted(rows, key=lambda r: (_score(r, rank_key), str(r["route"])))
+    for i, r in enumerate(ranked):
+        same = i > 0 and _score(ranked[i - 1], rank_key) == _score(r, rank_key)
+        r["rank"] = ranked[i - 1]["rank"] if same else i + 1
+    counts: dict[int, int] = {}
+    for r in ranked:
+        counts[r["rank"]] = counts.get(r["rank"], 0) + 1
+    for r in ranked:
+        r["tie"] = counts[r["rank"]] > 1
+    return ranked
