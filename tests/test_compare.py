@@ -354,35 +354,40 @@ def test_a_population_raster_that_covers_part_of_a_zone_makes_its_counts_lower_b
     """A raster of 0.01 people per m^2 that ends 200 m east of a route's track.  The route's zone above a level is
     the stadium of half-width r around its 2 km track (r from LAmax = 70 - 20 lg(sqrt(r^2 + 58.5^2) / 40)); the part
     east of x = 200 m is L (r - 200) plus the circle's segment beyond 200 m, r^2 acos(200/r) - 200 sqrt(r^2 - 200^2).
-    The warning's share is that part over the stadium 2 r L + pi r^2 (34.6 % above 45 dB(A)); the people above 45
-    dB(A) are the density times the rest, flagged lower bounds, as those above 50 and 55 (3.6 % above 55); a route
-    1 km west lies inside the raster: no flag."""
-    d, length, dens = 200.0, 2000.0, 0.01
+    The warning's share is that part over the stadium 2 r L + pi r^2 (34.6 % above 45 dB(A), 3.6 % above 55), to
+    within the cell-centre rule's resolution (half a 20 m cell along the zone's uncovered boundary, L + 2 r acos(200/r);
+    the raster's edge lies on cell edges); the people above 45 dB(A) are the density times the rest, flagged lower
+    bounds, as those above 50 and 55; a route 1 km west lies inside the raster: no flag."""
+    d, length, dens, cell = 200.0, 2000.0, 0.01, 20.0
     w = int((d + 2500.0) / 50.0)
     with rasterio.open(tmp_path / "half.tif", "w", driver="GTiff", width=w, height=80, count=1, dtype="float32",
                        crs=CRS.from_user_input(TMERC).to_wkt(), transform=Affine(50.0, 0, -2500.0, 0, -50.0, 2000.0)) as f:
         f.write(np.full((80, w), dens * 2500.0, np.float32), 1)
     pop = read_population(tmp_path / "half.tif")
-    grid = GridSpec(TMERC, Affine(20.0, 0, -1800.0, 0, -20.0, 1800.0), 130, 180)  # holds both 45 dB(A) zones
+    grid = GridSpec(TMERC, Affine(cell, 0, -1800.0, 0, -cell, 1800.0), 130, 180)  # holds both 45 dB(A) zones
     cmp = compare_routes([northwards(0.0), northwards(-1000.0)], [omni()], population=pop, names=["over", "west"],
                          ground_h=0.0, grid=grid)
     rows = {r["route"]: r for r in cmp.doc["ranking"]}
 
     def uncovered(level):
         r = math.sqrt((40.0 * 10 ** ((G0 - level) / 20)) ** 2 - (HEIGHT - HR) ** 2)
-        part = length * max(r - d, 0.0) + (r * r * math.acos(min(d / r, 1.0)) - d * math.sqrt(max(r * r - d * d, 0.0)))
-        return part / (2 * r * length + math.pi * r * r), 2 * r * length + math.pi * r * r
+        area = 2 * r * length + math.pi * r * r
+        part = length * (r - d) + r * r * math.acos(d / r) - d * math.sqrt(r * r - d * d)
+        return part / area, area, 0.5 * cell * (length + 2 * r * math.acos(d / r)) / area
 
-    share45, area45 = uncovered(45.0)
+    share45, area45, tol45 = uncovered(45.0)
+    share55, _, tol55 = uncovered(55.0)
     over = rows["over"]
-    assert over["population_uncovered_share"] == pytest.approx(share45, abs=1e-3)
-    assert over["uncovered_area_m2"]["55"] / over["area_above_m2"]["55"] == pytest.approx(uncovered(55.0)[0], abs=1e-3)
+    assert over["population_uncovered_share"] == over["uncovered_share"]["45"]
+    assert over["uncovered_share"]["45"] == pytest.approx(share45, abs=tol45)  # 0.3460 +- 0.0087
+    assert over["uncovered_share"]["55"] == pytest.approx(share55, abs=tol55)  # 0.0357 +- 0.0214
     assert over["people_above"]["45"] == pytest.approx(dens * area45 * (1 - share45), rel=2e-3)
     assert over["lower_bound"] == {"45": True, "50": True, "55": True, "60": False, "65": False}
     assert rows["west"]["population_uncovered_share"] == 0.0 and not any(rows["west"]["lower_bound"].values())
     (msg,) = [m for m in cmp.doc["warnings"] if "population raster" in m]
-    assert msg.startswith("over: the population raster (") and f"does not cover {100 * share45:.1f} % of its area " \
-        "above 45 dB(A) LAmax" in msg and "people above 45, 50, 55 dB(A) are lower bounds" in msg
+    got = 100 * over["population_uncovered_share"]
+    assert msg.startswith(f"over: the population raster (half.tif) does not cover {got:.1f} % of its area above 45 "
+                          "dB(A) LAmax") and "people above 45, 50, 55 dB(A) are lower bounds" in msg
 
 
 def test_lower_bounds_are_flagged_per_route_and_level_and_starred_in_the_table(tmp_path):

@@ -1,4 +1,4 @@
-"""The comparison's rules: one ground, one LAeq period, the population's reach, ranks with ties.
+"""The comparison's rules: one ground, one LAeq period, pads within the population raster, ranks with ties.
 
 Private helpers of :mod:`gisnoise.planning.compare`; the rules are stated in ``docs/planning.md``.
 """
@@ -12,17 +12,10 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.exposure import Population, fraction_above, level_field
+from gisnoise.exposure import Population
 from gisnoise.flight import Trajectory, ground_from_track
-from gisnoise.geo import GridSpec, apply_affine, transformer
+from gisnoise.geo import apply_affine, transformer
 from gisnoise.limits import GROUND_TOLERANCE_M, check_receivers
-
-UNCOVERED_SHARE_LIMIT = 0.01
-"""Share of a level's area outside the population raster above which the people above it are a lower bound.
-
-1 %: at an even density the count misses about that share of its people, as much as the counts' own
-discretization error on the zone's boundary (sub-cells of half a map cell); a raster that ends exactly at a
-zone's edge leaves a few boundary sub-cells uncovered and stays below it."""
 
 TIE_STEPS = (1.0, 1.0, 0.1)
 """The steps to which routes are scored before ranking: people (or residents) above the ranking level to the whole
@@ -108,54 +101,6 @@ def common_period(trajs: Mapping[str, Trajectory], metric: str, period_s: float 
         raise InputError(f"period_s: {p:g} s is shorter than route {longest}'s duration {d:.1f} s (LAeq over a common "
                          "period holds every route's whole flight)", field="period_s")
     return p
-
-
-def outside_raster(pop: Population, grid: GridSpec) -> np.ndarray | None:
-    """Which 2 x 2 sub-cells of the grid (shape ``(2 H, 2 W)``, the sub-cells of ``area_above``) lie outside the
-    population raster's extent; None when none does.
-
-    The raster's nodata cells are no people by the reader's rule (:func:`gisnoise.exposure.read_population`), so
-    only its extent is judged.  When the grid's boundary, at sub-cell spacing, maps inside the raster the whole grid
-    does (a projection maps the grid's inside within the image of its boundary).
-    """
-    t = grid.transform
-    h2, w2 = 2 * grid.height, 2 * grid.width
-    tr = transformer(grid.crs, pop.crs)
-    inv = ~pop.transform
-    ph, pw = pop.counts.shape
-
-    def out(col2: np.ndarray, row2: np.ndarray) -> np.ndarray:
-        x, y = t.c + t.a * (col2 + 0.5) / 2, t.f + t.e * (row2 + 0.5) / 2
-        c, r = apply_affine(inv, *tr.transform(x, y))
-        c, r = np.asarray(c), np.asarray(r)
-        with np.errstate(invalid="ignore"):
-            return np.asarray(~((c >= 0) & (c < pw) & (r >= 0) & (r < ph)))
-
-    cols, rows = np.arange(w2, dtype=float), np.arange(h2, dtype=float)
-    edge_c = np.concatenate([cols, cols, np.zeros(h2), np.full(h2, w2 - 1.0)])
-    edge_r = np.concatenate([np.zeros(w2), np.full(w2, h2 - 1.0), rows, rows])
-    if not out(edge_c, edge_r).any():
-        return None
-    rr, cc = np.meshgrid(rows, cols, indexing="ij")
-    return out(cc.ravel(), rr.ravel()).reshape(h2, w2)
-
-
-def uncovered_area(band: np.ndarray, grid: GridSpec, outside: np.ndarray | None, levels: Sequence[float]
-                   ) -> list[float]:
-    """Area (m^2) above each level on the sub-cells ``outside`` the population raster (:func:`outside_raster`):
-    the rule of :func:`gisnoise.exposure.area_above` (each sub-cell linear, :func:`~gisnoise.exposure.level_field`)
-    on those sub-cells alone, so it is a part of that area."""
-    if outside is None or not outside.any():
-        return [0.0 for _ in levels]
-    t = grid.transform
-    rx, ry = grid.resolution
-    r2, c2 = np.nonzero(outside)
-    x, y = t.c + t.a * (c2 + 0.5) / 2, t.f + t.e * (r2 + 0.5) / 2
-    L, gx, gy = level_field(band, grid, x, y)
-    side = 0.5 * math.sqrt(rx * ry)
-    with np.errstate(invalid="ignore"):  # a square whose highest level lies below every level adds nothing
-        ok = L + 0.5 * side * (np.abs(gx) + np.abs(gy)) >= min(levels)
-    return [float(np.sum(fraction_above(L[ok], gx[ok], gy[ok], side, e))) * rx * ry / 4.0 for e in levels]
 
 
 def pad_outside(pop: Population, lonlat: tuple[float, float]) -> bool:

@@ -37,6 +37,7 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.exposure import (
+    UNCOVERED_SHARE,
     Buildings,
     LevelsRaster,
     Population,
@@ -44,6 +45,7 @@ from gisnoise.exposure import (
     map_exposure,
     population_points,
     population_scores,
+    uncovered_shares,
 )
 from gisnoise.flight import Trajectory, read_route
 from gisnoise.geo import GridSpec, grid_for_points
@@ -64,12 +66,9 @@ from gisnoise.maps.grids import resolution_warning_of
 from gisnoise.maps.pipeline import flight_height
 from gisnoise.planning._rules import (
     TIE_STEPS,
-    UNCOVERED_SHARE_LIMIT,
     common_ground,
     common_period,
-    outside_raster,
     rank_rows,
-    uncovered_area,
 )
 
 __all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
@@ -175,9 +174,10 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         Serving every phase of every route.
     population, buildings : optional
         Exposure layers (:func:`gisnoise.exposure.read_population`, :func:`~gisnoise.exposure.read_buildings`);
-        at least one.  A route whose area above a level lies more than 1 % outside the population raster
-        (:data:`~gisnoise.planning._rules.UNCOVERED_SHARE_LIMIT`) is named in a warning with that share, and its
-        people above that level are flagged ``lower_bound``: outside the raster people are unknown, not none.
+        at least one.  A route whose area above a level lies more than 1 % outside the population raster (the
+        exposure's rule: :func:`gisnoise.exposure.uncovered_shares`, :data:`~gisnoise.exposure.UNCOVERED_SHARE`) is
+        named in a warning with that share, and its people above that level are flagged ``lower_bound``: outside
+        the raster people are unknown, not none.
     metric : str
         ``LAmax``, ``LAeq`` or ``SEL``: the metric judged.
     levels : sequence of float
@@ -206,7 +206,7 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     -------
     Comparison
         Its ``doc`` (``comparison.json``): ``ranking`` (rows best first: ``rank``, ``tie``, ``people_above``,
-        ``lower_bound`` and ``uncovered_area_m2`` per level, ``population_uncovered_share``, ``person_db``,
+        ``lower_bound`` and ``uncovered_share`` per level, ``population_uncovered_share``, ``person_db``,
         ...), ``period_s``, ``ground_h_m``, the rules and ``warnings``.
     """
     if len(routes) < 2:
@@ -252,7 +252,6 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         n: flight_height(t, ground_h, None, 0.0, receiver_height) for n, t in trajs.items()}, "route")
     warnings += [coarse] if coarse is not None else []
     pts = population_points(population, grid) if population is not None else None
-    off_raster = outside_raster(population, grid) if population is not None else None
     bands: dict[str, np.ndarray] = {}
     rows: list[dict[str, Any]] = []
     for n, traj in trajs.items():
@@ -262,8 +261,10 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         row["route"] = n
         bands[n] = band
         rows.append(row)
+    shares = uncovered_shares(bands, grid, population, {n: lv for n in bands}) if population is not None else None
     for row in rows:
-        warnings += _lower_bounds(row, bands[row["route"]], grid, lv, metric, off_raster, population)
+        warnings += _lower_bounds(row, bands[row["route"]], lv, metric, population,
+                                  None if shares is None else shares[row["route"]])
     ranked = rank_rows(rows, f"{float(rank_level_db):g}")
     over = f" over T = {period:g} s" if period is not None else ""
     doc = {"schema": COMPARISON_SCHEMA, "metric": metric, "levels_db": lv, "rank_level_db": float(rank_level_db),
@@ -280,8 +281,8 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
                "given (period_s, --period)"),
            "lower_bound_rule": "a route's counts above a level are a lower bound (lower_bound: true) when its "
                                "values at the grid's edge (or next to cells without a level) reach that level, "
-                               f"or when more than {UNCOVERED_SHARE_LIMIT:.0%} of its area above that level lies "
-                               "outside the population raster (people above it)",
+                               f"or when the population raster leaves more than {UNCOVERED_SHARE:.0%} of its area "
+                               "above that level uncovered (people above it; the exposure's rule, by cell centres)",
            "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked,
            "warnings": warnings}
     if outside:
@@ -289,29 +290,26 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     return Comparison(nm, grid, bands, metric, doc, trajs)
 
 
-def _lower_bounds(row: dict[str, Any], band: np.ndarray, grid: GridSpec, levels: Sequence[float], metric: str,
-                  off_raster: np.ndarray | None, population: Population | None) -> list[str]:
-    """Set the row's ``lower_bound``, ``uncovered_area_m2`` and ``population_uncovered_share`` (the share of its
-    area above the lowest level outside the population raster) and return the warnings of a cut grid edge and of
-    a raster that does not cover the route."""
+def _lower_bounds(row: dict[str, Any], band: np.ndarray, levels: Sequence[float], metric: str,
+                  population: Population | None, shares: list[float | None] | None) -> list[str]:
+    """Set the row's ``lower_bound``, ``uncovered_share`` (per level: the share of its area above the level that the
+    population raster does not cover, None where no cell reaches it) and ``population_uncovered_share`` (that of the
+    lowest level), and return the warnings of a cut grid edge and of a raster that does not cover the route."""
     name = row["route"]
     top = edge_max(band)  # the outer cells and those next to a cell without a level, as a map's contours
     flags = {f"{v:g}": bool(np.isfinite(top) and top >= v) for v in levels}
     said = [w for w in [_clipped(name, band, levels, metric)] if w is not None]
-    if population is not None:
-        gone = uncovered_area(band, grid, off_raster, levels)
-        area = [row["area_above_m2"][f"{v:g}"] for v in levels]
-        share = [g / a if a > 0 else 0.0 for g, a in zip(gone, area, strict=True)]
-        row["uncovered_area_m2"] = {f"{v:g}": g for v, g in zip(levels, gone, strict=True)}
-        row["population_uncovered_share"] = share[0]
-        cut = [v for v, s in zip(levels, share, strict=True) if s > UNCOVERED_SHARE_LIMIT]
+    if population is not None and shares is not None:
+        row["uncovered_share"] = {f"{v:g}": s for v, s in zip(levels, shares, strict=True)}
+        row["population_uncovered_share"] = shares[0]
+        cut = [v for v, s in zip(levels, shares, strict=True) if s is not None and s > UNCOVERED_SHARE]
         for v in cut:
             flags[f"{v:g}"] = True
         if cut:
-            said.append(f"{name}: the population raster ({population.source}) does not cover {100 * share[0]:.1f} % "
-                        f"of its area above {levels[0]:g} dB(A) {metric}: people there are unknown, not none; the "
-                        f"people above {', '.join(f'{v:g}' for v in cut)} dB(A) are lower bounds (a raster that "
-                        "covers the route's zone counts them)")
+            said.append(f"{name}: the population raster ({Path(population.source).name}) does not cover "
+                        f"{100 * (shares[0] or 0.0):.1f} % of its area above {levels[0]:g} dB(A) {metric}: people "
+                        f"there are unknown, not none; the people above {', '.join(f'{v:g}' for v in cut)} dB(A) "
+                        "are lower bounds (a raster that covers the route's zone counts them)")
     row["lower_bound"] = flags
     return said
 

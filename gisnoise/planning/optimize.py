@@ -36,16 +36,24 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.exposure import Buildings, Population, point_levels, population_points
+from gisnoise.exposure import (
+    UNCOVERED_SHARE,
+    Buildings,
+    Population,
+    point_levels,
+    population_coverage,
+    population_points,
+)
 from gisnoise.flight import GRAVITY, WAYPOINTS_SCHEMA, VehicleModel, route_from_waypoints
 from gisnoise.geo import WGS84, GridSpec, LocalFrame, transformer, utm_crs
 from gisnoise.maps import CardSet
-from gisnoise.planning._rules import UNCOVERED_SHARE_LIMIT, outside_raster, pad_outside
+from gisnoise.planning._rules import pad_outside
 from gisnoise.planning.compare import Comparison, compare_routes
 
 __all__ = ["Optimized", "optimize_route", "corridor_half_width", "waypoints_geojson"]
@@ -294,13 +302,12 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
     avoid_grown = shapely.union_all(avoid_m) if avoid_m else None
     people = _people_field(grid, population, buildings)
     warnings: list[str] = []
-    share = 0.0  # of the search area (its cells' 2 x 2 sub-cells) outside the population raster
-    off = outside_raster(population, grid) if population is not None else None
-    if off is not None and population is not None:
-        ins = np.repeat(np.repeat(inside, 2, axis=0), 2, axis=1)
-        share = float(np.sum(off & ins) / max(int(np.sum(ins)), 1))
-        if share > UNCOVERED_SHARE_LIMIT:
-            warnings.append(f"route optimize: the population raster ({population.source}) does not cover "
+    share = 0.0  # of the search area's cells whose centre the population raster does not cover
+    if population is not None:
+        rows_in, cols_in = np.nonzero(inside)
+        share = float(np.mean(~population_coverage(population, grid, rows_in, cols_in))) if rows_in.size else 0.0
+        if share > UNCOVERED_SHARE:
+            warnings.append(f"route optimize: the population raster ({Path(population.source).name}) does not cover "
                             f"{100 * share:.1f} % of the search area (the ellipse the detour limit allows): the search "
                             "counts nobody there, so the route may be drawn into it; give a raster that covers it")
     cost = _cost_field(people, resolution_m, max(r, resolution_m))
