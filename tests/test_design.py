@@ -125,6 +125,59 @@ def test_bad_plans_are_refused_naming_the_field(change, fld):
     assert fld in str(err.value)
 
 
+def test_a_displacement_limit_beyond_the_patterns_reach_is_refused(model):
+    """Every point of the racetrack lies within straight/2 + radius of its centre; m1 stands at the centre.  Moved
+    east along the long axis by that plus the signal-to-noise distance, it hears nothing; 20 m less, it hears the
+    turn's far end.  A limit beyond that reach is refused naming the field (1e9 m put m1 1e8 m away, n_usable 0)."""
+    plan = model.plan
+    pat = plan.doc["pattern"]
+    assert (plan.base.mic_e[0], plan.base.mic_n[0]) == tuple(pat["centre"]) == (0.0, 0.0) and pat["heading_deg"] == 90
+    reach = pat["straight_m"] / 2 + pat["radius_m"] + plan.max_distance_m
+    for shift, heard in ((reach + 1.0, False), (reach - 20.0, True)):
+        d = Design(plan.base.mic_e + np.array([shift, 0.0, 0.0]), plan.base.mic_n, plan.base.altitudes)
+        assert (evaluate(model, d).n_usable_per_mic["m1"] > 0) is heard, shift
+    mics = copy.deepcopy(plan_doc()["microphones"])
+    mics[0]["max_shift_m"] = 1e9
+    with pytest.raises(DesignError) as err:
+        make_plan(microphones=mics)
+    assert err.value.field == "microphones[0].max_shift_m"
+    msg = str(err.value)
+    assert "\n" not in msg and f"beyond {reach:.0f} m" in msg
+    assert f"signal-to-noise distance ({plan.max_distance_m:.0f} m)" in msg
+    mics[0]["max_shift_m"] = math.floor(reach) - 1.0
+    assert make_plan(microphones=mics).max_shift[0, 0] == math.floor(reach) - 1.0
+    with pytest.raises(DesignError) as err:
+        make_plan(study={"displacements_m": [0, 100, 5000]})
+    assert err.value.field == "study.displacements_m"
+
+
+def test_a_deaf_microphone_and_a_base_outside_its_range_are_warned(tmp_path):
+    """m4 at 3 km east, fixed: 2.7 km from the pattern's nearest point, beyond the signal-to-noise distance, so it
+    hears nothing in the base or any optimum; repetition 0 based at 20 m, below its 35 m minimum.  Both are said on
+    the console (also with -q), in design.json and, for the microphone, in layout.geojson."""
+    doc = plan_doc(optimizer={"maxiter": 3, "popsize": 5}, study=None, verify={"seeds": 0})
+    doc["altitudes"][0] = {"base_m": 20.0, "min_m": 35.0, "max_m": 200.0}
+    doc["microphones"].append({"id": "m4", "e": 3000.0, "n": 0.0, "max_shift_m": 0.0})
+    p = tmp_path / "plan.json"
+    p.write_text(json.dumps(doc), encoding="utf-8")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(cli, ["-q", "design", str(p), "--out", str(out), "--no-report"])
+    assert r.exit_code == 0, r.output
+    res = json.loads((out / "design.json").read_text())
+    said = [ln.removeprefix("warning: ") for ln in r.stderr.splitlines() if ln.startswith("warning: ")]
+    assert said == res["warnings"] and len(said) == 4
+    assert said[0].startswith("altitudes[0].base_m (20 m) is below altitudes[0].min_m (35 m)")
+    assert res["base"]["feasible"] is False and res["base"]["altitudes_m"][0] == 20.0
+    for label, w in zip(("the base design", "the paper optimum", "the d-optimal optimum"), said[1:], strict=True):
+        assert w.startswith(f"{label} has microphone 'm4' at e 3000 m, n 0 m") and "no usable sample" in w
+    gj = json.loads((out / "layout.geojson").read_text())
+    assert gj["warnings"] == res["warnings"]
+    for f in gj["features"]:
+        if f["properties"]["kind"] == "microphone":
+            deaf = f["properties"]["id"] == "m4"
+            assert ("warning" in f["properties"]) is deaf and (f["properties"]["n_usable"] == 0) is deaf
+
+
 def test_exclusions_covering_every_allowed_position_are_refused():
     frame = LocalFrame(52.3186, 10.5564, 125.0)
     # m2 may move +-200 m about (40, 20): a polygon over (-165..245) x (-185..225) covers all of it,
@@ -328,6 +381,7 @@ def test_cli_writes_layout_variables_and_report(tmp_path):
         assert (out / name).is_file(), name
     res = json.loads((out / "design.json").read_text())
     assert res["schema"] == "gisnoise/design-result/1"
+    assert res["warnings"] == [] and "warning" not in r.stderr
     assert set(res["optima"]) == {"paper", "d-optimal"}
     plan = load_plan(PLAN)
     base = evaluate(DesignModel.build(plan))
@@ -340,6 +394,7 @@ def test_cli_writes_layout_variables_and_report(tmp_path):
         assert np.all(v >= lo - 1e-9) and np.all(v <= hi + 1e-9)
     assert len(res["study"]) == 2 and res["verify"]["designs"]["d-optimal"]["n_fits"] == 2
     gj = json.loads((out / "layout.geojson").read_text())
+    assert gj["warnings"] == [] and not any("warning" in f["properties"] for f in gj["features"])
     kinds = [(f["properties"]["kind"], f["properties"]["design"]) for f in gj["features"]]
     assert kinds.count(("microphone", "base")) == 3 and kinds.count(("track", "d-optimal")) == 1
     # microphone coordinates are lon/lat of the design's local positions

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from gisnoise.cli.options import progress
+from gisnoise.cli.options import echo_warnings, progress
 
 
 @click.command("design")
@@ -44,6 +44,7 @@ def command(ctx: click.Context, plan: str, out: str, objectives: tuple[str, ...]
         res = run_design(p, objectives=list(objectives) or None, with_study=study, verify_seeds=verify_seeds,
                          progress=lambda f: update(100.0 * f))
     files = write_outputs(res, out, report=not no_report)
+    echo_warnings(res.warnings)  # -q keeps them
     if not (ctx.find_root().obj or {}).get("quiet"):
         b = res.base
         click.echo(f"base: max |corr| {b.max_abs_corr:.3f}, log det {b.log_det_fisher:.2f}, altitudes "

@@ -277,8 +277,12 @@ def resolve_plan(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[str] | N
     Errors are :class:`~gisnoise.errors.DesignError` naming the field
     (``altitudes[1].min_m``, ``microphones[0].max_shift_m``, ``exclusions``, ...).
     An infeasible plan is refused: an altitude range with its minimum above its
-    maximum, a negative displacement limit, or exclusion polygons covering every
-    position a microphone may take.
+    maximum, a negative displacement limit, exclusion polygons covering every
+    position a microphone may take, or a displacement limit (also a study's) that lets a
+    microphone leave the pattern's reach (farther than the signal-to-noise distance from
+    every point of the pattern, :func:`_reach`).  A base altitude outside its own range is
+    not refused: the base is the campaign as flown or planned, the range what the next one
+    may use (:class:`~gisnoise.design.result.DesignResult` warns).
 
     Parameters
     ----------
@@ -487,7 +491,42 @@ def resolve_plan(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[str] | N
     if dmax is None:
         dmax = snr_distance(card, plan.background_db + plan.margin_db,
                             power_w=float(out["vehicle"]["power"]["cruise_w"]))
+    _check_reach(out, base, shift, float(dmax))
     return dataclasses.replace(plan, max_distance_m=float(dmax))
+
+
+def _reach(doc: Mapping[str, Any], e: float, n: float, dmax: float) -> float:
+    """How far a microphone at (``e``, ``n``) m may usefully move, m: beyond, it cannot hear the pattern.
+
+    Every point of the racetrack lies within ``straight_m / 2 + radius_m`` of its centre (horizontally);
+    a microphone moved along one axis by more than its distance from the centre plus that plus the
+    signal-to-noise distance ``dmax`` is farther than ``dmax`` from every point of the pattern, where the
+    UAV's level has fallen below the background plus the margin: no sample it could record would count.
+    """
+    pat = doc["pattern"]
+    ce, cn = (float(v) for v in pat["centre"])
+    return float(math.hypot(e - ce, n - cn) + float(pat["straight_m"]) / 2.0 + float(pat["radius_m"]) + dmax)
+
+
+def _check_reach(doc: Mapping[str, Any], base: Design, shift: np.ndarray, dmax: float) -> None:
+    """Refuse a displacement limit (or a study's displacement) that lets a microphone leave the pattern's reach."""
+    reach = [_reach(doc, float(base.mic_e[i]), float(base.mic_n[i]), dmax) for i in range(len(base.mic_e))]
+    for i, m in enumerate(doc["microphones"]):
+        if float(np.max(shift[i])) > reach[i]:
+            raise DesignError(
+                f"plan: field 'microphones[{i}].max_shift_m' ({float(np.max(shift[i])):g} m) lets microphone "
+                f"{m['id']!r} move beyond {reach[i]:.0f} m, where it stands farther than the signal-to-noise distance "
+                f"({dmax:.0f} m) from every point of the pattern: the UAV's level falls below the background plus the "
+                f"margin there and no sample it records would count; give at most {reach[i]:.0f} m",
+                field=f"microphones[{i}].max_shift_m")
+    st = doc.get("study")
+    if st and max(st["displacements_m"]) > min(reach):
+        i = int(np.argmin(reach))
+        raise DesignError(
+            f"plan: field 'study.displacements_m' ({max(st['displacements_m']):g} m) lets microphone "
+            f"{doc['microphones'][i]['id']!r} move beyond {reach[i]:.0f} m, where it stands farther than the "
+            f"signal-to-noise distance ({dmax:.0f} m) from every point of the pattern; give at most {reach[i]:.0f} m",
+            field="study.displacements_m")
 
 
 def _enu_polygon(poly: list[list[list[float]]], frame: LocalFrame, h0: float) -> Any:

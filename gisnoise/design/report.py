@@ -326,6 +326,7 @@ def _html(result: DesignResult, doc: dict[str, Any], ratios: dict[str, Any], fil
 table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}
 th{{background:#eee}}img{{max-width:100%}}</style></head><body>
 <h1>Measurement design: {e(plan.doc['name'])}</h1>
+{''.join(f"<p><b>Warning:</b> {e(w)}.</p>" for w in doc.get("warnings") or [])}
 <p>{e(plan.doc.get('description', ''))}</p>
 <p>Card {e(plan.card.id)} (ansatz {e(plan.card.ansatz)}); pattern: racetrack, {plan.doc['pattern']['straight_m']:g} m
 straights, {plan.doc['pattern']['radius_m']:g} m turns at {plan.doc['pattern']['speed_m_s']:g} m/s, {plan.n_reps}
