@@ -212,6 +212,8 @@ def test_each_injected_effect_is_named_with_held_out_shrinkage(effect):
     assert v["rms_db_holdout_extended"] < v["rms_db_holdout_baseline"]
     top = next(e for e in r["effects"] if e["name"] == effect)
     assert top["rank"] == 1 and top["significant"]
+    # the effect explains the gap: no microphone or flight is left with a level offset
+    assert v["level_offsets"] == [], v["level_offsets"]
 
 
 def test_bank_angle_segments_lie_in_the_simulated_turns():
@@ -413,6 +415,7 @@ def test_ground_plates_that_stood_above_grass_are_found_from_the_band_levels():
         assert est[m]["listed_m"] == 0.0
         assert est[m]["height_m"] == pytest.approx(h, abs=0.3)
         assert est[m]["contradicts"]
+        assert est[m]["at_search_limit"] is False and 0.0 < est[m]["std_m"] < 0.3  # an estimate, not a bound
     sentence = next(t for t in v["metadata_contradicted"] if "m2" in t)
     assert "comb pattern" in sentence and "not a ground plate" in sentence
     assert f"about {est['m2']['height_m']:.1f} m" in sentence

@@ -66,6 +66,8 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
                        f"{v['rms_db_holdout_extended']:.2f} dB, shrinkage {v['holdout_shrinkage_pct']:.1f} %)")
         else:
             click.echo(f"verdict: no effect ({v['reason']})")
+        for sentence in v.get("level_offsets") or []:
+            click.echo(f"unexplained: {sentence}")
         click.echo(f"{len(diag.result['segments'])} segment(s) where the card misses; wrote {path}"
                    + ("" if no_report else f" and {folder / 'report.html'}"))
 

@@ -22,6 +22,7 @@ from gisnoise.diagnose.evidence import (
     register_evidence,
 )
 from gisnoise.diagnose.localization import (
+    REGIME_SHARE,
     localize,
     measurement_noise,
     sample_regimes,
@@ -34,6 +35,11 @@ from gisnoise.diagnose.metadata import (
     estimate_mic_heights,
     mic_clock_effect,
     shift_inputs,
+)
+from gisnoise.diagnose.offsets import (
+    OFFSET_Z,
+    level_offsets,
+    with_offsets,
 )
 from gisnoise.diagnose.report import (
     EFFECT_INPUT,
@@ -57,8 +63,8 @@ from gisnoise.diagnose.verdict import (
 )
 
 __all__ = ['CLOCK_RANGE_S', 'DIAGNOSIS_FILE', 'Diagnosis', 'EFFECT_INPUT', 'HEIGHT_RANGE_M', 'MAX_EFFECTS',
-           'MIN_IMPROVEMENT_DB2', 'SCHEMA', 'before_after_data', 'candidate_inputs', 'check_diagnosable', 'clocks_disagree', 'diagnose',
+           'MIN_IMPROVEMENT_DB2', 'OFFSET_Z', 'REGIME_SHARE', 'SCHEMA', 'before_after_data', 'candidate_inputs', 'check_diagnosable', 'clocks_disagree', 'diagnose',
            'estimate_clock_offsets', 'estimate_mic_heights', 'fold_labels', 'forward_selection', 'inputs_data',
-           'load_samples', 'localize', 'measurement_noise', 'metadata_overrides', 'mic_clock_effect',
+           'level_offsets', 'load_samples', 'localize', 'measurement_noise', 'metadata_overrides', 'mic_clock_effect',
            'register_evidence', 'residual_events', 'run_diagnosis', 'sample_regimes', 'shift_inputs',
-           'timeline_data', 'with_mic_heights', 'write_diagnosis', 'write_report']
+           'timeline_data', 'with_mic_heights', 'with_offsets', 'write_diagnosis', 'write_report']

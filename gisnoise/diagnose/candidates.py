@@ -148,7 +148,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
     ``overrides[name] = (effect, extra_inputs, notes, summary)`` tests a candidate in another form or with
     inputs estimated from the data instead of the campaign's metadata (the notes say why; ``summary``
     adds evidence computed with the estimate, e.g. the band-level held-out test);
-    a candidate whose fit fails keeps the error; ``tick(name)`` follows each candidate.  With
+    a candidate whose fit fails keeps the error; one the base ansatz holds already is not testable;
+    ``tick(name)`` follows each candidate.  With
     ``screen_alpha``, a candidate whose Wald test on all data does not reach it is not refitted in the
     folds (it cannot qualify; forward selection uses this to save time).  ``base_fixed`` are parameters of
     the base model held at their values (those an earlier effect of forward selection held, e.g. a reference
@@ -173,6 +174,8 @@ def _fit_candidates(names: Sequence[str], ctx: _Context, level: np.ndarray, x: d
         ok, why = _effects.check_testable(eff, xe)
         if nme == "background_event" and ok and not ev_list:
             ok, why = True, ""
+        if nme in ctx.base_model.name.split("+")[1:]:  # the baseline fits it already: nothing to add
+            ok, why = False, f"already in the card's ansatz {ctx.base_model.name!r}"
         if not ok:
             cand.testable, cand.reason = False, why
             tick(nme)

@@ -33,6 +33,12 @@ Attribution (:mod:`gisnoise.diagnose.candidates`, :mod:`gisnoise.diagnose.verdic
     Transient sound from other sources is found in the residual first
     (:mod:`gisnoise.diagnose.events`) and tested as the ``background_event`` candidate.
 
+Level offsets (:mod:`gisnoise.diagnose.offsets`)
+    A microphone or a flight heard louder or quieter throughout (a calibration error, a
+    recalibration between flights) is a constant no effect has the shape of: it is named
+    with its offset, measured by refitting the final model with one offset per flight and
+    per microphone that ``gisnoise fit``'s rule names.
+
 Shrinkage
     Baseline and extended RMS residual on the fitted data and on held-out data
     (out-of-fold predictions: every sample is predicted by a model not fitted to
@@ -58,6 +64,7 @@ import numpy as np
 from gisnoise.diagnose.candidates import CancelFn, _Context, _fit, _fit_candidates, _predict, fold_labels
 from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.localization import _statistics, localize, measurement_noise, sample_regimes
+from gisnoise.diagnose.offsets import level_offsets
 from gisnoise.diagnose.positions import (
     POSITION_RADIUS_M,
     correct_positions,
@@ -68,10 +75,10 @@ from gisnoise.diagnose.positions import (
 from gisnoise.diagnose.samples import load_samples
 from gisnoise.diagnose.selection import forward_selection, metadata_overrides
 from gisnoise.diagnose.verdict import MIN_IMPROVEMENT_DB2, _judge, _rms
-from gisnoise.errors import Cancelled, FitError, InputError
+from gisnoise.errors import Cancelled, FitError, InputError, NotIdentifiableError
 from gisnoise.jsonio import to_jsonable, write_json
 from gisnoise.measure import Samples, series_ids
-from gisnoise.model import HemisphereCard, ModelCard
+from gisnoise.model import Ansatz, HemisphereCard, ModelCard
 from gisnoise.model import effects as _effects
 
 __all__ = ["SCHEMA", "DIAGNOSIS_FILE", "Diagnosis", "check_diagnosable", "diagnose", "run_diagnosis",
@@ -133,7 +140,8 @@ def diagnose(campaign_or_samples: Any, card: ModelCard, *, progress: ProgressFn 
         ``{"schema", "card", "data", "noise_std_db", "baseline": {"rms_db", ...},
         "segments": [...], "statistics": {...}, "event_windows": [...],
         "effects": [{"name", "rank", "testable", "significant", "rms_db_fit",
-        "rms_db_holdout", "shrinkage_pct", ...}], "verdict": {"effect", "holdout_shrinkage_pct", ...}}``
+        "rms_db_holdout", "shrinkage_pct", ...}], "metadata": {..., "level_offsets"},
+        "verdict": {"effect", "holdout_shrinkage_pct", "level_offsets", ...}}``
     """
     return run_diagnosis(campaign_or_samples, card, progress=progress, cancel=cancel, **kw).result
 
@@ -246,6 +254,8 @@ def run_diagnosis(
         try:
             return _fit(level, xx, base, smp, rows_all, p0=card.p, cancel=cancel)
         except FitError as exc:
+            if isinstance(exc, NotIdentifiableError):
+                raise FitError(_not_identifiable(exc, base, level, xx, smp, cancel), field="card") from None
             raise FitError(f"diagnosis: the card's ansatz {base.name!r} cannot be refitted to these data: {exc}",
                            field="card") from None
 
@@ -309,10 +319,19 @@ def run_diagnosis(
                                                min_improvement_db2=min_improvement_db2)
     first = next((c for c in cands if c.name == verdict["effect"]), None)
     steps: list[dict[str, Any]] = []
+    last: list[Any] = []
     verdict["effects"] = [] if first is None else forward_selection(
         first, cands, ctx, level, ev_win, oof_base, fold, block, noise, level_alpha=level_alpha,
-        min_improvement_db2=min_improvement_db2, overrides=overrides, cancel=cancel, bias_z=bias_z, steps=steps)
+        min_improvement_db2=min_improvement_db2, overrides=overrides, cancel=cancel, bias_z=bias_z, steps=steps,
+        final=last)
     verdict["selection_steps"] = steps
+    # level offsets of one microphone or one flight, in what the model the diagnosis ends with leaves
+    if last and last[0].fit is not None and last[0].model is not None and last[0].x is not None:
+        offsets = level_offsets(s, level, last[0].x, last[0].model, last[0].fit, cancel=cancel)
+    else:
+        offsets = level_offsets(s, level, x, base, base_fit, cancel=cancel)
+    metadata["level_offsets"] = {k: offsets[k] for k in ("microphones", "flights")}
+    verdict["level_offsets"] = offsets["findings"]
 
     result = {
         "schema": SCHEMA,
@@ -344,6 +363,39 @@ def run_diagnosis(
             arrays[f"fit/{c.name}"] = c.fit.residuals
     tick("verdict")
     return Diagnosis(result=to_jsonable(result), samples=s, arrays=arrays)
+
+
+def _not_identifiable(exc: NotIdentifiableError, base: Ansatz, level: np.ndarray, x: dict[str, Any], s: Samples,
+                      cancel: CancelFn | None) -> str:
+    """Why the card's ansatz cannot be refitted: the data, or an ansatz without the level offset the data need.
+
+    An ansatz without ``p0`` (``paper``) makes ``p1 log10(P_el)`` the whole level; when the same ansatz with
+    the offset (``paper-offset``) fits the data with ``p0`` more than 3 corrected standard deviations from 0,
+    the data need the offset, and the message says so.  Otherwise it names both possibilities.
+    """
+    head = f"diagnosis: the card's ansatz {base.name!r} cannot be refitted to these data: {exc}"
+    first, *chain = base.name.split("+")
+    if "p0" in base.params:
+        return head
+    offset_name = "+".join([f"{first}-offset", *chain])
+    try:
+        off = _effects.get_ansatz(offset_name)
+        if "p0" not in off.params:
+            raise InputError(f"ansatz {offset_name!r} has no p0", field="ansatz")
+        res = _fit(level, x, off, s, np.arange(len(s)), cancel=cancel)
+    except Cancelled:
+        raise
+    except (FitError, InputError):
+        return (f"{head}; or the ansatz lacks a term these data need (a level offset p0, say, which "
+                f"{offset_name!r} would add)")
+    p0, sd = float(res.params["p0"]), float(res.std_corrected["p0"])
+    if not abs(p0) > 3.0 * sd:
+        return (f"{head}; or the ansatz lacks a term these data need ({offset_name!r}, with a level offset, fits "
+                f"them, but its p0 = {p0:.2f} dB (+/- {sd:.2f} dB) is not clearly needed)")
+    return (f"diagnosis: the card's ansatz {base.name!r} has no level offset p0, and these data need one: the same "
+            f"ansatz with it, {offset_name!r}, fits them with p0 = {p0:.2f} dB (+/- {sd:.2f} dB); without it "
+            f"p1 log10(P_el) must carry the whole level and the refit cannot tell {', '.join(exc.parameters)} apart. "
+            f"Diagnose a card of ansatz {offset_name!r} (gisnoise fit CAMPAIGN --ansatz {offset_name} writes one)")
 
 
 def write_diagnosis(diagnosis: Diagnosis, path: str | os.PathLike[str], *, campaign: str) -> Path:

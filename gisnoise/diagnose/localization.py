@@ -6,8 +6,8 @@ larger than the measurement noise explains (``z`` standard errors of a window
 mean), the samples are flagged and joined into segments.  The measurement noise
 per microphone is the robust spread of first differences of the residual: fast
 scatter is noise, slow structure is model error.  Each segment carries its flight
-regime, range and microphone; the residual is also summed up by regime,
-microphone, flight and geometry bins.
+regime (``mixed`` when none holds :data:`REGIME_SHARE` of it), range and microphone;
+the residual is also summed up by regime, microphone, flight and geometry bins.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 from gisnoise.diagnose._series import _intervals, _rolling_mean, _runs, _smoothed
 from gisnoise.measure import Samples, series_ids
 
-__all__ = ["measurement_noise", "sample_regimes", "localize"]
+__all__ = ["REGIME_SHARE", "measurement_noise", "sample_regimes", "localize"]
 
 TURN_BANK_DEG = 10.0
 """A horizontal-flight sample with |bank| above this is in a turn, deg."""
@@ -29,6 +29,8 @@ VERTICAL_SPEED_M_S = 1.5
 """Climb or sink when the vertical speed exceeds this, m/s."""
 HOVER_SPEED_M_S = 2.0
 """Hover when the ground speed is below this, m/s."""
+REGIME_SHARE = 0.8
+"""Share of a segment's samples one regime must hold to label it; below, the segment is ``mixed``."""
 
 
 def measurement_noise(resid: np.ndarray, sid: np.ndarray, t: np.ndarray, mic: np.ndarray) -> dict[str, float]:
@@ -118,8 +120,9 @@ def localize(
     -------
     segments : list of dict
         ``flight``, ``mic``, ``t0``, ``t1`` (emission time, s), ``rms_db``, ``mean_db``,
-        ``excess_db`` (mean smoothed residual), ``n``, ``regime``,
-        ``range`` (near or far), ``d_median_m``, ``bank_abs_mean_deg``.
+        ``excess_db`` (mean smoothed residual), ``n``, ``regime`` (the regime of at least
+        :data:`REGIME_SHARE` of its samples, else ``mixed``), ``regime_shares`` (share of each
+        regime, largest first), ``range`` (near or far), ``d_median_m``, ``bank_abs_mean_deg``.
     flagged : ndarray of bool
         Samples inside a segment.
     """
@@ -136,12 +139,15 @@ def localize(
             flagged[rows] = True
             r = resid[rows]
             vals, counts = np.unique(reg[rows], return_counts=True)
+            order = np.argsort(-counts, kind="stable")
+            shares = {str(vals[i]): float(counts[i] / len(rows)) for i in order}
+            top = str(vals[order[0]])
             segs.append({
                 "flight": ser.flight, "mic": ser.mic,
                 "t0": float(ser.t[a]), "t1": float(ser.t[b]),
                 "rms_db": float(np.sqrt(np.mean(r * r))), "mean_db": float(np.mean(r)),
                 "excess_db": float(np.mean(ser.excess[a:b + 1])), "n": int(len(rows)),
-                "regime": str(vals[np.argmax(counts)]),
+                "regime": top if shares[top] >= REGIME_SHARE else "mixed", "regime_shares": shares,
                 "range": "near" if float(np.median(s.d[rows])) <= d_med else "far",
                 "d_median_m": float(np.median(s.d[rows])),
                 "bank_abs_mean_deg": float(np.mean(np.abs(s.roll[rows]))),

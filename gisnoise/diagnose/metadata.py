@@ -112,8 +112,10 @@ def estimate_mic_heights(s: Samples, x: Mapping[str, Any], fold: np.ndarray, *, 
     Returns
     -------
     dict
-        Per microphone: ``listed_m``, ``height_m``, ``std_m``, ``comb_share`` (share of the centred
-        band-level variance the comb explains), ``contradicts``, ``sentence`` and, for the held-out
+        Per microphone: ``listed_m``, ``height_m``, ``std_m``, ``at_search_limit`` (the best height is an
+        end of the search range: ``height_m`` is that bound and ``std_m`` None), ``comb_share`` (share of
+        the centred band-level variance the comb explains; at or below 0 the band levels hold no comb),
+        ``contradicts``, ``sentence`` and, for the held-out
         test, ``rows`` (sample indices), ``err0`` and ``err1`` (held-out RMS band residual per row
         without and with the comb); empty when there are no band levels or no speed of sound.
     """
@@ -163,12 +165,18 @@ def estimate_mic_heights(s: Samples, x: Mapping[str, Any], fold: np.ndarray, *, 
             err1[te] = np.sqrt(np.mean((e[te] - shape[te]) ** 2, axis=1))
         contradicts = bool(share >= _MIN_COMB_SHARE and abs(h_hat - h_list) > _CONTRA_Z * std
                            and h_list < HEIGHT_RANGE_M[0])
+        # the edge of the grid is a bound, not an estimate: the comb of the best height may lie beyond it
+        at_limit = kh in (0, len(grid) - 1)
+        where = f"about {h_hat:.1f} m (+/- {std:.2f} m)"
+        if at_limit:
+            where = (f"{'at least' if kh else 'at most'} {h_hat:.1f} m (the "
+                     f"{'upper' if kh else 'lower'} limit of the {HEIGHT_RANGE_M[0]:g}-{HEIGHT_RANGE_M[1]:g} m search)")
         sentence = ""
         if contradicts:
-            sentence = (f"the band levels of {m} show the comb pattern of a microphone about {h_hat:.1f} m "
-                        f"(+/- {std:.2f} m) above a reflecting ground (reflection amplitude about {a:.1f}), "
-                        "not a ground plate as the campaign lists")
-        out[m] = {"listed_m": h_list, "height_m": h_hat, "std_m": std, "comb_share": share, "amplitude": a,
+            sentence = (f"the band levels of {m} show the comb pattern of a microphone {where} above a reflecting "
+                        f"ground (reflection amplitude about {a:.1f}), not a ground plate as the campaign lists")
+        out[m] = {"listed_m": h_list, "height_m": h_hat, "std_m": None if at_limit else std,
+                  "at_search_limit": at_limit, "comb_share": share, "amplitude": a,
                   "phase_rad": phi, "contradicts": contradicts, "sentence": sentence,
                   "rows": rows, "err0": err0, "err1": err1}
     return out

@@ -254,6 +254,13 @@ def _num(v: Any, fmt: str = ".3g") -> str:
     return html.escape(str(v))
 
 
+def _regime(seg: dict[str, Any]) -> str:
+    """A segment's regime, with the shares of its regimes when it is mixed (``mixed: turn 55 %, straight 45 %``)."""
+    if seg["regime"] != "mixed":
+        return str(seg["regime"])
+    return "mixed: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in (seg.get("regime_shares") or {}).items())
+
+
 def write_report(diag: Diagnosis, out_dir: str | os.PathLike[str], *, title: str | None = None,
                  progress: Callable[[int, int], None] | None = None) -> dict[str, Path]:
     """Write figures, their numbers and ``report.html`` of a diagnosis into ``out_dir``.
@@ -309,6 +316,8 @@ def _html(r: dict[str, Any], pngs: list[tuple[str, str]], title: str | None) -> 
             f"{e(x['effect'])} ({x['holdout_shrinkage_pct']:.1f} % held-out shrinkage)" for x in v["effects"]) + ".</p>"
     for sentence in (r.get("metadata") or {}).get("contradictions", []):
         head += f"<p>The data contradict the campaign's metadata: {e(sentence)}.</p>"
+    for sentence in v.get("level_offsets") or []:
+        head += f"<p>Not explained by any effect: {e(sentence)}.</p>"
     eff_rows = []
     for x in r["effects"]:
         ev = x.get("evidence") or {}
@@ -321,12 +330,13 @@ def _html(r: dict[str, Any], pngs: list[tuple[str, str]], title: str | None) -> 
                 e(ev.get("summary", "") or x.get("reason", "")))) + "</tr>")
     seg_rows = "\n".join(
         "<tr>" + "".join(f"<td>{c}</td>" for c in (
-            e(g["flight"]), e(g["mic"]), _num(g["t0"], ".1f"), _num(g["t1"], ".1f"), e(g["regime"]), e(g["range"]),
+            e(g["flight"]), e(g["mic"]), _num(g["t0"], ".1f"), _num(g["t1"], ".1f"), e(_regime(g)), e(g["range"]),
             _num(g["rms_db"], ".2f"), _num(g["excess_db"], "+.2f"), _num(g.get("rms_db_holdout_baseline"), ".2f"),
             _num(g.get("rms_db_holdout_extended"), ".2f"), _num(g.get("shrinkage_pct"), ".1f"))) + "</tr>"
         for g in r["segments"])
     stat_html = []
-    for key, label in (("by_regime", "regime"), ("by_mic", "microphone"), ("by_distance", "distance"),
+    for key, label in (("by_regime", "regime"), ("by_mic", "microphone"), ("by_flight", "flight"),
+                       ("by_distance", "distance"),
                        ("by_polar", "polar angle"), ("by_azimuth", "azimuth")):
         rows = "".join(f"<tr><td>{e(b['bin'])}</td><td>{b['n']}</td><td>{b['mean_db']:+.2f}</td>"
                        f"<td>{b['rms_db']:.2f}</td><td>{100 * b['flagged_fraction']:.0f} %</td></tr>"

@@ -146,13 +146,15 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
                       noise: Mapping[str, float], *, level_alpha: float, min_improvement_db2: float,
                       overrides: Mapping[str, Override], cancel: CancelFn | None, bias_z: float,
                       max_effects: int = MAX_EFFECTS,
-                      steps: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
+                      steps: list[dict[str, Any]] | None = None,
+                      final: list[_Candidate] | None = None) -> list[dict[str, Any]]:
     """The effects in the order forward selection adds them, each with its held-out shrinkage.
 
     Candidates that showed nothing alone (no significant test, band-level test or held-out
     improvement) are not tried again (an effect too weak to show alone is not looked for under
     another).  ``steps``, when given, receives one entry per step after the first: the candidates
-    tried on top of the model so far with their scores, and the one added (or None).
+    tried on top of the model so far with their scores, and the one added (or None); ``final``, when
+    given, receives the last candidate added (its fit is the model the selection ends with).
     """
     chosen = [_entry(first, oof_base, oof_base)]
     names = [c.name for c in cands if c.name != first.name and c.fit is not None and _worth_trying(c)]
@@ -202,4 +204,6 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
         hold_events(nxt, cur.model.params)
         names = [c.name for c in ranked if c.name != nxt.name and _worth_trying(c)]
         cur = nxt
+    if final is not None:
+        final.append(cur)
     return chosen

@@ -22,7 +22,8 @@ from gisnoise.measure import Samples, read_campaign, series_key
 from gisnoise.model import PHASES, POWER_RANGE_DEX, Ansatz, check_testable, get_ansatz, get_effect
 
 __all__ = ["fit", "fit_campaign", "usable_rows", "identifiable_form", "STEADY_POWER_DEX", "P7_MAX_STD_DB",
-           "BACKGROUND_DOMINATED_DB", "background_dominated_rows", "systematic_residuals", "misfit_warnings",
+           "BACKGROUND_DOMINATED_DB", "background_dominated_rows", "systematic_residuals", "misfit_microphones",
+           "misfit_warnings",
            "SYSTEMATIC_WINDOW_S", "SYSTEMATIC_MIN_DB", "SYSTEMATIC_RATIO"]
 
 
@@ -258,6 +259,27 @@ def systematic_residuals(samples: Samples, residuals: Any,
     return out
 
 
+def misfit_microphones(parts: Mapping[str, tuple[float, float]]) -> dict[str, float]:
+    """The microphones the model misses alone, each with the median systematic residual of the others, dB.
+
+    ``parts`` is :func:`systematic_residuals`' ``mic -> (noise std, systematic rms)``.  A microphone is
+    named when its systematic part exceeds :data:`SYSTEMATIC_MIN_DB` and :data:`SYSTEMATIC_RATIO` times
+    the median of the other microphones' (the one rule of ``gisnoise fit``'s warning and of
+    ``gisnoise diagnose``).
+
+    >>> misfit_microphones({"a": (1.1, 0.2), "b": (3.1, 2.9), "c": (1.0, 0.2)})
+    {'b': 0.2}
+    """
+    if len(parts) < 2:
+        return {}
+    out = {}
+    for mic, (_std, sys_db) in parts.items():
+        ref = float(np.median([v[1] for m, v in parts.items() if m != mic]))
+        if sys_db > SYSTEMATIC_MIN_DB and sys_db > SYSTEMATIC_RATIO * ref:
+            out[mic] = ref
+    return out
+
+
 def misfit_warnings(res: FitResult) -> list[str]:
     """One line per microphone the fit misses alone (``gisnoise fit`` prints them, the result's ``info['warnings']``).
 
@@ -270,19 +292,16 @@ def misfit_warnings(res: FitResult) -> list[str]:
     at one microphone only (its position, height, a reflection) does not.
     """
     parts = systematic_residuals(res.samples, res.residuals)
-    if len(parts) < 2:
-        return []
     out = []
-    for mic, (std, sys_db) in parts.items():
-        ref = float(np.median([v[1] for m, v in parts.items() if m != mic]))
-        if sys_db > SYSTEMATIC_MIN_DB and sys_db > SYSTEMATIC_RATIO * ref:
-            stds = [res.noise_std.get(m, v[0]) for m, v in parts.items() if m != mic]
-            span = f"{min(stds):.2f}" if len(stds) == 1 else f"{min(stds):.2f}-{max(stds):.2f}"
-            out.append(f"microphone '{mic}': noise std {res.noise_std.get(mic, std):.2f} dB against "
-                       f"{span} for the other{'s' if len(stds) > 1 else ''}, {sys_db:.2f} dB of it systematic "
-                       f"(steady over {SYSTEMATIC_WINDOW_S:g} s) against a median {ref:.2f} for the others: the "
-                       "model misses this microphone alone; check its position, height and calibration "
-                       "(gisnoise diagnose searches its position)")
+    for mic, ref in misfit_microphones(parts).items():
+        std, sys_db = parts[mic]
+        stds = [res.noise_std.get(m, v[0]) for m, v in parts.items() if m != mic]
+        span = f"{min(stds):.2f}" if len(stds) == 1 else f"{min(stds):.2f}-{max(stds):.2f}"
+        out.append(f"microphone '{mic}': noise std {res.noise_std.get(mic, std):.2f} dB against "
+                   f"{span} for the other{'s' if len(stds) > 1 else ''}, {sys_db:.2f} dB of it systematic "
+                   f"(steady over {SYSTEMATIC_WINDOW_S:g} s) against a median {ref:.2f} for the others: the "
+                   "model misses this microphone alone; check its position, height and calibration "
+                   "(gisnoise diagnose searches its position and measures its level offset)")
     return out
 
 
