@@ -34,11 +34,15 @@ def track_gaps(t: Any) -> list[tuple[int, float]]:
     []
     >>> track_gaps(np.arange(0.0, 60.0, 5.0))   # a slow logger: every step alike
     []
+    >>> track_gaps([0.0, np.nan, 1.0, 20.0])      # times the trajectory refuses: not judged here
+    []
     """
     tt = np.asarray(t, dtype=float)
-    if tt.size < 3:
-        return []
+    if tt.ndim != 1 or tt.size < 3 or not np.all(np.isfinite(tt)):
+        return []  # the trajectory's own checks refuse such times, naming them
     dt = np.diff(tt)
+    if not np.all(dt > 0.0):
+        return []
     limit = max(TRACK_GAP_S, GAP_FACTOR * float(np.median(dt)))
     return [(int(i), float(dt[i])) for i in np.flatnonzero(dt > limit)]
 
