@@ -3,13 +3,22 @@
 The classes are the contour levels: ``[L_i, L_i+1)`` dB(A), the last one open
 upwards, coloured with the core's noise palette (:mod:`gisnoise.maps.palette`,
 DIN 18005-2 5 dB classes), the same as ``map.png`` and the web page.  Legends name
-the metric and the unit.  :func:`save_style` writes a style beside a file output
+the metric and the unit.
+
+QGIS's graduated ranges and discrete raster classes hold their upper bound
+(``lower <= v <= upper``, the first match wins), so a class that ends at
+``L_i+1`` would take the isoband whose ``level`` is ``L_i+1``: every band would
+be drawn one class too low.  Each class therefore ends at the largest double
+below the next level (:func:`class_top`): ``L_i <= v <= class_top(L_i+1)`` is
+exactly ``L_i <= v < L_i+1``, and the bounds survive a saved style (QGIS writes
+them with 15 decimals).  :func:`save_style` writes a style beside a file output
 (``.qml``, and inside a GeoPackage as its default style), so the layer opens styled
 however it is loaded: from ``qgis_process``, a model or a script.
 """
 
 from __future__ import annotations
 
+import math
 import os
 
 from qgis.core import (
@@ -45,6 +54,13 @@ def keep(post):
     return post
 
 
+def class_top(next_level):
+    """Upper bound of a QGIS class that ends just below ``next_level`` (dB): the largest double below it, so
+    the class is ``[lower, next_level)``; ``inf`` stays ``inf``."""
+    next_level = float(next_level)
+    return next_level if math.isinf(next_level) else math.nextafter(next_level, -math.inf)
+
+
 def level_ramp():
     """Green -> yellow -> orange -> red -> purple."""
     ramp = QgsGradientColorRamp(QColor("#1a9850"), QColor("#5e3c99"))
@@ -74,16 +90,16 @@ def class_label(levels, i, metric="", unit="dB(A)"):
 
 
 def graduated_renderer(levels, *, polygons, field="level", metric=""):
-    """A graduated renderer on ``field`` with one class per level."""
+    """A graduated renderer on ``field`` with one class ``[L_i, L_i+1)`` per level (see :func:`class_top`)."""
     ranges = []
     for i, (lo, colour) in enumerate(zip(levels, level_colours(levels), strict=True)):
-        hi = levels[i + 1] if i + 1 < len(levels) else TOP_DB
+        hi = class_top(levels[i + 1]) if i + 1 < len(levels) else TOP_DB
         if polygons:
             symbol = QgsFillSymbol.createSimple({"color": colour.name(), "outline_color": "#404040",
                                                  "outline_width": "0.1"})
             symbol.setOpacity(0.6)
         else:
-            symbol = QgsLineSymbol.createSimple({"color": colour.darker(130).name(), "width": "0.5"})
+            symbol = QgsLineSymbol.createSimple({"color": colour.name(), "width": "0.5"})
         label = class_label(levels, i, metric) if polygons else f"{metric} {lo:g} dB(A)".strip()
         ranges.append(QgsRendererRange(QgsClassificationRange(label, lo, hi), symbol))
     renderer = QgsGraduatedSymbolRenderer(field, ranges)
@@ -93,11 +109,11 @@ def graduated_renderer(levels, *, polygons, field="level", metric=""):
 def pseudocolor_renderer(provider, levels, band=1, metric=""):
     """Discrete pseudo-colour classes of a raster band at the levels; below the first level transparent
     (drawn white in legends, so a print layout shows no black box)."""
-    items = [QgsColorRampShader.ColorRampItem(levels[0], QColor(255, 255, 255, 0),
+    items = [QgsColorRampShader.ColorRampItem(class_top(levels[0]), QColor(255, 255, 255, 0),
                                               f"{metric} < {levels[0]:g} dB(A)".strip())]
     colours = level_colours(levels)
-    for i, colour in enumerate(colours):
-        hi = levels[i + 1] if i + 1 < len(levels) else float("inf")
+    for i, colour in enumerate(colours):  # a discrete item holds the values up to and including its value
+        hi = class_top(levels[i + 1]) if i + 1 < len(levels) else float("inf")
         items.append(QgsColorRampShader.ColorRampItem(hi, colour, class_label(levels, i, metric)))
     shader_fn = QgsColorRampShader(levels[0], levels[-1], level_ramp(), QgsColorRampShader.Discrete)
     shader_fn.setColorRampItemList(items)
@@ -215,9 +231,9 @@ class ResidualStyle(QgsProcessingLayerPostProcessorInterface):
         levels = list(RESIDUAL_CLASSES)
         ranges = []
         for i, colour in enumerate(level_colours(levels)):
-            hi = levels[i + 1] if i + 1 < len(levels) else TOP_DB
+            hi = class_top(levels[i + 1]) if i + 1 < len(levels) else TOP_DB
             symbol = QgsLineSymbol.createSimple({"color": colour.name(), "width": "1.2"})
-            label = f">= {levels[i]:g} dB" if i == len(levels) - 1 else f"{levels[i]:g} - {hi:g} dB"
+            label = f">= {levels[i]:g} dB" if i == len(levels) - 1 else f"{levels[i]:g} - {levels[i + 1]:g} dB"
             ranges.append(QgsRendererRange(QgsClassificationRange(label, levels[i], hi), symbol))
         layer.setRenderer(QgsGraduatedSymbolRenderer(self.field, ranges))
         layer.triggerRepaint()
