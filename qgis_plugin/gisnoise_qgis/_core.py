@@ -85,6 +85,40 @@ def bundled() -> list[dict]:
         return json.load(fh)
 
 
+def externally_managed() -> bool:
+    """Whether this Python is managed by the operating system (PEP 668: Debian 12, Ubuntu 23.04 and newer, ...).
+
+    Its pip then refuses to install anything, even with ``--user``, unless given ``--break-system-packages``;
+    with ``--user`` that option only lets pip write into the user's own site-packages.
+    """
+    import sysconfig
+
+    if sys.prefix != sys.base_prefix:  # a virtual environment is never marked
+        return False
+    stdlib = sysconfig.get_path("stdlib")
+    return bool(stdlib) and os.path.isfile(os.path.join(stdlib, "EXTERNALLY-MANAGED"))
+
+
+def linux_pip(spec: str) -> str:
+    """The pip command that installs ``spec`` into the user's site-packages of this Linux Python."""
+    if externally_managed():
+        return f"python3 -m pip install --user --break-system-packages {spec}"
+    return f"python3 -m pip install --user {spec}"
+
+
+def pip_hint(modules: list[str]) -> str:
+    """How to pip-install ``modules`` into QGIS's Python on Linux, Windows and macOS (for packages no Linux
+    distribution has)."""
+    spec = " ".join(modules)
+    linux = linux_pip(spec)
+    if "--break-system-packages" in linux:
+        linux += (" (into your home folder only; this Python is managed by the system (PEP 668), so pip needs "
+                  "--break-system-packages even with --user)")
+    return (f"Linux: {linux}; Windows: in the OSGeo4W Shell, python -m pip install {spec}; "
+            f"macOS: /Applications/QGIS.app/Contents/MacOS/bin/python3 -m pip install --user {spec}; "
+            "then restart QGIS")
+
+
 def install_hint(missing: list[tuple[str, str, str, str]]) -> str:
     """How to install ``missing`` ((module, minimum, Debian package, Fedora package)) into QGIS's Python."""
     spec = " ".join(f"'{m}>={v}'" for m, v, _, _ in missing)
@@ -92,7 +126,7 @@ def install_hint(missing: list[tuple[str, str, str, str]]) -> str:
     debian = " ".join(d for _, _, d, _ in missing)
     fedora = " ".join(f for _, _, _, f in missing)
     return (f"Linux: sudo apt install {debian} (Debian, Ubuntu), sudo dnf install {fedora} (Fedora), or "
-            f"python3 -m pip install --user {spec}; "
+            f"{linux_pip(spec)}; "
             f"Windows: in the OSGeo4W Shell, python -m pip install {win}; "
             f"macOS: /Applications/QGIS.app/Contents/MacOS/bin/python3 -m pip install --user {spec}; "
             "then restart QGIS")

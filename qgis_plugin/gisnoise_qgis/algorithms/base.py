@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 
 from qgis.core import QgsProcessingAlgorithm, QgsProcessingException
 from qgis.PyQt.QtGui import QIcon
@@ -22,6 +23,12 @@ class GisnoiseAlgorithm(QgsProcessingAlgorithm):
 
     GROUP = ""
     GROUP_ID = ""
+    #: The core's field names (keyword arguments, JSON fields) -> this algorithm's parameter keys, for messages.
+    CORE_FIELDS: dict = {}
+    #: The command line's options the core's messages advise -> this algorithm's parameter keys.
+    CLI_OPTIONS: dict = {}
+    #: Words of the core's messages -> the same words with the parameter they mean here.
+    PHRASES: dict = {}
 
     def createInstance(self):  # noqa: N802 - QGIS API
         return type(self)()
@@ -44,7 +51,7 @@ class GisnoiseAlgorithm(QgsProcessingAlgorithm):
         except Cancelled:
             raise QgsProcessingException("cancelled by the user") from None
         except GisnoiseError as exc:
-            raise QgsProcessingException(error_message(exc)) from None
+            raise QgsProcessingException(self.core_error(exc)) from None
         except ImportError as exc:
             raise QgsProcessingException(f"a Python package this step needs is missing in QGIS's Python: {exc}") from None
         except MemoryError:
@@ -53,12 +60,77 @@ class GisnoiseAlgorithm(QgsProcessingAlgorithm):
     def compute(self, parameters, context, feedback):
         raise NotImplementedError
 
+    def warn(self, feedback, text):
+        """A warning of the core in the log, its fields and options named as this algorithm's parameters."""
+        warn(feedback, self._translate(text))
 
-def error_message(exc) -> str:
-    """The core error's message, with its field appended when the message omits it."""
-    msg = str(exc)
+    def _translate(self, text):
+        for words, phrase in self.PHRASES.items():
+            text = text.replace(words, phrase)
+        return translate(text, parameter_names(self.CORE_FIELDS), parameter_names(self.CLI_OPTIONS))
+
+    def core_error(self, exc, extra=None):
+        """The one-line message of a core error in this algorithm's terms (``extra``: more core names -> phrases)."""
+        names = {**parameter_names(self.CORE_FIELDS), **(extra or {})}
+        msg = error_message(exc, names, parameter_names(self.CLI_OPTIONS))
+        for words, phrase in self.PHRASES.items():
+            msg = msg.replace(words, phrase)
+        return msg
+
+
+def warn(feedback, text):
+    """Say a warning: ``feedback.pushWarning`` (QGIS >= 3.20: ``WARNING`` in qgis_process, the warning colour in
+    the log), else ``pushInfo``.  Not ``reportError``, which qgis_process prints as ``ERROR`` and the log in red."""
+    push = getattr(feedback, "pushWarning", None)
+    if push is not None:
+        push(text)
+    else:
+        feedback.pushInfo(f"warning: {text}")
+
+
+def parameter_names(keys):
+    """``{"resolution_m": "RESOLUTION"}`` -> ``{"resolution_m": "parameter RESOLUTION"}``."""
+    return {core: f"parameter {key}" for core, key in (keys or {}).items()}
+
+
+def translate(msg, names, options=None):
+    """The core's message with its field names and command-line options replaced by what the user set.
+
+    Parameters
+    ----------
+    msg : str
+        One line of the core.
+    names : dict
+        Core field name -> phrase, e.g. ``{"resolution_m": "parameter RESOLUTION"}`` or
+        ``{"t": "field 'time' (parameter TIME_FIELD)"}``.
+    options : dict, optional
+        Command-line option -> phrase, e.g. ``{"--ground-height": "parameter GROUND_HEIGHT"}``; an option's
+        metavariable (``--ground-height M``) goes with it.
+
+    Forms replaced: ``field 'x'``, ``column 'x'``, ``(field x)``, ``x:`` at the start of the message or of a
+    part after ``": "``, and ``x`` as a word when it holds ``_`` or ``.`` (no English word does).
+    """
+    for opt, phrase in (options or {}).items():
+        msg = re.sub(rf"{re.escape(opt)}(?: [A-Z][\w.]*)?(?![\w-])", phrase, msg)
+    for core, phrase in names.items():
+        c = re.escape(core)
+        msg = re.sub(rf"\((?:field|column) '?{c}'?\)", f"({phrase})", msg)
+        msg = re.sub(rf"\b(?:field|column) '{c}'", phrase, msg)
+        msg = re.sub(rf"(^|: ){c}:", lambda m, p=phrase: f"{m.group(1)}{p}:", msg)
+        if "_" in core or "." in core:
+            msg = re.sub(rf"(?<![\w.']){c}(?![\w'])", phrase, msg)
+    return re.sub(r"(parameter (\w+)) \(parameter \2\)", r"\1", msg)
+
+
+def error_message(exc, names=None, options=None) -> str:
+    """The core error's message in the algorithm's terms (:func:`translate`), naming its field or parameter."""
+    names = names or {}
+    msg = translate(str(exc), names, options)
     fld = getattr(exc, "field", None)
-    if fld and fld not in msg:
+    if fld and fld in names:
+        if names[fld] not in msg:
+            msg = f"{msg} ({names[fld]})"
+    elif fld and fld not in msg:
         msg = f"{msg} (field '{fld}')"
     return msg
 

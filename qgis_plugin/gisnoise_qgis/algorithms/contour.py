@@ -39,9 +39,10 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QVariant
 
+from .._core import pip_hint
 from . import styles
-from .base import FeedbackProgress, GisnoiseAlgorithm
-from .layers import trajectory_columns
+from .base import FeedbackProgress, GisnoiseAlgorithm, warn
+from .layers import layer_route, track_evidence, track_fields
 from .waypoints import ALT_REFERENCES, is_waypoint_layer, waypoints_document
 
 METRICS = ("LAmax", "LAeq", "SEL")
@@ -94,6 +95,23 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
     OUTPUT_LINES = "OUTPUT_LINES"
     OUTPUT_TRACK = "OUTPUT_TRACK"
 
+    #: Column of a flown track, its field parameter and the parameter's default (the flight CSV's name).
+    TRACK_FIELDS = (("t", TIME_FIELD, "t"), ("h", ALTITUDE_FIELD, "h"), ("roll", ROLL_FIELD, "roll"),
+                    ("pitch", PITCH_FIELD, "pitch"), ("yaw", YAW_FIELD, "yaw"), ("power_w", POWER_FIELD, "power_w"),
+                    ("phase", PHASE_FIELD, "phase"))
+    CORE_FIELDS = {"resolution_m": RESOLUTION, "grid.resolution_m": RESOLUTION, "margin_m": MARGIN,
+                   "levels": LEVELS, "metrics": METRICS, "crs": CRS, "dem": DEM, "receiver_height": RECEIVER_HEIGHT,
+                   "dem_offset_m": DEM_OFFSET, "substeps": SUBSTEPS, "ground_h": GROUND_HEIGHT,
+                   "ground_h_m": GROUND_HEIGHT, "period_s": PERIOD, "threshold_db": THRESHOLD,
+                   "snapshot_t": SNAPSHOT_T, "uncertainty": UNCERTAINTY, "geoid_undulation_m": GEOID_UNDULATION,
+                   "cards": CARDS}
+    CLI_OPTIONS = {"--resolution": RESOLUTION, "--margin": MARGIN, "--levels": LEVELS, "--dem-offset": DEM_OFFSET,
+                   "--dem": DEM, "--receiver-height": RECEIVER_HEIGHT, "--ground-height": GROUND_HEIGHT,
+                   "--power-w": POWER_W, "--geoid-undulation": GEOID_UNDULATION, "--crs": CRS, "--metrics": METRICS,
+                   "--period": PERIOD, "--threshold": THRESHOLD, "--snapshot": SNAPSHOT_T, "--substeps": SUBSTEPS,
+                   "--background": BACKGROUND, "--uncertainty": UNCERTAINTY, "--card": CARDS}
+    PHRASES = {"a wider margin": "a wider margin (parameter MARGIN)"}
+
     GROUP = "Noise maps"
     GROUP_ID = "maps"
 
@@ -112,7 +130,9 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             "a line layer (one sample per vertex: Z = height, M = time; attitude, power and phase from the "
             "feature's fields; yaw along the line unless a yaw field is given), a layer of waypoints (points "
             "in order or a line's vertices; fields alt, speed, hold_s, seq, phase; read as waypoints when the "
-            "layer has no time, or by 'The layer holds'), flown by the vehicle model as a waypoints file, or a "
+            "layer has no time field and no M, or by 'The layer holds'; a point layer with fields of a flown track "
+            "(time, timestamp, roll, pitch, power, ...) but not the time field is refused, naming what to set), "
+            "flown by the vehicle model as a waypoints file, or a "
             "file as the gisnoise command line reads it: flight CSV, GeoJSON, waypoints, PX4 .ulg, ArduPilot "
             ".bin (constant power for a log without battery current, geoid undulation for ArduPilot).\n\n"
             "Outputs: a GeoTIFF with one band per metric (LAmax, LAeq over the flight, SEL), "
@@ -130,17 +150,17 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             self.TRAJECTORY_FILE, "or a trajectory file (flight CSV, GeoJSON, PX4 .ulg, ArduPilot .bin)",
             behavior=QgsProcessingParameterFile.File, optional=True,
             fileFilter="Trajectories (*.csv *.geojson *.json *.ulg *.ULG *.bin *.BIN);;All files (*)"))
-        for key, label, default, ftype in (
-            (self.TIME_FIELD, "Time field (s; empty for lines: M values)", "t", QgsProcessingParameterField.Numeric),
-            (self.ALTITUDE_FIELD, "Height field (m, ellipsoidal; empty: geometry Z)", "h",
+        for key, label, ftype in (
+            (self.TIME_FIELD, "Time field (s; lines: their M values)", QgsProcessingParameterField.Numeric),
+            (self.ALTITUDE_FIELD, "Height field (m, ellipsoidal; empty: geometry Z)", QgsProcessingParameterField.Numeric),
+            (self.ROLL_FIELD, "Roll field (deg; empty: 0)", QgsProcessingParameterField.Numeric),
+            (self.PITCH_FIELD, "Pitch field (deg; empty: 0)", QgsProcessingParameterField.Numeric),
+            (self.YAW_FIELD, "Yaw field (deg from north; empty for lines: along the line)",
              QgsProcessingParameterField.Numeric),
-            (self.ROLL_FIELD, "Roll field (deg; empty: 0)", "roll", QgsProcessingParameterField.Numeric),
-            (self.PITCH_FIELD, "Pitch field (deg; empty: 0)", "pitch", QgsProcessingParameterField.Numeric),
-            (self.YAW_FIELD, "Yaw field (deg from north; empty for lines: along the line)", "yaw",
-             QgsProcessingParameterField.Numeric),
-            (self.POWER_FIELD, "Electric power field (W)", "power_w", QgsProcessingParameterField.Numeric),
-            (self.PHASE_FIELD, "Flight phase field (empty: horizontal)", "phase", QgsProcessingParameterField.Any),
+            (self.POWER_FIELD, "Electric power field (W)", QgsProcessingParameterField.Numeric),
+            (self.PHASE_FIELD, "Flight phase field (empty: horizontal)", QgsProcessingParameterField.Any),
         ):
+            default = next(d for _, k, d in self.TRACK_FIELDS if k == key)
             self.addParameter(QgsProcessingParameterField(
                 key, label, defaultValue=default, parentLayerParameterName=self.TRAJECTORY, type=ftype,
                 optional=True))
@@ -239,17 +259,26 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         if path and path.lower().endswith(".bin") and importlib.util.find_spec("pymavlink") is None:
             raise QgsProcessingException(
                 "reading an ArduPilot .bin log needs pymavlink in QGIS's Python (compiled, so the plugin does not "
-                "bundle it): Linux: python3 -m pip install --user pymavlink; Windows: in the OSGeo4W Shell, python -m "
-                "pip install pymavlink; macOS: /Applications/QGIS.app/Contents/MacOS/bin/python3 -m pip install "
-                "--user pymavlink; then restart QGIS (field TRAJECTORY_FILE)")
+                f"bundle it; Debian and Ubuntu do not package it): {pip_hint(['pymavlink'])} (parameter TRAJECTORY_FILE)")
         if path:  # flight CSV, GeoJSON, waypoints, PX4 .ulg, ArduPilot .bin
             return read_route(path, dem=dem, dem_offset_m=dem_offset, geoid_undulation_m=geoid,
                               power_w=self._optional(parameters, self.POWER_W, context))
         layer = self.parameterAsVectorLayer(parameters, self.TRAJECTORY, context)
         name = layer.name() if layer is not None else "trajectory"
         kind = TRAJECTORY_KINDS[self.parameterAsEnum(parameters, self.TRAJECTORY_KIND, context)]
-        time_field = self.parameterAsString(parameters, self.TIME_FIELD, context)
-        if kind == "waypoints" or (kind.startswith("auto") and is_waypoint_layer(source, time_field)):
+        fields = {col: self.parameterAsString(parameters, key, context) for col, key, _ in self.TRACK_FIELDS}
+        defaults = {col: default for col, _, default in self.TRACK_FIELDS}
+        if kind.startswith("auto") and is_waypoint_layer(source, fields["t"]):
+            # a point layer without the time field: a plan, unless its fields say it is a flown track
+            evidence = (track_evidence(source.fields())
+                        if QgsWkbTypes.geometryType(source.wkbType()) == QgsWkbTypes.PointGeometry else [])
+            if evidence:
+                _, _, problems = track_fields(source, fields, defaults)
+                raise QgsProcessingException(
+                    f"trajectory layer '{name}' has fields of a flown track ({', '.join(evidence)}), so it is not "
+                    f"flown as waypoints (parameter TRAJECTORY_KIND: auto), but they do not fit: {'; '.join(problems)}; "
+                    "or set TRAJECTORY_KIND to waypoints to fly its points as a plan")
+        if kind == "waypoints" or (kind.startswith("auto") and is_waypoint_layer(source, fields["t"])):
             names = {}
             for col, key, default in (("alt", self.WAYPOINT_ALT_FIELD, "alt"), ("speed", self.WAYPOINT_SPEED_FIELD,
                                                                                "speed"),
@@ -264,22 +293,23 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
                                      geoid_undulation_m=geoid, layer_name=name)
             feedback.pushInfo(f"waypoint layer '{name}': {len(doc['waypoints'])} waypoints, altitudes {ref}")
             return read_route(doc, dem=dem, dem_offset_m=dem_offset)
-        from gisnoise.flight import trajectory as gtraj
-
-        fields = {col: self.parameterAsString(parameters, key, context)
-                  for col, key in (("t", self.TIME_FIELD), ("h", self.ALTITUDE_FIELD), ("roll", self.ROLL_FIELD),
-                                   ("pitch", self.PITCH_FIELD), ("yaw", self.YAW_FIELD),
-                                   ("power_w", self.POWER_FIELD), ("phase", self.PHASE_FIELD))}
-        cols = trajectory_columns(source, context, feedback, fields=fields, layer_name=name)
-        return read_route(gtraj.from_columns(cols, source=f"trajectory layer '{name}'"))
+        return layer_route(source, context, feedback, fields=fields, defaults=defaults, layer_name=name)
 
     def _cards(self, parameters, context):
+        from gisnoise.errors import GisnoiseError
         from gisnoise.model import cards as gcards
 
         paths = self.parameterAsFileList(parameters, self.CARDS, context)
         if not paths:
             raise QgsProcessingException("no model card given (parameter CARDS)")
-        return [gcards.load(p) for p in paths]
+        out = []
+        for p in paths:
+            try:
+                out.append(gcards.load(p))
+            except GisnoiseError as exc:  # its field is the card's ('p2', 'schema') or the file's ('json')
+                what = "model cards are JSON files" if exc.field in ("json", "card") else "a model card"
+                raise QgsProcessingException(f"{exc} (parameter CARDS: {what})") from None
+        return out
 
     # ------------------------------------------------------------------ run
     def compute(self, parameters, context, feedback):
@@ -329,7 +359,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             progress=steps.progress, cancel=steps.cancel, **kw)
         tif, geojson = os.fspath(paths["levels"]), os.fspath(paths["contours"])
         for warning in paths.get("warnings", []):
-            feedback.reportError(f"warning: {warning}", fatalError=False)
+            self.warn(feedback, warning)
 
         raster_out = self.parameterAsOutputLayer(parameters, self.OUTPUT_RASTER, context)
         _write_raster(tif, raster_out)
@@ -421,7 +451,7 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
                 else:
                     styles.style_contours(layer, levels, polygons=key == self.OUTPUT_BANDS, metric=metric)
             if not layer.isValid():
-                feedback.reportError(f"cannot open {dest} to save its style", fatalError=False)
+                warn(feedback, f"cannot open {dest} to save its style")
                 continue
             styles.save_style(layer, dest)
 
@@ -436,11 +466,27 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
                 details.setPostProcessor(styles.keep(post))
 
 
+#: Files GDAL and QGIS keep beside a raster: cached statistics and histograms (PAM), overviews, masks.  They
+#: describe the file they were made for; left beside a new grid they show the old grid's min/max.
+RASTER_SIDECARS = (".aux.xml", ".ovr", ".msk")
+
+
 def _write_raster(tif, dest):
-    """Copy the core's GeoTIFF to ``dest``; other formats through GDAL."""
+    """Copy the core's GeoTIFF to ``dest``; other formats through GDAL.
+
+    The sidecars of an earlier file at ``dest`` (:data:`RASTER_SIDECARS`) are removed first.
+    """
     folder = os.path.dirname(dest)
     if folder:
         os.makedirs(folder, exist_ok=True)
+    for ext in RASTER_SIDECARS:
+        try:
+            os.remove(dest + ext)
+        except FileNotFoundError:
+            pass
+        except OSError as exc:
+            raise QgsProcessingException(f"cannot remove {dest + ext}, left by an earlier grid at the output "
+                                         f"(parameter OUTPUT_RASTER): {exc}") from None
     if dest.lower().endswith((".tif", ".tiff")):
         shutil.copyfile(tif, dest)
         return
@@ -450,9 +496,26 @@ def _write_raster(tif, dest):
     driver = QgsRasterFileWriter.driverForExtension(os.path.splitext(dest)[1])
     if not driver:
         raise QgsProcessingException(f"no raster format for the output {dest!r} (parameter OUTPUT_RASTER)")
-    out = gdal.Translate(dest, tif, format=driver)
+    gdal.PushErrorHandler("CPLQuietErrorHandler")
+    try:
+        gdal.ErrorReset()
+        try:
+            out = gdal.Translate(dest, tif, format=driver)
+            reason = gdal.GetLastErrorMsg().strip()
+        except RuntimeError as exc:  # when something in this QGIS turned GDAL's exceptions on
+            out, reason = None, str(exc).strip()
+    finally:
+        gdal.PopErrorHandler()
     if out is None:
-        raise QgsProcessingException(f"GDAL could not write {dest!r} as {driver}")
+        src = gdal.Open(tif)
+        names = [src.GetRasterBand(i + 1).GetDescription() for i in range(src.RasterCount)]
+        src = None
+        reason = " ".join(reason.replace(f"{dest}: ", "").split()).rstrip(".")
+        why = f": {reason}" if reason else ""
+        if len(names) > 1:
+            why += (f"; the noise grid has {len(names)} bands ({', '.join(names)}): write a GeoTIFF (.tif), or choose "
+                    "one metric (parameter METRICS) without uncertainty bands for a one-band format")
+        raise QgsProcessingException(f"GDAL could not write {dest!r} as {driver} (parameter OUTPUT_RASTER){why}")
     out = None
 
 

@@ -122,7 +122,7 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
 
         campaign = read_campaign(folder)
         for w in campaign_log_warnings(campaign):  # what the command line and the service say about the logs
-            feedback.reportError(f"warning: {w}", fatalError=False)
+            self.warn(feedback, w)
         feedback.pushInfo(f"diagnosing {card.id} against the campaign {folder}")
         diag = run_diagnosis(campaign, card, candidates=candidates, progress=progress, cancel=feedback.isCanceled)
         write_diagnosis(diag, dest, campaign=folder)

@@ -89,13 +89,13 @@ class FitCardAlgorithm(GisnoiseAlgorithm):
 
         camp = read_campaign(folder)
         for w in campaign_log_warnings(camp):  # what the command line and the service say about the logs
-            feedback.reportError(f"warning: {w}", fatalError=False)
+            self.warn(feedback, w)
         feedback.pushInfo(f"fitting ansatz {ansatz!r} to the {phase} samples of {folder}")
         result = fit_campaign(camp, phase, ansatz=ansatz, max_iter=max_iter, progress=progress,
                               cancel=feedback.isCanceled)
         feedback.pushInfo(result.summary())
         for w in result.info.get("warnings") or []:  # a microphone the model misses alone, as the command line says
-            feedback.reportError(f"warning: {w}", fatalError=False)
+            self.warn(feedback, w)
         card = result.to_card()
         gcards.save(card, dest)
         out = {self.OUTPUT_CARD: dest, self.RMS_DB: result.rms_db, self.N_SAMPLES: int(result.n),

@@ -1,4 +1,9 @@
-"""Route planners in QGIS: candidate routes compared by exposure, and a quieter route between two pads."""
+"""Route planners in QGIS: candidate routes compared by exposure, and a quieter route between two pads.
+
+The core's ``compare_routes`` and ``optimize_route`` take no progress or cancel callbacks: the
+progress bar moves between the steps the plugin drives (reading the layers, the core's
+computation, writing the files), and a cancel stops at the next of them, before any file is written.
+"""
 
 from __future__ import annotations
 
@@ -12,6 +17,7 @@ from qgis.core import (
     QgsProcessingException,
     QgsProcessingOutputNumber,
     QgsProcessingOutputString,
+    QgsProcessingParameterCrs,
     QgsProcessingParameterEnum,
     QgsProcessingParameterFile,
     QgsProcessingParameterFolderDestination,
@@ -19,10 +25,12 @@ from qgis.core import (
     QgsProcessingParameterNumber,
     QgsProcessingParameterPoint,
     QgsProcessingParameterRasterLayer,
+    QgsProcessingParameterString,
     QgsProcessingParameterVectorLayer,
     QgsProject,
 )
 
+from .._core import ensure_core
 from .base import GisnoiseAlgorithm
 
 METRICS = ("LAmax", "LAeq", "SEL")
@@ -52,6 +60,13 @@ def _buildings(alg, parameters, context):
     return read_buildings(path)
 
 
+def step(feedback, percent):
+    """A step the plugin drives is done: stop here when the user cancelled, else move the bar to ``percent``."""
+    if feedback.isCanceled():
+        raise QgsProcessingException("cancelled by the user")
+    feedback.setProgress(percent)
+
+
 class _PlanningBase(GisnoiseAlgorithm):
     CARDS = "CARDS"
     POPULATION = "POPULATION"
@@ -60,9 +75,16 @@ class _PlanningBase(GisnoiseAlgorithm):
     GROUP = "Route planning"
     GROUP_ID = "planning"
 
-    def _layers(self):
-        from qgis.core import QgsProcessingParameterString
+    def _exposure(self, parameters, context, feedback, start, end):
+        """The population raster and the buildings, read with a step each from ``start`` to ``end`` percent."""
+        step(feedback, start)
+        population = _population(self, parameters, context)
+        step(feedback, (start + end) / 2)
+        buildings = _buildings(self, parameters, context)
+        step(feedback, end)
+        return population, buildings
 
+    def _layers(self):
         self.addParameter(QgsProcessingParameterString(
             self.CARDS, "Model cards (files or bundled ids, comma-separated)",
             defaultValue="demo-horizontal,demo-climb,demo-sink"))
@@ -78,10 +100,22 @@ class CompareRoutesAlgorithm(_PlanningBase):
 
     ROUTES = "ROUTES"
     METRIC = "METRIC"
+    LEVELS = "LEVELS"
     RESOLUTION = "RESOLUTION"
+    MARGIN = "MARGIN"
+    CRS = "CRS"
     RANK_LEVEL = "RANK_LEVEL"
     GROUND_HEIGHT = "GROUND_HEIGHT"
     BEST = "BEST"
+
+    CORE_FIELDS = {"routes": ROUTES, "metric": METRIC, "levels": LEVELS, "rank_level": RANK_LEVEL,
+                   "resolution_m": RESOLUTION, "grid.resolution_m": RESOLUTION, "margin_m": MARGIN, "crs": CRS,
+                   "ground_h": GROUND_HEIGHT, "ground_h_m": GROUND_HEIGHT, "population": "POPULATION",
+                   "buildings": "BUILDINGS", "cards": "CARDS"}
+    CLI_OPTIONS = {"--ground-height": GROUND_HEIGHT, "--margin": MARGIN, "--resolution": RESOLUTION,
+                   "--levels": LEVELS, "--rank-level": RANK_LEVEL, "--crs": CRS, "--metric": METRIC,
+                   "--population": "POPULATION", "--buildings": "BUILDINGS", "--card": "CARDS"}
+    PHRASES = {"a wider margin": "a wider margin (parameter MARGIN)"}
 
     def name(self):
         return "compareroutes"
@@ -91,8 +125,10 @@ class CompareRoutesAlgorithm(_PlanningBase):
 
     def shortHelpString(self):  # noqa: N802 - QGIS API
         return ("Evaluates every candidate route (flight CSV, GeoJSON LineString with times, waypoints) on one "
-                "common grid and ranks them by the people above the ranking level, then person-dB, then the peak "
-                "level at a dwelling. Writes comparison.json, comparison.md, levels.tif (one band per route) and "
+                "common grid and ranks them by the people above the ranking level (one of the levels), then "
+                "person-dB above the lowest level, then the peak level at a dwelling. The grid spans the routes and "
+                "the margin around them; counts above a level the grid's edge cuts are lower bounds (said in the "
+                "log: widen the margin). Writes comparison.json, comparison.md, levels.tif (one band per route) and "
                 "difference.tif (each route minus the best, dB) into the output folder.")
 
     def initAlgorithm(self, config=None):  # noqa: N802 - QGIS API
@@ -100,34 +136,79 @@ class CompareRoutesAlgorithm(_PlanningBase):
             self.ROUTES, "Candidate routes (files)", layerType=QgsProcessing.TypeFile))
         self._layers()
         self.addParameter(QgsProcessingParameterEnum(self.METRIC, "Metric", options=list(METRICS), defaultValue=0))
+        self.addParameter(QgsProcessingParameterString(
+            self.LEVELS, "Levels for the people above (dB(A), comma separated, each within -50..200)",
+            "45,50,55,60,65"))
         self.addParameter(QgsProcessingParameterNumber(
-            self.RANK_LEVEL, "Rank by people above (dB(A))", QgsProcessingParameterNumber.Double, 55.0))
+            self.RANK_LEVEL, "Rank by people above (dB(A), one of the levels)", QgsProcessingParameterNumber.Double,
+            55.0))
         self.addParameter(QgsProcessingParameterNumber(
             self.RESOLUTION, "Grid cell (m)", QgsProcessingParameterNumber.Double, 20.0, minValue=0.5))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.MARGIN, "Margin around all routes (m)", QgsProcessingParameterNumber.Double, 500.0, minValue=0.0))
+        self.addParameter(QgsProcessingParameterCrs(
+            self.CRS, "Grid CRS (projected, metres; empty: local UTM zone)", optional=True))
         self.addParameter(QgsProcessingParameterNumber(
             self.GROUND_HEIGHT, "Flat ground height (m, ellipsoidal; empty: stated by the routes, else a take-off "
             "or landing point; routes all in the air need it)", QgsProcessingParameterNumber.Double, optional=True))
         self.addParameter(QgsProcessingParameterFolderDestination(self.OUTPUT_FOLDER, "Output folder"))
         self.addOutput(QgsProcessingOutputString(self.BEST, "best route"))
 
+    def _levels(self, parameters, context):
+        ensure_core()
+        from gisnoise.errors import GisnoiseError
+        from gisnoise.maps import parse_levels
+
+        try:
+            return parse_levels(self.parameterAsString(parameters, self.LEVELS, context), field="LEVELS")
+        except GisnoiseError as exc:
+            raise QgsProcessingException(self.core_error(exc)) from None
+
+    def checkParameterValues(self, parameters, context):  # noqa: N802 - QGIS API
+        ok, msg = super().checkParameterValues(parameters, context)
+        if not ok:
+            return ok, msg
+        try:
+            levels = self._levels(parameters, context)
+        except QgsProcessingException as exc:
+            return False, str(exc)
+        rank = self.parameterAsDouble(parameters, self.RANK_LEVEL, context)
+        if rank not in levels:
+            return False, (f"RANK_LEVEL {rank:g} dB(A) is not one of the levels (parameter LEVELS: "
+                           f"{', '.join(f'{v:g}' for v in levels)}): the people above a level are counted at the "
+                           "levels only; rank by one of them, or add it to LEVELS")
+        crs = self.parameterAsCrs(parameters, self.CRS, context)
+        if crs.isValid() and crs.isGeographic():
+            return False, (f"grid CRS (parameter CRS) must be projected in metres, got "
+                           f"{crs.authid() or crs.description()}")
+        return True, ""
+
     def compute(self, parameters, context, feedback):
         from gisnoise.planning import compare_routes, write_comparison
 
         routes = self.parameterAsFileList(parameters, self.ROUTES, context)
         out = self.parameterAsString(parameters, self.OUTPUT_FOLDER, context)
-        cmp = compare_routes(list(routes), _cards(self, parameters, context),
-                             population=_population(self, parameters, context),
-                             buildings=_buildings(self, parameters, context),
-                             metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
-                             rank_level_db=self.parameterAsDouble(parameters, self.RANK_LEVEL, context),
+        levels = self._levels(parameters, context)
+        crs = self.parameterAsCrs(parameters, self.CRS, context)
+        population, buildings = self._exposure(parameters, context, feedback, 2.0, 10.0)
+        feedback.pushInfo(f"comparing {len(routes)} routes on one grid (the core's step: no progress within it, a "
+                          "cancel stops after it)")
+        cmp = compare_routes(list(routes), _cards(self, parameters, context), population=population,
+                             buildings=buildings, metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
+                             levels=levels, rank_level_db=self.parameterAsDouble(parameters, self.RANK_LEVEL, context),
                              resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
+                             margin_m=self.parameterAsDouble(parameters, self.MARGIN, context),
+                             crs=(crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED))
+                             if crs.isValid() else None,
                              ground_h=(None if parameters.get(self.GROUND_HEIGHT) in (None, "")
                                        else self.parameterAsDouble(parameters, self.GROUND_HEIGHT, context)))
+        step(feedback, 90.0)
         write_comparison(cmp, out)
         for r in cmp.doc["ranking"]:
             feedback.pushInfo(f"{r['rank']}. {r['route']}")
         for w in cmp.doc["warnings"]:
-            feedback.reportError(f"warning: {w}", fatalError=False)
+            self.warn(feedback, w)
+        feedback.setProgress(100.0)
         return {self.OUTPUT_FOLDER: out, self.BEST: cmp.best}
 
 
@@ -142,6 +223,13 @@ class QuieterRouteAlgorithm(_PlanningBase):
     RESOLUTION = "RESOLUTION"
     REDUCTION_PCT = "REDUCTION_PCT"
     ROUTE = "ROUTE"
+
+    CORE_FIELDS = {"from": START, "to": GOAL, "avoid": AVOID, "altitude": ALTITUDE, "max_detour": MAX_DETOUR,
+                   "resolution_m": RESOLUTION, "population": "POPULATION", "buildings": "BUILDINGS",
+                   "cards": "CARDS"}
+    CLI_OPTIONS = {"--from": START, "--to": GOAL, "--avoid": AVOID, "--altitude": ALTITUDE,
+                   "--max-detour": MAX_DETOUR, "--resolution": RESOLUTION, "--population": "POPULATION",
+                   "--buildings": "BUILDINGS", "--card": "CARDS"}
 
     def name(self):
         return "quieterroute"
@@ -187,19 +275,24 @@ class QuieterRouteAlgorithm(_PlanningBase):
         layer = self.parameterAsVectorLayer(parameters, self.AVOID, context)
         if layer is not None:
             tr = QgsCoordinateTransform(layer.crs(), QgsCoordinateReferenceSystem("EPSG:4326"), QgsProject.instance())
-            for f in layer.getFeatures():
+            total = max(layer.featureCount(), 1)
+            for i, f in enumerate(layer.getFeatures()):
+                step(feedback, 2.0 * (i + 1) / total)
                 g = f.geometry()
                 g.transform(tr)
                 shp = shapes.from_wkb(bytes(g.asWkb()))
                 polys.extend(list(shp.geoms) if shp.geom_type == "MultiPolygon" else [shp])
+        population, buildings = self._exposure(parameters, context, feedback, 2.0, 10.0)
+        feedback.pushInfo("searching the quieter route and comparing it with the direct one (the core's step: no "
+                          "progress within it, a cancel stops after it)")
         res = optimize_route(self._lonlat(parameters, self.START, context), self._lonlat(parameters, self.GOAL, context),
-                             _cards(self, parameters, context), population=_population(self, parameters, context),
-                             buildings=_buildings(self, parameters, context), avoid=polys,
-                             altitude_m=self.parameterAsDouble(parameters, self.ALTITUDE, context),
+                             _cards(self, parameters, context), population=population, buildings=buildings,
+                             avoid=polys, altitude_m=self.parameterAsDouble(parameters, self.ALTITUDE, context),
                              max_detour_pct=self.parameterAsDouble(parameters, self.MAX_DETOUR, context),
                              resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context))
+        step(feedback, 90.0)
         for w in res.comparison.doc["warnings"]:  # each route checked as its map would be, and clipped counts
-            feedback.reportError(f"warning: {w}", fatalError=False)
+            self.warn(feedback, w)
         out = self.parameterAsString(parameters, self.OUTPUT_FOLDER, context)
         write_comparison(res.comparison, out)
         route = os.path.join(out, "route.geojson")
@@ -209,4 +302,5 @@ class QuieterRouteAlgorithm(_PlanningBase):
         with open(os.path.join(out, "optimize.json"), "w", encoding="utf-8") as fh:
             json.dump(res.summary, fh, indent=1)
         feedback.pushInfo(json.dumps(res.summary, indent=1))
+        feedback.setProgress(100.0)
         return {self.OUTPUT_FOLDER: out, self.REDUCTION_PCT: float(res.summary["reduction_pct"]), self.ROUTE: route}

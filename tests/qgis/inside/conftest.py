@@ -201,17 +201,38 @@ def bilinear(array, geotransform, x, y):
 
 
 def recording_feedback():
-    """A Processing feedback that keeps what the algorithm reports as errors (``.errors``; warnings are reported
-    that way, ``fatalError=False``)."""
+    """A Processing feedback that keeps what the algorithm says: ``.warnings`` (pushWarning), ``.errors``
+    (reportError), ``.infos`` (pushInfo) and ``.progress`` (each setProgress)."""
     from qgis.core import QgsProcessingFeedback
 
     class Recording(QgsProcessingFeedback):
         def __init__(self):
             super().__init__()
-            self.errors = []
+            self.errors, self.warnings, self.infos, self.progress = [], [], [], []
+            self.progressChanged.connect(self.progress.append)
 
         def reportError(self, error, fatalError=False):  # noqa: N802, N803 (QGIS's names)
             self.errors.append(error)
             super().reportError(error, fatalError)
 
+        def pushWarning(self, warning):  # noqa: N802 (QGIS's name)
+            self.warnings.append(warning)
+            super().pushWarning(warning)
+
+        def pushInfo(self, info):  # noqa: N802 (QGIS's name)
+            self.infos.append(info)
+            super().pushInfo(info)
+
     return Recording()
+
+
+def pip_output(command):
+    """What pip says to an advised command line (``python3 -m pip install ...``) run by this Python with
+    ``--dry-run --no-index``: it installs and fetches nothing, but refuses as pip would for real."""
+    import shlex
+
+    args = shlex.split(command)
+    assert args[:4] == ["python3", "-m", "pip", "install"], command
+    r = subprocess.run([sys.executable, "-m", "pip", "install", *args[4:], "--dry-run", "--no-index"],
+                       capture_output=True, text=True, timeout=120)
+    return r.stdout + r.stderr

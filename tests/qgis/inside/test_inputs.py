@@ -6,6 +6,7 @@ on the command line.
 """
 
 import json
+import os
 import shutil
 
 import numpy as np
@@ -183,8 +184,15 @@ def test_a_track_without_current_in_flight_needs_the_constant_power(plugin, omni
 
 
 def test_an_ardupilot_log_without_pymavlink_says_how_to_install_it(plugin, omni_card, tmp_path):
+    """Per platform; on Linux a pip command this Python's pip accepts: Debian 12 marks its Python as managed by
+    the system (PEP 668), where pip refuses even --user without --break-system-packages (and apt has no
+    python3-pymavlink).  The advised command is run by pip with --dry-run --no-index: refused or not, nothing
+    is installed."""
     import importlib.util
+    import re
+    import sysconfig
 
+    from conftest import pip_output
     from qgis.core import QgsProcessingException
 
     params = {"TRAJECTORY_FILE": str(LOGS / "dronekit_la_testdata_log171_copter.bin"), "CARDS": [omni_card],
@@ -197,3 +205,11 @@ def test_an_ardupilot_log_without_pymavlink_says_how_to_install_it(plugin, omni_
     msg = str(err.value)
     assert msg.startswith("reading an ArduPilot .bin log needs pymavlink in QGIS's Python")
     assert "OSGeo4W Shell" in msg and "QGIS.app" in msg and "TRAJECTORY_FILE" in msg
+    assert "apt install" not in msg
+    linux = re.search(r"Linux: (python3 -m pip install [^(;]*?)(?: \(|;)", msg).group(1)
+    managed = os.path.isfile(os.path.join(sysconfig.get_path("stdlib"), "EXTERNALLY-MANAGED"))
+    assert ("--break-system-packages" in linux) == managed and "--user" in linux
+    if importlib.util.find_spec("pip") is not None:
+        said = pip_output(linux)
+        assert "externally-managed-environment" not in said
+        assert "pymavlink" in said  # pip went on to look for it

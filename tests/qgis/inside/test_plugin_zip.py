@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import subprocess
 import sys
 import zipfile
@@ -106,7 +107,14 @@ def test_a_too_old_shapely_is_named_with_its_version(plugin_zip, tmp_path):
     out = _load(_install(plugin_zip, tmp_path), tmp_path, block=["shapely=1.7.1"])
     (text,) = out["messages"]
     assert text.startswith("gisnoise cannot run in this QGIS: shapely 1.7.1 is older than 1.8. To fix it")
-    assert "python3 -m pip install --user 'shapely>=1.8'" in text and out["refused"] == text
+    assert out["refused"] == text
+    # the Linux pip command, which this Python's pip must accept (Debian 12: PEP 668, --break-system-packages)
+    from conftest import pip_output
+
+    command = re.search(r"or (python3 -m pip install [^;]*);", text).group(1)
+    assert command.endswith("--user 'shapely>=1.8'") or command.endswith("--user --break-system-packages "
+                                                                          "'shapely>=1.8'")
+    assert "externally-managed-environment" not in pip_output(command)
 
 
 def test_the_zip_as_built_loads_without_a_message_on_qgis_own_packages(plugin_zip, tmp_path):

@@ -92,3 +92,27 @@ def test_qgis_process_outputs_open_styled_in_a_fresh_project(plugin, fresh_setti
     assert lines.labelsEnabled() and "level" in lines.labeling().settings().fieldName
     assert track.renderer().type() == "categorizedSymbol" and track.featureCount() == 1
     project.clear()
+
+
+def test_qgis_process_prints_the_warnings_as_warnings(fresh_settings, cli, tmp_path):
+    """The command line's three warnings for the delivery route on a 500 m margin, printed by qgis_process as
+    WARNING lines; no ERROR line for a run that succeeds."""
+    import re
+
+    from conftest import CARDS, REPO
+
+    route = REPO / "gisnoise" / "data" / "routes" / "delivery_route.geojson"
+    demo = [str(CARDS / f"demo_{p}.json") for p in ("horizontal", "climb", "sink")]
+    r = cli("contour", route, *sum((["--card", c] for c in demo), []), "--resolution", "20", "--margin", "500",
+            "--out", tmp_path / "cli")
+    expected = [line[len("warning: "):] for line in r.stderr.splitlines() if line.startswith("warning: ")]
+    assert len(expected) == 3
+    args = [f"TRAJECTORY_FILE={route}", *(f"CARDS={c}" for c in demo), "RESOLUTION=20", "MARGIN=500",
+            f"OUTPUT_RASTER={tmp_path / 'grid.tif'}", f"OUTPUT_BANDS={tmp_path / 'bands.gpkg'}"]
+    r = subprocess.run([qgis_process(), "run", "gisnoise:noisemap", "--", *args], env=fresh_settings,
+                       capture_output=True, text=True, timeout=300)
+    out = r.stdout + r.stderr
+    assert r.returncode == 0, out[-3000:]
+    assert "ERROR" not in out
+    warned = re.findall(r"WARNING:\s*(.*)", out)
+    assert [w.replace(" (parameter MARGIN)", "") for w in warned] == expected
