@@ -18,7 +18,8 @@ class GisnoiseAlgorithm(QgsProcessingAlgorithm):
     :meth:`processAlgorithm` makes the core importable, then calls :meth:`compute`
     and turns every core error (``gisnoise.errors.GisnoiseError``) into a
     :class:`QgsProcessingException` carrying the core's one-line message,
-    which names the bad field.
+    its field names and command-line options put as this algorithm's
+    parameters (:attr:`CORE_FIELDS`, :attr:`CLI_OPTIONS`, :attr:`PHRASES`).
     """
 
     GROUP = ""
@@ -62,20 +63,12 @@ class GisnoiseAlgorithm(QgsProcessingAlgorithm):
 
     def warn(self, feedback, text):
         """A warning of the core in the log, its fields and options named as this algorithm's parameters."""
-        warn(feedback, self._translate(text))
+        warn(feedback, translate(text, parameter_names(self.CORE_FIELDS), parameter_names(self.CLI_OPTIONS),
+                                 self.PHRASES))
 
-    def _translate(self, text):
-        for words, phrase in self.PHRASES.items():
-            text = text.replace(words, phrase)
-        return translate(text, parameter_names(self.CORE_FIELDS), parameter_names(self.CLI_OPTIONS))
-
-    def core_error(self, exc, extra=None):
-        """The one-line message of a core error in this algorithm's terms (``extra``: more core names -> phrases)."""
-        names = {**parameter_names(self.CORE_FIELDS), **(extra or {})}
-        msg = error_message(exc, names, parameter_names(self.CLI_OPTIONS))
-        for words, phrase in self.PHRASES.items():
-            msg = msg.replace(words, phrase)
-        return msg
+    def core_error(self, exc):
+        """The one-line message of a core error in this algorithm's terms."""
+        return error_message(exc, parameter_names(self.CORE_FIELDS), parameter_names(self.CLI_OPTIONS), self.PHRASES)
 
 
 def warn(feedback, text):
@@ -93,7 +86,7 @@ def parameter_names(keys):
     return {core: f"parameter {key}" for core, key in (keys or {}).items()}
 
 
-def translate(msg, names, options=None):
+def translate(msg, names, options=None, phrases=None):
     """The core's message with its field names and command-line options replaced by what the user set.
 
     Parameters
@@ -106,10 +99,14 @@ def translate(msg, names, options=None):
     options : dict, optional
         Command-line option -> phrase, e.g. ``{"--ground-height": "parameter GROUND_HEIGHT"}``; an option's
         metavariable (``--ground-height M``) goes with it.
+    phrases : dict, optional
+        Words -> words, replaced first (``{"a wider margin": "a wider margin (parameter MARGIN)"}``).
 
     Forms replaced: ``field 'x'``, ``column 'x'``, ``(field x)``, ``x:`` at the start of the message or of a
     part after ``": "``, and ``x`` as a word when it holds ``_`` or ``.`` (no English word does).
     """
+    for words, phrase in (phrases or {}).items():
+        msg = msg.replace(words, phrase)
     for opt, phrase in (options or {}).items():
         msg = re.sub(rf"{re.escape(opt)}(?: [A-Z][\w.]*)?(?![\w-])", phrase, msg)
     for core, phrase in names.items():
@@ -122,10 +119,10 @@ def translate(msg, names, options=None):
     return re.sub(r"(parameter (\w+)) \(parameter \2\)", r"\1", msg)
 
 
-def error_message(exc, names=None, options=None) -> str:
+def error_message(exc, names=None, options=None, phrases=None) -> str:
     """The core error's message in the algorithm's terms (:func:`translate`), naming its field or parameter."""
     names = names or {}
-    msg = translate(str(exc), names, options)
+    msg = translate(str(exc), names, options, phrases)
     fld = getattr(exc, "field", None)
     if fld and fld in names:
         if names[fld] not in msg:

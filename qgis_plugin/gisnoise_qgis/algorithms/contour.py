@@ -152,7 +152,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
             fileFilter="Trajectories (*.csv *.geojson *.json *.ulg *.ULG *.bin *.BIN);;All files (*)"))
         for key, label, ftype in (
             (self.TIME_FIELD, "Time field (s; lines: their M values)", QgsProcessingParameterField.Numeric),
-            (self.ALTITUDE_FIELD, "Height field (m, ellipsoidal; empty: geometry Z)", QgsProcessingParameterField.Numeric),
+            (self.ALTITUDE_FIELD, "Height field (m, ellipsoidal; empty: geometry Z)",
+             QgsProcessingParameterField.Numeric),
             (self.ROLL_FIELD, "Roll field (deg; empty: 0)", QgsProcessingParameterField.Numeric),
             (self.PITCH_FIELD, "Pitch field (deg; empty: 0)", QgsProcessingParameterField.Numeric),
             (self.YAW_FIELD, "Yaw field (deg from north; empty for lines: along the line)",
@@ -259,7 +260,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
         if path and path.lower().endswith(".bin") and importlib.util.find_spec("pymavlink") is None:
             raise QgsProcessingException(
                 "reading an ArduPilot .bin log needs pymavlink in QGIS's Python (compiled, so the plugin does not "
-                f"bundle it; Debian and Ubuntu do not package it): {pip_hint(['pymavlink'])} (parameter TRAJECTORY_FILE)")
+                f"bundle it; Debian and Ubuntu do not package it): {pip_hint(['pymavlink'])} "
+                "(parameter TRAJECTORY_FILE)")
         if path:  # flight CSV, GeoJSON, waypoints, PX4 .ulg, ArduPilot .bin
             return read_route(path, dem=dem, dem_offset_m=dem_offset, geoid_undulation_m=geoid,
                               power_w=self._optional(parameters, self.POWER_W, context))
@@ -276,8 +278,8 @@ class NoiseMapAlgorithm(GisnoiseAlgorithm):
                 _, _, problems = track_fields(source, fields, defaults)
                 raise QgsProcessingException(
                     f"trajectory layer '{name}' has fields of a flown track ({', '.join(evidence)}), so it is not "
-                    f"flown as waypoints (parameter TRAJECTORY_KIND: auto), but they do not fit: {'; '.join(problems)}; "
-                    "or set TRAJECTORY_KIND to waypoints to fly its points as a plan")
+                    f"flown as waypoints (parameter TRAJECTORY_KIND: auto), but they do not fit: "
+                    f"{'; '.join(problems)}; or set TRAJECTORY_KIND to waypoints to fly its points as a plan")
         if kind == "waypoints" or (kind.startswith("auto") and is_waypoint_layer(source, fields["t"])):
             names = {}
             for col, key, default in (("alt", self.WAYPOINT_ALT_FIELD, "alt"), ("speed", self.WAYPOINT_SPEED_FIELD,

@@ -106,16 +106,18 @@ class CompareRoutesAlgorithm(_PlanningBase):
     CRS = "CRS"
     RANK_LEVEL = "RANK_LEVEL"
     GROUND_HEIGHT = "GROUND_HEIGHT"
+    PERIOD = "PERIOD"
     BEST = "BEST"
 
     CORE_FIELDS = {"routes": ROUTES, "metric": METRIC, "levels": LEVELS, "rank_level": RANK_LEVEL,
                    "resolution_m": RESOLUTION, "grid.resolution_m": RESOLUTION, "margin_m": MARGIN, "crs": CRS,
-                   "ground_h": GROUND_HEIGHT, "ground_h_m": GROUND_HEIGHT, "population": "POPULATION",
-                   "buildings": "BUILDINGS", "cards": "CARDS"}
-    CLI_OPTIONS = {"--ground-height": GROUND_HEIGHT, "--margin": MARGIN, "--resolution": RESOLUTION,
-                   "--levels": LEVELS, "--rank-level": RANK_LEVEL, "--crs": CRS, "--metric": METRIC,
-                   "--population": "POPULATION", "--buildings": "BUILDINGS", "--card": "CARDS"}
-    PHRASES = {"a wider margin": "a wider margin (parameter MARGIN)"}
+                   "ground_h": GROUND_HEIGHT, "ground_h_m": GROUND_HEIGHT, "period_s": PERIOD,
+                   "population": "POPULATION", "buildings": "BUILDINGS", "cards": "CARDS"}
+    CLI_OPTIONS = {"--ground-height": GROUND_HEIGHT, "--period": PERIOD, "--margin": MARGIN,
+                   "--resolution": RESOLUTION, "--levels": LEVELS, "--rank-level": RANK_LEVEL, "--crs": CRS,
+                   "--metric": METRIC, "--population": "POPULATION", "--buildings": "BUILDINGS", "--card": "CARDS"}
+    PHRASES = {"a wider margin": "a wider margin (parameter MARGIN)",
+               "gisnoise contour --dem": "the noise map (gisnoise:noisemap) with a DEM"}
 
     def name(self):
         return "compareroutes"
@@ -151,6 +153,9 @@ class CompareRoutesAlgorithm(_PlanningBase):
         self.addParameter(QgsProcessingParameterNumber(
             self.GROUND_HEIGHT, "Flat ground height (m, ellipsoidal; empty: stated by the routes, else a take-off "
             "or landing point; routes all in the air need it)", QgsProcessingParameterNumber.Double, optional=True))
+        self.addParameter(QgsProcessingParameterNumber(
+            self.PERIOD, "LAeq averaging period, the same for every route (s; metric LAeq only; empty: the longest "
+            "route's duration)", QgsProcessingParameterNumber.Double, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterFolderDestination(self.OUTPUT_FOLDER, "Output folder"))
         self.addOutput(QgsProcessingOutputString(self.BEST, "best route"))
 
@@ -194,14 +199,17 @@ class CompareRoutesAlgorithm(_PlanningBase):
         feedback.pushInfo(f"comparing {len(routes)} routes on one grid (the core's step: no progress within it, a "
                           "cancel stops after it)")
         cmp = compare_routes(list(routes), _cards(self, parameters, context), population=population,
-                             buildings=buildings, metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
+                             buildings=buildings,
+                             metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
                              levels=levels, rank_level_db=self.parameterAsDouble(parameters, self.RANK_LEVEL, context),
                              resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
                              margin_m=self.parameterAsDouble(parameters, self.MARGIN, context),
                              crs=(crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED))
                              if crs.isValid() else None,
                              ground_h=(None if parameters.get(self.GROUND_HEIGHT) in (None, "")
-                                       else self.parameterAsDouble(parameters, self.GROUND_HEIGHT, context)))
+                                       else self.parameterAsDouble(parameters, self.GROUND_HEIGHT, context)),
+                             period_s=(None if parameters.get(self.PERIOD) in (None, "")
+                                       else self.parameterAsDouble(parameters, self.PERIOD, context)))
         step(feedback, 90.0)
         write_comparison(cmp, out)
         for r in cmp.doc["ranking"]:
@@ -285,9 +293,10 @@ class QuieterRouteAlgorithm(_PlanningBase):
         population, buildings = self._exposure(parameters, context, feedback, 2.0, 10.0)
         feedback.pushInfo("searching the quieter route and comparing it with the direct one (the core's step: no "
                           "progress within it, a cancel stops after it)")
-        res = optimize_route(self._lonlat(parameters, self.START, context), self._lonlat(parameters, self.GOAL, context),
-                             _cards(self, parameters, context), population=population, buildings=buildings,
-                             avoid=polys, altitude_m=self.parameterAsDouble(parameters, self.ALTITUDE, context),
+        res = optimize_route(self._lonlat(parameters, self.START, context),
+                             self._lonlat(parameters, self.GOAL, context), _cards(self, parameters, context),
+                             population=population, buildings=buildings, avoid=polys,
+                             altitude_m=self.parameterAsDouble(parameters, self.ALTITUDE, context),
                              max_detour_pct=self.parameterAsDouble(parameters, self.MAX_DETOUR, context),
                              resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context))
         step(feedback, 90.0)

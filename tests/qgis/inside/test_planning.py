@@ -212,3 +212,16 @@ def test_planners_show_progress_and_stop_when_cancelled(plugin, town, candidates
     assert not [i for i in cancelled.infos if "comparing" in i or "searching" in i]  # the core's step never began
     left = tmp_path / "cancelled"
     assert not left.exists() or not any(left.iterdir())
+
+
+def test_compare_laeq_takes_one_period_named_period(plugin, town, candidates, tmp_path):
+    """PERIOD, as --period: LAeq over one averaging period for every route; for LAmax, which has none, refused
+    naming PERIOD (not the core's period_s)."""
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException) as err:
+        _compare(town, candidates, tmp_path / "lamax", METRIC=0, PERIOD=600.0)
+    assert "parameter PERIOD" in str(err.value) and "period_s" not in str(err.value)
+    _compare(town, candidates, tmp_path / "laeq", METRIC=1, PERIOD=600.0)
+    doc = json.loads((tmp_path / "laeq" / "comparison.json").read_text())
+    assert doc["metric"] == "LAeq" and doc["period_s"] == 600.0
