@@ -437,3 +437,18 @@ def test_equal_routes_share_a_rank_whatever_the_order_of_the_arguments(tmp_path)
     assert [(r["route"], r["rank"], r["tie"]) for r in ranked] == [("b", 1, False), ("a", 2, False), ("c", 3, False)]
     ranked = rank_rows([row("z", 10.0, 5.0, 60.0), row("y", 10.4, 5.4, 60.04), row("x", 12.0, 0.0, 50.0)], "55")
     assert [(r["route"], r["rank"], r["tie"]) for r in ranked] == [("y", 1, True), ("z", 1, True), ("x", 3, False)]
+
+
+def test_progress_counts_the_routes_and_a_cancel_stops_the_comparison(tmp_path):
+    """The fraction done follows the routes (half after the first of two, 1 at the end) and a cancel raises
+    Cancelled while a route is evaluated."""
+    from gisnoise.errors import Cancelled
+
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    routes = [northwards(0.0), northwards(400.0)]
+    grid = GridSpec(TMERC, Affine(20.0, 0, -800.0, 0, -20.0, 1800.0), 100, 180)
+    seen: list[float] = []
+    compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=grid, progress=seen.append)
+    assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0) and any(abs(f - 0.5) < 1e-9 for f in seen)
+    with pytest.raises(Cancelled):
+        compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=grid, cancel=lambda: True)

@@ -220,3 +220,25 @@ def test_a_search_that_finds_no_quieter_route_keeps_the_direct_one(tmp_path):
     assert s["people_above_55_optimized"] == s["people_above_55_direct"]
     kept = [line for line in r.stdout.splitlines() if line.startswith("kept the direct route")]
     assert len(kept) == 1 and "not better than the direct one" in kept[0]
+
+
+def test_progress_rises_to_the_end_and_a_cancel_stops_the_search(population):
+    """Long searches are followed and can be stopped (the QGIS planners' bar and Cancel): the fraction done rises to
+    1, the search's part ending at 0.5; a cancel raises Cancelled at the next graph solution."""
+    from gisnoise.errors import Cancelled
+
+    seen: list[float] = []
+    optimize_route(pad(-1500.0), pad(1500.0), [omni()], population=population, altitude_m=60.0,
+                   max_detour_pct=25.0, progress=seen.append)
+    assert seen and seen == sorted(seen) and seen[-1] == pytest.approx(1.0)
+    assert max(f for f in seen if f <= 0.5) <= 0.5 and any(f > 0.5 for f in seen)
+    calls = []
+
+    def cancel() -> bool:
+        calls.append(1)
+        return len(calls) > 1  # the second solution is not started
+
+    with pytest.raises(Cancelled):
+        optimize_route(pad(-1500.0), pad(1500.0), [omni()], population=population, altitude_m=60.0,
+                       max_detour_pct=25.0, cancel=cancel)
+    assert len(calls) == 2

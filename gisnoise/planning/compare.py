@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -117,7 +117,8 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
                 levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), receiver_height: float = 1.5,
                 ground_h: float = 0.0, engine: str = "numpy",
                 points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None,
-                period_s: float | None = None) -> tuple[dict[str, Any], np.ndarray]:
+                period_s: float | None = None, progress: Callable[[float], Any] | None = None,
+                cancel: Callable[[], bool] | None = None) -> tuple[dict[str, Any], np.ndarray]:
     """The exposure scores of one route on a given grid, and its band of ``metric``.
 
     One evaluator call for ``metric`` alone (no GeoTIFF, no contours), then people above each
@@ -128,11 +129,13 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
     ``points`` are the population's sub-cells on this grid
     (:func:`gisnoise.exposure.population_points`), computed once when several routes share the grid.
     ``period_s``: the averaging period of ``LAeq``, s (default the route's own duration; routes compared on
-    ``LAeq`` share one, :func:`compare_routes`).
+    ``LAeq`` share one, :func:`compare_routes`).  ``progress`` (fraction 0-1) and ``cancel`` (true raises
+    :class:`~gisnoise.errors.Cancelled`) go to the evaluator.
     """
     lv = [float(v) for v in levels]
     res = evaluate_flying(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
-                          ground_h=ground_h, engine=engine, period_s=period_s)  # samples on the ground make no noise
+                          ground_h=ground_h, engine=engine, period_s=period_s, progress=progress,
+                          cancel=cancel)  # samples on the ground make no noise
     band = res.bands[metric]
     lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
                                                                "period_s": res.metadata.get("period_s")})
@@ -163,7 +166,9 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
                    levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), rank_level_db: float = 55.0,
                    resolution_m: float = 20.0, margin_m: float | None = 500.0, crs: Any = None,
                    receiver_height: float = 1.5, ground_h: float | None = None, engine: str = "numpy",
-                   grid: GridSpec | None = None, period_s: float | None = None) -> Comparison:
+                   grid: GridSpec | None = None, period_s: float | None = None,
+                   progress: Callable[[float], Any] | None = None, cancel: Callable[[], bool] | None = None
+                   ) -> Comparison:
     """Evaluate candidate routes on one grid and rank them by exposure (see the module docstring).
 
     Parameters
@@ -201,6 +206,10 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     period_s : float, optional
         ``LAeq`` only: the averaging period T, s, the same for every route (``LAeq,T = SEL - 10 lg(T / 1 s)``,
         so the routes rank as by SEL); default the longest route's duration; shorter than a route is refused.
+    progress : callable, optional
+        Called with the fraction of the routes evaluated (0-1).
+    cancel : callable, optional
+        Polled while each route is evaluated; returning true raises :class:`~gisnoise.errors.Cancelled`.
 
     Returns
     -------
@@ -254,10 +263,14 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     pts = population_points(population, grid) if population is not None else None
     bands: dict[str, np.ndarray] = {}
     rows: list[dict[str, Any]] = []
-    for n, traj in trajs.items():
+    for k, (n, traj) in enumerate(trajs.items()):
+        def part(f: float, k: int = k) -> None:  # route k of the routes, in the comparison's fraction done
+            if progress is not None:
+                progress((k + min(max(f, 0.0), 1.0)) / len(trajs))
+
         row, band = score_route(traj, cardset, grid, population=population, buildings=buildings, metric=metric,
                                 levels=lv, receiver_height=receiver_height, ground_h=ground_h, engine=engine,
-                                points=pts, period_s=period)
+                                points=pts, period_s=period, progress=part, cancel=cancel)
         row["route"] = n
         bands[n] = band
         rows.append(row)

@@ -34,14 +34,14 @@ so (the search takes nobody there and may be drawn into it).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from gisnoise.errors import InputError
+from gisnoise.errors import Cancelled, InputError
 from gisnoise.exposure import (
     UNCOVERED_SHARE,
     Buildings,
@@ -250,7 +250,9 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
                    avoid: Sequence[Any] = (), altitude_m: float = 60.0, max_detour_pct: float = 30.0,
                    turn_radius_m: float | None = None, vehicle: dict[str, Any] | None = None,
                    rank_level_db: float = 55.0, resolution_m: float = 50.0, eval_resolution_m: float = 20.0,
-                   ground_h: float = 0.0, levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0)) -> Optimized:
+                   ground_h: float = 0.0, levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0),
+                   progress: Callable[[float], Any] | None = None, cancel: Callable[[], bool] | None = None
+                   ) -> Optimized:
     """Least-exposure flyable route from ``start`` to ``goal`` (lon, lat in deg); see the module docstring.
 
     ``avoid`` are no-fly polygons in WGS84 (shapely).  The result's ``summary`` states the
@@ -259,7 +261,10 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
     the searched route was not better than the direct one, which is then returned
     (``searched_length_m``, ``people_above_<level>_searched`` state the searched route); ``warnings``
     (also appended to the comparison's) name a search area partly outside the population raster.
-    A pad outside the population raster is refused (field ``from`` or ``to``).
+    A pad outside the population raster is refused (field ``from`` or ``to``).  ``progress`` is called with the
+    fraction done (the search up to 0.5, the re-evaluation of both routes after it); ``cancel`` is polled between
+    the search's graph solutions and while the routes are evaluated (true raises
+    :class:`~gisnoise.errors.Cancelled`).
     """
     from gisnoise.geo import shapes as shapely
 
@@ -323,7 +328,14 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
 
     s_node, g_node = node(sx, sy), node(gx, gy)
 
+    solved = [0]
+
     def solve(lam: float) -> np.ndarray:
+        if cancel is not None and cancel():
+            raise Cancelled("route optimize: cancelled")
+        if progress is not None:  # at most about 1 + 10 + 10 solutions: the search's half of the bar
+            progress(0.5 * min(solved[0] / 20.0, 1.0))
+        solved[0] += 1
         path = _dijkstra(cost, closed, resolution_m, lam, s_node, g_node)
         rr, cc = np.divmod(np.asarray(path), grid.width)
         px = t.c + t.a * (cc + 0.5)
@@ -368,7 +380,8 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
         del i
     cmp = compare_routes([d_doc, o_doc], cardset, population=population, buildings=buildings,
                          names=["direct", "optimized"], levels=levels, rank_level_db=rank_level_db,
-                         resolution_m=eval_resolution_m, margin_m=None, ground_h=ground_h)
+                         resolution_m=eval_resolution_m, margin_m=None, ground_h=ground_h,
+                         progress=None if progress is None else (lambda f: progress(0.5 + 0.5 * f)), cancel=cancel)
     rows = {x["route"]: x for x in cmp.doc["ranking"]}
     key = f"{rank_level_db:g}"
 

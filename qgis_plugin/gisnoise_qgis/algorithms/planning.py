@@ -196,9 +196,9 @@ class CompareRoutesAlgorithm(_PlanningBase):
         levels = self._levels(parameters, context)
         crs = self.parameterAsCrs(parameters, self.CRS, context)
         population, buildings = self._exposure(parameters, context, feedback, 2.0, 10.0)
-        feedback.pushInfo(f"comparing {len(routes)} routes on one grid (the core's step: no progress within it, a "
-                          "cancel stops after it)")
+        feedback.pushInfo(f"comparing {len(routes)} routes on one grid")
         cmp = compare_routes(list(routes), _cards(self, parameters, context), population=population,
+                             progress=lambda f: feedback.setProgress(10.0 + 80.0 * f), cancel=feedback.isCanceled,
                              buildings=buildings,
                              metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
                              levels=levels, rank_level_db=self.parameterAsDouble(parameters, self.RANK_LEVEL, context),
@@ -291,14 +291,14 @@ class QuieterRouteAlgorithm(_PlanningBase):
                 shp = shapes.from_wkb(bytes(g.asWkb()))
                 polys.extend(list(shp.geoms) if shp.geom_type == "MultiPolygon" else [shp])
         population, buildings = self._exposure(parameters, context, feedback, 2.0, 10.0)
-        feedback.pushInfo("searching the quieter route and comparing it with the direct one (the core's step: no "
-                          "progress within it, a cancel stops after it)")
+        feedback.pushInfo("searching the quieter route and comparing it with the direct one")
         res = optimize_route(self._lonlat(parameters, self.START, context),
                              self._lonlat(parameters, self.GOAL, context), _cards(self, parameters, context),
                              population=population, buildings=buildings, avoid=polys,
                              altitude_m=self.parameterAsDouble(parameters, self.ALTITUDE, context),
                              max_detour_pct=self.parameterAsDouble(parameters, self.MAX_DETOUR, context),
-                             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context))
+                             resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
+                             progress=lambda f: feedback.setProgress(10.0 + 80.0 * f), cancel=feedback.isCanceled)
         step(feedback, 90.0)
         for w in res.comparison.doc["warnings"]:  # each route checked as its map would be, and clipped counts
             self.warn(feedback, w)

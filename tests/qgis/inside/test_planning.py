@@ -190,8 +190,9 @@ def _cancel_at_first_progress():
 
 @pytest.mark.parametrize("algorithm", ["compareroutes", "quieterroute"])
 def test_planners_show_progress_and_stop_when_cancelled(plugin, town, candidates, tmp_path, algorithm):
-    """Progress at each step the plugin drives (rising, to 100 %); cancelled at the first, the algorithm stops
-    before the core's computation ("cancelled by the user"), writing no file."""
+    """Progress at each step the plugin drives and within the core's computation (rising, to 100 %); cancelled at
+    the first, the algorithm stops before the core's computation, and cancelled within it, it stops there ("cancelled
+    by the user"), writing no file either way."""
     import processing
     from qgis.core import QgsProcessingException
 
@@ -211,6 +212,17 @@ def test_planners_show_progress_and_stop_when_cancelled(plugin, town, candidates
                        feedback=cancelled)
     assert not [i for i in cancelled.infos if "comparing" in i or "searching" in i]  # the core's step never began
     left = tmp_path / "cancelled"
+    assert not left.exists() or not any(left.iterdir())
+    # within the core's computation (10-90 %) the bar moves, and a cancel there stops it too
+    assert any(10.0 < p < 90.0 for p in said.progress)
+    inside = recording_feedback()
+    inside.progressChanged.connect(lambda p: inside.cancel() if 10.0 < p < 90.0 else None)
+    with pytest.raises(QgsProcessingException, match="cancelled by the user"):
+        processing.run(f"gisnoise:{algorithm}", {**params, "OUTPUT_FOLDER": str(tmp_path / "inside")},
+                       feedback=inside)
+    assert [i for i in inside.infos if "comparing" in i or "searching" in i]  # the core's step had begun
+    assert max(inside.progress) < 90.0
+    left = tmp_path / "inside"
     assert not left.exists() or not any(left.iterdir())
 
 
