@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from gisnoise.cli.options import card_option, out_dir_option
+from gisnoise.cli.options import card_option, out_dir_option, progress
 from gisnoise.errors import InputError
 
 
@@ -43,7 +43,8 @@ def _floats(value: str, name: str) -> list[float]:
                    "routes rank as by SEL) [default: the longest route's duration].")
 @click.option("--engine", "engine", type=click.Choice(["numpy", "fast"]), default="numpy", show_default=True,
               help="Evaluator engine.")
-def command(routes: tuple[str, ...], cards: tuple[str, ...], out: str, population: str | None,
+@click.pass_context
+def command(ctx: click.Context, routes: tuple[str, ...], cards: tuple[str, ...], out: str, population: str | None,
             buildings: str | None, metric: str, levels: str, rank_level: float, resolution: float, margin: float,
             crs: str | None, ground_h: float | None, period: float | None, engine: str) -> None:
     """Rank candidate ROUTES (two or more trajectory or waypoint files) by the people they expose.
@@ -63,9 +64,11 @@ def command(routes: tuple[str, ...], cards: tuple[str, ...], out: str, populatio
         raise InputError("compare: give --population and/or --buildings", field="population")
     pop = read_population(population) if population else None
     b = read_buildings(buildings) if buildings else None
-    cmp = compare_routes(list(routes), list(cards), population=pop, buildings=b, metric=metric,
-                         levels=_floats(levels, "--levels"), rank_level_db=rank_level, resolution_m=resolution,
-                         margin_m=margin, crs=crs, ground_h=ground_h, engine=engine, period_s=period)
+    with progress(ctx, "comparing routes", 1.0) as update:
+        cmp = compare_routes(list(routes), list(cards), population=pop, buildings=b, metric=metric,
+                             levels=_floats(levels, "--levels"), rank_level_db=rank_level, resolution_m=resolution,
+                             margin_m=margin, crs=crs, ground_h=ground_h, engine=engine, period_s=period,
+                             progress=update)
     paths = write_comparison(cmp, out)
     click.echo(comparison_table(cmp.doc, warnings=False).rstrip())
     for w in cmp.doc["warnings"]:

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from gisnoise.cli.options import card_option, out_dir_option
+from gisnoise.cli.options import card_option, out_dir_option, progress
 from gisnoise.errors import InputError
 
 
@@ -68,7 +68,8 @@ def command() -> None:
               help="Cost grid cell, m.")
 @click.option("--ground-height", "ground_h", type=float, default=0.0, show_default=True,
               help="Ellipsoidal height of flat ground, m.")
-def optimize(start: str, goal: str, cards: tuple[str, ...], out: str, population: str | None,
+@click.pass_context
+def optimize(ctx: click.Context, start: str, goal: str, cards: tuple[str, ...], out: str, population: str | None,
              buildings: str | None, avoid: str | None, altitude: float, max_detour: float,
              turn_radius: float | None, rank_level: float, resolution: float, ground_h: float) -> None:
     """Least-exposure flyable route from --from to --to, re-evaluated against the direct route.
@@ -89,9 +90,10 @@ def optimize(start: str, goal: str, cards: tuple[str, ...], out: str, population
     pop = read_population(population) if population else None
     b = read_buildings(buildings) if buildings else None
     polys = _read_avoid(avoid) if avoid else []
-    res = optimize_route(s, g, list(cards), population=pop, buildings=b, avoid=polys, altitude_m=altitude,
-                         max_detour_pct=max_detour, turn_radius_m=turn_radius, rank_level_db=rank_level,
-                         resolution_m=resolution, ground_h=ground_h)
+    with progress(ctx, "searching and comparing", 1.0) as update:
+        res = optimize_route(s, g, list(cards), population=pop, buildings=b, avoid=polys, altitude_m=altitude,
+                             max_detour_pct=max_detour, turn_radius_m=turn_radius, rank_level_db=rank_level,
+                             resolution_m=resolution, ground_h=ground_h, progress=update)
     o = Path(out)
     paths = write_comparison(res.comparison, o)
     for name, doc in (("route.geojson", res.optimized_doc), ("direct.geojson", res.direct_doc)):
