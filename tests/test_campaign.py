@@ -426,11 +426,11 @@ def test_absorption_without_band_levels_is_refused_not_skipped(tmp_path):
 DATA = Path(__file__).parent / "data"
 
 
-def test_campaign_with_a_px4_log_aligned_by_gps_time(tmp_path):
-    """flights/f1.ulg is read with the flight's start_utc: t = GPS UTC - start_utc."""
+def vtol_campaign(root: Path, t_r: np.ndarray) -> Path:
+    """A campaign of the real PX4 VTOL log (flights/f1.ulg) with one microphone 10 m east of its site hearing a
+    steady 60 dB(A) at the reception times ``t_r``."""
     import shutil
 
-    root = tmp_path / "c"
     (root / "flights").mkdir(parents=True)
     shutil.copy(DATA / "pyulog_sample_log_small_vtol.ulg", root / "flights" / "f1.ulg")
     frame = LocalFrame(63.4170, 10.4082, 100.0)   # the log's site
@@ -441,9 +441,13 @@ def test_campaign_with_a_px4_log_aligned_by_gps_time(tmp_path):
            "microphones": [{"id": "m1", "lat": float(lat), "lon": float(lon), "h": float(h), "mount": "free_field"}],
            "flights": [{"id": "f1", "start_utc": "2021-04-21T06:30:58Z"}]}
     (root / "campaign.json").write_text(json.dumps(doc))
-    t_r = np.arange(0.0, 7.0, 0.125)
     write_levels(root / "mics" / "m1" / "f1.csv", t_r, np.full(len(t_r), 60.0))
-    camp = read_campaign(root)
+    return root
+
+
+def test_campaign_with_a_px4_log_aligned_by_gps_time(tmp_path):
+    """flights/f1.ulg is read with the flight's start_utc: t = GPS UTC - start_utc."""
+    camp = read_campaign(vtol_campaign(tmp_path / "c", np.arange(0.0, 7.0, 0.125)))
     tr = camp.trajectories["f1"]
     # first GPS fix inside the attitude/battery span: 06:30:58.80 UTC (time_utc_usec of the log)
     assert abs(tr.t[0] - 0.800) < 0.03 and abs(tr.t[-1] - 6.600) < 0.03
@@ -463,22 +467,7 @@ def test_a_recording_that_ends_before_take_off_is_not_blamed_on_the_clock(tmp_pa
     """The real VTOL log: its GPS time is right, the log spans 0.8-6.6 s of the campaign's clock and the vehicle
     flies at about 3.0-3.8 s.  A recording of 2.5 s falls within the log but finds the vehicle on the ground: the
     check says so and names the airborne stretch, not "check start_utc"."""
-    import shutil
-
-    root = tmp_path / "c"
-    (root / "flights").mkdir(parents=True)
-    shutil.copy(DATA / "pyulog_sample_log_small_vtol.ulg", root / "flights" / "f1.ulg")
-    frame = LocalFrame(63.4170, 10.4082, 100.0)
-    lat, lon, h = frame.to_wgs84(10.0, 0.0, 1.5)
-    doc = {"schema": "gisnoise/campaign/1", "origin": {"lat": 63.4170, "lon": 10.4082, "h": 100.0},
-           "speed_of_sound_m_s": 340.0, "weather": {"temperature_c": 10.0},
-           "vehicle": {"name": "vtol", "reference_power_w": 500.0},
-           "microphones": [{"id": "m1", "lat": float(lat), "lon": float(lon), "h": float(h), "mount": "free_field"}],
-           "flights": [{"id": "f1", "start_utc": "2021-04-21T06:30:58Z"}]}
-    (root / "campaign.json").write_text(json.dumps(doc))
-    t_r = np.arange(0.0625, 2.5, 0.125)
-    write_levels(root / "mics" / "m1" / "f1.csv", t_r, np.full(len(t_r), 60.0))
-    camp, problems = inspect_campaign(root)
+    camp, problems = inspect_campaign(vtol_campaign(tmp_path / "c", np.arange(0.0625, 2.5, 0.125)))
     tr = camp.trajectories["f1"]
     fly = tr.t[tr.flying]
     assert fly.min() > 2.5  # the vehicle takes off after the recording ends

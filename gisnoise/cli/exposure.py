@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from gisnoise.cli.options import echo_warnings
+from gisnoise.cli.options import building_field_options, echo_warnings
 from gisnoise.errors import InputError
 
 
@@ -27,12 +27,7 @@ def _edges(value: str) -> list[float]:
 @click.option("--buildings", "buildings", type=click.Path(dir_okay=False), default=None,
               help="Building polygons (GeoPackage, GeoJSON, Shapefile) with residents/dwellings/height attributes; "
                    "needs --trajectory and --card.")
-@click.option("--layer", "layer", default=None, help="Layer of the buildings file (GeoPackage).")
-@click.option("--residents-field", "residents_field", default=None,
-              help="Attribute with the residents of a building [default: the first of residents, population, pop, "
-                   "inhabitants, persons, people; a layer with none of them is read with a warning].")
-@click.option("--dwellings-field", "dwellings_field", default=None,
-              help="Attribute with the dwellings of a building [default: dwellings, households, units, flats].")
+@building_field_options
 @click.option("--trajectory", "trajectory", type=click.Path(dir_okay=False), default=None,
               help="The map's trajectory (for façade levels of --buildings).")
 @click.option("--schedule", "schedule", type=click.Path(dir_okay=False), default=None,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from gisnoise.cli.contour import _echo_bands_and_files
-from gisnoise.cli.options import echo_warnings, out_dir_option, progress
+from gisnoise.cli.options import building_field_options, echo_warnings, out_dir_option, progress
 from gisnoise.errors import InputError
 
 
@@ -39,12 +39,7 @@ from gisnoise.errors import InputError
                    "most exposed façade, in DIR/exposure.json and exposure.md (flat ground only).")
 @click.option("--facade-height", "facade_height", type=click.FloatRange(min=0.0, min_open=True), default=4.0,
               show_default=True, help="Height of façade receivers above ground, m.")
-@click.option("--layer", "layer", default=None, help="Layer of the buildings file (GeoPackage).")
-@click.option("--residents-field", "residents_field", default=None,
-              help="Attribute with the residents of a building [default: the first of residents, population, pop, "
-                   "inhabitants, persons, people; a layer with none of them is read with a warning].")
-@click.option("--dwellings-field", "dwellings_field", default=None,
-              help="Attribute with the dwellings of a building [default: dwellings, households, units, flats].")
+@building_field_options
 @click.pass_context
 def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, workers: int | None,
             single_process: bool, threads: int | None, tile_cells: int | None, memory_limit: str | None, levels: str | None,

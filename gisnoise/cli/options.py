@@ -20,6 +20,21 @@ out_dir_option = click.option("--out", "out", required=True, type=click.Path(fil
                               help="Output folder (created).")
 
 
+def building_field_options(f: Any) -> Any:
+    """``--layer``, ``--residents-field`` and ``--dwellings-field``: how a buildings file is read."""
+    for opt in reversed((
+            click.option("--layer", "layer", default=None, help="Layer of the buildings file (GeoPackage)."),
+            click.option("--residents-field", "residents_field", default=None,
+                         help="Attribute with the residents of a building [default: the first of residents, "
+                              "population, pop, inhabitants, persons, people; a layer with none of them is read "
+                              "with a warning]."),
+            click.option("--dwellings-field", "dwellings_field", default=None,
+                         help="Attribute with the dwellings of a building [default: dwellings, households, units, "
+                              "flats]."))):
+        f = opt(f)
+    return f
+
+
 @contextmanager
 def progress(ctx: click.Context | None, description: str, total: float | None) -> Iterator[Any]:
     """Progress on stderr, yielding ``update(done)``; silent with ``-q``.
