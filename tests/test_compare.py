@@ -286,7 +286,8 @@ def test_cli_compare_states_the_laeq_period(tmp_path):
     md = (tmp_path / "out" / "comparison.md").read_text()
     assert "(LAeq, over T = 200 s)" in md and "| 1 (tie) | parked |" in md and "| 1 (tie) | plain |" in md
     r = CliRunner().invoke(cli, ["compare", "--help"])
-    assert "--period" in r.output and "longest route's duration" in r.output
+    text = " ".join(r.output.split())  # as wrapped to the terminal's width
+    assert "--period" in text and "longest route's duration" in text
 
 
 def _waypoints(e, ground):
@@ -452,3 +453,18 @@ def test_progress_counts_the_routes_and_a_cancel_stops_the_comparison(tmp_path):
     assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0) and any(abs(f - 0.5) < 1e-9 for f in seen)
     with pytest.raises(Cancelled):
         compare_routes(routes, [omni()], population=pop, ground_h=0.0, grid=grid, cancel=lambda: True)
+
+
+def test_the_default_margin_comes_from_the_cards_and_cuts_no_zone(tmp_path):
+    """Without a margin the common grid holds every route's zone above the lowest level (a fixed 500 m cut the
+    bundled route's 45-55 dB(A) zones): no edge warning, and the people above each level equal those counted on
+    a grid 3 km wider on every side."""
+    pop = read_population(block_population(tmp_path / "pop.tif"))
+    routes = [northwards(0.0), northwards(400.0)]
+    cmp = compare_routes(routes, [omni()], population=pop, ground_h=0.0)
+    assert not [w for w in cmp.doc["warnings"] if "grid's edge" in w]
+    wide = compare_routes(routes, [omni()], population=pop, ground_h=0.0, margin_m=3000.0)
+    for a, b in zip(cmp.doc["ranking"], wide.doc["ranking"], strict=True):
+        assert a["route"] == b["route"]  # (lower bounds here: the block raster covers little of the zones)
+        assert a["people_above"] == pytest.approx(b["people_above"], rel=1e-6)
+    assert cmp.grid.n_cells < wide.grid.n_cells

@@ -31,8 +31,9 @@ def _floats(value: str, name: str) -> list[float]:
               help="Rank by the people above this level first (one of --levels).")
 @click.option("--resolution", "resolution", type=float, default=20.0, show_default=True,
               help="Cell size of the common grid, m.")
-@click.option("--margin", "margin", type=float, default=500.0, show_default=True,
-              help="Margin around all routes, m.")
+@click.option("--margin", "margin", type=float, default=None,
+              help="Margin around all routes, m [default: from the cards, so that every route's zone above the "
+                   "lowest level closes inside the grid, as gisnoise contour].")
 @click.option("--crs", "crs", default=None, help="Projected CRS of the grid [default: local UTM].")
 @click.option("--ground-height", "ground_h", type=float, default=None,
               help="Ellipsoidal height of flat ground, m, checked against every route as `gisnoise contour` checks "
@@ -41,11 +42,11 @@ def _floats(value: str, name: str) -> list[float]:
 @click.option("--period", "period", type=float, default=None,
               help="LAeq only: the averaging period T, s, the same for every route (LAeq,T = SEL - 10 lg T, so "
                    "routes rank as by SEL) [default: the longest route's duration].")
-@click.option("--engine", "engine", type=click.Choice(["numpy", "fast"]), default="numpy", show_default=True,
-              help="Evaluator engine.")
+@click.option("--engine", "engine", type=click.Choice(["auto", "numpy", "fast"]), default="auto", show_default=True,
+              help="Evaluator engine (auto: the fast one where it serves the cards, as gisnoise contour).")
 @click.pass_context
 def command(ctx: click.Context, routes: tuple[str, ...], cards: tuple[str, ...], out: str, population: str | None,
-            buildings: str | None, metric: str, levels: str, rank_level: float, resolution: float, margin: float,
+            buildings: str | None, metric: str, levels: str, rank_level: float, resolution: float, margin: float | None,
             crs: str | None, ground_h: float | None, period: float | None, engine: str) -> None:
     """Rank candidate ROUTES (two or more trajectory or waypoint files) by the people they expose.
 

@@ -8,6 +8,7 @@ from gisnoise.planning.compare import (
     Comparison,
     compare_routes,
     comparison_table,
+    routes_margin,
     score_route,
     write_comparison,
 )
@@ -19,4 +20,4 @@ from gisnoise.planning.optimize import (
 )
 
 __all__ = ['COMPARISON_SCHEMA', 'Comparison', 'Optimized', 'compare_routes', 'comparison_table', 'corridor_half_width',
-           'optimize_route', 'score_route', 'waypoints_geojson', 'write_comparison']
+           'optimize_route', 'routes_margin', 'score_route', 'waypoints_geojson', 'write_comparison']

@@ -71,7 +71,8 @@ from gisnoise.planning._rules import (
     rank_rows,
 )
 
-__all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "score_route", "write_comparison", "comparison_table"]
+__all__ = ["COMPARISON_SCHEMA", "Comparison", "compare_routes", "routes_margin", "score_route", "write_comparison",
+           "comparison_table"]
 
 COMPARISON_SCHEMA = "gisnoise/comparison/1"
 
@@ -164,8 +165,8 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
 def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population | None = None,
                    buildings: Buildings | None = None, names: Sequence[str] | None = None, metric: str = "LAmax",
                    levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), rank_level_db: float = 55.0,
-                   resolution_m: float = 20.0, margin_m: float | None = 500.0, crs: Any = None,
-                   receiver_height: float = 1.5, ground_h: float | None = None, engine: str = "numpy",
+                   resolution_m: float = 20.0, margin_m: float | None = None, crs: Any = None,
+                   receiver_height: float = 1.5, ground_h: float | None = None, engine: str = "auto",
                    grid: GridSpec | None = None, period_s: float | None = None,
                    progress: Callable[[float], Any] | None = None, cancel: Callable[[], bool] | None = None
                    ) -> Comparison:
@@ -190,9 +191,12 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     rank_level_db : float
         Routes are ranked by the people above this level first; must be one of ``levels``.
     resolution_m, margin_m, crs, receiver_height, engine
-        The common grid and the evaluator, as ``gisnoise contour``; ``margin_m=None``: from the cards, the
-        largest over the routes of the margin at which no edge cell reaches the lowest level
-        (:func:`gisnoise.maps.auto_margin`; for ``SEL`` its SEL bound), so no count is cut by the edge.
+        The common grid and the evaluator, as ``gisnoise contour``; ``margin_m=None`` (the default): from the
+        cards, the largest over the routes of the margin at which no edge cell reaches the lowest level
+        (:func:`routes_margin`), so no count is cut by the edge (a fixed 500 m cut the bundled route's zones
+        above 45-55 dB(A): people above 45 dB(A) 10 114 against 17 000 on 20 people per hectare);
+        ``engine="auto"``: the fast engine where it serves the cards (levels within 0.01 dB of the NumPy
+        engine's).
     ground_h : float, optional
         Flat ground's ellipsoidal height, m, checked against every route as ``gisnoise contour`` checks it (at
         or below the lowest flying point; refused naming the route).  Default the ground the routes state
@@ -252,7 +256,7 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     lat = np.concatenate([t.lat for t in trajs.values()])
     if grid is None:
         if margin_m is None:
-            margin_m, said = _margin(trajs.values(), cardset, metric, lv[0], resolution_m, crs)
+            margin_m, said = routes_margin(trajs.values(), cardset, metric, lv[0], resolution_m, crs)
             warnings += said
         grid = grid_for_points(lon, lat, resolution_m, margin_m, crs)
     scale = crs_scale_warning(grid, lon, lat)
@@ -327,8 +331,8 @@ def _lower_bounds(row: dict[str, Any], band: np.ndarray, levels: Sequence[float]
     return said
 
 
-def _margin(trajs: Any, cards: CardSet, metric: str, lowest_db: float, resolution_m: float,
-            crs: Any) -> tuple[float, list[str]]:
+def routes_margin(trajs: Any, cards: CardSet, metric: str, lowest_db: float, resolution_m: float,
+                  crs: Any) -> tuple[float, list[str]]:
     """The common grid's margin from the cards: the largest over the routes of :func:`gisnoise.maps.auto_margin`
     at the lowest level (``LAmax``, and ``LAeq``, which stays below it; ``SEL`` by its own bound), and what it
     warned (a margin cut by the cell limit), once each."""

@@ -203,7 +203,8 @@ _COMPARE_FIELDS = {"rank_level": "rank_level_db", "ground_h": "ground_h_m", "rec
 def _compare(req: CompareRequest, state: State) -> tuple[bytes, str]:
     from gisnoise.exposure import read_buildings, read_population
     from gisnoise.geo import grid_for_points
-    from gisnoise.planning import compare_routes, write_comparison
+    from gisnoise.maps import CardSet
+    from gisnoise.planning import compare_routes, routes_margin, write_comparison
     from gisnoise.service.routes_contours import resolve_cards
 
     s = state.settings
@@ -222,10 +223,15 @@ def _compare(req: CompareRequest, state: State) -> tuple[bytes, str]:
     cards = resolve_cards(req, state.cards)  # type: ignore[arg-type]  # same card fields as ContourRequest
     import numpy as np
 
+    margin_said: list[str] = []
     try:
+        margin = req.grid.margin_m
+        if margin is None:  # from the cards, as the command line: every route's zone above the lowest level closes
+            with request_fields(_COMPARE_FIELDS):
+                margin, margin_said = routes_margin(trajs, CardSet(cards), req.metric, min(req.levels),
+                                                    req.grid.resolution_m, req.grid.crs)
         grid = grid_for_points(np.concatenate([t.lon for t in trajs]), np.concatenate([t.lat for t in trajs]),
-                               req.grid.resolution_m, 500.0 if req.grid.margin_m is None else req.grid.margin_m,
-                               req.grid.crs)  # the CLI compare's default margin
+                               req.grid.resolution_m, margin, req.grid.crs)
     except GridTooLargeError as exc:
         raise GridTooLargeError(str(exc), field="grid.resolution_m") from None
     except InputError as exc:
@@ -245,6 +251,7 @@ def _compare(req: CompareRequest, state: State) -> tuple[bytes, str]:
         cmp = compare_routes(trajs, cards, population=pop, buildings=b, names=req.names, metric=req.metric,
                              levels=req.levels, rank_level_db=req.rank_level_db, grid=grid,
                              receiver_height=req.receiver_height_m, ground_h=req.ground_h_m)
+        cmp.doc["warnings"] = margin_said + cmp.doc["warnings"]  # a margin from the cards cut by the cell limit
         if req.output == "difference":
             with tempfile.TemporaryDirectory(prefix="gisnoise-") as tmp:
                 return write_comparison(cmp, tmp)["difference"].read_bytes(), MediaType.geotiff.value

@@ -147,7 +147,8 @@ class CompareRoutesAlgorithm(_PlanningBase):
         self.addParameter(QgsProcessingParameterNumber(
             self.RESOLUTION, "Grid cell (m)", QgsProcessingParameterNumber.Double, 20.0, minValue=0.5))
         self.addParameter(QgsProcessingParameterNumber(
-            self.MARGIN, "Margin around all routes (m)", QgsProcessingParameterNumber.Double, 500.0, minValue=0.0))
+            self.MARGIN, "Margin around all routes (m; empty: from the cards, so every route's lowest level closes)",
+            QgsProcessingParameterNumber.Double, None, optional=True, minValue=0.0))
         self.addParameter(QgsProcessingParameterCrs(
             self.CRS, "Grid CRS (projected, metres; empty: local UTM zone)", optional=True))
         self.addParameter(QgsProcessingParameterNumber(
@@ -203,7 +204,8 @@ class CompareRoutesAlgorithm(_PlanningBase):
                              metric=METRICS[self.parameterAsEnum(parameters, self.METRIC, context)],
                              levels=levels, rank_level_db=self.parameterAsDouble(parameters, self.RANK_LEVEL, context),
                              resolution_m=self.parameterAsDouble(parameters, self.RESOLUTION, context),
-                             margin_m=self.parameterAsDouble(parameters, self.MARGIN, context),
+                             margin_m=(None if parameters.get(self.MARGIN) in (None, "")
+                                       else self.parameterAsDouble(parameters, self.MARGIN, context)),
                              crs=(crs.authid() or crs.toWkt(QgsCoordinateReferenceSystem.WKT_PREFERRED))
                              if crs.isValid() else None,
                              ground_h=(None if parameters.get(self.GROUND_HEIGHT) in (None, "")
