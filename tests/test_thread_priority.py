@@ -48,6 +48,37 @@ def test_blocks_of_background_work_run_niced_and_others_do_not():
 
 
 @linux
+def test_a_pool_started_by_a_background_thread_is_niced_once():
+    """Threads inherit their creator's nice: a background pool started from a job's (niced) thread gets the
+    process's nice + BACKGROUND_NICE, not twice that (19, the floor, before)."""
+    base = os.getpriority(os.PRIO_PROCESS, os.getpid())
+    out = {}
+
+    def job_thread():
+        threads.lower_priority()
+        with threads.background():
+            out["blocks"] = _nices_of_blocks_in_a_new_pool()
+
+    t = threading.Thread(target=job_thread)
+    t.start()
+    t.join()
+    assert out["blocks"] == {min(19, base + threads.BACKGROUND_NICE)}
+
+
+def _nices_of_blocks_in_a_new_pool() -> set[int]:
+    from concurrent.futures import ThreadPoolExecutor
+
+    barrier = threading.Barrier(2)
+
+    def fn(_):
+        barrier.wait(10)
+        return _nice()
+
+    with ThreadPoolExecutor(2, initializer=threads.lower_priority) as pool:  # as thread_pool makes a background pool
+        return set(pool.map(fn, range(2)))
+
+
+@linux
 def test_lower_priority_changes_only_the_calling_thread():
     out = {}
 

@@ -37,17 +37,21 @@ _LOCAL = threading.local()
 
 
 def lower_priority(nice: int = BACKGROUND_NICE) -> bool:
-    """Lower the calling thread's scheduling priority by ``nice`` (Linux; True when it took effect).
+    """Give the calling thread the process's nice value plus ``nice`` (Linux; True when it holds after the call).
 
-    Where threads have no priority of their own (not Linux) or the system refuses, nothing changes
-    and a debug line says so: the results are the same, only who gets the CPUs first differs.
+    The target is the process's (its main thread's) nice plus ``nice``, not the thread's own plus it: a thread
+    started by a background thread inherits that thread's nice already, and is not lowered twice.  Where threads
+    have no priority of their own (not Linux) or the system refuses, nothing changes and a debug line says so:
+    the results are the same, only who gets the CPUs first differs.
     """
     if not hasattr(os, "setpriority") or not hasattr(threading, "get_native_id"):  # pragma: no cover
         log.debug("thread priorities are not available here; background work runs at normal priority")
         return False
     tid = threading.get_native_id()
     try:
-        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + int(nice)))
+        target = min(19, os.getpriority(os.PRIO_PROCESS, os.getpid()) + int(nice))
+        if os.getpriority(os.PRIO_PROCESS, tid) < target:
+            os.setpriority(os.PRIO_PROCESS, tid, target)
     except OSError as exc:  # pragma: no cover - a system that refuses even a lower priority
         log.debug("could not lower the priority of thread %s: %s", tid, exc)
         return False
