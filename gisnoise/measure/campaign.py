@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import CampaignError, GisnoiseError
-from gisnoise.flight import Trajectory, ground_from_track, read_flight, track_warning
+from gisnoise.flight import Trajectory, flying_segments, ground_from_track, read_flight, track_warning
 from gisnoise.limits import GROUND_TOLERANCE_M
 from gisnoise.measure.document import (
     _Collector,
@@ -285,13 +285,11 @@ def _outside_problems(camp: Campaign, s: Any, col: _Collector) -> None:
 
 
 def _airborne_text(traj: Trajectory) -> str:
-    """The log's airborne stretches, ``a-b, c-d`` (s of the log), or ``no time`` when it never flies."""
-    fly = np.asarray(traj.flying, bool)
-    if not fly.any():
-        return "no time"
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], fly.astype(np.int8), [0]])))
+    """The log's airborne stretches (:func:`gisnoise.flight.flying_segments`, the stretches a map evaluates),
+    ``a-b, c-d`` (s of the log), or ``no time`` when it never flies."""
     t = np.asarray(traj.t, float)
-    return ", ".join(f"{t[a]:.1f}-{t[b - 1]:.1f}" for a, b in zip(edges[::2], edges[1::2], strict=True))
+    segs = flying_segments(traj)
+    return ", ".join(f"{t[a]:.1f}-{t[b - 1]:.1f}" for a, b in segs) if segs else "no time"
 
 
 def _track_distance_m(traj: Trajectory, mics: tuple[Microphone, ...]) -> float:

@@ -249,7 +249,7 @@ def own_ground(flight: Flight) -> float | None:
     return flight.ground_h_m if flight.ground_h_m is not None else ground_from_track(flight.trajectory)
 
 
-def ground_shift_db(flight: Flight, ground_h: float, receiver_height: float = 1.5
+def ground_shift_db(flight: Flight, ground_h: float, receiver_height: float = 1.5, *, own: float | None = None
                     ) -> tuple[float, float, float] | None:
     """How a flight's levels under its track change when it is mapped over flat ground at ``ground_h`` (m) rather
     than its own (:func:`own_ground`).
@@ -259,9 +259,10 @@ def ground_shift_db(flight: Flight, ground_h: float, receiver_height: float = 1.
     height_used)``, the change of a level under the track by spherical spreading (negative: lower; +inf when the
     flight would be at or below the receivers over ``ground_h``).  None when the flight has no ground of its own,
     or one it does not rise above the receivers over (a hover whose first sample, at rest at its lowest point, the
-    ground rule takes for a vehicle standing on the ground: no take-off).
+    ground rule takes for a vehicle standing on the ground: no take-off).  ``own``: the flight's own ground when the
+    caller has it already.
     """
-    own = own_ground(flight)
+    own = own_ground(flight) if own is None else own
     if own is None:
         return None
     h_own = flight_height(flight.trajectory, own, None, 0.0, receiver_height)
@@ -294,10 +295,11 @@ def ground_warnings(schedule: Schedule) -> list[str]:
     used = schedule.ground_h_m if schedule.ground_h_m is not None else flights_ground(schedule)
     if used is None:
         return []
+    owns = {f.id: own_ground(f) for f in flown}
     far: list[tuple[Flight, float, tuple[float, float, float]]] = []
     for f in flown:
-        shift = ground_shift_db(f, used, schedule.receiver_height_m)
-        own = own_ground(f)
+        own = owns[f.id]
+        shift = None if own is None else ground_shift_db(f, used, schedule.receiver_height_m, own=own)
         if shift is not None and own is not None and abs(shift[0]) > GROUND_SHIFT_DB:
             far.append((f, own, shift))
     if schedule.ground_h_m is not None:
@@ -310,7 +312,7 @@ def ground_warnings(schedule: Schedule) -> list[str]:
         return []
     grounds: dict[str, list[str]] = {}
     for f in flown:
-        own = own_ground(f)
+        own = owns[f.id]
         if own is not None:
             grounds.setdefault(f"{own:.1f} m", []).append(f.id)
     listed = "; ".join(f"{', '.join(ids)} {g}" for g, ids in grounds.items())
