@@ -149,6 +149,12 @@ class Trajectory:
             fly &= ~self.on_ground
         return fly & ~self.lying
 
+    def flying_heights(self) -> np.ndarray:
+        """Heights (m) of the samples that fly (:attr:`flying`), or of every sample when none does: the heights a
+        ground given for a map of this flight must lie below."""
+        fly = self.flying
+        return self.h[fly] if fly.any() else self.h
+
     @cached_property
     def lying(self) -> np.ndarray:
         """True on samples where the vehicle lies upside down: inverted and at rest for 1 s or longer

@@ -212,7 +212,7 @@ def make_map(
         check_card(card)   # the plausibility guard: an implausible card never makes a map
     # the shared rule set (gisnoise.limits): a ground the user gives lies below the flight; a ground taken from the
     # track's own take-off or landing point is within the log's height noise of it by construction
-    check_receivers(receiver_height, ground_h, traj.h[traj.flying] if traj.flying.any() else traj.h)
+    check_receivers(receiver_height, ground_h, traj.flying_heights())
     from_track = ground_h is None and dem is None and route.ground_h_m is None and "ground_h_m" not in traj.metadata
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
     found = flight_findings(traj, cardset, ground_h=ground_h if from_track else None)

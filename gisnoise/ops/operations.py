@@ -203,10 +203,8 @@ def schedule_findings(schedule: Schedule, grid: GridSpec) -> tuple[list[str], di
     flown = [f for f in schedule.flights if f.total > 0]
     if schedule.ground_h_m is not None:
         for f in flown:
-            tr = f.trajectory
             try:
-                check_ground_below(schedule.ground_h_m, tr.h[tr.flying] if tr.flying.any() else tr.h,
-                                   field="ground_h_m")
+                check_ground_below(schedule.ground_h_m, f.trajectory.flying_heights(), field="ground_h_m")
             except InputError as exc:
                 raise InputError(f"{schedule.source}: flight {f.id!r}: {exc}", field="ground_h_m") from None
     ground = flights_ground(schedule)

@@ -43,7 +43,7 @@ def common_ground(names: Sequence[str], trajs: Mapping[str, Trajectory], stated:
         for n in names:
             t = trajs[n]
             try:
-                check_receivers(receiver_height, ground_h, t.h[t.flying] if t.flying.any() else t.h)
+                check_receivers(receiver_height, ground_h, t.flying_heights())
             except InputError as exc:
                 raise type(exc)(f"{n}: {exc}", field=exc.field) from None
         g = float(ground_h)
