@@ -102,6 +102,8 @@ def _target(mod: str, name: str | None) -> str:
 
 
 def _subpackage(module: str) -> str | None:
+    if module == "gisnoise.__main__":  # ``python -m gisnoise``: the command line's entry
+        return "cli"
     parts = module.split(".")
     if len(parts) >= 2 and parts[1] != "data" and (PKG / parts[1]).is_dir():
         return parts[1]

@@ -49,6 +49,17 @@ def test_lazy_help_lists_the_same_commands_and_lines_as_the_imported_ones():
             "simulate"} <= set(full.commands)
 
 
+def test_python_m_gisnoise_is_the_command():
+    # an environment whose scripts folder is not on the PATH still has the command: same name, same version
+    from gisnoise import __version__
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    out = subprocess.run([sys.executable, "-m", "gisnoise", "--version"], capture_output=True, text=True, env=env,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == f"gisnoise, version {__version__}"
+
+
 def test_unknown_command_is_a_usage_error():
     res = CliRunner().invoke(cli, ["nosuch"])
     assert res.exit_code == 2 and "No such command 'nosuch'" in res.output
