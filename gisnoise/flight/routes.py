@@ -10,12 +10,14 @@ GeoJSON ``LineString`` with times
     ``[lon, lat, z, t]``.  ``z`` is the WGS84 ellipsoidal height (RFC 7946) unless
     ``properties.altitude_reference`` says ``agl`` or ``msl`` (see waypoints).  Optional
     per-vertex lists in ``properties``: ``power_w``, ``phase``, ``roll``, ``pitch``,
-    ``yaw`` (deg), ``rpm``, ``airspeed_m_s``; missing ones are derived from the motion
-    (:func:`~gisnoise.flight.paths.derive_states`).  The vertices are flown straight at constant
+    ``yaw`` (deg), ``rpm``, ``airspeed_m_s``.  The vertices are flown straight at constant
     velocity between their times; a leg longer than ``sample_dt_s`` (a ``properties`` or request
-    setting, default 0.5 s, as waypoints) is cut into equal parts no longer than it, the states between vertices
-    interpolated as :meth:`~gisnoise.flight.Trajectory.interpolate` does (as ``--substeps`` does):
-    a planned leg of a few vertices is heard all along it, not only at its vertices;
+    setting, default 0.5 s, as waypoints) is cut into equal parts no longer than it, so a planned leg of
+    a few vertices is heard all along it, not only at its vertices.  The states missing from
+    ``properties`` are derived from the motion of these samples
+    (:func:`~gisnoise.flight.paths.derive_states`): a cruise leg between two vertices is flown at its
+    own speed, phase and power; given states are linear in time between their vertices (angles the
+    shorter way round, a phase held from its vertex on);
 waypoints
     a route plan (a ``gisnoise/waypoints/1`` JSON document, a GeoJSON ``FeatureCollection``
     of ``Point`` features or a ``LineString`` without times) that
@@ -42,7 +44,7 @@ from gisnoise.flight.paths import trajectory_from_path
 from gisnoise.flight.trajectory import Trajectory, read_flight_csv
 from gisnoise.flight.vehicle import VehicleModel
 from gisnoise.flight.waypoints import _WP_PREFIX, WAYPOINTS_SCHEMA, Route, _heights, _settings, route_from_waypoints
-from gisnoise.limits import MAX_UAV_SPEED_M_S, check_samples
+from gisnoise.limits import MAX_UAV_SPEED_M_S, check_samples, check_times
 
 __all__ = ["read_trajectory", "read_route", "trajectory_to_geojson", "LOG_MAP_RATE_HZ"]
 
@@ -252,9 +254,14 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
         i = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
         raise TrajectoryError(f"{source}: properties.times must increase strictly; vertex {i} is at t = {t[i]:g} s "
                               f"after {t[i - 1]:g} s", field="times")
+    check_times(t, source=source, error=TrajectoryError)  # a gap between vertices is a gap, before it is sampled
     _check_leg_speeds(t, lat, lon, h, source)
-    traj = _sampled(trajectory_from_path(t, lat, lon, h, vehicle=st["vehicle"], source=source, **states),
-                    st["sample_dt_s"])
+    tt, at = _sample_times(t, st["sample_dt_s"])
+    # the path is sampled first, so that the states derived from its motion are those of legs flown straight at
+    # constant velocity, not of the vertices alone (a 20 s climb beside a 75 s cruise leg gave the cruise 4 m/s)
+    lat_s, lon_s, h_s = _along(lat, t, tt, at), _along_lon(lon, t, tt, at), _along(h, t, tt, at)
+    given_s = {k: _state_along(k, v, t, tt, at) for k, v in states.items()}
+    traj = trajectory_from_path(tt, lat_s, lon_s, h_s, vehicle=st["vehicle"], source=source, **given_s)
     traj.metadata.update(datum)
     return Route(traj, ground)
 
@@ -273,22 +280,41 @@ def _check_leg_speeds(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.nda
                               "a UAV flies): check properties.times and the coordinates", field="times")
 
 
-def _sampled(traj: Trajectory, dt: float) -> Trajectory:
-    """``traj`` (a timed path's vertices) with every leg longer than ``dt`` s cut into equal parts no longer than
-    it; states between vertices interpolated (:meth:`Trajectory.interpolate`), the vertices kept as they are."""
-    t = traj.t
+def _sample_times(t: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Times of a timed path with every leg longer than ``dt`` s cut into equal parts no longer than it, and the
+    indices of its vertices among them."""
     parts = np.ceil(np.diff(t) / dt - 1e-9).astype(np.int64) if t.size > 1 else np.zeros(0, np.int64)
-    if not np.any(parts > 1):
-        return traj
+    parts = np.maximum(parts, 1)
     check_samples(float(parts.sum()) + 1, field="sample_dt_s", what="LineString")  # before allocating
     leg = np.repeat(np.arange(t.size - 1), parts)
     k = np.arange(leg.size) - np.repeat(np.cumsum(parts) - parts, parts)   # part k of its leg
     tt = np.append(t[leg] + (t[leg + 1] - t[leg]) * k / parts[leg], t[-1])
-    state = traj.interpolate(tt)
-    at = np.append(np.cumsum(parts) - parts, leg.size)  # the vertices, exactly as they were
-    for name, v in state.items():
-        v[at] = getattr(traj, name)
-    return Trajectory(t=tt, **state, source=traj.source, metadata=traj.metadata)
+    at = np.append(np.cumsum(parts) - parts, leg.size)
+    return tt, at
+
+
+def _along(v: np.ndarray, t: np.ndarray, tt: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``v`` (one value per vertex) linear in time between the vertices, the vertices' values exactly."""
+    out = np.interp(tt, t, v)
+    out[at] = v
+    return out
+
+
+def _along_lon(lon: np.ndarray, t: np.ndarray, tt: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Longitudes (deg) linear in time along each leg's shorter way round (a leg across 180 deg stays short)."""
+    out = (np.interp(tt, t, np.unwrap(lon, period=360.0)) + 180.0) % 360.0 - 180.0
+    out[at] = lon
+    return out
+
+
+def _state_along(name: str, v: np.ndarray, t: np.ndarray, tt: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """A state given per vertex at the sample times: the phase of the vertex before, angles the shorter way
+    round, other values linear in time; the vertices' values exactly."""
+    if name == "phase":
+        return v[np.clip(np.searchsorted(t, tt, side="right") - 1, 0, t.size - 1)]
+    if name in ("roll", "pitch", "yaw"):
+        return _along_lon(v, t, tt, at)  # degrees on the circle, in [-180, 180)
+    return _along(v, t, tt, at)
 
 
 def trajectory_to_geojson(route: Trajectory) -> dict[str, Any]:
