@@ -247,6 +247,33 @@ def test_receivers_on_a_dem(tmp_path, card_path):
 
 
 
+def test_a_track_below_the_dem_is_named_with_its_depth(tmp_path, card_path):
+    # the straight track at 140 m crosses a 400 m wide plateau at 170 m on a 100 m plain: its samples over the
+    # plateau fly 30 m inside the terrain (a route's legs are straight between its waypoints' heights above
+    # ground).  The map says so with the depth, the times and where; over the plain alone it says nothing
+    from affine import Affine
+    from pyproj import Transformer
+
+    x0, y0 = Transformer.from_crs("EPSG:4326", "EPSG:32632", always_xy=True).transform(10.52, 52.27)
+    z = np.full((200, 200), 100.0, dtype=np.float32)
+    xc = x0 - 1000.0 + 10.0 * (np.arange(200) + 0.5)
+    for name, top in (("plain", 100.0), ("plateau", 170.0)):
+        z[:, np.abs(xc - x0) < 200.0] = top
+        dem = tmp_path / f"{name}.tif"
+        with rasterio.open(dem, "w", driver="GTiff", width=200, height=200, count=1, dtype="float32",
+                           crs="EPSG:32632", transform=Affine(10.0, 0, x0 - 1000.0, 0, -10.0, y0 + 1000.0)) as ds:
+            ds.write(z, 1)
+        csv = write_csv(tmp_path / "flight.csv", flyover())
+        r = run("contour", csv, "--card", card_path, "--out", str(tmp_path / name), "--resolution", "20",
+                "--margin", "100", "--dem", str(dem), "--metrics", "LAmax")
+        assert r.exit_code == 0, r.output
+        said = [w for w in r.output.splitlines() if "below the DEM's ground" in w]
+        if top == 100.0:
+            assert not said, said
+        else:
+            assert len(said) == 1 and "up to 30.0 m" in said[0] and "--dem-offset" in said[0], said
+
+
 def test_receivers_beyond_the_dem_are_a_map_warning_said_once(tmp_path, card_path):
     """A grid reaching past the DEM: the count of receivers without ground is a map warning (metadata, GeoJSON,
     one stderr line), not a log line."""

@@ -8,6 +8,7 @@ the refusals among them raise :class:`~gisnoise.errors.InputError`:
   mapped with what could be read;
 * a track flying more than :data:`~gisnoise.limits.GROUND_TOLERANCE_M` below the ground taken from
   take-off or landing points (:func:`below_track_ground`);
+* a flying track below the ground of a DEM (:func:`below_dem`, with a DEM only);
 * airborne samples without electric power (:func:`airborne_without_power`; all of them: refused,
   field ``power_w``);
 * samples lying upside down at rest after a crash (:func:`lying_upside_down`);
@@ -36,7 +37,7 @@ from gisnoise.maps.cardset import CardSet, flying_cards
 from gisnoise.maps.conditions import check_hemisphere_speeds
 from gisnoise.maps.powers import check_power_ranges
 
-__all__ = ["CRS_SCALE_TOLERANCE", "FlightFindings", "airborne_without_power", "below_track_ground",
+__all__ = ["CRS_SCALE_TOLERANCE", "FlightFindings", "airborne_without_power", "below_dem", "below_track_ground",
            "crs_scale_warning", "flight_findings", "lying_upside_down"]
 
 
@@ -57,15 +58,19 @@ class FlightFindings:
 
 
 def flight_findings(traj: Trajectory, cards: CardSet, *, ground_h: float | None = None,
-                    ground_from: str = GROUND_FROM_OWN, ground_hint: str = GROUND_HINT_CLI) -> FlightFindings:
+                    ground_from: str = GROUND_FROM_OWN, ground_hint: str = GROUND_HINT_CLI,
+                    dem: Any = None, dem_offset_m: float = 0.0) -> FlightFindings:
     """The checks of the module docstring on ``traj`` flown with ``cards``.
 
     ``ground_h``: the flat ground when it was taken from take-off or landing points (the track is then checked
     against it); None when the user gave the ground or a DEM.  ``ground_from``, ``ground_hint``: the warning's
     words for where that ground came from and how the user gives it on this face (default: the map's, the
     track's own take-off or landing point and the command line's options; :func:`below_track_ground`).
+    ``dem``, ``dem_offset_m``: the map's DEM (:class:`~gisnoise.geo.Dem`) and its offset, when it has one.
     """
     below = below_track_ground(traj, ground_h, ground_from=ground_from, hint=ground_hint)
+    if below is None and dem is not None:
+        below = below_dem(traj, dem, dem_offset_m)
     unpowered = airborne_without_power(traj)
     lying = lying_upside_down(traj)
     served = flying_cards(traj, cards) if traj.flying.any() else None  # once for both checks
@@ -148,3 +153,30 @@ def below_track_ground(traj: Trajectory, ground_h: float | None, *, ground_from:
     return (f"{traj.source}: the track flies up to {depth:.1f} m below the ground taken from {ground_from} "
             f"({ground_h:.1f} m; at t = {traj.t[i]:.1f} s): its logged heights drift, and there the UAV is put "
             f"under the receivers; give the ground with {hint}")
+
+
+def below_dem(traj: Trajectory, dem: Any, dem_offset_m: float = 0.0) -> str | None:
+    """The warning for flying samples more than :data:`~gisnoise.limits.GROUND_TOLERANCE_M` below the ground of
+    ``dem`` (a :class:`~gisnoise.geo.Dem`, plus ``dem_offset_m``) under them: there the UAV is put inside the
+    terrain, beside receivers on the slope above it.  A route's altitudes above ground hold at its waypoints and
+    its legs are straight between them (:mod:`gisnoise.flight.waypoints`), so a leg across a hill can pass
+    through it.  Samples off the DEM are not judged; None when no sample lies below.
+    """
+    from gisnoise.geo import sample_dem
+
+    fly = np.flatnonzero(traj.flying)
+    if not fly.size:
+        return None
+    ground = sample_dem(dem, np.asarray(traj.lon)[fly], np.asarray(traj.lat)[fly]) + float(dem_offset_m)
+    depth = np.where(np.isfinite(ground), ground - np.asarray(traj.h, dtype=float)[fly], -np.inf)
+    deep = depth > GROUND_TOLERANCE_M
+    if not deep.any():
+        return None
+    k = int(np.argmax(depth))
+    i, first, last = fly[k], fly[np.flatnonzero(deep)[0]], fly[np.flatnonzero(deep)[-1]]
+    return (f"{traj.source}: {int(deep.sum())} of {fly.size} flying samples lie below the DEM's ground, up to "
+            f"{depth[k]:.1f} m (t = {traj.t[i]:.1f} s at {traj.lon[i]:.6f}, {traj.lat[i]:.6f}; between t = "
+            f"{traj.t[first]:.1f} and {traj.t[last]:.1f} s): there the UAV is put inside the terrain. A route's "
+            f"altitudes above ground hold at its waypoints, its legs straight between them: add waypoints over "
+            f"the high ground or fly higher; for a log, check its heights' datum and the DEM's (the DEM's offset: --dem-offset, "
+            f"field dem_offset_m)")

@@ -215,7 +215,9 @@ def make_map(
     check_receivers(receiver_height, ground_h, traj.flying_heights())
     from_track = ground_h is None and dem is None and route.ground_h_m is None and "ground_h_m" not in traj.metadata
     ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
-    found = flight_findings(traj, cardset, ground_h=ground_h if from_track else None)
+    found = flight_findings(traj, cardset, ground_h=ground_h if from_track else None,
+                            dem=dem if dem is not None and not isinstance(dem, np.ndarray) else None,
+                            dem_offset_m=dem_offset_m)
     if grid is None:
         grid, warnings = grid_for_map(traj, cardset, lv[0], resolution_m=resolution_m, margin_m=margin_m, crs=crs,
                                       background=background, sel="SEL" in metrics)

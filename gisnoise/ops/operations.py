@@ -208,13 +208,19 @@ def schedule_findings(schedule: Schedule, grid: GridSpec) -> tuple[list[str], di
             except InputError as exc:
                 raise InputError(f"{schedule.source}: flight {f.id!r}: {exc}", field="ground_h_m") from None
     ground = flights_ground(schedule)
+    dem = None
+    if schedule.dem is not None:
+        from gisnoise.geo import Dem, read_dem
+
+        dem = schedule.dem if isinstance(schedule.dem, Dem) else read_dem(schedule.dem)
     said: dict[str, list[str]] = {}
     outside: dict[str, Any] = {}
     for f in flown:
         cards = f.cards if f.cards is not None else schedule.cards
         found = flight_findings(f.trajectory, cards if isinstance(cards, CardSet) else CardSet(cards),
                                 ground_h=ground, ground_from=GROUND_FROM_FLIGHTS,
-                                ground_hint="the schedule's ground_h_m or dem")
+                                ground_hint="the schedule's ground_h_m or dem", dem=dem,
+                                dem_offset_m=schedule.dem_offset_m)
         for w in found.warnings:
             said.setdefault(w, []).append(f.id)
         if found.power_outside:
