@@ -273,3 +273,26 @@ def test_agl_altitudes_stand_on_the_dem(tmp_path):
     h = route.trajectory.h
     assert h[0] == pytest.approx(100.0 + 0.02 * 300.0 + 40.0, abs=0.01)
     assert h[-1] == pytest.approx(100.0 + 0.02 * 1200.0 + 40.0 + 50.0, abs=0.01)
+
+
+def _timed(coords, **doc):
+    return {"type": "FeatureCollection", **doc, "features": [
+        {"type": "Feature", "geometry": {"type": "LineString", "coordinates": coords},
+         "properties": {"times": [0.0, 60.0], "altitude_reference": "agl"}}]}
+
+
+def test_a_route_in_a_projected_crs_is_refused_naming_the_positions():
+    # RFC 7946 positions are WGS84 longitude, latitude: UTM metres are not degrees (before: "origin lat0 must be
+    # within [-90, 90] deg, got 5789919.97", naming a field the user never wrote)
+    utm = [[602398.3, 5789904.5, 50.0], [603898.3, 5789904.5, 50.0]]
+    with pytest.raises(TrajectoryError, match=r"coordinates: vertex 0 is \(602398.30, 5789904.50\), not WGS84") as e:
+        read_trajectory(_timed(utm))
+    assert e.value.field == "coordinates"
+    # the pre-RFC 7946 crs member naming it is refused, not ignored; one naming WGS84 longitude, latitude is read
+    named = {"crs": {"type": "name", "properties": {"name": "urn:ogc:def:crs:EPSG::25832"}}}
+    with pytest.raises(TrajectoryError, match="crs: GeoJSON positions are WGS84 .*EPSG::25832") as e:
+        read_trajectory(_timed(utm, **named))
+    assert e.value.field == "crs"
+    deg = [[LON0, LAT0, 50.0], [LON0 + 0.02, LAT0, 50.0]]
+    crs84 = {"crs": {"type": "name", "properties": {"name": "urn:ogc:def:crs:OGC:1.3:CRS84"}}}
+    np.testing.assert_array_equal(read_trajectory(_timed(deg, **crs84)).lon, read_trajectory(_timed(deg)).lon)

@@ -142,6 +142,7 @@ def _from_json(doc: Any, *, source: str, dem: Any, dem_offset_m: float, vehicle:
     if not isinstance(doc, Mapping):
         raise TrajectoryError(f"{source}: expected a JSON object", field="trajectory")
     given = {} if geoid_undulation_m is None else {"geoid_undulation_m": float(geoid_undulation_m)}  # overrides
+    _check_crs_member(doc, source)
     schema = doc.get("schema")
     if isinstance(schema, str) and schema.startswith(_WP_PREFIX):
         if schema != WAYPOINTS_SCHEMA:
@@ -240,6 +241,7 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
         raise TrajectoryError(f"{source}: LineString coordinates and times must be numbers",
                               field="coordinates") from None
     lon, lat, alt = arr[:, 0], arr[:, 1], arr[:, 2]
+    _check_lon_lat(lon, lat, source)
     h, ground, datum = _heights(alt, lon, lat, st, dem, dem_offset_m, source)
     states: dict[str, Any] = {}
     for k in ("power_w", "phase", "roll", "pitch", "yaw", "rpm", "airspeed_m_s"):
@@ -264,6 +266,34 @@ def _from_linestring(feat: Mapping[str, Any], settings: Mapping[str, Any], *, so
     traj = trajectory_from_path(tt, lat_s, lon_s, h_s, vehicle=st["vehicle"], source=source, **given_s)
     traj.metadata.update(datum)
     return Route(traj, ground)
+
+
+_WGS84_NAMES = ("urn:ogc:def:crs:ogc:1.3:crs84", "urn:ogc:def:crs:epsg::4326", "epsg:4326", "crs84", "ogc:crs84")
+"""Names of WGS84 longitude, latitude in the ``crs`` member of pre-RFC 7946 GeoJSON (compared in lower case)."""
+
+
+def _check_crs_member(doc: Mapping[str, Any], source: str) -> None:
+    """Refuse a GeoJSON ``crs`` member naming another CRS than WGS84 longitude, latitude: RFC 7946 positions are
+    in WGS84, and the member is not read (a route in a projected CRS would be taken for degrees)."""
+    crs = doc.get("crs")
+    if crs is None:
+        return
+    name = ((crs.get("properties") or {}).get("name") if isinstance(crs, Mapping) else None)
+    if isinstance(name, str) and name.strip().lower() in _WGS84_NAMES:
+        return
+    raise TrajectoryError(f"{source}: crs: GeoJSON positions are WGS84 longitude, latitude in degrees (RFC 7946); "
+                          f"the file names {name or crs!r}, which is not read: reproject the route to EPSG:4326",
+                          field="crs")
+
+
+def _check_lon_lat(lon: np.ndarray, lat: np.ndarray, source: str) -> None:
+    """Refuse positions that are not longitude, latitude in degrees, naming the first such vertex."""
+    bad = ~((np.abs(lon) <= 180.0) & (np.abs(lat) <= 90.0))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise TrajectoryError(f"{source}: coordinates: vertex {i} is ({lon[i]:.2f}, {lat[i]:.2f}), not WGS84 "
+                              f"longitude, latitude in degrees (RFC 7946); reproject a route in a projected CRS to "
+                              f"EPSG:4326", field="coordinates")
 
 
 def _check_leg_speeds(t: np.ndarray, lat: np.ndarray, lon: np.ndarray, h: np.ndarray, source: str) -> None:
