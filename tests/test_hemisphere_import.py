@@ -4,8 +4,13 @@ Known truths by construction: a table in radians has every angle within +-pi/2; 
 (phi 0..90) lacks half the lower hemisphere and a quarter table (phi and theta 0..90) three quarters (phi_t and
 theta_t are each uniform in solid angle; the four quadrants are congruent); the one-third-octave band after 800 Hz
 is 1000 Hz; a table of levels ``f(phi, theta)`` written with its rows in any order is the same table.
+
+A card document written or edited by hand passes the same checks of units and bands when it is read (file,
+``--card``, ``card show``, a map given its path): the same table with its axes in degrees and Hz is taken, in
+radians or kHz refused naming the field.
 """
 
+import json
 import math
 import re
 
@@ -16,11 +21,13 @@ from click.testing import CliRunner
 from gisnoise.cli.main import cli
 from gisnoise.errors import CardError
 from gisnoise.model import (
+    HEMISPHERE_SCHEMA,
     SALFORD_ATMOSPHERE,
     ImplausibleCardError,
     fit_hemisphere,
     import_hemisphere,
     import_warnings,
+    load,
 )
 
 openpyxl = pytest.importorskip("openpyxl")
@@ -201,3 +208,67 @@ def test_a_level_column_at_1_m_with_another_radius_is_refused(tmp_path):
     assert e.value.field == "radius_m"
     p = write_csv(tmp_path / "r3.csv", FULL, FULL, radius=3.0)  # level_db at the radius the file states
     assert import_hemisphere(p, atmosphere=ATM).reference_distance_m == 3.0
+
+
+# --------------------------------------------------------------------------- the same checks for a card read
+
+
+def card_doc(phi=FULL, theta=FULL, bands=THIRDS):
+    """A hemisphere card written by hand: the table of ``level`` at 1 m on angles in degrees and bands in Hz, every
+    node measured; ``phi``, ``theta``, ``bands`` are what the document states for them."""
+    return {"schema": HEMISPHERE_SCHEMA, "id": "by-hand", "vehicle": "v", "phase": "horizontal",
+            "reference_distance_m": 1.0, "atmosphere": ATM, "phi_deg": list(phi), "theta_deg": list(theta),
+            "bands_hz": list(bands),
+            "levels_db": [[[level(f, a, b) for b in FULL] for a in FULL] for f in THIRDS],
+            "measured": [[True] * len(FULL) for _ in FULL]}
+
+
+def write_card(path, doc):
+    path.write_text(json.dumps(doc))
+    return path
+
+
+RAD = [math.radians(a) for a in FULL]
+
+
+@pytest.mark.parametrize("axis", ["phi_deg", "theta_deg"])
+def test_a_card_written_by_hand_with_angles_in_radians_is_refused_on_load(tmp_path, axis):
+    ok = load(write_card(tmp_path / "deg.json", card_doc()))  # the same table in degrees is taken
+    assert ok.phi_deg.tolist() == FULL and ok.theta_deg.tolist() == FULL
+    p = write_card(tmp_path / "rad.json", {**card_doc(), axis: RAD})
+    with pytest.raises(CardError, match=rf"rad.json: field '{axis}': all 5 angles lie within \+-1.571 "
+                                        r"\(-1.5708..1.5708\), the range of radians") as e:
+        load(p)
+    assert e.value.field == axis and "\n" not in str(e.value)
+    r = run("card", "show", str(p))  # the command line: one usage line naming the field
+    assert r.exit_code == 2 and axis in r.output and "radians" in r.output, r.output
+    assert len(r.output.strip().splitlines()) == 1
+
+
+def test_a_map_given_a_card_file_in_radians_refuses_it_naming_the_field(tmp_path):
+    from gisnoise.maps import make_map
+
+    rows = ["t,lat,lon,h,roll,pitch,yaw,power_w,phase"] + [
+        f"{t},{52.0 + 1e-5 * t:.7f},10.0,20,0,0,0,1000,horizontal" for t in range(0, 11)]
+    traj = tmp_path / "fly.csv"
+    traj.write_text("\n".join(rows) + "\n")
+    p = write_card(tmp_path / "rad.json", {**card_doc(), "phi_deg": RAD})
+    with pytest.raises(CardError, match="radians") as e:
+        make_map(str(traj), [str(p)], tmp_path / "map", resolution_m=20.0, margin_m=60.0, ground_h=0.0,
+                 metrics=["LAmax"], engine="numpy")
+    assert e.value.field == "phi_deg" and not (tmp_path / "map" / "levels.tif").exists()
+
+
+@pytest.mark.parametrize("bands, said", [
+    ([f / 1000.0 for f in THIRDS], "band 0.8 Hz lies below 10 Hz"),                       # kHz
+    ([630.0, 800.0, 1250.0], "the bands 630-1250 Hz lack 1000 Hz"),                       # 1000 Hz left out
+    ([800.0, 1100.0, 1250.0], "band 1100 Hz is no one-third-octave mid-band frequency"),  # no band's frequency
+])
+def test_a_card_written_by_hand_with_bands_not_in_hz_thirds_is_refused_on_load(tmp_path, bands, said):
+    assert load(write_card(tmp_path / "hz.json", card_doc())).bands_hz.tolist() == THIRDS
+    p = write_card(tmp_path / "bad.json", card_doc(bands=bands))
+    with pytest.raises(CardError, match=re.escape(f"bad.json: field 'bands_hz': {said}")) as e:
+        load(p)
+    assert e.value.field == "bands_hz"
+    r = run("card", "plot", str(p), "--out", str(tmp_path / "bad.png"))
+    assert r.exit_code == 2 and "bands_hz" in r.output and not (tmp_path / "bad.png").exists(), r.output

@@ -33,6 +33,23 @@ card's ``atmosphere``, the one the table was back-propagated with).  It is exact
 continuous, and between nodes lies between the values of the neighbouring nodes.  Outside the
 table's angle range the edge values hold (counted as filled).  The level does not depend on
 the electric power: the table stands for its stated flight condition.
+
+**Checks of a table that enters the product** (:func:`table_problems`; every card document read,
+:func:`hemisphere_from_dict`, so card files, ``--card``, the service's upload and the QGIS plugin,
+and every import, :func:`gisnoise.model.import_hemisphere`): the slips a table typed or edited by
+hand carries, which a card's structure does not show and the map would turn into wrong levels:
+
+* angles in degrees: an axis of more than one angle, all within +-:data:`RADIAN_LIMIT_DEG`
+  (1.571, pi/2 rounded up), is refused as given in radians (radians fill that range; in degrees
+  such an axis would span at most 3.1 deg about straight below, 0.55 m across at 10 m, where a
+  measured hemisphere spans tens of degrees: the Salford line of microphones +-60), naming
+  ``phi_deg`` or ``theta_deg``;
+* bands: nominal one-third-octave mid-band frequencies in Hz, none below :data:`LOWEST_BAND_HZ`
+  (10 Hz, the lowest frequency IEC 61672-1 states the A-weighting for: a table in kHz gives
+  0.02-20 "Hz"), every band between the lowest and the highest (a band missing from the table
+  would drop its energy from every level), naming ``bands_hz``.
+
+A card built in Python from arrays is checked for its structure only (shapes, order, ranges).
 """
 
 from __future__ import annotations
@@ -44,17 +61,23 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.acoustics import a_weighting, atmospheric_absorption, exact_frequency
+from gisnoise.acoustics import a_weighting, atmospheric_absorption, exact_frequency, nominal_frequency
 from gisnoise.errors import CardError
 from gisnoise.model.ansatz import Ansatz
 from gisnoise.model.cards import ModelCard, _check_card_identity, register_card_schema
 
-__all__ = ["HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "HemisphereCard", "hemisphere_from_dict",
-           "hemisphere_quadrature", "table_angles"]
+__all__ = ["HEMISPHERE_ANSATZ", "HEMISPHERE_SCHEMA", "LOWEST_BAND_HZ", "RADIAN_LIMIT_DEG", "HemisphereCard",
+           "band_problem", "hemisphere_from_dict", "hemisphere_quadrature", "table_angles", "table_problems"]
 
 HEMISPHERE_SCHEMA = "gisnoise/hemisphere-card/1"
 HEMISPHERE_ANSATZ = "hemisphere"
 DEFAULT_ATMOSPHERE = {"temperature_c": 20.0, "humidity_pct": 70.0, "pressure_kpa": 101.325}
+LOWEST_BAND_HZ = 10.0
+"""Lowest one-third-octave band taken, Hz: the lowest frequency of the A-weighting in IEC 61672-1 (a band below
+it is no audio band; a table in kHz gives 0.02-20)."""
+RADIAN_LIMIT_DEG = 1.571
+"""An axis whose angles all lie within +-this many "degrees" is taken to be in radians: pi/2 rounded up to three
+decimals, so that radians written rounded (1.5708) count (module docstring)."""
 
 
 _LN10_10 = math.log(10.0) / 10.0
@@ -149,6 +172,62 @@ def hemisphere_quadrature(phi_deg: Any, theta_deg: Any, n: int = 16) -> tuple[np
     b = np.arctan2(np.sin(lp), np.cos(lp) * np.cos(a)[:, None, None])
     aa = np.broadcast_to(a[:, None, None], lp.shape)
     return np.degrees(aa).ravel(), np.degrees(b).ravel(), w.ravel()
+
+
+def band_problem(f_hz: float) -> str | None:
+    """What makes ``f_hz`` no band of a hemisphere table, completing ``"band <value> ..."``; None for a band.
+
+    A band is a nominal one-third-octave mid-band frequency in Hz (within 0.02 decades) from
+    :data:`LOWEST_BAND_HZ` on.
+
+    Examples
+    --------
+    >>> band_problem(1000.0) is None, band_problem(0.02)[:32]
+    (True, 'Hz lies below 10 Hz, the lowest ')
+    """
+    f = float(f_hz)
+    if not math.isfinite(f) or f <= 0:
+        return "is not a positive frequency"
+    if f < LOWEST_BAND_HZ * 10 ** -0.05:  # below the 10 Hz band's lower edge
+        return (f"Hz lies below {LOWEST_BAND_HZ:g} Hz, the lowest band of the A-weighting (IEC 61672-1): bands are "
+                "nominal frequencies in Hz (kHz given?)")
+    if abs(math.log10(float(nominal_frequency(f)) / f)) > 0.02:
+        return "Hz is no one-third-octave mid-band frequency"
+    return None
+
+
+def table_problems(phi_deg: Any, theta_deg: Any, bands_hz: Any) -> list[tuple[str, str]]:
+    """``(field, reason)`` of every slip of units or bands in a table's axes (module docstring); empty when none.
+
+    ``field`` is ``phi_deg``, ``theta_deg`` or ``bands_hz``; ``reason`` reads after the field's name.
+    The axes are 1-D, finite and ascending (as a card holds them).
+
+    Examples
+    --------
+    >>> table_problems([-90.0, 0.0, 90.0], [0.0], [800.0, 1000.0, 1250.0])
+    []
+    >>> [f for f, _ in table_problems([-1.5708, 0.0, 1.5708], [0.0], [0.8, 1.0, 1.25])]
+    ['phi_deg', 'bands_hz']
+    """
+    out: list[tuple[str, str]] = []
+    for name, axis in (("phi_deg", phi_deg), ("theta_deg", theta_deg)):
+        a = np.asarray(axis, dtype=float).reshape(-1)
+        if a.size > 1 and np.abs(a).max() <= RADIAN_LIMIT_DEG:
+            out.append((name, f"all {a.size} angles lie within +-{RADIAN_LIMIT_DEG:g} ({a[0]:g}..{a[-1]:g}), the "
+                              "range of radians; table angles are degrees (-90..90, 0 straight below)"))
+    bands = np.asarray(bands_hz, dtype=float).reshape(-1)
+    bad = [(f, why) for f in bands.tolist() if (why := band_problem(f)) is not None]
+    if bad:
+        out.append(("bands_hz", f"band {bad[0][0]:g} {bad[0][1]}"))
+    elif bands.size:
+        idx = np.rint(10.0 * np.log10(exact_frequency(bands) / 1000.0)).astype(int)
+        missing = sorted(set(range(int(idx.min()), int(idx.max()) + 1)) - set(idx.tolist()))
+        if missing:
+            names = ", ".join(f"{float(nominal_frequency(1000.0 * 10.0 ** (k / 10.0))):g}" for k in missing)
+            out.append(("bands_hz", f"the bands {bands[0]:g}-{bands[-1]:g} Hz lack {names} Hz: a one-third-octave "
+                                    "table needs every band between its lowest and highest (a missing band drops "
+                                    "its energy from every level)"))
+    return out
 
 
 def _fail(msg: str, fld: str) -> None:
@@ -454,7 +533,11 @@ class HemisphereCard(ModelCard):
 
 
 def hemisphere_from_dict(doc: Mapping[str, Any], *, source: str = "hemisphere card") -> HemisphereCard:
-    """Build a hemisphere card from a parsed JSON object (schema ``gisnoise/hemisphere-card/1``)."""
+    """Build a hemisphere card from a parsed JSON object (schema ``gisnoise/hemisphere-card/1``).
+
+    Besides the card's structure, the table's units and bands are checked (:func:`table_problems`): a
+    :class:`~gisnoise.errors.CardError` naming ``phi_deg``, ``theta_deg`` or ``bands_hz``.
+    """
     if doc.get("schema") != HEMISPHERE_SCHEMA:
         raise CardError(f"{source}: field 'schema' must be '{HEMISPHERE_SCHEMA}', got {doc.get('schema')!r}",
                         field="schema")
@@ -478,11 +561,16 @@ def hemisphere_from_dict(doc: Mapping[str, Any], *, source: str = "hemisphere ca
     if "atmosphere" in kw:
         kw["atmosphere"] = {**DEFAULT_ATMOSPHERE, **kw["atmosphere"]}
     try:
-        return HemisphereCard(**kw)
+        card = HemisphereCard(**kw)
     except CardError as exc:
         raise CardError(str(exc).replace("hemisphere card", source, 1), field=exc.field) from None
     except ValueError as exc:  # ragged nested lists
         raise CardError(f"{source}: table fields must be rectangular ({exc})", field="levels_db") from None
+    problems = table_problems(card.phi_deg, card.theta_deg, card.bands_hz)
+    if problems:
+        fld, reason = problems[0]
+        raise CardError(f"{source}: field '{fld}': {reason}", field=fld)
+    return card
 
 
 register_card_schema(HEMISPHERE_SCHEMA, hemisphere_from_dict)

@@ -26,17 +26,15 @@ row to the horizon that way); the innermost row of such a run is measured.
 **Checks at import** (each a one-line :class:`~gisnoise.errors.CardError` naming the file and
 the field; the card written is one every other command takes):
 
-* angles in degrees: an axis of more than one angle, all within +-1.571 (pi/2 rounded up), is
-  refused as given in radians (:data:`RADIAN_LIMIT_DEG`: radians fill that range; in degrees such
-  an axis would span at most 3.1 deg about straight below, 0.55 m across at 10 m, where a measured
-  hemisphere spans tens of degrees: the Salford line of microphones +-60);
+* the checks of every table that enters the product, the same that reading a card document runs
+  (:func:`gisnoise.model.hemisphere.table_problems`): angles in degrees, not radians (an axis of
+  more than one angle, all within +-:data:`RADIAN_LIMIT_DEG`, field ``phi_deg`` or ``theta_deg``);
+  bands that are nominal one-third-octave frequencies in Hz from :data:`LOWEST_BAND_HZ` on (a
+  table in kHz gives 0.02-20 "Hz") with every band between the lowest and the highest (field
+  ``band``: the file's band column or ``band_<Hz>`` sheets);
 * the rows and columns of a workbook sheet may come in any order (each carries its angle): they
   are sorted; an angle given twice is refused naming the sheet and cells, a blank, text or
   non-finite cell naming its cell (``C7``);
-* bands: nominal one-third-octave frequencies in Hz, none below :data:`LOWEST_BAND_HZ` (10 Hz,
-  the lowest frequency IEC 61672-1 states the A-weighting for: a table in kHz would give
-  0.02-20 "Hz"), every band between the lowest and the highest (a band missing from the table
-  would drop its energy from every level);
 * a CSV's radius: ``spl_db_at_1m`` with a ``radius_m`` other than 1, or a ``radius_m`` argument
   other than the radius the file states, is refused (field ``radius_m``);
 * the plausibility guard of the maps and the service (:func:`gisnoise.model.check_card`: radius
@@ -57,9 +55,16 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.acoustics import exact_frequency, nominal_frequency
+from gisnoise.acoustics import nominal_frequency
 from gisnoise.errors import CardError
-from gisnoise.model.hemisphere import HEMISPHERE_ANSATZ, HemisphereCard
+from gisnoise.model.hemisphere import (
+    HEMISPHERE_ANSATZ,
+    LOWEST_BAND_HZ,
+    RADIAN_LIMIT_DEG,
+    HemisphereCard,
+    band_problem,
+    table_problems,
+)
 from gisnoise.model.plausibility import check_card
 
 __all__ = ["LOWEST_BAND_HZ", "RADIAN_LIMIT_DEG", "SALFORD_ATMOSPHERE", "fill_rows", "import_hemisphere",
@@ -67,13 +72,6 @@ __all__ = ["LOWEST_BAND_HZ", "RADIAN_LIMIT_DEG", "SALFORD_ATMOSPHERE", "fill_row
 
 SALFORD_ATMOSPHERE = {"temperature_c": 25.0, "humidity_pct": 70.0, "pressure_kpa": 101.325}
 """The atmosphere the Salford tool back-propagates with (25 C, 70 % RH, 29.92 inHg)."""
-
-LOWEST_BAND_HZ = 10.0
-"""Lowest one-third-octave band taken, Hz: the lowest frequency of the A-weighting in IEC 61672-1 (a band below
-it is no audio band; a table in kHz gives 0.02-20)."""
-RADIAN_LIMIT_DEG = 1.571
-"""An axis whose angles all lie within +-this many "degrees" is taken to be in radians: pi/2 rounded up to three
-decimals, so that radians written rounded (1.5708) count (module docstring)."""
 
 _SALFORD_NAME = re.compile(r"Hem_(?P<site>[A-Za-z]+)_(?P<drone>[A-Za-z0-9]+)_(?P<h>\d+)_F(?P<v>\d+)_")
 _DRONES = {"M3": "DJI Matrice 300 RTK", "M2": "DJI Mavic 2 Pro", "3p": "DJI Phantom 3"}
@@ -88,15 +86,10 @@ def _band(path: Any, v: Any) -> float:
         f = float(v)
     except (TypeError, ValueError):
         raise _err(path, f"band {v!r} is not a frequency in Hz", "band") from None
-    if not math.isfinite(f) or f <= 0:
-        raise _err(path, f"band {v!r} is not a positive frequency", "band")
-    if f < LOWEST_BAND_HZ * 10 ** -0.05:  # below the 10 Hz band's lower edge
-        raise _err(path, f"band {v!r} Hz lies below {LOWEST_BAND_HZ:g} Hz, the lowest band of the A-weighting "
-                         "(IEC 61672-1): bands are nominal frequencies in Hz (kHz given?)", "band")
-    nom = float(nominal_frequency(f))
-    if abs(math.log10(nom / f)) > 0.02:
-        raise _err(path, f"band {v!r} Hz is no one-third-octave mid-band frequency", "band")
-    return nom
+    why = band_problem(f)
+    if why is not None:
+        raise _err(path, f"band {v!r} {why}", "band")
+    return float(nominal_frequency(f))
 
 
 def _cell(col: int, row: int) -> str:
@@ -285,20 +278,13 @@ def read_hemisphere_csv(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 
 def _check_table(path: Any, t: dict[str, Any]) -> None:
-    """Refuse angles in radians and a band sequence with gaps (module docstring)."""
-    for name in ("phi_deg", "theta_deg"):
-        a = np.asarray(t[name], dtype=float)
-        if a.size > 1 and np.abs(a).max() <= RADIAN_LIMIT_DEG:
-            raise _err(path, f"{name}: all {a.size} angles lie within +-{RADIAN_LIMIT_DEG:g} ({a[0]:g}..{a[-1]:g}), "
-                             "the range of radians; table angles are degrees (-90..90, 0 straight below)", name)
-    bands = np.asarray(t["bands_hz"], dtype=float)
-    idx = np.rint(10.0 * np.log10(exact_frequency(bands) / 1000.0)).astype(int)
-    missing = sorted(set(range(int(idx.min()), int(idx.max()) + 1)) - set(idx.tolist()))
-    if missing:
-        names = ", ".join(f"{float(nominal_frequency(1000.0 * 10.0 ** (k / 10.0))):g}" for k in missing)
-        raise _err(path, f"the bands {bands[0]:g}-{bands[-1]:g} Hz lack {names} Hz: a one-third-octave table needs "
-                         "every band between its lowest and highest (a missing band drops its energy from every "
-                         "level)", "band")
+    """Refuse a table whose units or bands every card refuses (:func:`~gisnoise.model.hemisphere.table_problems`)."""
+    problems = table_problems(t["phi_deg"], t["theta_deg"], t["bands_hz"])
+    if problems:
+        fld, reason = problems[0]
+        if fld == "bands_hz":  # the file's bands: its 'band' column, its band_<Hz> sheets
+            raise _err(path, reason, "band")
+        raise _err(path, f"{fld}: {reason}", fld)
 
 
 def import_warnings(card: HemisphereCard) -> list[str]:

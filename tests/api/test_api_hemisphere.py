@@ -78,6 +78,32 @@ def test_an_implausible_hemisphere_is_refused_on_upload_naming_levels_db_and_by_
     assert "levels_db" in r.json()["detail"] and "hemi-bad1@1" in r.json()["detail"]
 
 
+@pytest.mark.parametrize("field, change, said", [
+    ("phi_deg", lambda doc: [math.radians(a) for a in doc["phi_deg"]], "the range of radians"),
+    ("theta_deg", lambda doc: [math.radians(a) for a in doc["theta_deg"]], "the range of radians"),
+    ("bands_hz", lambda doc: [f / 1000.0 for f in doc["bands_hz"]], "band 0.02 Hz lies below 10 Hz"),
+])
+def test_a_hemisphere_in_radians_or_khz_is_refused_on_upload_and_nothing_is_stored(client, m300, field, change, said):
+    """The M300 card with its angles turned into radians (or its bands into kHz), the rest as imported: 422 naming
+    the field, the store's listing and folder as before; the same document inline in a map request is refused
+    naming it as well."""
+    doc = json.loads(dumps(m300))
+    doc["id"] = "hemi-units"
+    doc[field] = change(doc)
+    before = client.get("/cards").json()
+    r = client.post("/cards", json=doc)
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["field"] == field and f"field '{field}': " in body["detail"] and said in body["detail"], body
+    assert client.get("/cards").json() == before
+    assert client.get("/cards/hemi-units").status_code == 404
+    assert not (client.app.state.gisnoise.cards.root / "hemi-units").exists()
+    req = {"trajectory": {"format": "csv", "text": flyover_csv(h=20.0, speed=5.0, dt=0.2, length_m=200.0)},
+           "cards": [doc], "grid": {"resolution_m": 5, "margin_m": 30}, "levels": [45, 50], "ground_h_m": 0.0}
+    r = client.post("/contours", json=req)
+    assert r.status_code == 422 and r.json()["field"] == f"cards[0].{field}", r.text
+
+
 def test_diagnose_job_with_a_hemisphere_card_is_refused_at_submission(client, m300):
     """A measured hemisphere has no parameters to extend: POST /jobs/diagnose refuses it at once (422 naming card_id,
     or card for a card file), and no job is queued; before, it answered 202 and the job failed later."""
