@@ -3,7 +3,8 @@
 Known truths by construction: a table in radians has every angle within +-pi/2; a table of the behind half
 (phi 0..90) lacks half the lower hemisphere and a quarter table (phi and theta 0..90) three quarters (phi_t and
 theta_t are each uniform in solid angle; the four quadrants are congruent); the one-third-octave band after 800 Hz
-is 1000 Hz; a table of levels ``f(phi, theta)`` written with its rows in any order is the same table.
+is 1000 Hz; a table of levels ``f(phi, theta)`` written with its rows in any order is the same table; a table whose
+rows are all equal has no row that repeats a different measured one.
 
 A card document written or edited by hand passes the same checks of units and bands when it is read (file,
 ``--card``, ``card show``, a map given its path): the same table with its axes in degrees and Hz is taken, in
@@ -208,6 +209,25 @@ def test_a_level_column_at_1_m_with_another_radius_is_refused(tmp_path):
     assert e.value.field == "radius_m"
     p = write_csv(tmp_path / "r3.csv", FULL, FULL, radius=3.0)  # level_db at the radius the file states
     assert import_hemisphere(p, atmosphere=ATM).reference_distance_m == 3.0
+
+
+# --------------------------------------------------------------------------- the measured cells of a constant table
+
+
+def test_a_table_whose_rows_are_all_equal_counts_every_row_as_measured(tmp_path):
+    """70 dB at every node: no row repeats a different, measured one, so no row is fill; without a 'measured'
+    column only the columns beyond --measured-theta-max (60 deg: theta +-90 of FULL) count as filled."""
+    p = tmp_path / "flat.csv"
+    p.write_text("band,phi_deg,theta_deg,level_db\n" + "".join(f"{f:g},{a:g},{b:g},70\n" for f in THIRDS
+                                                                 for a in FULL for b in FULL))
+    card = import_hemisphere(p, atmosphere=ATM)
+    expect = np.broadcast_to((np.abs(np.array(FULL)) <= 60.0)[None, :], (len(FULL), len(FULL)))
+    np.testing.assert_array_equal(card.measured, expect)
+    r = run("card", "import-hemisphere", str(p), "--out", str(tmp_path / "flat.json"), "--temperature", "25",
+            "--humidity", "70")
+    assert r.exit_code == 0 and f"{expect.sum()} nodes measured" in r.output, r.output
+    r = run("card", "show", str(tmp_path / "flat.json"))
+    assert f"measured  {expect.sum()} of {expect.size} nodes" in r.output, r.output
 
 
 # --------------------------------------------------------------------------- the same checks for a card read

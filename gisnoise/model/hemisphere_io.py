@@ -21,7 +21,8 @@ drone approached the microphone line), ``theta`` across it, positive to starboar
 ``|theta| <= measured_theta_max`` (deg; the Salford line of 9 microphones spans +-60) and its
 phi row is not a constant fill: rows at either end of the table that repeat their inner
 neighbour in every band and column are fill (the Salford tool extends the outermost measured
-row to the horizon that way); the innermost row of such a run is measured.
+row to the horizon that way); the innermost row of such a run is measured.  A table whose rows
+are all equal shows no fill (:func:`fill_rows`): every row counts.
 
 **Checks at import** (each a one-line :class:`~gisnoise.errors.CardError` naming the file and
 the field; the card written is one every other command takes):
@@ -299,13 +300,27 @@ def import_warnings(card: HemisphereCard) -> list[str]:
 
 
 def fill_rows(levels_db: np.ndarray) -> np.ndarray:
-    """Rows (phi) at the table's ends that repeat their inner neighbour in every band: constant fill."""
+    """Rows (phi) at the table's ends that repeat their inner neighbour in every band: constant fill.
+
+    The innermost row of each run is the measured one it repeats.  A table whose rows are all equal has no
+    such row to tell (the runs from both ends would take each other's, and every row would count as fill):
+    none of its rows is fill.
+
+    Examples
+    --------
+    >>> fill_rows(np.array([[[1.0], [1.0], [2.0], [3.0], [3.0], [3.0]]])).tolist()
+    [True, False, False, False, True, True]
+    >>> fill_rows(np.full((2, 4, 3), 70.0)).tolist()
+    [False, False, False, False]
+    """
     n = levels_db.shape[1]
     fill = np.zeros(n, bool)
     i = 0
     while i + 1 < n and np.array_equal(levels_db[:, i], levels_db[:, i + 1]):
         fill[i] = True
         i += 1
+    if i == n - 1:  # every row equals its neighbour: no measured row to tell the fill by
+        return np.zeros(n, bool)
     i = n - 1
     while i - 1 >= 0 and np.array_equal(levels_db[:, i], levels_db[:, i - 1]):
         fill[i] = True
