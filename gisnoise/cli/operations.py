@@ -101,7 +101,8 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
         res = evaluate_operations(sched, scheduler=scheduler, workers=workers, single_process=single_process,
                                   threads=threads,
                                   tile_cells=tile_cells, memory_limit=memory_limit, progress=update)
-    paths = write_operations(res, out, lv, plot=plot)
+    paths = write_operations(res, out, lv, plot=plot,
+                             tracks=[(f.id, f.trajectory) for f in sched.flights if f.total > 0])
     exposed: list[str] = []
     if pop is not None or bld is not None:
         from gisnoise.exposure import operations_exposure, write_exposure

@@ -83,7 +83,8 @@ def _save_png(fig: Any, path: str | os.PathLike[str], dpi: int) -> Path:
 
 
 def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequence[float],
-             trajectory: Trajectory | None = None, metric: str | None = None, dpi: int = 120) -> Path:
+             trajectory: Trajectory | None = None, metric: str | None = None, dpi: int = 120,
+             tracks: Sequence[tuple[str, Trajectory]] = ()) -> Path:
     """Draw a level band with its contours, the track, a scale bar, a north arrow and a legend.
 
     Parameters
@@ -98,6 +99,9 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
         Drawn as the track, coloured by phase, with start and end marked.
     metric : str, optional
         Band to draw; default ``LAmax`` if present, else the first level band.
+    tracks : sequence of (name, Trajectory)
+        Several flights (a day of operations): each drawn as a thin line named at its start; the title then
+        speaks of the flights.
 
     Returns
     -------
@@ -144,6 +148,16 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
             ax.plot(x[-1], y[-1], marker="s", ms=8, color="black", ls="", zorder=6)
             handles += [Line2D([], [], marker="^", ls="", color="black", label="start"),
                         Line2D([], [], marker="s", ls="", color="black", label="end")]
+        starts: dict[tuple[int, int], list[str]] = {}  # flights taking off within 10 m of each other: one label
+        for name, tr in tracks:
+            x, y = grid.from_wgs84(tr.lon, tr.lat)
+            ax.plot(x, y, color="0.25", lw=0.8, zorder=4)
+            starts.setdefault((round(float(x[0]) / 10.0), round(float(y[0]) / 10.0)), []).append(name)
+        for (xs, ys), names_here in starts.items():
+            ax.annotate(", ".join(names_here), (10.0 * xs, 10.0 * ys), xytext=(4, 4), textcoords="offset points",
+                        fontsize=7, color="0.15", zorder=6)
+        if tracks:
+            handles.append(Line2D([], [], color="0.25", lw=0.8, label="flight tracks (named at take-off)"))
         handles.append(Line2D([], [], color="black", lw=0.7, label=f"{metric} contours, dB(A)"))
         # below the map, not over it: no corner of a map is sure to be empty
         fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4), fontsize=8,
@@ -165,7 +179,8 @@ def plot_map(result: MapResult, path: str | os.PathLike[str], *, levels: Sequenc
         sub = f"grid {grid.resolution[0]:g} m, receivers {md.get('receiver_height_m', '?')} m above ground"
         if metric == "LAeq" and md.get("period_s"):
             sub += f", period {md['period_s']:.0f} s"
-        ax.set_title(f"{metric} of the UAV\n{sub}", fontsize=11)
+        what = f"the day's {len(tracks)} flight{'s' if len(tracks) != 1 else ''}" if tracks else "the UAV"
+        ax.set_title(f"{metric} of {what}\n{sub}", fontsize=11)
         p = _save_png(fig, path, dpi)
     finally:
         plt.close(fig)

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
+from gisnoise.flight import Trajectory
 from gisnoise.jsonio import to_jsonable
 from gisnoise.maps import MapResult, plot_map, write_geojson, write_geotiff
 
@@ -18,10 +19,11 @@ __all__ = ["write_operations"]
 
 
 def write_operations(result: MapResult, out_dir: str | os.PathLike[str], levels: Any = None,
-                     contour_bands: Sequence[str] = ("Lden", "Lnight"), *, plot: bool = False) -> dict[str, Path]:
+                     contour_bands: Sequence[str] = ("Lden", "Lnight"), *, plot: bool = False,
+                     tracks: Sequence[tuple[str, Trajectory]] = ()) -> dict[str, Path]:
     """Write ``DIR/operations.tif`` (every band), ``DIR/contours.geojson`` (of ``contour_bands``)
     and ``DIR/summary.json`` (metadata and per-band ranges); with ``plot`` also ``DIR/map.png``
-    (Lden with its contours at the levels)."""
+    (Lden with its contours at the levels and the flights' ``tracks``, ``(id, trajectory)``)."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: output exists and is not a folder", field="out")
@@ -43,5 +45,5 @@ def write_operations(result: MapResult, out_dir: str | os.PathLike[str], levels:
     if plot:
         if not lv:
             raise InputError("plot: give contour levels (--levels or the schedule's levels_db)", field="levels")
-        paths["map"] = plot_map(result, out / "map.png", levels=list(lv), metric="Lden")
+        paths["map"] = plot_map(result, out / "map.png", levels=list(lv), metric="Lden", tracks=tracks)
     return paths
