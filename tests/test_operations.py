@@ -436,7 +436,10 @@ def test_departures_and_counts_are_clock_times_and_numbers_only(tmp_path):
                             ({"departures": ["25:00"]}, "departures", "flight 'B': departures: '25:00' is not a clock"),
                             ({"departures": [24]}, "departures", "flight 'B': departures: 24 h is not within 0-24 h"),
                             ({"counts": {"day": True}}, "counts", "flight 'B': count of 'day' must be a number, got True"),
-                            ({"counts": {"day": "5"}}, "counts", "flight 'B': count of 'day' must be a number, got '5'")):
+                            ({"counts": {"day": "5"}}, "counts", "flight 'B': count of 'day' must be a number, got '5'"),
+                            # one timetable written both ways was two (the day's count doubled, Lden +3 dB)
+                            ({"counts": {"day": 1, "night": 2}, "departures": [7.5, 23.5, "06:59"]}, "departures",
+                             "flight 'B' gives both 'counts' and 'departures'")):
         with pytest.raises(InputError) as err:
             load(**fb)
         assert err.value.field == field and said in str(err.value), str(err.value)

@@ -294,6 +294,10 @@ def schedule_from_dict(doc: Mapping[str, Any], *, base_dir: str | os.PathLike[st
                            power_w=_num(fd, "power_w", None, f"{source}: flight {fid!r}", minimum=0.0, strict=True))
         counts: dict[str, float] = {p: 0.0 for p in PERIODS}
         given = fd.get("counts")
+        if given is not None and fd.get("departures"):  # either the counts of a timetable or its clock times
+            raise InputError(f"{source}: flight {fid!r} gives both 'counts' and 'departures': give one (the "
+                             f"departures are counted into their periods, so both would count each flight twice)",
+                             field="departures")
         if given is not None:
             if not isinstance(given, Mapping):
                 raise InputError(f"{source}: flight {fid!r}: counts must be an object of periods", field="counts")
