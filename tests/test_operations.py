@@ -459,3 +459,15 @@ def test_quiet_keeps_the_warnings_and_leaves_out_the_summary(tmp_path):
     assert warned and "resolution: cells of 50 m" in "".join(warned)
     assert quiet.stderr.splitlines() == warned and quiet.stdout == ""
     assert "Lden: max" in loud.stdout and "wrote" in loud.stdout
+
+
+def test_an_n_above_area_cut_by_the_grid_edge_is_named(tmp_path):
+    # the omnidirectional hover B (8 departures, 50 m above the receivers at x = 300, y = -100) exceeds 60 dB(A)
+    # within d < 40 m * 10^((G0 - 60) / 20) = 126.5 m: 116 m around it on the ground, past the cells at x = 400
+    # (the grid ends at 425 m); hover A (13 flights, 30 m up at the centre) stays inside, and 70 dB(A) (d < 40 m)
+    # is exceeded only next to A.  So the day names NA60 with B's 8 flights, and not NA70
+    res = evaluate_operations(load_schedule(write_case(tmp_path)))
+    said = [w for w in res.metadata["warnings"] if "at the grid's edge" in w]
+    assert said == ["NA60: up to 8 flights a day exceed 60 dB(A) at the grid's edge: the area where they do reaches "
+                    "beyond the map (a wider margin shows it whole)"]
+    assert float(res.bands["NA60"][:, -1].max()) == 8.0

@@ -176,11 +176,27 @@ def evaluate_operations(
         "engine": "fast",
         "tiles": len(windows),
         "execution": how,
-        "warnings": warnings,
+        "warnings": warnings + reach_warnings(bands, plan.thresholds),
     }
     if outside:
         meta["power_outside_card_range"] = outside
     return MapResult(bands=bands, grid=grid, metadata=meta)
+
+
+def reach_warnings(bands: dict[str, np.ndarray], thresholds: Any) -> list[str]:
+    """One line per threshold whose day's N-above (``NA<L>``) is above zero at the grid's edge: the area where
+    flights exceed it reaches beyond the map (its time above and the people it counts are cut there too)."""
+    out = []
+    for k in thresholds:
+        na = bands.get(f"NA{k:g}")
+        if na is None or na.ndim != 2 or not na.size:
+            continue
+        edge = np.concatenate([na[0], na[-1], na[:, 0], na[:, -1]])
+        edge = edge[np.isfinite(edge)]
+        if edge.size and float(edge.max()) > 0.0:
+            out.append(f"NA{k:g}: up to {float(edge.max()):g} flights a day exceed {k:g} dB(A) at the grid's edge: "
+                       f"the area where they do reaches beyond the map (a wider margin shows it whole)")
+    return out
 
 
 GROUND_FROM_FLIGHTS = "a take-off or landing point of a flight, or a route's stated ground"
