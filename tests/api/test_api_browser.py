@@ -190,3 +190,218 @@ def test_a_fit_job_on_a_cut_log_lists_its_warning_as_text(tmp_path):
     finally:
         browser.close()
         srv.stop()
+
+
+# ---------------------------------------------------------------- what the page shows of the drawn map
+def _compute(b: Browser, timeout: float = 120) -> None:
+    """Click "Compute contours" and wait for the answer drawn or an error in the status."""
+    b.evaluate("gisnoise.contourCount = 0; document.getElementById('btn-compute').click(); true")
+    b.wait_for("gisnoise.contourCount > 0 || document.getElementById('status').classList.contains('error')", timeout)
+    assert not b.evaluate("document.getElementById('status').classList.contains('error')"), \
+        b.evaluate("document.getElementById('status').textContent")
+
+
+def _visible_text(b: Browser) -> str:
+    """The panel's text as rendered: hidden elements and closed disclosures are not in it."""
+    return b.evaluate("document.getElementById('panel').innerText")
+
+
+def _set_metric(b: Browser, metric: str) -> None:
+    b.evaluate(f"{{ const m = document.getElementById('metric'); m.value = '{metric}';"
+               "m.dispatchEvent(new Event('change')); } true")
+
+
+def _drawn_metrics(b: Browser) -> list[str]:
+    """The metric of every contour feature on the map (none when no contour layer is on it)."""
+    return b.evaluate("gisnoise.contourLayer && gisnoise.map.hasLayer(gisnoise.contourLayer)"
+                      " ? gisnoise.contourLayer.getLayers().map((l) => l.feature.properties.metric) : []")
+
+
+def _legend_title(b: Browser) -> str | None:
+    return b.evaluate("(document.querySelector('#legend .legend-title') || {}).textContent || null")
+
+
+def _wait_job_shown(b: Browser) -> str:
+    """After a job was queued from the page: its id, once it succeeded and its contours are drawn."""
+    job = b.wait_for("gisnoise.shownJob", 20)
+    b.wait_for(f"(document.querySelector('#jobs tr[data-job=\"{job}\"]') || {{dataset: {{}}}}).dataset.status"
+               " === 'succeeded'", 120)
+    b.wait_for("gisnoise.contourCount > 0", 30)
+    return job
+
+
+def test_every_warning_of_the_answer_is_shown_one_line_each(page):
+    """The power-range warning of the sample route (and every other line of ``gisnoise.warnings``) is visible
+    text of the panel, one line each; the clipping notice of a narrow margin is shown once, not twice."""
+    import httpx
+
+    b = page
+    if b.evaluate("document.getElementById('btn-sample').disabled"):
+        pytest.skip("this checkout has no sample route")
+    origin = b.evaluate("location.origin")
+    b.evaluate("document.getElementById('btn-sample').click(); true")
+    b.wait_for("gisnoise.trajectory !== null", 20)
+    b.evaluate("document.getElementById('resolution').value = 30; true")
+    _compute(b)
+    # the answer to the same request, asked here: it warns that demo-horizontal flies outside its powers
+    route = httpx.get(origin + "/samples/route").json()
+    req = {"trajectory": {"format": "geojson", "data": route}, "cards": ["demo-horizontal", "demo-climb", "demo-sink"],
+           "grid": {"resolution_m": 30}, "metrics": ["LAmax"], "levels": [45, 50, 55, 60, 65]}
+    answer = httpx.post(origin + "/contours", json=req, timeout=120).json()["gisnoise"]["warnings"]
+    power = [w for w in answer if "card 'demo-horizontal' is used at" in w and "it was fitted at" in w]
+    assert len(power) == 1, answer
+    text = _visible_text(b)
+    lines = text.split("\n")
+    assert f"warning: {power[0]}" in lines, text
+    shown = b.evaluate("gisnoise.lastContours.gisnoise.warnings")
+    for w in shown:
+        assert f"warning: {w}" in lines and text.count(w) == 1, (w, text)
+
+    # a margin that cuts the contours: the clipping line joins the power-range one, each shown once
+    b.evaluate("document.getElementById('margin').value = 100; true")
+    _compute(b)
+    shown = b.evaluate("gisnoise.lastContours.gisnoise.warnings")
+    clip = [w for w in shown if " contours are clipped: " in w]
+    assert clip and any("card 'demo-horizontal' is used at" in w for w in shown), shown
+    text = _visible_text(b)
+    for w in shown:
+        assert f"warning: {w}" in text.split("\n") and text.count(w) == 1, (w, text)
+    # a new route clears the drawn map and its warnings
+    b.evaluate("document.getElementById('btn-clear').click(); true")
+    assert not any(w in _visible_text(b) for w in shown)
+
+
+def test_a_jobs_warnings_are_shown_with_its_contours(page):
+    """A drawn route run as a job: every warning of the job's result GeoJSON is visible text once it is shown."""
+    import httpx
+
+    b = page
+    _draw_route(b)
+    b.evaluate("document.getElementById('as-job').checked = true; document.getElementById('btn-compute').click();"
+               "true")
+    job = _wait_job_shown(b)
+    result = httpx.get(f"{b.evaluate('location.origin')}/jobs/{job}/result", timeout=30).json()
+    warnings = result["gisnoise"]["warnings"]
+    assert any("card 'demo-" in w and "it was fitted at" in w for w in warnings), warnings
+    lines = _visible_text(b).split("\n")
+    for w in warnings:
+        assert f"warning: {w}" in lines, (w, lines)
+
+
+def test_a_metric_switch_never_relabels_the_drawn_contours(page):
+    """Contours drawn under a legend are of the legend's metric: a metric the map lacks draws nothing and says
+    to compute again; a map with several metrics draws each one's own features."""
+    import httpx
+
+    b = page
+    _draw_route(b)
+    _compute(b)
+    assert set(_drawn_metrics(b)) == {"LAmax"} and _legend_title(b) == "LAmax, dB(A)"
+    _set_metric(b, "SEL")
+    drawn = _drawn_metrics(b)
+    assert all(m == "SEL" for m in drawn), drawn  # was: the LAmax features under "SEL, dB(A)"
+    assert not drawn and contour_fraction(b.screenshot()) < 0.005
+    assert b.evaluate("document.querySelectorAll('#legend .item').length") == 0
+    text = _visible_text(b)
+    assert "SEL" in text and "compute" in text.lower() and "LAmax" in text, text
+    # nothing drawn: nothing to download
+    assert b.evaluate("document.getElementById('downloads').hidden"
+                      " || document.getElementById('btn-geotiff').disabled")
+    # back to the computed metric: its contours again
+    _set_metric(b, "LAmax")
+    assert set(_drawn_metrics(b)) == {"LAmax"} and _legend_title(b) == "LAmax, dB(A)"
+    assert contour_fraction(b.screenshot()) > 0.2
+    assert not b.evaluate("document.getElementById('downloads').hidden"
+                          " || document.getElementById('btn-geotiff').disabled")
+    # computed for SEL: SEL's features under SEL's legend
+    _set_metric(b, "SEL")
+    _compute(b)
+    assert set(_drawn_metrics(b)) == {"SEL"} and _legend_title(b) == "SEL, dB(A)"
+
+    # a job of two metrics, shown: each metric draws its own features
+    origin = b.evaluate("location.origin")
+    req = {"trajectory": b.evaluate("gisnoise.trajectory"), "cards": ["demo-horizontal", "demo-climb", "demo-sink"],
+           "grid": {"resolution_m": 20}, "metrics": ["LAmax", "LAeq"], "levels": [45, 50, 55, 60, 65]}
+    r = httpx.post(origin + "/jobs/contours", json=req, timeout=60)
+    assert r.status_code == 202, r.text
+    job = r.json()["id"]
+    row = f"document.querySelector('#jobs tr[data-job=\"{job}\"]')"
+    b.wait_for(f"!!({row} && {row}.dataset.status === 'succeeded' && {row}.querySelector('button'))", 120)
+    b.evaluate(f"gisnoise.contourCount = 0; {row}.querySelector('button').click(); true")
+    b.wait_for("gisnoise.contourCount > 0", 30)
+    shown = _legend_title(b).split(",")[0]
+    assert shown in ("LAmax", "LAeq") and set(_drawn_metrics(b)) == {shown}
+    for metric in ("LAeq", "LAmax", "LAeq"):
+        _set_metric(b, metric)
+        assert set(_drawn_metrics(b)) == {metric} and _legend_title(b) == f"{metric}, dB(A)"
+    _set_metric(b, "SEL")
+    assert _drawn_metrics(b) == [] and b.evaluate("document.querySelectorAll('#legend .item').length") == 0
+
+
+_SAVE_HOOK = ("window._saved = null; gisnoise.save = (blob, name) => { const r = new FileReader();"
+              " r.onload = () => { window._saved = {name: name, data: r.result.split(',')[1]}; };"
+              " r.readAsDataURL(blob); }; true")
+
+
+def _download_geotiff(b: Browser) -> bytes:
+    """Click "Download GeoTIFF" and return the bytes the page saves (its save function caught)."""
+    import base64
+
+    b.evaluate(_SAVE_HOOK)
+    assert b.evaluate("!document.getElementById('downloads').hidden && !document.getElementById('btn-geotiff').disabled")
+    b.evaluate("document.getElementById('status').classList.remove('error');"
+               "document.getElementById('btn-geotiff').click(); true")
+    b.wait_for("window._saved !== null || document.getElementById('status').classList.contains('error')", 120)
+    assert b.evaluate("window._saved !== null"), b.evaluate("document.getElementById('status').textContent")
+    assert b.evaluate("window._saved.name") == "levels.tif"
+    return base64.b64decode(b.evaluate("window._saved.data"))
+
+
+def _assert_geotiff_of(data: bytes, grid: dict, metrics: tuple[str, ...]) -> None:
+    from rasterio.io import MemoryFile
+
+    with MemoryFile(data) as mf, mf.open() as ds:
+        assert (ds.width, ds.height) == (grid["width"], grid["height"])
+        assert list(ds.transform)[:6] == pytest.approx(grid["transform"])
+        assert ds.crs.to_string() == grid["crs"]
+        assert ds.descriptions == metrics
+
+
+def test_the_geotiff_download_is_the_drawn_map(page):
+    """"Download GeoTIFF" saves the raster of the contours on screen: after a failed recompute, with the form
+    changed since, and for a shown job (its own map, not the form's)."""
+    pytest.importorskip("rasterio")
+    b = page
+    _draw_route(b)
+    _compute(b)
+    grid = b.evaluate("gisnoise.lastContours.gisnoise.grid")
+    assert grid["transform"][0] == 20.0
+    # a recompute that fails (a level that is no number): the drawn map stays, and so does its download
+    b.evaluate("document.getElementById('levels').value = '45,abc'; document.getElementById('btn-compute').click();"
+               "true")
+    b.wait_for("document.getElementById('status').classList.contains('error')", 60)
+    assert set(_drawn_metrics(b)) == {"LAmax"}
+    b.evaluate("document.getElementById('resolution').value = 50; document.getElementById('metric').value = 'SEL';"
+               "true")  # the form, not the map, changes (no change event: the select keeps the map drawn)
+    _assert_geotiff_of(_download_geotiff(b), grid, ("LAmax",))
+
+    # a job, shown: its own map, whatever the form says now
+    b.evaluate("document.getElementById('levels').value = '45,50,55,60,65';"
+               "document.getElementById('metric').value = 'LAmax';"
+               "document.getElementById('resolution').value = 25; document.getElementById('as-job').checked = true;"
+               "document.getElementById('btn-compute').click(); true")
+    job = _wait_job_shown(b)
+    job_grid = b.evaluate("gisnoise.lastContours.gisnoise.grid")
+    assert job_grid["transform"][0] == 25.0
+    # the form changes, then the job is shown again from its row
+    b.evaluate("document.getElementById('resolution').value = 40; document.getElementById('as-job').checked = false;"
+               "true")
+    row = f"document.querySelector('#jobs tr[data-job=\"{job}\"]')"
+    b.evaluate(f"gisnoise.contourCount = 0; {row}.querySelector('button').click(); true")
+    b.wait_for("gisnoise.contourCount > 0", 30)
+    assert b.evaluate("gisnoise.lastContours.gisnoise.grid") == job_grid
+    _assert_geotiff_of(_download_geotiff(b), job_grid, ("LAmax",))
+    # nothing drawn: no download offered
+    b.evaluate("document.getElementById('btn-clear').click(); true")
+    assert b.evaluate("document.getElementById('downloads').hidden"
+                      " || document.getElementById('btn-geotiff').disabled")

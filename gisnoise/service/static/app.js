@@ -13,7 +13,9 @@ const app = {
   drawing: false,
   drawn: [],          // [lat, lng] of clicked waypoints
   trajectory: null,   // the request's trajectory object
-  lastContours: null, // the last GeoJSON drawn
+  lastContours: null, // the GeoJSON of the map on screen (every metric it holds)
+  mapSource: null,    // where that map came from: {request: body} (POST /contours) or {job: id}
+  drawnMetric: null,  // the metric whose contours are drawn; null when the map does not hold the chosen one
   shownJob: null,
   jobs: [],
 };
@@ -65,7 +67,7 @@ async function init() {
   $("btn-draw").onclick = toggleDraw;
   $("btn-clear").onclick = clearAll;
   $("btn-compute").onclick = compute;
-  $("metric").onchange = () => app.lastContours && drawContours(app.lastContours);
+  $("metric").onchange = () => app.lastContours && drawMetric($("metric").value);
   await loadCards();
   pollJobs();
   app.ready = true;
@@ -214,8 +216,11 @@ function clearAll() {
   app.trajectory = null;
   if (app.routeLayer) app.routeLayer.remove();
   if (app.contourLayer) app.contourLayer.remove();
-  app.routeLayer = app.contourLayer = app.lastContours = null;
+  app.routeLayer = app.contourLayer = app.lastContours = app.mapSource = app.drawnMetric = null;
+  app.contourCount = 0;
   $("legend").textContent = "";
+  showWarnings([]);
+  updateDownloads();
   setStatus("");
 }
 
@@ -240,12 +245,14 @@ async function compute() {
   const asJob = $("as-job").checked;
   setStatus("Computing…");
   const t0 = performance.now();
+  // the request as sent: kept with the map it gives (the form may change meanwhile), for the GeoTIFF download
+  const body = JSON.stringify(request());
   const resp = await fetch("/contours" + (asJob ? "?job=true" : ""), {
     method: "POST",
     headers: headers({ "Content-Type": "application/json", Accept: "application/geo+json" }),
-    body: JSON.stringify(request()),
+    body: body,
   });
-  app.lastRequest = null;
+  // a failed request leaves the map on screen as it is: contours, warnings, downloads
   if (resp.status === 202) {
     const job = await resp.json();
     app.shownJob = job.id;
@@ -256,12 +263,51 @@ async function compute() {
   }
   if (!resp.ok) { setStatus(await errorText(resp), true); return; }
   const geo = await resp.json();
-  app.lastRequest = request();
-  drawContours(geo);
-  const metric = $("metric").value;
-  const warns = ((geo.gisnoise && geo.gisnoise.warnings) || []).filter((w) => w.startsWith(metric + " "));
-  setStatus(`Contours in ${((performance.now() - t0) / 1000).toFixed(1)} s: ${geo.features.length} features.`
-    + (warns.length ? " Warning: " + warns.join(" ") : ""), warns.length > 0);
+  showMap(geo, { request: JSON.parse(body) });
+  setStatus(`Contours in ${((performance.now() - t0) / 1000).toFixed(1)} s: ${geo.features.length} features`
+    + warningCount(geo) + ".");
+}
+
+function mapWarnings(geo) {
+  return (geo.gisnoise && geo.gisnoise.warnings) || [];
+}
+
+function warningCount(geo) {
+  const n = mapWarnings(geo).length;
+  return n ? `, ${n} warning${n > 1 ? "s" : ""} below` : "";
+}
+
+// The warnings of the map on screen (gisnoise.warnings of its GeoJSON: power ranges, clipped contours, ...),
+// one line each, as plain text; they stay while the map is drawn.
+function showWarnings(warnings) {
+  const box = $("map-warnings");
+  box.textContent = "";
+  for (const w of warnings) {
+    const line = document.createElement("div");
+    line.textContent = `warning: ${w}`;
+    box.append(line);
+  }
+  box.hidden = warnings.length === 0;
+}
+
+function mapMetrics(geo) {
+  const listed = geo.gisnoise && geo.gisnoise.metrics;
+  return listed && listed.length ? listed : [...new Set(geo.features.map((f) => f.properties.metric))];
+}
+
+// A new map on screen: its warnings, the chosen metric's contours (or, when the map lacks it, its first
+// metric's, the Metric list set to it), and where it came from for the downloads.
+function showMap(geo, source) {
+  app.lastContours = geo;
+  app.mapSource = source;
+  showWarnings(mapWarnings(geo));
+  const metrics = mapMetrics(geo);
+  const select = $("metric");
+  if (!metrics.includes(select.value) && metrics.length
+      && [...select.options].some((o) => o.value === metrics[0])) select.value = metrics[0];
+  drawMetric(metrics.includes(select.value) || !metrics.length ? select.value : metrics[0]);
+  const b = app.contourLayer ? app.contourLayer.getBounds() : null;
+  if (b && b.isValid()) app.map.fitBounds(b.pad(0.05));
 }
 
 function colourFor(level) {
@@ -276,13 +322,28 @@ function unitOf(feats) {
   return f ? f.properties.unit : "dB(A)";
 }
 
-function drawContours(geo) {
-  app.lastContours = geo;
-  const metric = $("metric").value;
-  const mine = geo.features.filter((f) => !f.properties.metric || f.properties.metric === metric);
-  const feats = mine.length ? mine : geo.features;
-  const levels = [...new Set(feats.map((f) => f.properties.level))].sort((a, b) => a - b);
+// Draw the contours of one metric of the map on screen, and its legend. Only that metric's features are
+// drawn under its name: a metric the map does not hold draws nothing and says to compute it.
+function drawMetric(metric) {
+  const geo = app.lastContours;
   if (app.contourLayer) app.contourLayer.remove();
+  app.contourLayer = null;
+  const legend = $("legend");
+  legend.textContent = "";
+  const metrics = mapMetrics(geo);
+  if (!metrics.includes(metric)) {
+    app.drawnMetric = null;
+    app.contourCount = 0;
+    const note = document.createElement("div");
+    note.className = "legend-note";
+    note.textContent = `${metric} is not in the map on screen (computed: ${metrics.join(", ") || "none"}). `
+      + `Click "Compute contours" to compute ${metric}.`;
+    legend.append(note);
+    updateDownloads();
+    return;
+  }
+  const feats = geo.features.filter((f) => f.properties.metric === metric);
+  const levels = [...new Set(feats.map((f) => f.properties.level))].sort((a, b) => a - b);
   app.contourLayer = L.geoJSON({ type: "FeatureCollection", features: feats }, {
     style: (f) => {
       const c = colourFor(f.properties.level);
@@ -291,14 +352,10 @@ function drawContours(geo) {
         : { color: c, weight: 0.5, fillColor: c, fillOpacity: 0.55 };
     },
     onEachFeature: (f, layer) => layer.bindTooltip(
-      `${f.properties.metric || ""} ${f.properties.level}${f.properties.level_max != null ? "–" + f.properties.level_max : ""} dB(A)`
+      `${f.properties.metric} ${f.properties.level}${f.properties.level_max != null ? "–" + f.properties.level_max : ""} dB(A)`
       + (f.properties.clipped ? " (clipped by the grid's edge)" : "")),
   }).addTo(app.map);
   if (app.routeLayer) app.routeLayer.bringToFront();
-  const b = app.contourLayer.getBounds();
-  if (b.isValid()) app.map.fitBounds(b.pad(0.05));
-  const legend = $("legend");
-  legend.textContent = "";
   const unit = unitOf(feats);
   const title = document.createElement("div");
   title.className = "legend-title";
@@ -315,8 +372,15 @@ function drawContours(geo) {
     item.append(sw, `${range} ${unit}`);
     legend.append(item);
   });
-  $("downloads").hidden = false;
+  if (!feats.length) {
+    const note = document.createElement("div");
+    note.className = "legend-note";
+    note.textContent = `No ${metric} contours: no receiver reaches the lowest level.`;
+    legend.append(note);
+  }
+  app.drawnMetric = metric;
   app.contourCount = feats.length;
+  updateDownloads();
 }
 
 // ------------------------------------------------------------------ downloads
@@ -330,28 +394,56 @@ function saveBlob(blob, name) {
   setTimeout(() => URL.revokeObjectURL(a.href), 10000);
 }
 
+app.save = saveBlob;  // the downloads save through this (the browser test catches the bytes here)
+
+// The downloads are offered while a map is on screen, and enabled while its chosen metric is drawn:
+// they save that map (its GeoJSON; its GeoTIFF from its own request or job), never the form's.
+function updateDownloads() {
+  $("downloads").hidden = !app.lastContours;
+  const off = app.drawnMetric === null;
+  for (const id of ["btn-geojson", "btn-geotiff"]) {
+    $(id).disabled = off;
+    $(id).title = off ? "Nothing is drawn: compute the map for the chosen metric first" : "";
+  }
+}
+
 function downloadGeoJSON() {
-  if (!app.lastContours) return;
-  saveBlob(new Blob([JSON.stringify(app.lastContours)], { type: "application/geo+json" }), "contours.geojson");
+  if (!app.lastContours || app.drawnMetric === null) return;
+  app.save(new Blob([JSON.stringify(app.lastContours)], { type: "application/geo+json" }), "contours.geojson");
 }
 
 async function fetchGeoTIFF() {
-  const req = app.lastRequest;
-  const resp = await fetch("/contours", {
-    method: "POST",
-    headers: headers({ "Content-Type": "application/json", Accept: "image/tiff" }),
-    body: JSON.stringify({ ...req, output: "geotiff" }),
-  });
+  const source = app.mapSource;
+  if (!source) throw new Error("No map on screen: compute one first.");
+  let resp;
+  if (source.job) {  // the job's own levels.tif
+    resp = await fetch(`/jobs/${source.job}/result?format=geotiff`, { headers: { Accept: "image/tiff" } });
+  } else {  // the request that gave the drawn contours, as a GeoTIFF
+    resp = await fetch("/contours", {
+      method: "POST",
+      headers: headers({ "Content-Type": "application/json", Accept: "image/tiff" }),
+      body: JSON.stringify({ ...source.request, output: "geotiff" }),
+    });
+  }
+  if (resp.status === 202) {
+    const job = await resp.json();
+    refreshJobs();
+    throw new Error(`The GeoTIFF is large: it was queued as job ${job.id.slice(0, 8)}; its levels.tif `
+      + "is its result under Jobs.");
+  }
   if (!resp.ok) throw new Error(await errorText(resp));
   return resp.blob();
 }
 
 async function downloadGeoTIFF() {
-  if (!app.lastRequest) { setStatus("Compute a map first: the job's files are under Jobs.", true); return; }
+  if (!app.mapSource || app.drawnMetric === null) {
+    setStatus("Nothing is drawn: compute a map first.", true);
+    return;
+  }
   setStatus("Preparing the GeoTIFF…");
   try {
     const blob = await fetchGeoTIFF();
-    saveBlob(blob, "levels.tif");
+    app.save(blob, "levels.tif");
     setStatus(`GeoTIFF of ${blob.size} bytes saved as levels.tif.`);
   } catch (e) { setStatus(String(e.message || e), true); }
 }
@@ -442,9 +534,8 @@ async function showJob(id) {
   const resp = await fetch(`/jobs/${id}/result`, { headers: { Accept: "application/geo+json" } });
   if (!resp.ok) { setStatus(await errorText(resp), true); return; }
   const geo = await resp.json();
-  app.lastRequest = request();
-  drawContours(geo);
-  setStatus(`Job ${id.slice(0, 8)}: ${geo.features.length} features.`);
+  showMap(geo, { job: id });
+  setStatus(`Job ${id.slice(0, 8)}: ${geo.features.length} features${warningCount(geo)}.`);
 }
 
 init().catch((e) => setStatus(String(e), true));
