@@ -307,7 +307,8 @@ function showMap(geo, source) {
       && [...select.options].some((o) => o.value === metrics[0])) select.value = metrics[0];
   drawMetric(metrics.includes(select.value) || !metrics.length ? select.value : metrics[0]);
   const b = app.contourLayer ? app.contourLayer.getBounds() : null;
-  if (b && b.isValid()) app.map.fitBounds(b.pad(0.05));
+  // at once: a layer added during a zoom animation (a quick switch of Metric) would be drawn at the old scale
+  if (b && b.isValid()) app.map.fitBounds(b.pad(0.05), { animate: false });
 }
 
 function colourFor(level) {
