@@ -226,7 +226,9 @@ def _wait_job_shown(b: Browser) -> str:
     job = b.wait_for("gisnoise.shownJob", 20)
     b.wait_for(f"(document.querySelector('#jobs tr[data-job=\"{job}\"]') || {{dataset: {{}}}}).dataset.status"
                " === 'succeeded'", 120)
-    b.wait_for("gisnoise.contourCount > 0", 30)
+    # its map shown (the status names the job; a map drawn before may still be on screen until then)
+    b.wait_for(f"document.getElementById('status').textContent.startsWith('Job {job[:8]}: ')", 30)
+    assert b.evaluate("gisnoise.contourCount") > 0
     return job
 
 
