@@ -25,8 +25,8 @@ def _edges(value: str) -> list[float]:
 @click.option("--population", "population", type=click.Path(dir_okay=False), default=None,
               help="Population raster (GeoTIFF, people per cell, any CRS).")
 @click.option("--buildings", "buildings", type=click.Path(dir_okay=False), default=None,
-              help="Building polygons (GeoPackage, GeoJSON, Shapefile) with residents/dwellings/height attributes; "
-                   "needs --trajectory and --card.")
+              help="Building polygons (GeoPackage, GeoJSON, Shapefile; courtyards too) with residents, dwellings, "
+                   "height or building:levels attributes; needs --trajectory and --card.")
 @building_field_options
 @click.option("--trajectory", "trajectory", type=click.Path(dir_okay=False), default=None,
               help="The map's trajectory (for façade levels of --buildings).")
@@ -37,7 +37,7 @@ def _edges(value: str) -> list[float]:
 @click.option("--card", "cards", multiple=True, type=click.Path(dir_okay=False),
               help="The map's model cards, one per phase (for façade levels of --buildings).")
 @click.option("--facade-height", "facade_height", type=float, default=4.0, show_default=True,
-              help="Height of façade receivers above ground, m.")
+              help="Height of façade receivers above ground, m: the level buildings are classed by.")
 @click.option("--facade-spacing", "facade_spacing", type=float, default=5.0, show_default=True,
               help="Longest wall segment per façade receiver, m.")
 @click.option("--ground-height", "ground_h", type=float, default=None,
@@ -52,7 +52,8 @@ def _edges(value: str) -> list[float]:
 def command(ctx: click.Context, map_dir: str, population: str | None, buildings: str | None, layer: str | None,
             residents_field: str | None, dwellings_field: str | None, trajectory: str | None,
             cards: tuple[str, ...], facade_height: float, facade_spacing: float, ground_h: float | None,
-            metrics: str | None, classes: str, out: str | None, schedule: str | None = None) -> None:
+            metrics: str | None, classes: str, out: str | None, schedule: str | None = None,
+            height_field: str | None = None, levels_field: str | None = None, storey_height: float = 3.0) -> None:
     """Exposure of the map in MAP_DIR (its levels.tif, or the GeoTIFF itself): people by 5 dB class
     of each level band (from --population), buildings, residents and dwellings at the most
     exposed façade (from --buildings), area above each level.  Writes exposure.json and exposure.md.
@@ -64,8 +65,9 @@ def command(ctx: click.Context, map_dir: str, population: str | None, buildings:
     A population raster that does not cover the map where the levels reach the classes leaves
     those people unknown: a warning gives the share uncovered and those classes are lower bounds.
     Buildings whose residents or dwellings are empty (null) are classed without them, said in a
-    warning.  Warnings go to stderr and atop exposure.md; with -q the table and the files written
-    are not printed.
+    warning.  Buildings with a height (or building:levels) also get the level at their most exposed
+    storey (receivers at the middle of each storey); they are classed at --facade-height.  Warnings
+    go to stderr and atop exposure.md; with -q the table and the files written are not printed.
     """
     from gisnoise.exposure import map_exposure, read_buildings, read_levels, read_population, write_exposure
 
@@ -80,8 +82,8 @@ def command(ctx: click.Context, map_dir: str, population: str | None, buildings:
     edges = _edges(classes)
     levels = read_levels(tif)
     pop = read_population(population) if population else None
-    b = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field) \
-        if buildings else None
+    b = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field,
+                       height=height_field, levels=levels_field) if buildings else None
     if "Lden" in levels.bands:  # a day of operations
         from gisnoise.exposure import operations_exposure
 
@@ -96,7 +98,8 @@ def command(ctx: click.Context, map_dir: str, population: str | None, buildings:
 
             sched = load_schedule(schedule)  # checked against the folder's before anything is written
         doc = operations_exposure(levels, sched, population=pop, buildings=b, edges=edges,
-                                  facade_height_m=facade_height, facade_spacing_m=facade_spacing)
+                                  facade_height_m=facade_height, facade_spacing_m=facade_spacing,
+                                  storey_height_m=storey_height)
         _written(ctx, doc, write_exposure(doc, out if out is not None else (p if p.is_dir() else p.parent)))
         return
     traj = None
@@ -110,7 +113,7 @@ def command(ctx: click.Context, map_dir: str, population: str | None, buildings:
     names = [m.strip() for m in metrics.split(",") if m.strip()] if metrics else None
     doc = map_exposure(levels, population=pop, buildings=b, trajectory=traj, cards=list(cards) or None,
                        metrics=names, edges=edges, facade_height_m=facade_height,
-                       facade_spacing_m=facade_spacing, ground_h=ground_h)
+                       facade_spacing_m=facade_spacing, ground_h=ground_h, storey_height_m=storey_height)
     _written(ctx, doc, write_exposure(doc, out if out is not None else (p if p.is_dir() else p.parent)))
 
 

@@ -36,7 +36,8 @@ from gisnoise.errors import InputError
                    "exposure.md (people by 5 dB class of Lden, Lday, Levening, Lnight, LAmax and by events of NA<L>).")
 @click.option("--buildings", "buildings", type=click.Path(dir_okay=False), default=None,
               help="Buildings with residents/dwellings (GeoPackage, GeoJSON, Shapefile): the same at each building's "
-                   "most exposed façade, in DIR/exposure.json and exposure.md (flat ground only).")
+                   "most exposed façade, and the levels at the most exposed storey of those with a height or "
+                   "building:levels, in DIR/exposure.json and exposure.md (flat ground only).")
 @click.option("--facade-height", "facade_height", type=click.FloatRange(min=0.0, min_open=True), default=4.0,
               show_default=True, help="Height of façade receivers above ground, m.")
 @building_field_options
@@ -45,7 +46,8 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
             single_process: bool, threads: int | None, tile_cells: int | None, memory_limit: str | None, levels: str | None,
             plot: bool, population: str | None = None, buildings: str | None = None,
             facade_height: float = 4.0, layer: str | None = None, residents_field: str | None = None,
-            dwellings_field: str | None = None) -> None:
+            dwellings_field: str | None = None, height_field: str | None = None, levels_field: str | None = None,
+            storey_height: float = 3.0) -> None:
     """Noise of a day of operations: DIR/operations.tif, DIR/contours.geojson, DIR/summary.json.
 
     SCHEDULE is a JSON file (schema gisnoise/operations/1): model cards, the receiver grid
@@ -95,8 +97,8 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
         if buildings and sched.dem is not None:
             raise InputError("buildings: façade levels need flat ground; the schedule gives a DEM", field="buildings")
         pop = read_population(population) if population else None
-        bld = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field) \
-            if buildings else None
+        bld = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field,
+                             height=height_field, levels=levels_field) if buildings else None
     with progress(ctx, "operations", 1.0) as update:
         res = evaluate_operations(sched, scheduler=scheduler, workers=workers, single_process=single_process,
                                   threads=threads,
@@ -107,7 +109,8 @@ def command(ctx: click.Context, schedule: str, out: str, scheduler: str | None, 
     if pop is not None or bld is not None:
         from gisnoise.exposure import operations_exposure, write_exposure
 
-        doc = operations_exposure(res, sched, population=pop, buildings=bld, facade_height_m=facade_height)
+        doc = operations_exposure(res, sched, population=pop, buildings=bld, facade_height_m=facade_height,
+                                  storey_height_m=storey_height)
         ex = write_exposure(doc, out)
         paths["exposure"], paths["table"] = ex["exposure"], ex["table"]
         exposed = [f"exposure: {w}" for w in doc.get("warnings", [])]

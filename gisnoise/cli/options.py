@@ -21,7 +21,8 @@ out_dir_option = click.option("--out", "out", required=True, type=click.Path(fil
 
 
 def building_field_options(f: Any) -> Any:
-    """``--layer``, ``--residents-field`` and ``--dwellings-field``: how a buildings file is read."""
+    """``--layer``, ``--residents-field``, ``--dwellings-field``, ``--height-field``, ``--levels-field`` and
+    ``--storey-height``: how a buildings file is read, and its storeys."""
     for opt in reversed((
             click.option("--layer", "layer", default=None, help="Layer of the buildings file (GeoPackage)."),
             click.option("--residents-field", "residents_field", default=None,
@@ -30,7 +31,19 @@ def building_field_options(f: Any) -> Any:
                               "with a warning]."),
             click.option("--dwellings-field", "dwellings_field", default=None,
                          help="Attribute with the dwellings of a building [default: dwellings, households, units, "
-                              "flats]."))):
+                              "flats]."),
+            click.option("--height-field", "height_field", default=None,
+                         help="Attribute with the height of a building, m or ft ('10', '10 m', '12 ft') [default: "
+                              "height, height_m, building_height]; a value that does not read is unknown, said in "
+                              "a warning."),
+            click.option("--levels-field", "levels_field", default=None,
+                         help="Attribute with the storeys above ground of a building, for those without a height "
+                              "[default: building:levels, building_levels, levels, storeys, floors]."),
+            click.option("--storey-height", "storey_height", type=click.FloatRange(min=0.0, min_open=True),
+                         default=3.0, show_default=True,
+                         help="Height of a storey, m: a building with a height (or storeys) gets a receiver at the "
+                              "middle of each storey, and its level at the most exposed one besides the façade "
+                              "level at --facade-height."))):
         f = opt(f)
     return f
 

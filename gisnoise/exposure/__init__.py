@@ -12,15 +12,20 @@ from gisnoise.exposure.exposure import (
 )
 from gisnoise.exposure.facades import (
     ASSESSMENT_HEIGHT_M,
+    SCALE_TOLERANCE,
     FacadePoints,
+    StoreyPoints,
     facade_levels,
     facade_points,
     most_exposed,
+    most_exposed_storeys,
     point_levels,
+    storey_points,
 )
 from gisnoise.exposure.layers import (
     DWELLING_FIELDS,
     HEIGHT_FIELDS,
+    LEVEL_FIELDS,
     RESIDENT_FIELDS,
     Buildings,
     LevelsRaster,
@@ -53,12 +58,15 @@ from gisnoise.exposure.stats import (
     population_scores,
     uncovered_shares,
 )
+from gisnoise.exposure.storeys import STOREY_HEIGHT_M, parse_height, parse_levels
 
 __all__ = ['ASSESSMENT_HEIGHT_M', 'Buildings', 'CLASS_WIDTH_DB', 'DWELLING_FIELDS', 'EVENT_EDGES', 'FacadePoints',
-           'HEIGHT_FIELDS', 'LevelsRaster', 'OPERATIONS_LEVELS', 'Population', 'RESIDENT_FIELDS', 'SCHEMA',
-           'UNCOVERED_SHARE', 'area_above', 'cell_values', 'check_schedule_of', 'class_edges', 'coverage_warning',
-           'events_area_above', 'exposure_table', 'facade_levels', 'facade_points', 'fraction_above', 'level_field',
-           'map_exposure', 'most_exposed', 'operations_exposure', 'operations_facade_levels', 'person_db_above',
-           'point_levels', 'population_coverage', 'population_event_exposure', 'population_exposure',
-           'population_points', 'population_scores', 'read_buildings', 'read_levels', 'read_population',
-           'uncovered_shares', 'write_exposure']
+           'HEIGHT_FIELDS', 'LEVEL_FIELDS', 'LevelsRaster', 'OPERATIONS_LEVELS', 'Population', 'RESIDENT_FIELDS',
+           'SCALE_TOLERANCE', 'SCHEMA', 'STOREY_HEIGHT_M', 'StoreyPoints', 'UNCOVERED_SHARE', 'area_above',
+           'cell_values', 'check_schedule_of', 'class_edges', 'coverage_warning', 'events_area_above',
+           'exposure_table', 'facade_levels', 'facade_points', 'fraction_above', 'level_field', 'map_exposure',
+           'most_exposed', 'most_exposed_storeys', 'operations_exposure', 'operations_facade_levels',
+           'parse_height', 'parse_levels', 'person_db_above', 'point_levels', 'population_coverage',
+           'population_event_exposure', 'population_exposure', 'population_points', 'population_scores',
+           'read_buildings', 'read_levels', 'read_population', 'storey_points', 'uncovered_shares',
+           'write_exposure']

@@ -24,6 +24,11 @@ people counts that are lower bounds read ``≥ N``.
 Buildings whose residents or dwellings are null are classed without them (:func:`gisnoise.exposure.read_buildings`):
 each class counts them in ``residents_unknown`` (``dwellings_unknown``), and the reader's warnings join the
 document's.
+
+Buildings are classed by their façade level at the assessment height (``facade.height_m``, 4 m).  When the layer
+has heights or storeys, each metric also holds ``storeys``: per building the level at its most exposed storey
+(:mod:`gisnoise.exposure.storeys`; null for a building without a height), that storey and its receiver's height,
+and the loudest of them all; ``exposure.md`` lists the buildings loudest there.
 """
 
 from __future__ import annotations
@@ -50,6 +55,7 @@ from gisnoise.exposure.stats import (
     population_points,
     uncovered_shares,
 )
+from gisnoise.exposure.storeys import STOREY_HEIGHT_M
 from gisnoise.flight import Trajectory
 from gisnoise.jsonio import to_jsonable
 from gisnoise.maps.clipping import edge_max
@@ -73,7 +79,8 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
                  edges: Sequence[float] | None = None, facade_height_m: float = ASSESSMENT_HEIGHT_M,
                  facade_spacing_m: float = 5.0, ground_h: float | None = None,
                  points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None,
-                 facades: dict[str, Any] | None = None, event_edges: Sequence[float] = EVENT_EDGES) -> dict[str, Any]:
+                 facades: dict[str, Any] | None = None, event_edges: Sequence[float] = EVENT_EDGES,
+                 storey_height_m: float | None = STOREY_HEIGHT_M) -> dict[str, Any]:
     """The exposure document of a map (see the module docstring).
 
     Parameters
@@ -98,6 +105,9 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
         ``trajectory`` and ``cards`` are not needed.
     event_edges : sequence of float
         Lower class edges of count bands (unit ``events``: N-above), default :data:`EVENT_EDGES`.
+    storey_height_m : float or None
+        Storey height, m: turns ``building:levels`` into a height and a height into storeys
+        (:mod:`gisnoise.exposure.storeys`); None: no storeys, the façades alone.
     """
     if population is None and buildings is None:
         raise InputError("exposure: give a population raster or buildings (or both)", field="population")
@@ -166,7 +176,7 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
     if buildings is not None:
         doc["warnings"] += list(buildings.warnings)
         doc["buildings"] = _buildings_doc(levels, buildings, trajectory, cards, names, edges, facade_height_m,
-                                          facade_spacing_m, ground_h, facades, ev_edges)
+                                          facade_spacing_m, ground_h, facades, ev_edges, storey_height_m)
     return doc
 
 
@@ -212,7 +222,8 @@ def lower_bound_warning(name: str, top: float, edges: Sequence[float], unit: str
 
 def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, cards: Any, names: Sequence[str],
                    edges: Sequence[float], height: float, spacing: float, ground_h: float | None,
-                   fl: dict[str, Any] | None, ev_edges: Sequence[float]) -> dict[str, Any]:
+                   fl: dict[str, Any] | None, ev_edges: Sequence[float], storey_height: float | None
+                   ) -> dict[str, Any]:
     if fl is None:
         if traj is None or cards is None:
             raise InputError("buildings: façade levels need the trajectory and its cards (--trajectory, --card)",
@@ -228,7 +239,7 @@ def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, 
                              "them", field="metric")
         period = levels.metadata.get("period_s")
         fl = facade_levels(b, traj, cards, ground_h=float(ground_h), metrics=metrics, spacing_m=spacing,
-                           height_m=height, period_s=period)
+                           height_m=height, period_s=period, storey_height_m=storey_height)
     else:
         metrics = [n for n in names if n in fl["buildings"]]
         if not metrics:
@@ -237,12 +248,17 @@ def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, 
     pts = fl["points"]
     out: dict[str, Any] = {
         "source": b.source, "n_buildings": b.n, "fields": b.fields, "facade_points": int(pts.x.size),
-        "facade": {"height_m": height, "spacing_m": spacing, "offset_m": pts.offset_m,
-                   "rule": "receivers at the middle of wall segments of at most spacing_m, offset_m in front of "
-                           "each outer wall, height_m above ground; a building's level is its most exposed "
-                           "façade point (the source-side wall); incident free-field level, no screening"},
+        "facade": {"height_m": height, "spacing_m": spacing, "offset_m": pts.offset_m, "rule": FACADE_RULE},
         "metrics": {},
     }
+    st = fl.get("storeys")
+    if st is not None:
+        sp = st["points"]
+        out["facade"]["storeys"] = {"storey_height_m": sp.storey_height_m,
+                                    "buildings_with_height": int(np.sum(sp.storeys > 0)),
+                                    "per_building_height_m": [float(h) if n else None for h, n in
+                                                              zip(sp.roof_m, sp.storeys, strict=True)],
+                                    "per_building_storeys": [int(n) for n in sp.storeys], "rule": STOREY_RULE}
     for m in metrics:
         lv = fl["buildings"][m]["level"]
         ev = levels.units.get(m) == "events"
@@ -270,7 +286,43 @@ def _buildings_doc(levels: LevelsRaster, b: Buildings, traj: Trajectory | None, 
         entry["most_exposed"] = {"building": top, "wall": int(pts.wall[p]), "lon": float(pts.lon[p]),
                                  "lat": float(pts.lat[p]), "level_db": float(lv[top])}
         entry["per_building_db"] = [float(v) for v in lv]
+        if st is not None:
+            entry["storeys"] = _storeys_entry(st, pts, m)
         out["metrics"][m] = entry
+    return out
+
+
+FACADE_RULE = ("receivers at the middle of wall segments of at most spacing_m (ground metres), offset_m in front of "
+               "each wall facing outdoor air (outer walls, and courtyard walls with the receivers in the courtyard), "
+               "height_m above ground; a building's level is its most exposed façade point (the source-side wall); "
+               "incident free-field level, no screening")
+STOREY_RULE = ("a building's height is its height attribute (m, or ft: '10', '10 m', '12 ft'), else building:levels "
+               "x storey_height_m; it has round(height / storey_height_m) storeys (at least 1) of equal height, "
+               "and a receiver in front of every façade point at the middle of each storey; the most exposed "
+               "storey is the loudest of them (per metric storeys.per_building_db, at per_building_receiver_m above "
+               "ground; null: no height, judged at height_m alone); buildings are classed at height_m")
+
+
+def _storeys_entry(st: dict[str, Any], pts: Any, m: str) -> dict[str, Any]:
+    """A metric's levels at the most exposed storey of each building, and the loudest of them."""
+    e = st["buildings"][m]
+    lv = e["level"]
+    has = e["point"] >= 0
+    out: dict[str, Any] = {
+        "per_building_db": [float(v) if h else None for v, h in zip(lv, has, strict=True)],
+        "per_building_storey": [int(v) if h else None for v, h in zip(e["storey"], has, strict=True)],
+        "per_building_receiver_m": [float(v) if h else None for v, h in zip(e["z_m"], has, strict=True)],
+        "peak_db": None, "most_exposed": None,
+    }
+    known = has & np.isfinite(lv)
+    if known.any():
+        top = int(np.flatnonzero(known)[np.argmax(lv[known])])
+        p = int(e["facade_point"][top])
+        out["peak_db"] = float(lv[top])
+        out["most_exposed"] = {"building": top, "storey": int(e["storey"][top]),
+                               "storeys": int(st["points"].storeys[top]), "receiver_m": float(e["z_m"][top]),
+                               "wall": int(pts.wall[p]), "lon": float(pts.lon[p]), "lat": float(pts.lat[p]),
+                               "level_db": float(lv[top])}
     return out
 
 
@@ -312,8 +364,41 @@ def exposure_table(doc: dict[str, Any]) -> str:
             lines += [f"peak façade value: {peak:.0f} events" if ev else
                       f"peak façade level: {peak:.1f} dB(A)" if np.isfinite(peak) else
                       "peak façade level: none (no flight in the period)"]
+            if "storeys" in bld:
+                lines += _storey_lines(bld, doc["buildings"], "events" if ev else "dB(A)")
         lines.append("")
     return "\n".join(lines)
+
+
+STOREY_ROWS = 10
+"""``exposure.md`` lists this many buildings loudest at their most exposed storey (all are in ``exposure.json``)."""
+
+
+def _storey_lines(bld: dict[str, Any], b: dict[str, Any], unit: str) -> list[str]:
+    """The lines of ``exposure.md`` on a metric's most exposed storeys: the loudest, and a table of the buildings
+    loudest there, with their façade level at the assessment height beside."""
+    st = bld["storeys"]
+    at = b["facade"]["height_m"]
+    n_height = b["facade"]["storeys"]["buildings_with_height"]
+    others = f"; the others are judged at {at:g} m alone" if n_height < b["n_buildings"] else ""
+    lines = ["", f"most exposed storeys ({n_height} of {b['n_buildings']} buildings with a height{others}):"]
+    top = st.get("most_exposed")
+    if top is None:
+        return lines + ["none (no building with a height, or no flight in the period)"]
+
+    def val(v: Any) -> str:
+        return "-" if v is None or not np.isfinite(v) else f"{v:.0f}" if unit == "events" else f"{v:.1f}"
+
+    rows = sorted((i for i, v in enumerate(st["per_building_db"]) if v is not None and np.isfinite(v)),
+                  key=lambda i: -st["per_building_db"][i])[:STOREY_ROWS]
+    n_of = b["facade"]["storeys"]["per_building_storeys"]
+    lines += ["", f"| building | storey | m above ground | {unit} at that storey | {unit} at {at:g} m |",
+              "|---|---|---|---|---|"]
+    lines += [f"| {i} | {st['per_building_storey'][i]} of {n_of[i]} | {st['per_building_receiver_m'][i]:.1f} | "
+              f"{val(st['per_building_db'][i])} | {val(bld['per_building_db'][i])} |" for i in rows]
+    if len(rows) < n_height:
+        lines += ["", f"the {len(rows)} loudest of {n_height}; every building in exposure.json (storeys)"]
+    return lines
 
 
 def write_exposure(doc: dict[str, Any], out_dir: str | os.PathLike[str]) -> dict[str, Path]:

@@ -3,12 +3,16 @@
 * :func:`read_population`: a GeoTIFF (any CRS, any driver rasterio reads) whose band 1
   holds people per cell; nodata cells count as no people, and any other cell that is not a
   finite count >= 0 (negative, NaN, infinite) refuses the raster.
-* :func:`read_buildings`: polygons (GeoPackage, GeoJSON, Shapefile, anything pyogrio reads)
-  with optional attributes for residents, dwellings and height.  A null (empty) value is unknown for
-  that building, not 0: its façade is classed, its residents are not counted and a warning says so
-  (one missing value in a city's layer should not refuse the layer, nor count as nobody); any other
-  value that is not a number >= 0 refuses the layer, naming the feature.  A layer without a residents
-  attribute (none of :data:`RESIDENT_FIELDS`, none named) is read with a warning naming the names looked for.
+* :func:`read_buildings`: polygons (GeoPackage, GeoJSON, Shapefile, anything pyogrio reads), courtyards
+  (holes) kept, with optional attributes for residents, dwellings, height and storeys.  A null (empty)
+  residents or dwellings value is unknown for that building, not 0: its façade is classed, its residents
+  are not counted and a warning says so (one missing value in a city's layer should not refuse the layer,
+  nor count as nobody); any other value that is not a number >= 0 refuses the layer, naming the feature.
+  A layer without a residents attribute (none of :data:`RESIDENT_FIELDS`, none named) is read with a
+  warning naming the names looked for.  Heights are read in OpenStreetMap's forms (``"10"``, ``"10 m"``,
+  ``"12 ft"``: :func:`gisnoise.exposure.storeys.parse_height`) and storeys from ``building:levels``
+  (:data:`LEVEL_FIELDS`); a value that is neither is unknown for that building, never a reason to refuse
+  the layer, and one warning per attribute says how many there are and shows the first.
 * :func:`read_levels`: the ``levels.tif`` a map wrote, back as bands on its grid.
 """
 
@@ -25,10 +29,11 @@ from affine import Affine
 from pyproj import CRS
 
 from gisnoise.errors import InputError
+from gisnoise.exposure.storeys import is_blank, parse_height, parse_levels
 from gisnoise.geo import GridSpec
 
 __all__ = ["Population", "Buildings", "LevelsRaster", "read_population", "read_buildings", "read_levels",
-           "RESIDENT_FIELDS", "DWELLING_FIELDS", "HEIGHT_FIELDS"]
+           "RESIDENT_FIELDS", "DWELLING_FIELDS", "HEIGHT_FIELDS", "LEVEL_FIELDS"]
 
 RESIDENT_FIELDS = ("residents", "population", "pop", "inhabitants", "persons", "people")
 """Attribute names tried, in order, for the residents of a building (case-insensitive)."""
@@ -36,6 +41,8 @@ DWELLING_FIELDS = ("dwellings", "households", "units", "flats")
 """Attribute names tried, in order, for the dwellings of a building (case-insensitive)."""
 HEIGHT_FIELDS = ("height", "height_m", "building_height")
 """Attribute names tried, in order, for the height of a building, m (case-insensitive)."""
+LEVEL_FIELDS = ("building:levels", "building_levels", "levels", "storeys", "floors")
+"""Attribute names tried, in order, for the storeys above ground of a building (case-insensitive)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,25 +71,30 @@ class Population:
 
 @dataclass(frozen=True, eq=False)
 class Buildings:
-    """Building footprints with residents, dwellings and heights.
+    """Building footprints with residents, dwellings, heights and storeys.
 
     Attributes
     ----------
     polygons : list of shapely Polygon
-        Footprints (multi-polygons split into parts, each part keeping its building's index
-        in ``part_of``), in ``crs``.
+        Footprints with their courtyards (holes) (multi-polygons split into parts, each part keeping
+        its building's index in ``part_of``), in ``crs``.
     part_of : ndarray of int
         Building index of each polygon.
     residents, dwellings, height_m : ndarray of float, one per building, or None
         From the attributes; None when the layer has no such attribute.  A building whose residents or
-        dwellings are null (empty) holds 0 there and is marked in ``unknown``; a null height is NaN.
+        dwellings are null (empty) holds 0 there and is marked in ``unknown``; a height, m, that is null
+        or not a height (:func:`~gisnoise.exposure.storeys.parse_height`) is NaN.
     crs : pyproj.CRS
     fields : dict
-        Which attribute gave residents, dwellings and height.
+        Which attribute gave residents, dwellings and height (and ``levels``, when the layer has one).
     unknown : dict of str -> ndarray of bool
         Per attribute (``residents``, ``dwellings``) that has null values, the buildings without a value.
     warnings : list of str
-        What the reader found that the counts depend on: null values, no residents attribute.
+        What the reader found that the counts depend on: null values, no residents attribute, heights or
+        storeys that do not read.
+    levels : ndarray of float or None
+        Storeys above ground per building (``building:levels``), NaN where null or not a number of storeys
+        (:func:`~gisnoise.exposure.storeys.parse_levels`); None when the layer has no such attribute.
     """
 
     polygons: list
@@ -96,6 +108,7 @@ class Buildings:
     fields: dict[str, str | None] = field(default_factory=dict)
     unknown: dict[str, np.ndarray] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    levels: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,16 +215,33 @@ def _unknown_warning(name: str, col: str, what: str, null: np.ndarray) -> str:
             f"the {what} by class are lower bounds ({what}_unknown: the buildings without a value in each class)")
 
 
+def _parsed(df: Any, col: str | None, name: str, what: str, parse: Any, reads: str,
+            then: str) -> tuple[np.ndarray | None, str | None]:
+    """The values of attribute ``col`` through ``parse`` (NaN: unknown), and the warning naming how many non-null
+    values did not read and what follows (``then``); None when all did."""
+    if col is None:
+        return None, None
+    raw = list(df[col])
+    v = np.array([parse(x) for x in raw], dtype=float)
+    bad = np.array([not is_blank(x) for x in raw], dtype=bool) & ~np.isfinite(v)
+    if not bad.any():
+        return v, None
+    i = int(np.flatnonzero(bad)[0])
+    return v, (f"buildings: {name}: {int(bad.sum())} of {len(raw)} buildings have a value of {col!r} ({what}) that "
+               f"is not {reads} (first feature {i}: {_plain(raw[i])}): unknown, {then}")
+
+
 def read_buildings(path: str | os.PathLike[str], *, layer: str | None = None, residents: str | None = None,
-                   dwellings: str | None = None, height: str | None = None) -> Buildings:
-    """Read building footprints (polygons) with residents, dwellings and height attributes.
+                   dwellings: str | None = None, height: str | None = None, levels: str | None = None) -> Buildings:
+    """Read building footprints (polygons, courtyards kept) with residents, dwellings, height and storeys.
 
     Attribute names default to the first of :data:`RESIDENT_FIELDS`, :data:`DWELLING_FIELDS`,
-    :data:`HEIGHT_FIELDS` that the layer has.
+    :data:`HEIGHT_FIELDS`, :data:`LEVEL_FIELDS` that the layer has.  Heights are read in m or ft
+    (:func:`~gisnoise.exposure.storeys.parse_height`), storeys as numbers
+    (:func:`~gisnoise.exposure.storeys.parse_levels`); values that do not read are unknown for their
+    building, and a warning says how many (never a refusal of the layer).
     """
     import geopandas as gpd
-
-    from gisnoise.geo import shapes as shapely
 
     p = Path(path)
     if not p.exists():
@@ -229,6 +259,7 @@ def read_buildings(path: str | os.PathLike[str], *, layer: str | None = None, re
     rc = _pick(cols, residents, RESIDENT_FIELDS, "residents")
     dc = _pick(cols, dwellings, DWELLING_FIELDS, "dwellings")
     hc = _pick(cols, height, HEIGHT_FIELDS, "height")
+    lc = _pick(cols, levels, LEVEL_FIELDS, "levels")
     polys: list = []
     part_of: list[int] = []
     for i, g in enumerate(df.geometry):
@@ -241,26 +272,37 @@ def read_buildings(path: str | os.PathLike[str], *, layer: str | None = None, re
         else:
             raise InputError(f"buildings: feature {i} is a {g.geom_type}, not a polygon", field="buildings")
         for part in parts:
-            polys.append(shapely.Polygon(part.exterior))  # façades are the outer walls
+            polys.append(part)  # with its courtyards: their walls are façades too
             part_of.append(i)
-    values, unknown, warnings = {}, {}, []
+    values: dict[str, np.ndarray | None] = {}
+    unknown: dict[str, np.ndarray] = {}
+    warnings: list[str] = []
     if rc is None:
         warnings.append(f"buildings: {p.name} has no residents attribute (looked for {', '.join(RESIDENT_FIELDS)}; "
                         f"its attributes: {', '.join(map(str, cols)) or 'none'}): no residents are counted; name the "
                         "attribute with --residents-field")
-    for what, col in (("residents", rc), ("dwellings", dc), ("height", hc)):
+    for what, col in (("residents", rc), ("dwellings", dc)):
         v, null = _numbers(df, col, what)
         if v is not None and null.any():
-            if what == "height":  # not counted: unknown heights stay NaN
-                v[null] = np.nan
-            else:
-                v[null] = 0.0
-                unknown[what] = null
-                warnings.append(_unknown_warning(p.name, str(col), what, null))
+            v[null] = 0.0
+            unknown[what] = null
+            warnings.append(_unknown_warning(p.name, str(col), what, null))
         values[what] = v
+    alone = "judged at the façade height alone (no storeys)"
+    hv, note = _parsed(df, hc, p.name, "height", parse_height,
+                       "a height in m or ft (a number > 0, at most 1000 m, with m, ft or no unit: '10', '10 m', "
+                       "'12 ft')", f"so those buildings take their storeys from {lc!r} where it has a value, else are "
+                       f"{alone}" if lc is not None else f"so those buildings are {alone}")
+    warnings += [note] if note is not None else []
+    lv, note = _parsed(df, lc, p.name, "storeys", parse_levels, "a number of storeys > 0",
+                       f"so those buildings without a height are {alone}")
+    warnings += [note] if note is not None else []
+    fields: dict[str, str | None] = {"residents": rc, "dwellings": dc, "height": hc}
+    if lc is not None:
+        fields["levels"] = lc
     return Buildings(polys, np.asarray(part_of, dtype=int), len(df), values["residents"], values["dwellings"],
-                     values["height"], CRS.from_wkt(df.crs.to_wkt()), source=str(p),
-                     fields={"residents": rc, "dwellings": dc, "height": hc}, unknown=unknown, warnings=warnings)
+                     hv, CRS.from_wkt(df.crs.to_wkt()), source=str(p), fields=fields, unknown=unknown,
+                     warnings=warnings, levels=lv)
 
 
 def read_levels(path: str | os.PathLike[str]) -> LevelsRaster:

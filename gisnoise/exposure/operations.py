@@ -27,11 +27,21 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
 from gisnoise.errors import InputError
 from gisnoise.exposure.exposure import map_exposure
-from gisnoise.exposure.facades import ASSESSMENT_HEIGHT_M, facade_points, most_exposed, point_levels
+from gisnoise.exposure.facades import (
+    ASSESSMENT_HEIGHT_M,
+    facade_points,
+    most_exposed,
+    most_exposed_storeys,
+    point_levels,
+    storey_points,
+)
 from gisnoise.exposure.layers import Buildings, LevelsRaster, Population
 from gisnoise.exposure.stats import EVENT_EDGES
+from gisnoise.exposure.storeys import STOREY_HEIGHT_M
 from gisnoise.maps import MapResult
 from gisnoise.ops import PERIODS, Schedule, add_flight, new_accumulators, period_bands
 
@@ -73,44 +83,58 @@ def check_schedule_of(metadata: dict[str, Any], schedule: Schedule) -> None:
 
 def operations_facade_levels(b: Buildings, schedule: Schedule, *, ground_h: float,
                              spacing_m: float = 5.0, height_m: float = ASSESSMENT_HEIGHT_M,
-                             offset_m: float = 0.1) -> dict[str, Any]:
+                             offset_m: float = 0.1, storey_height_m: float = STOREY_HEIGHT_M) -> dict[str, Any]:
     """Levels of a day of operations at the façade receivers and per building (see the module docstring).
 
     Returns what :func:`gisnoise.exposure.facade_levels` returns, with the metrics
     ``Lden``, ``Lday``, ``Levening``, ``Lnight``, ``LAmax`` and ``NA<L>`` for each of the
-    schedule's thresholds.
+    schedule's thresholds; at the storeys of buildings with a height too (``storeys``).
     """
     if schedule.dem is not None:
         raise InputError("buildings: façade levels need flat ground; the schedule gives a DEM", field="buildings")
     pts = facade_points(b, spacing_m=spacing_m, height_m=height_m, offset_m=offset_m)
+    sp = storey_points(b, pts, storey_height_m=storey_height_m) \
+        if b.height_m is not None or b.levels is not None else None
+    # the façade points, then the storeys' receivers
+    receivers: list[tuple[np.ndarray, np.ndarray, Any]] = [(pts.lon, pts.lat, ground_h + height_m)]
+    if sp is not None:
+        receivers.append((pts.lon[sp.point], pts.lat[sp.point], ground_h + sp.z))
     thresholds = [float(v) for v in schedule.thresholds_db]
-    acc = new_accumulators((pts.x.size,), len(thresholds), time_above=False)
+    accs = [new_accumulators((lon.size,), len(thresholds), time_above=False) for lon, _, _ in receivers]
     for f in schedule.flights:
         if f.total == 0:
             continue
         cards = f.cards if f.cards is not None else schedule.cards
-        lv = point_levels(f.trajectory, cards, pts.lon, pts.lat, ground_h + height_m,
-                          min_distance_m=schedule.min_distance_m)
-        add_flight(acc, 10.0 ** (lv["SEL"] / 10.0), 10.0 ** (lv["LAmax"] / 10.0), f.counts, thresholds)
-    bands = period_bands(acc, thresholds)
-    levels = {n: bands[n] for n in OPERATIONS_LEVELS}
-    levels.update({f"NA{thr:g}": bands[f"NA{thr:g}"] for thr in thresholds})
-    return most_exposed(b, pts, levels, list(levels))
+        for acc, (lon, lat, h) in zip(accs, receivers, strict=True):
+            if lon.size == 0:
+                continue
+            lv = point_levels(f.trajectory, cards, lon, lat, h, min_distance_m=schedule.min_distance_m)
+            add_flight(acc, 10.0 ** (lv["SEL"] / 10.0), 10.0 ** (lv["LAmax"] / 10.0), f.counts, thresholds)
+    levels = []
+    for acc in accs:
+        bands = period_bands(acc, thresholds)
+        lv = {n: bands[n] for n in OPERATIONS_LEVELS}
+        lv.update({f"NA{thr:g}": bands[f"NA{thr:g}"] for thr in thresholds})
+        levels.append(lv)
+    out = most_exposed(b, pts, levels[0], list(levels[0]))
+    out["storeys"] = None if sp is None else most_exposed_storeys(b, sp, levels[1], list(levels[1]))
+    return out
 
 
 def operations_exposure(result: MapResult | LevelsRaster, schedule: Schedule | None, *, population: Population | None = None,
                         buildings: Buildings | None = None, edges: Sequence[float] | None = None,
                         event_edges: Sequence[float] = EVENT_EDGES, facade_height_m: float = ASSESSMENT_HEIGHT_M,
-                        facade_spacing_m: float = 5.0) -> dict[str, Any]:
+                        facade_spacing_m: float = 5.0, storey_height_m: float = STOREY_HEIGHT_M) -> dict[str, Any]:
     """The exposure document of a day of operations (:func:`gisnoise.ops.evaluate_operations`'s result,
     or its ``operations.tif`` read back with :func:`gisnoise.exposure.read_levels`).
 
     People by class of ``Lden``, ``Lday``, ``Levening``, ``Lnight``, ``LAmax`` (5 dB classes of
     ``edges``) and of every ``NA<L>`` band (classes of ``event_edges``); with ``buildings`` the
     same at each building's most exposed façade (:func:`operations_facade_levels`, flat ground
-    of the map).  Cells the map left without value (no flight above the schedule's
-    ``floor_db``) hold no level: their people are counted in ``people_without_level``; so do
-    all people in the band of an empty period (no flight departs in it: ``operations.empty_periods``).
+    of the map), and for buildings with a height the levels at their most exposed storey.  Cells
+    the map left without value (no flight above the schedule's ``floor_db``) hold no level: their
+    people are counted in ``people_without_level``; so do all people in the band of an empty
+    period (no flight departs in it: ``operations.empty_periods``).
     """
     if schedule is not None:
         check_schedule_of(result.metadata, schedule)  # before any façade is evaluated
@@ -128,7 +152,7 @@ def operations_exposure(result: MapResult | LevelsRaster, schedule: Schedule | N
             raise InputError("buildings: façade levels need flat ground (a ground height in the schedule, not a DEM)",
                              field="buildings")
         fl = operations_facade_levels(buildings, schedule, ground_h=float(ground_h), spacing_m=facade_spacing_m,
-                                      height_m=facade_height_m)
+                                      height_m=facade_height_m, storey_height_m=storey_height_m)
     doc = map_exposure(lr, population=population, buildings=buildings, metrics=names, edges=edges, facades=fl,
                        event_edges=event_edges)
     meta = result.metadata

@@ -151,7 +151,7 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
         area = area_above(band, grid, lv)
     else:
         ex = map_exposure(lr, buildings=buildings, trajectory=traj, cards=cards, metrics=[metric], edges=lv,
-                          ground_h=ground_h)
+                          ground_h=ground_h, storey_height_m=None)  # ranked at the façades: no storeys
         area = [a["area_m2"] for a in ex["area_above"][metric]]
         bm = ex["buildings"]["metrics"][metric]
         row["peak_facade_db"] = bm["peak_facade_db"]
