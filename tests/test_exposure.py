@@ -252,12 +252,16 @@ def test_population_cells_that_are_not_counts_are_refused_naming_the_layer(tmp_p
     assert f"first {shown} at row 1, column 1" in msg
 
 
-def test_population_nodata_cells_are_no_people(tmp_path):
-    """Cells holding the raster's nodata value (a negative number or NaN) are 0 people: the others are summed."""
+def test_population_nodata_cells_hold_no_data(tmp_path):
+    """Cells holding the raster's nodata value (a negative number or NaN) count no people and are not covered
+    (people there are unknown, not none: tests/test_exposure_coverage.py); the others are summed."""
     p = _population_tif(tmp_path / "neg_nodata.tif", [[1.0, -9999.0, 3.0], [4.0, 5.0, -9999.0]], nodata=-9999.0)
-    assert read_population(p).total == 13.0
+    pop = read_population(p)
+    assert pop.total == 13.0 and pop.covered.tolist() == [[True, False, True], [True, True, False]]
     q = _population_tif(tmp_path / "nan_nodata.tif", [[1.0, np.nan, 3.0], [4.0, 5.0, 6.0]], nodata=np.nan)
-    assert read_population(q).total == 19.0
+    pop = read_population(q)
+    assert pop.total == 19.0 and pop.covered.tolist() == [[True, False, True], [True, True, True]]
+    assert read_population(_population_tif(tmp_path / "full.tif", [[1.0, 0.0, 3.0], [4.0, 5.0, 6.0]])).covered is None
 
 
 def test_unreadable_population_names_the_file_not_its_folder(tmp_path):

@@ -77,7 +77,17 @@ def plain_people(band, grid, pts, edges, floor):
     return above, dose, float(people[~ok].sum())
 
 
+def ground_areas(grid):
+    """Each cell's area on the ground: its area in the map's CRS over PROJ's areal scale at its centre."""
+    from pyproj import Proj
+
+    p = Proj(grid.crs)
+    lon, lat = p(*grid.centres(), inverse=True)
+    return grid.resolution[0] * grid.resolution[1] / np.asarray(p.get_factors(lon, lat).areal_scale)
+
+
 def plain_area(band, grid, edges):
+    """Every map sub-cell through level_field and fraction_above, each a quarter of its cell's ground area."""
     rx, ry = grid.resolution
     t = grid.transform
     cc, rr = np.meshgrid(np.arange(grid.width), np.arange(grid.height))
@@ -87,9 +97,10 @@ def plain_area(band, grid, edges):
             xs.append(t.c + t.a * (cc + oc))
             ys.append(t.f + t.e * (rr + orr))
     L, gx, gy = level_field(band, grid, np.concatenate(xs).ravel(), np.concatenate(ys).ravel())
+    w = np.tile(ground_areas(grid).ravel() / 4, 4)
     ok = np.isfinite(L) & np.isfinite(gx) & np.isfinite(gy)
     side = 0.5 * math.sqrt(rx * ry)
-    return [float(np.sum(fraction_above(L[ok], gx[ok], gy[ok], side, e))) * rx * ry / 4 for e in edges]
+    return [float(np.sum(w[ok] * fraction_above(L[ok], gx[ok], gy[ok], side, e))) for e in edges]
 
 
 def test_the_map_spans_the_levels_and_most_cells_lie_below_the_lowest(case):

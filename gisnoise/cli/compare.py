@@ -55,8 +55,8 @@ def command(ctx: click.Context, routes: tuple[str, ...], cards: tuple[str, ...],
     DIR/comparison.md, DIR/levels.tif (one band per route) and DIR/difference.tif (each
     route minus the best, dB). Routes whose scores are equal as the table shows them (whole
     people, whole person-dB, 0.1 dB) share a rank ("tie"); counts that are lower bounds (a zone cut by the grid's
-    edge or partly outside the population raster) are starred in the table and flagged
-    lower_bound in comparison.json.
+    edge or partly outside the population raster or on its nodata cells) are starred in the table and
+    flagged lower_bound in comparison.json.
     """
     from gisnoise.exposure import read_buildings, read_population
     from gisnoise.planning import compare_routes, comparison_table, write_comparison

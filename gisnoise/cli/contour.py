@@ -172,9 +172,9 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
 
         if dem is not None and buildings:
             raise InputError("buildings: façade levels need flat ground; without --dem", field="buildings")
-        doc = map_exposure(read_levels(paths["levels"]),
-                           population=read_population(population) if population else None,
-                           buildings=read_buildings(buildings) if buildings else None,
+        written = read_levels(paths["levels"])
+        pop = read_population(population, within=written.grid) if population else None  # the part under the map
+        doc = map_exposure(written, population=pop, buildings=read_buildings(buildings) if buildings else None,
                            trajectory=paths["trajectory"], cards=list(cards))
         paths.update(write_exposure(doc, out))
         paths["warnings"] = list(paths.get("warnings", [])) + [f"exposure: {w}" for w in doc.get("warnings", [])]

@@ -62,8 +62,10 @@ def command(ctx: click.Context, map_dir: str, population: str | None, buildings:
     Lnight, LAmax and the events of each NA<L> band; its buildings need --schedule, the one
     the folder was made from.
 
-    A population raster that does not cover the map where the levels reach the classes leaves
-    those people unknown: a warning gives the share uncovered and those classes are lower bounds.
+    A population raster that does not cover the map where the levels reach the classes (the map
+    lies beyond it or on its nodata cells) leaves those people unknown: a warning gives the share
+    uncovered and those classes are lower bounds. A raster holding a density (people per km²)
+    instead of people per cell is refused. Only the part of the raster under the map is read.
     Buildings whose residents or dwellings are empty (null) are classed without them, said in a
     warning.  Buildings with a height (or building:levels) also get the level at their most exposed
     storey (receivers at the middle of each storey); they are classed at --facade-height.  Warnings
@@ -81,7 +83,7 @@ def command(ctx: click.Context, map_dir: str, population: str | None, buildings:
         raise InputError("exposure: give --population and/or --buildings", field="population")
     edges = _edges(classes)
     levels = read_levels(tif)
-    pop = read_population(population) if population else None
+    pop = read_population(population, within=levels.grid) if population else None  # the part under the map
     b = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field,
                        height=height_field, levels=levels_field) if buildings else None
     if "Lden" in levels.bands:  # a day of operations

@@ -79,7 +79,7 @@ def optimize(ctx: click.Context, start: str, goal: str, cards: tuple[str, ...], 
     and the comparison (comparison.json, comparison.md, levels.tif, difference.tif).
     When the searched route is not better than the direct one by the comparison's ranking
     (a tie is not better), the direct route is kept: route.geojson holds it and one line says so.
-    Both pads must lie within the population raster.
+    Both pads must lie within the population raster, on cells with data.
     """
     from gisnoise.exposure import read_buildings, read_population
     from gisnoise.planning import optimize_route, waypoints_geojson, write_comparison
@@ -108,7 +108,10 @@ def optimize(ctx: click.Context, start: str, goal: str, cards: tuple[str, ...], 
     else:
         click.echo(f"direct {sm['direct_length_m']:.0f} m, optimized {sm['optimized_length_m']:.0f} m "
                    f"(+{sm['detour_pct']:.1f} %, limit {max_detour:g} %), turn radius {sm['turn_radius_m']:.0f} m")
-        click.echo(f"people above {key} dB(A) LAmax: direct {sm[f'people_above_{key}_direct']:.0f}, "
-                   f"optimized {sm[f'people_above_{key}_optimized']:.0f} ({sm['reduction_pct']:.1f} % fewer)")
+        star = {n: " *" if sm.get(f"lower_bound_{key}_{n}") else "" for n in ("direct", "optimized")}
+        said = "; * lower bound: see the warnings" if any(star.values()) else ""
+        click.echo(f"people above {key} dB(A) LAmax: direct {sm[f'people_above_{key}_direct']:.0f}{star['direct']}, "
+                   f"optimized {sm[f'people_above_{key}_optimized']:.0f}{star['optimized']} "
+                   f"({sm['reduction_pct']:.1f} % fewer{said})")
     for p in [*paths.values(), o / "route.geojson", o / "direct.geojson", o / "optimize.json"]:
         click.echo(f"wrote {p}")

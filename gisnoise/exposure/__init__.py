@@ -23,6 +23,9 @@ from gisnoise.exposure.facades import (
     storey_points,
 )
 from gisnoise.exposure.layers import (
+    BLOCK_M2,
+    DENSEST_BLOCK_PER_KM2,
+    DENSEST_DISTRICTS_PER_KM2,
     DWELLING_FIELDS,
     HEIGHT_FIELDS,
     LEVEL_FIELDS,
@@ -47,8 +50,10 @@ from gisnoise.exposure.stats import (
     area_above,
     cell_values,
     class_edges,
+    covered_at,
     events_area_above,
     fraction_above,
+    ground_cell_areas,
     level_field,
     person_db_above,
     population_coverage,
@@ -60,13 +65,13 @@ from gisnoise.exposure.stats import (
 )
 from gisnoise.exposure.storeys import STOREY_HEIGHT_M, parse_height, parse_levels
 
-__all__ = ['ASSESSMENT_HEIGHT_M', 'Buildings', 'CLASS_WIDTH_DB', 'DWELLING_FIELDS', 'EVENT_EDGES', 'FacadePoints',
-           'HEIGHT_FIELDS', 'LEVEL_FIELDS', 'LevelsRaster', 'OPERATIONS_LEVELS', 'Population', 'RESIDENT_FIELDS',
-           'SCALE_TOLERANCE', 'SCHEMA', 'STOREY_HEIGHT_M', 'StoreyPoints', 'UNCOVERED_SHARE', 'area_above',
-           'cell_values', 'check_schedule_of', 'class_edges', 'coverage_warning', 'events_area_above',
-           'exposure_table', 'facade_levels', 'facade_points', 'fraction_above', 'level_field', 'map_exposure',
-           'most_exposed', 'most_exposed_storeys', 'operations_exposure', 'operations_facade_levels',
-           'parse_height', 'parse_levels', 'person_db_above', 'point_levels', 'population_coverage',
-           'population_event_exposure', 'population_exposure', 'population_points', 'population_scores',
-           'read_buildings', 'read_levels', 'read_population', 'storey_points', 'uncovered_shares',
-           'write_exposure']
+__all__ = ['area_above', 'ASSESSMENT_HEIGHT_M', 'BLOCK_M2', 'Buildings', 'cell_values', 'check_schedule_of',
+           'class_edges', 'CLASS_WIDTH_DB', 'coverage_warning', 'covered_at', 'DENSEST_BLOCK_PER_KM2',
+           'DENSEST_DISTRICTS_PER_KM2', 'DWELLING_FIELDS', 'EVENT_EDGES', 'events_area_above', 'exposure_table',
+           'facade_levels', 'facade_points', 'FacadePoints', 'fraction_above', 'ground_cell_areas', 'HEIGHT_FIELDS',
+           'level_field', 'LEVEL_FIELDS', 'LevelsRaster', 'map_exposure', 'most_exposed', 'most_exposed_storeys',
+           'operations_exposure', 'operations_facade_levels', 'OPERATIONS_LEVELS', 'parse_height', 'parse_levels',
+           'person_db_above', 'point_levels', 'Population', 'population_coverage', 'population_event_exposure',
+           'population_exposure', 'population_points', 'population_scores', 'read_buildings', 'read_levels',
+           'read_population', 'RESIDENT_FIELDS', 'SCALE_TOLERANCE', 'SCHEMA', 'STOREY_HEIGHT_M', 'storey_points',
+           'StoreyPoints', 'UNCOVERED_SHARE', 'uncovered_shares', 'write_exposure']

@@ -14,8 +14,8 @@ people of that class go on beyond the map and are not counted.  Such classes car
 ``warnings`` names the band, its levels and the level the edge reaches
 (:func:`gisnoise.maps.clipping.edge_max`, the rule that flags clipped contours).
 
-Where the population raster does not reach: people outside its extent are unknown, not none.  The share of each
-band's area at or above a class's lower edge that the raster leaves uncovered
+Where the population raster does not reach: people outside its extent, or on its nodata cells, are unknown, not
+none.  The share of each band's area at or above a class's lower edge that the raster leaves uncovered
 (:func:`gisnoise.exposure.stats.uncovered_shares`) is kept in ``population.coverage``; a class whose share exceeds
 :data:`~gisnoise.exposure.stats.UNCOVERED_SHARE` (1 %) is a lower bound too, and one warning
 (:func:`coverage_warning`) names each band's share above its lowest class and those classes.  In ``exposure.md``
@@ -23,12 +23,15 @@ people counts that are lower bounds read ``≥ N``.
 
 Buildings whose residents or dwellings are null are classed without them (:func:`gisnoise.exposure.read_buildings`):
 each class counts them in ``residents_unknown`` (``dwellings_unknown``), and the reader's warnings join the
-document's.
+document's, as the population reader's do (a raster denser than the densest districts on record).
 
 Buildings are classed by their façade level at the assessment height (``facade.height_m``, 4 m).  When the layer
 has heights or storeys, each metric also holds ``storeys``: per building the level at its most exposed storey
 (:mod:`gisnoise.exposure.storeys`; null for a building without a height), that storey and its receiver's height,
 and the loudest of them all; ``exposure.md`` lists the buildings loudest there.
+
+Areas are on the ground: a cell's area in the map's CRS over the CRS's areal scale at the cell.  People are those on
+the map (``total_people``); those on cells without a level are ``people_without_level``.
 """
 
 from __future__ import annotations
@@ -134,7 +137,8 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
         "units": {n: levels.units.get(n, "dB(A)") for n in names},
         "grid": levels.grid.to_dict(),
         "area_above": area,
-        "area_rule": f"map cells of {res[0]:g} x {res[1]:g} m in 2 x 2 sub-cells, level linear within each",
+        "area_rule": f"map cells of {res[0]:g} x {res[1]:g} m in 2 x 2 sub-cells, level linear within each; "
+                     "areas on the ground (a cell's area in the map's CRS over the CRS's areal scale there)",
         "lower_bound_rule": "a class is a lower bound (lower_bound: true) when the map's values end at or above "
                             "its lower edge: the grid's edge or a cell next to cells without a level reaches it, "
                             "so its area and people go on beyond the map",
@@ -152,8 +156,9 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
         doc["population"] = {"source": population.source, "total_people": pe["total_people"],
                              "subcell_m": pe["subcell_m"], "metrics": {n: pe["metrics"][n] for n in names},
                              "rule": "population cells split into sub-cells of at most half a map cell; level linear "
-                                     "within each sub-cell (second-order Taylor about the nearest map cell); people outside the map "
-                                     "or without a level are counted in people_without_level"}
+                                     "within each sub-cell (second-order Taylor about the nearest map cell); the "
+                                     "people on the map (sub-cells within its extent) are counted (total_people), "
+                                     "those on cells without a level in people_without_level"}
     doc["warnings"] = [w for w in (lower_bound_warning(n, top[n], ev_edges if n in counts else edges,
                                                        doc["units"][n], population is not None) for n in names)
                        if w is not None]
@@ -164,15 +169,15 @@ def map_exposure(levels: LevelsRaster, *, population: Population | None = None, 
         doc["population"]["coverage"] = {
             "uncovered_share": {n: shares[n][0] for n in names}, "threshold": UNCOVERED_SHARE,
             "rule": "share of the map's area at or above the lowest class (map cells by their centres) outside the "
-                    "population raster's extent: people there are unknown, not none; a class whose share above its "
-                    f"lower edge exceeds {100 * UNCOVERED_SHARE:g} % is a lower bound"}
+                    "population raster's extent or on its nodata cells: people there are unknown, not none; a class "
+                    f"whose share above its lower edge exceeds {100 * UNCOVERED_SHARE:g} % is a lower bound"}
         for n, m in doc["population"]["metrics"].items():
             for c, cut in zip(m["classes"], short[n], strict=True):
                 c["lower_bound"] = bool(top[n] >= c.get("from_db", c.get("from")) or cut)
             for a, cut in zip(m["above"], short[n], strict=True):
                 a["lower_bound"] = bool(top[n] >= a.get("level_db", a.get("level")) or cut)
         said = coverage_warning(population.source, shares, short, edges_of, doc["units"])
-        doc["warnings"] += [said] if said is not None else []
+        doc["warnings"] += ([said] if said is not None else []) + list(population.warnings)
     if buildings is not None:
         doc["warnings"] += list(buildings.warnings)
         doc["buildings"] = _buildings_doc(levels, buildings, trajectory, cards, names, edges, facade_height_m,
@@ -355,10 +360,10 @@ def exposure_table(doc: dict[str, Any]) -> str:
             lines += ["", "\\* lower bound: the map's edge reaches this class, which goes on beyond the map"]
         if (pop and any(c.get("lower_bound") for c in pop["classes"])) or \
                 (bld and any(k.endswith("_unknown") and v for c in bld["classes"] for k, v in c.items())):
-            lines += ["", "≥ lower bound: people beyond the map's edge or outside the population raster, or "
-                          "buildings without a value, are not counted (see the warnings)"]
+            lines += ["", "≥ lower bound: people beyond the map's edge, outside the population raster or on its "
+                          "cells without data, or buildings without a value, are not counted (see the warnings)"]
         if pop:
-            lines += ["", f"people without a level (outside the map or on cells without value): {pop['people_without_level']:.0f}"]
+            lines += ["", f"people on the map without a level (on cells without value): {pop['people_without_level']:.0f}"]
         if bld:
             peak = bld["peak_facade_db"]
             lines += [f"peak façade value: {peak:.0f} events" if ev else

@@ -1,8 +1,9 @@
 """Exposure layers: a population raster, buildings with residents, and a written levels raster.
 
 * :func:`read_population`: a GeoTIFF (any CRS, any driver rasterio reads) whose band 1
-  holds people per cell; nodata cells count as no people, and any other cell that is not a
-  finite count >= 0 (negative, NaN, infinite) refuses the raster.
+  holds people per cell; nodata cells hold no data (people there are unknown, not none, as outside the raster),
+  any other cell that is not a finite count >= 0 (negative, NaN, infinite) refuses the raster, and so does one
+  denser than any city block has been (:data:`DENSEST_BLOCK_PER_KM2`: a density read as people per cell).
 * :func:`read_buildings`: polygons (GeoPackage, GeoJSON, Shapefile, anything pyogrio reads), courtyards
   (holes) kept, with optional attributes for residents, dwellings, height and storeys.  A null (empty)
   residents or dwellings value is unknown for that building, not 0: its façade is classed, its residents
@@ -33,7 +34,8 @@ from gisnoise.exposure.storeys import is_blank, parse_height, parse_levels
 from gisnoise.geo import GridSpec
 
 __all__ = ["Population", "Buildings", "LevelsRaster", "read_population", "read_buildings", "read_levels",
-           "RESIDENT_FIELDS", "DWELLING_FIELDS", "HEIGHT_FIELDS", "LEVEL_FIELDS"]
+           "RESIDENT_FIELDS", "DWELLING_FIELDS", "HEIGHT_FIELDS", "LEVEL_FIELDS", "DENSEST_BLOCK_PER_KM2",
+           "DENSEST_DISTRICTS_PER_KM2", "BLOCK_M2"]
 
 RESIDENT_FIELDS = ("residents", "population", "pop", "inhabitants", "persons", "people")
 """Attribute names tried, in order, for the residents of a building (case-insensitive)."""
@@ -43,6 +45,20 @@ HEIGHT_FIELDS = ("height", "height_m", "building_height")
 """Attribute names tried, in order, for the height of a building, m (case-insensitive)."""
 LEVEL_FIELDS = ("building:levels", "building_levels", "levels", "storeys", "floors")
 """Attribute names tried, in order, for the storeys above ground of a building (case-insensitive)."""
+
+
+DENSEST_BLOCK_PER_KM2 = 1_500_000.0
+"""People per km² of ground above which a population raster is refused: more than any city block has held.  The
+densest on record, Kowloon Walled City (Hong Kong), held about 33 000 people on 2.6 ha in the late 1980s, about
+1.3 million per km².  A density (people per km²) read as people per cell exceeds it wherever the density exceeds
+15 000 per km² on cells of 1 ha or less (judged over :data:`BLOCK_M2`), more on larger cells (on 1 km cells a
+density is a count)."""
+DENSEST_DISTRICTS_PER_KM2 = 300_000.0
+"""People per km² of ground above which a population raster is read with a warning: about what the densest
+districts on record hold on average (Dharavi, Mumbai: some 300 000 per km²); a density read as people per cell
+exceeds it wherever the density exceeds 3 000 per km² on cells of 1 ha or less."""
+BLOCK_M2 = 10_000.0
+"""A cell smaller than this (1 ha) is judged as if its people spread over 1 ha: one tower may fill a small cell."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,12 +73,19 @@ class Population:
         Pixel-corner transform in the raster's CRS.
     crs : pyproj.CRS
     source : str
+    covered : ndarray of bool, shape (height, width), or None
+        The cells that hold data; False where the raster has nodata: people there are unknown, not none, as
+        outside the raster's extent.  None: every cell.
+    warnings : list of str
+        What the reader found that the counts depend on (cells denser than the densest districts on record).
     """
 
     counts: np.ndarray
     transform: Affine
     crs: Any
     source: str = "population"
+    covered: np.ndarray | None = None
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def total(self) -> float:
@@ -130,44 +153,102 @@ def _north_up(t: Affine, fld: str) -> None:
         raise InputError(f"{fld}: the raster must be north-up without rotation", field=fld)
 
 
-def read_population(path: str | os.PathLike[str], *, band: int = 1) -> Population:
+def read_population(path: str | os.PathLike[str], *, band: int = 1, within: GridSpec | None = None) -> Population:
     """Read a population raster: people per cell of band ``band``.
 
-    Cells holding the raster's nodata value are no people.  Every other cell must be a finite
-    count >= 0: a negative, NaN or infinite value is refused, not counted as 0 (an infinite
-    count would otherwise vanish from every total, a NaN one hide a hole in the data).
+    Cells holding the raster's nodata value hold no data: no people are counted there, and they are not covered
+    (``Population.covered``), so the counts of a map reaching them are lower bounds, as where the raster ends (a
+    national raster holds nodata beyond the border: the people there are unknown, not none).  Every other cell
+    must be a finite count >= 0: a negative, NaN or infinite value is refused, not counted as 0 (an infinite
+    count would otherwise vanish from every total, a NaN one hide a hole in the data).  A cell holding more
+    people per km² of ground than :data:`DENSEST_BLOCK_PER_KM2` is refused (a density, people per km² or per
+    hectare, read as people per cell); one above :data:`DENSEST_DISTRICTS_PER_KM2` is named in a warning
+    (``Population.warnings``).  Cells smaller than :data:`BLOCK_M2` are judged over that area.
+
+    Parameters
+    ----------
+    within : GridSpec, optional
+        Read only the window of the raster that the grid's extent may touch
+        (:func:`gisnoise.geo.raster_window`); its checks then apply to that window.  Default the whole raster.
 
     Raises
     ------
     InputError
-        No such file, no CRS, a rotated raster, or a cell other than nodata that is not a finite
-        count >= 0 (the first one named with its row, column and value).
+        No such file, no CRS, a rotated raster, a cell other than nodata that is not a finite count >= 0 (the
+        first one named with its row, column and value), or a cell denser than any city block.
     """
     import rasterio
     from rasterio.errors import RasterioIOError
+    from rasterio.windows import Window
+
+    from gisnoise.geo import raster_window
 
     p = Path(path)
+    r0 = c0 = 0
     try:
         with rasterio.open(p) as src:
             if src.crs is None:
                 raise InputError(f"population: {p.name} has no CRS", field="population")
             if not 1 <= band <= src.count:
                 raise InputError(f"population: band {band} not in 1..{src.count}", field="population")
-            a = src.read(band, masked=True).astype(np.float64)
             t, crs = src.transform, CRS.from_wkt(src.crs.to_wkt())
+            _north_up(t, "population")
+            win = None
+            if within is not None:
+                r0, r1, c0, c1 = raster_window(t, (src.height, src.width), crs, within)
+                win = Window(c0, r0, c1 - c0, r1 - r0)
+                t = Affine(t.a, 0.0, t.c + t.a * c0, 0.0, t.e, t.f + t.e * r0)  # north-up: the window's corner
+            if win is not None and (win.width == 0 or win.height == 0):  # the grid lies beside the raster
+                a = np.ma.masked_array(np.zeros((0, 0)), mask=np.zeros((0, 0), dtype=bool))
+            else:
+                a = src.read(band, masked=True, window=win).astype(np.float64)
     except RasterioIOError as exc:  # the file's name only: its folder may be a server's
         raise InputError(f"population: cannot read {p.name}: {str(exc).replace(str(p), p.name)}",
                          field="population") from None
-    _north_up(t, "population")
     data, nodata = np.ma.getdata(a), np.ma.getmaskarray(a)
     with np.errstate(invalid="ignore"):
         bad = ~nodata & ~(np.isfinite(data) & (data >= 0))
     if bad.any():
         r, c = (int(i) for i in np.argwhere(bad)[0])
         raise InputError(f"population: {p.name} has {int(bad.sum())} cell(s) that are not a number of people >= 0 "
-                         f"(first {data[r, c]:g} at row {r}, column {c}); people per cell must be finite and >= 0, "
-                         "cells without data must hold the raster's nodata value", field="population")
-    return Population(np.where(nodata, 0.0, data), t, crs, source=str(p))
+                         f"(first {data[r, c]:g} at row {r + r0}, column {c + c0}); people per cell must be finite "
+                         "and >= 0, cells without data must hold the raster's nodata value", field="population")
+    counts = np.where(nodata, 0.0, data)
+    said = _density_said(counts, t, crs, p.name, (r0, c0))
+    return Population(counts, t, crs, source=str(p), covered=None if not nodata.any() else ~nodata,
+                      warnings=[said] if said is not None else [])
+
+
+def _density_said(counts: np.ndarray, t: Affine, crs: Any, name: str, offset: tuple[int, int]) -> str | None:
+    """Refuse a raster denser than :data:`DENSEST_BLOCK_PER_KM2` in some cell; the warning of one denser than
+    :data:`DENSEST_DISTRICTS_PER_KM2` (None when no cell is).  Cells are judged over their ground area
+    (:func:`gisnoise.geo.cell_areas`), at least :data:`BLOCK_M2`; ``offset`` (rows, columns) places a window's
+    cells in the file, for the message."""
+    from gisnoise.geo import cell_areas
+
+    rows, cols = np.nonzero(counts > DENSEST_DISTRICTS_PER_KM2 * BLOCK_M2 / 1e6)  # fewer cannot be denser
+    if rows.size == 0:
+        return None
+    area = cell_areas(crs, t, rows, cols)
+    with np.errstate(invalid="ignore"):
+        per_km2 = counts[rows, cols] / np.maximum(area, BLOCK_M2) * 1e6  # NaN where PROJ gives no area
+    if not np.isfinite(per_km2).any():
+        return None
+    k = int(np.nanargmax(per_km2))
+    top, people, ha = float(per_km2[k]), float(counts[rows[k], cols[k]]), float(area[k]) / 1e4
+    where = f"row {int(rows[k]) + offset[0]}, column {int(cols[k]) + offset[1]}"
+    if top > DENSEST_BLOCK_PER_KM2:
+        raise InputError(f"population: {name} holds {people:.0f} people in one cell ({where}, {ha:.2f} ha of ground): "
+                         f"{top:.0f} per km², more than any city block has held ({DENSEST_BLOCK_PER_KM2:.0f} per "
+                         "km²; Kowloon Walled City held about 1.3 million): it looks like a density (people per km² "
+                         "or per hectare); give people per cell", field="population")
+    if top <= DENSEST_DISTRICTS_PER_KM2:
+        return None
+    n = int(np.sum(per_km2 > DENSEST_DISTRICTS_PER_KM2))
+    return (f"population: {name} holds up to {top:.0f} people per km² of ground ({people:.0f} people in one cell, "
+            f"{where}; {n} cell(s) above {DENSEST_DISTRICTS_PER_KM2:.0f} per km², about the densest districts on "
+            "record): if it holds a density (people per km² or per hectare) and not people per cell, every count "
+            "is too large; give people per cell")
 
 
 def _pick(columns: list[str], wanted: str | None, names: tuple[str, ...], what: str) -> str | None:

@@ -8,13 +8,16 @@ a sub-cell the level is taken linear: value and gradient at its centre come from
 second-order Taylor expansion about the nearest map cell centre (gradient and Hessian by
 central differences), and the fraction of the sub-cell's people above a level is
 the exact area fraction of a square on which the level is linear
-(:func:`fraction_above`). People in sub-cells the map does not cover (or where it has
-no value) are counted as ``people_without_level``, never put in a class.  Where the population raster does not
-reach (outside its extent) the people are unknown, not none: :func:`uncovered_shares` gives the share of the map's
-area above each level that it leaves uncovered, and the exposure document marks the classes where that share
-exceeds :data:`UNCOVERED_SHARE` as lower bounds.
+(:func:`fraction_above`). Only the population cells that the map's extent may touch are expanded
+(:func:`gisnoise.geo.raster_window`), and only their sub-cells on the map are kept: the people on the map.  Those
+on cells where it has no value are counted as ``people_without_level``, never put in a class.  Where the population
+raster does not reach (outside its extent) or holds no data (its nodata cells) the people are unknown, not none:
+:func:`uncovered_shares` gives the share of the map's area above each level that it leaves uncovered, and the
+exposure document marks the classes where that share exceeds :data:`UNCOVERED_SHARE` as lower bounds.
 
-Area above a level uses the same rule on 2 x 2 sub-cells of the map's own cells.
+Area above a level uses the same rule on 2 x 2 sub-cells of the map's own cells, each weighing its cell's area
+on the ground (:func:`gisnoise.geo.cell_areas`: the cell's area in the map's CRS over the CRS's areal scale there,
+so a map in Web Mercator gives the same square metres as one in UTM).
 
 Only where it can count
 -----------------------
@@ -44,12 +47,12 @@ import numpy as np
 
 from gisnoise.errors import InputError
 from gisnoise.exposure.layers import LevelsRaster, Population
-from gisnoise.geo import GridSpec, apply_affine, transformer
+from gisnoise.geo import GridSpec, apply_affine, cell_areas, raster_window, transformer
 
 __all__ = ["CLASS_WIDTH_DB", "class_edges", "fraction_above", "level_field", "population_points",
            "population_exposure", "area_above", "person_db_above", "population_scores",
            "EVENT_EDGES", "cell_values", "events_area_above", "population_event_exposure", "UNCOVERED_SHARE",
-           "population_coverage", "uncovered_shares"]
+           "population_coverage", "uncovered_shares", "covered_at", "ground_cell_areas"]
 
 CLASS_WIDTH_DB = 5.0
 """Width of the exposure classes, dB."""
@@ -162,11 +165,15 @@ def level_field(band: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray,
 
 def population_points(pop: Population, grid: GridSpec, *, max_points: int = 50_000_000
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Sub-cells of the populated cells in the map's CRS: ``x, y`` (m), people, side (m).
+    """Sub-cells of the populated cells on the map, in the map's CRS: ``x, y`` (m), people, side (m).
 
-    Cells with no people are skipped.  Sub-cells are at most half a map cell wide.
+    Only the cells that the map's extent may touch are expanded (:func:`gisnoise.geo.raster_window`), and only
+    their sub-cells whose centres lie on the map are kept.  Cells with no people are skipped.  Sub-cells are at
+    most half a map cell wide.
     """
-    rows, cols = np.nonzero(pop.counts > 0)
+    r0, r1, c0, c1 = raster_window(pop.transform, pop.counts.shape, pop.crs, grid)
+    rows, cols = np.nonzero(pop.counts[r0:r1, c0:c1] > 0)
+    rows, cols = rows + r0, cols + c0
     if rows.size == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0), 0.0
     t = pop.transform
@@ -182,8 +189,8 @@ def population_points(pop: Population, grid: GridSpec, *, max_points: int = 50_0
     cell_m = math.sqrt(wx * wy)
     k = max(1, int(math.ceil(cell_m / (0.5 * min(grid.resolution)))))
     if rows.size * k * k > max_points:
-        raise InputError(f"population: {rows.size} populated cells x {k * k} sub-cells exceed {max_points} points; "
-                         "use a coarser map or a smaller population raster", field="population")
+        raise InputError(f"population: {rows.size} populated cells under the map x {k * k} sub-cells exceed "
+                         f"{max_points} points; use a coarser map or a smaller one", field="population")
     off = (np.arange(k) + 0.5) / k - 0.5
     # each cell is mapped affinely about its centre (centre and the unit steps along a column and a row
     # transformed exactly; the cell is small against the curvature of any map projection)
@@ -199,7 +206,9 @@ def population_points(pop: Population, grid: GridSpec, *, max_points: int = 50_0
     x = (x0[:, None] + dcx[:, None] * fc[None, :] + drx[:, None] * fr[None, :]).ravel()
     y = (y0[:, None] + dcy[:, None] * fc[None, :] + dry[:, None] * fr[None, :]).ravel()
     people = np.repeat(pop.counts[rows, cols] / (k * k), k * k)
-    return np.asarray(x), np.asarray(y), people, cell_m / k
+    gc, gr = apply_affine(~grid.transform, x, y)  # on the map: the cells level_field reads
+    on = (gc >= 0) & (gc < grid.width) & (gr >= 0) & (gr < grid.height)
+    return np.asarray(x[on]), np.asarray(y[on]), people[on], cell_m / k
 
 
 UNCOVERED_SHARE = 0.01
@@ -209,20 +218,32 @@ slivers along the map's edge, where the levels are the map's lowest; a real hole
 the map) leaves far more.  Below 1 % the people missed are within the accuracy of gridded population data."""
 
 
-def population_coverage(pop: Population, grid: GridSpec, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """Whether the population raster's extent holds the centre of each map cell ``rows, cols`` (bool, one per cell).
+def covered_at(pop: Population, crs: Any, x: Any, y: Any) -> np.ndarray:
+    """Whether the population raster holds data at points ``x, y`` of ``crs`` (bool, broadcast): within its extent
+    and not on a nodata cell (:attr:`~gisnoise.exposure.Population.covered`).  Elsewhere the people are unknown,
+    not zero."""
+    px, py = transformer(crs, pop.crs).transform(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    c, r = apply_affine(~pop.transform, np.asarray(px, dtype=float), np.asarray(py, dtype=float))
+    h, w = pop.counts.shape
+    c, r = np.asarray(c), np.asarray(r)
+    inside = (c >= 0) & (c < w) & (r >= 0) & (r < h)
+    if pop.covered is None or not inside.any():
+        return inside
+    out = inside.copy()
+    out[inside] = pop.covered[np.floor(r[inside]).astype(np.int64), np.floor(c[inside]).astype(np.int64)]
+    return out
 
-    The raster's extent is where it has data (people or none, nodata cells counting as none); outside it the people
+
+def population_coverage(pop: Population, grid: GridSpec, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Whether the population raster holds data at the centre of each map cell ``rows, cols`` (bool, one per cell).
+
+    It holds data within its extent, on every cell but its nodata cells (:func:`covered_at`); elsewhere the people
     are unknown, not zero.
     """
     t = grid.transform
     x = t.c + t.a * (np.asarray(cols, dtype=float) + 0.5)
     y = t.f + t.e * (np.asarray(rows, dtype=float) + 0.5)
-    px, py = transformer(grid.crs, pop.crs).transform(x, y)
-    c, r = apply_affine(~pop.transform, np.asarray(px, dtype=float), np.asarray(py, dtype=float))
-    h, w = pop.counts.shape
-    c, r = np.asarray(c), np.asarray(r)
-    return (c >= 0) & (c < w) & (r >= 0) & (r < h)
+    return covered_at(pop, grid.crs, x, y)
 
 
 def uncovered_shares(bands: dict[str, np.ndarray], grid: GridSpec, pop: Population,
@@ -308,11 +329,12 @@ def population_exposure(levels: LevelsRaster, pop: Population, *, metrics: Seque
 
 def area_above(band: np.ndarray, grid: GridSpec, edges: Sequence[float], *, chunk_cells: int = 1 << 20
                ) -> list[float]:
-    """Area (m^2) of the map where ``band`` exceeds each level.
+    """Area (m^2 on the ground) of the map where ``band`` exceeds each level.
 
     Each cell is split into 2 x 2 sub-cells whose levels follow the same rule as people's
-    (:func:`level_field`), each linear within itself (:func:`fraction_above`); cells whose
-    bound lies below the lowest level are skipped (module docstring).
+    (:func:`level_field`), each linear within itself (:func:`fraction_above`) and weighing a quarter of
+    its cell's ground area (:func:`ground_cell_areas`); cells whose bound lies below the lowest level are
+    skipped (module docstring).
     """
     edges = list(edges)
     if not edges:
@@ -323,6 +345,7 @@ def area_above(band: np.ndarray, grid: GridSpec, edges: Sequence[float], *, chun
     side = 0.5 * math.sqrt(rx * ry)
     upper = _cell_upper(band, der, 0.25 * rx, 0.25 * ry, side)
     all_rows, all_cols = np.nonzero(~(upper < min(edges)))
+    quarter = 0.25 * ground_cell_areas(grid, all_rows, all_cols)
     off = np.array([0.25, 0.75])
     total = np.zeros(len(edges))
     for s in range(0, all_rows.size, chunk_cells):
@@ -333,9 +356,19 @@ def area_above(band: np.ndarray, grid: GridSpec, edges: Sequence[float], *, chun
         yy = np.broadcast_to(t.f + t.e * rr, (rows.size, 2, 2)).ravel()
         L, gx, gy = level_field(band, grid, xx, yy, der)
         ok = np.isfinite(L) & np.isfinite(gx) & np.isfinite(gy)
-        ones = np.ones(int(ok.sum()))
-        total += [_sum_above(ones, L[ok], gx[ok], gy[ok], side, e) for e in edges]
-    return [float(v) * rx * ry / 4.0 for v in total]
+        w = np.repeat(quarter[s:s + chunk_cells], 4)[ok]
+        total += [_sum_above(w, L[ok], gx[ok], gy[ok], side, e) for e in edges]
+    return [float(v) for v in total]
+
+
+def ground_cell_areas(grid: GridSpec, rows: Any, cols: Any) -> np.ndarray:
+    """Ground area (m^2) of the map cells ``rows, cols``: the cell's area in the map's CRS over the CRS's areal scale
+    at the cell (:func:`gisnoise.geo.cell_areas`).  Refused (field ``crs``) where PROJ gives no areal scale."""
+    a = cell_areas(grid.crs, grid.transform, rows, cols)
+    if not np.isfinite(a).all():
+        raise InputError("crs: PROJ gives no areal scale for some cells of the map in its CRS; map in a CRS that "
+                         "holds them (a UTM zone)", field="crs")
+    return a
 
 
 def person_db_above(band: np.ndarray, grid: GridSpec, points: tuple[np.ndarray, np.ndarray, np.ndarray, float],
@@ -360,18 +393,24 @@ def cell_values(band: np.ndarray, grid: GridSpec, x: np.ndarray, y: np.ndarray) 
 
 
 def events_area_above(band: np.ndarray, grid: GridSpec, edges: Sequence[float]) -> list[float]:
-    """Area (m^2) where a count band (N-above, events) reaches each edge: whole cells, as the band is
-    constant over a cell (a count changes in whole events, so it is not interpolated)."""
-    rx, ry = grid.resolution
-    return [float(np.sum(band >= e)) * rx * ry for e in edges]
+    """Area (m^2 on the ground) where a count band (N-above, events) reaches each edge: whole cells
+    (:func:`ground_cell_areas`), as the band is constant over a cell (a count changes in whole events, so it is
+    not interpolated)."""
+    if not len(edges):
+        return []
+    with np.errstate(invalid="ignore"):
+        rows, cols = np.nonzero(band >= min(edges))
+    area = ground_cell_areas(grid, rows, cols)
+    v = band[rows, cols]
+    return [float(np.sum(area[v >= e])) for e in edges]
 
 
 def population_event_exposure(band: np.ndarray, grid: GridSpec,
                               points: tuple[np.ndarray, np.ndarray, np.ndarray, float],
                               edges: Sequence[float]) -> dict[str, Any]:
     """People by class of a count band (N-above, events): each sub-cell takes the count of the map cell
-    holding it; classes ``[edge_j, edge_j+1)``, the last open.  People outside the map or on cells
-    without value are ``people_without_level``."""
+    holding it; classes ``[edge_j, edge_j+1)``, the last open.  People on cells without value (or points given
+    outside the map) are ``people_without_level``."""
     x, y, people, _ = points
     v = cell_values(band, grid, x, y)
     ok = np.isfinite(v)

@@ -1,7 +1,9 @@
-"""Digital elevation models: reading a DEM GeoTIFF and sampling it at points.
+"""Digital elevation models: reading a DEM GeoTIFF and sampling it at points; the part of a raster under a grid.
 
 :func:`read_dem` reads an elevation model (for the receivers' ground heights, or the
 ground under waypoints); :func:`sample_dem` interpolates it at WGS84 points.
+:func:`raster_window` gives the rows and columns of a raster (in any CRS) that a grid's
+extent may touch, so that only they are read or expanded.
 """
 
 from __future__ import annotations
@@ -16,9 +18,9 @@ from affine import Affine
 from pyproj import CRS
 
 from gisnoise.errors import CRSError, InputError
-from gisnoise.geo.grid import apply_affine
+from gisnoise.geo.grid import GridSpec, apply_affine, transformer
 
-__all__ = ["Dem", "read_dem", "sample_dem"]
+__all__ = ["Dem", "read_dem", "sample_dem", "raster_window"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,3 +90,36 @@ def sample_dem(dem: Dem, lon: Any, lat: Any) -> np.ndarray:
     coords = np.vstack([np.asarray(row) - 0.5, np.asarray(col) - 0.5])
     out = map_coordinates(dem.heights, coords, order=1, mode="constant", cval=np.nan, prefilter=False)
     return out.reshape(lon.shape)
+
+
+def raster_window(transform: Affine, shape: tuple[int, int], crs: CRS, grid: GridSpec, *, pad: int = 2
+                  ) -> tuple[int, int, int, int]:
+    """The rows ``r0:r1`` and columns ``c0:c1`` of a north-up raster (``transform``, ``shape``, ``crs``) that the
+    extent of ``grid`` may touch: the grid's outline, 64 points a side, in the raster's pixels, its bounding box
+    grown by ``pad`` cells and clipped to the raster.  Empty (``r0 == r1`` or ``c0 == c1``) when the grid lies
+    beside the raster; the whole raster when part of the outline has no place in its CRS.  The outline bounds
+    the image of the extent (a projection maps the boundary of a region to the boundary of its image), and
+    ``pad`` takes the curvature between its points.
+
+    Examples
+    --------
+    >>> g = GridSpec.from_bounds("EPSG:32632", 600000.0, 5800000.0, 600100.0, 5800050.0, 10.0)
+    >>> raster_window(Affine(10.0, 0, 599000.0, 0, -10.0, 5801000.0), (300, 300), CRS.from_epsg(32632), g)
+    (93, 102, 98, 112)
+    """
+    h, w = shape
+    left, bottom, right, top = grid.bounds
+    s = np.linspace(0.0, 1.0, 65)
+    x = np.concatenate([left + (right - left) * s, np.full(s.size, right), right - (right - left) * s,
+                        np.full(s.size, left)])
+    y = np.concatenate([np.full(s.size, top), top - (top - bottom) * s, np.full(s.size, bottom),
+                        bottom + (top - bottom) * s])
+    px, py = transformer(grid.crs, crs).transform(x, y)
+    col, row = apply_affine(~transform, np.asarray(px, dtype=float), np.asarray(py, dtype=float))
+    if not (np.isfinite(col).all() and np.isfinite(row).all()):  # part of the outline beyond the raster's CRS
+        return 0, h, 0, w
+    c0 = int(np.clip(np.floor(col.min()) - pad, 0, w))
+    c1 = int(np.clip(np.ceil(col.max()) + pad, 0, w))
+    r0 = int(np.clip(np.floor(row.min()) - pad, 0, h))
+    r1 = int(np.clip(np.ceil(row.max()) + pad, 0, h))
+    return r0, max(r0, r1), c0, max(c0, c1)

@@ -12,9 +12,8 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.exposure import Population
+from gisnoise.exposure import Population, covered_at
 from gisnoise.flight import Trajectory, ground_from_track
-from gisnoise.geo import apply_affine, transformer
 from gisnoise.limits import GROUND_TOLERANCE_M, check_receivers
 
 TIE_STEPS = (1.0, 1.0, 0.1)
@@ -104,13 +103,11 @@ def common_period(trajs: Mapping[str, Trajectory], metric: str, period_s: float 
 
 
 def pad_outside(pop: Population, lonlat: tuple[float, float]) -> bool:
-    """Whether a point (lon, lat, deg) lies outside the population raster's extent."""
+    """Whether a point (lon, lat, deg) lies where the population raster holds no data: outside its extent or on one
+    of its nodata cells (:func:`gisnoise.exposure.covered_at`)."""
     from gisnoise.geo import WGS84
 
-    x, y = transformer(WGS84, pop.crs).transform(lonlat[0], lonlat[1])
-    c, r = apply_affine(~pop.transform, np.asarray(x, dtype=float), np.asarray(y, dtype=float))
-    ph, pw = pop.counts.shape
-    return not (math.isfinite(float(c)) and math.isfinite(float(r)) and 0 <= float(c) < pw and 0 <= float(r) < ph)
+    return not bool(covered_at(pop, WGS84, np.array([lonlat[0]]), np.array([lonlat[1]]))[0])
 
 
 def _score(r: Mapping[str, Any], key: str) -> tuple[float, float, float]:

@@ -17,7 +17,8 @@ route's duration).  Each route is checked as a map of it is (:func:`gisnoise.map
 cut short, a track below the ground taken from the routes, airborne samples without power, a crash, powers
 outside a card's fitted range) before any evaluation; its warnings, named by route, lead the document's
 ``warnings``.  Counts that are lower bounds (a level's zone cut by the grid's edge, or partly outside the
-population raster) carry ``lower_bound`` per level.
+population raster or on its nodata cells) carry ``lower_bound`` per level; the population reader's warnings
+join the document's.
 
 :func:`write_comparison` writes ``comparison.json`` (schema ``gisnoise/comparison/1``),
 ``comparison.md`` (the table), ``levels.tif`` (the metric of every route, one band per
@@ -180,7 +181,8 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         Serving every phase of every route.
     population, buildings : optional
         Exposure layers (:func:`gisnoise.exposure.read_population`, :func:`~gisnoise.exposure.read_buildings`);
-        at least one.  A route whose area above a level lies more than 1 % outside the population raster (the
+        at least one.  A route whose area above a level lies more than 1 % outside the population raster or on its
+        nodata cells (the
         exposure's rule: :func:`gisnoise.exposure.uncovered_shares`, :data:`~gisnoise.exposure.UNCOVERED_SHARE`) is
         named in a warning with that share, and its people above that level are flagged ``lower_bound``: outside
         the raster people are unknown, not none.
@@ -251,7 +253,7 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
         found_said += [f"{n}: {w}" for w in found.warnings]
         if found.power_outside:
             outside[n] = found.power_outside
-    warnings = found_said + warnings
+    warnings = found_said + warnings + (list(population.warnings) if population is not None else [])
     lon = np.concatenate([t.lon for t in trajs.values()])
     lat = np.concatenate([t.lat for t in trajs.values()])
     if grid is None:
@@ -299,7 +301,8 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
            "lower_bound_rule": "a route's counts above a level are a lower bound (lower_bound: true) when its "
                                "values at the grid's edge (or next to cells without a level) reach that level, "
                                f"or when the population raster leaves more than {UNCOVERED_SHARE:.0%} of its area "
-                               "above that level uncovered (people above it; the exposure's rule, by cell centres)",
+                               "above that level uncovered, outside its extent or on its nodata cells (people above "
+                               "it; the exposure's rule, by cell centres)",
            "grid": grid.to_dict(), "ground_h_m": ground_h, "cards": cardset.phases, "ranking": ranked,
            "warnings": warnings}
     if outside:
@@ -401,7 +404,8 @@ def comparison_table(doc: dict[str, Any], *, warnings: bool = True) -> str:
         lines.append("| " + " | ".join(cells) + " |")
     if starred:
         lines += ["", "\\* lower bound: the zone above this level reaches the grid's edge (a wider --margin counts it "
-                  "whole) or lies partly outside the population raster (people there are unknown); see the warnings. A route ranked by a starred count may rank too well"]
+                  "whole) or lies partly outside the population raster or on its cells without data (people there "
+                  "are unknown); see the warnings. A route ranked by a starred count may rank too well"]
     if any(r.get("tie") for r in doc["ranking"]):
         lines += ["", f"(tie): {doc.get('tie_rule', 'equal scores share a rank')}"]
     if warnings and doc.get("warnings"):

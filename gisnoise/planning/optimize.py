@@ -26,9 +26,10 @@ The method (stated):
    level, then person-dB, then peak dwelling level; a tie is not better), the direct route
    is kept and returned, and the summary says so (``kept_direct``, ``note``).
 
-The population raster must hold both pads (a pad outside it is refused: there the search
-would count nobody); when more than 1 % of the search area lies outside it, a warning says
-so (the search takes nobody there and may be drawn into it).
+The population raster must hold both pads (a pad outside it, or on one of its nodata cells, is
+refused: there the search would count nobody); when more than 1 % of the search area lies outside
+it or on its nodata cells, a warning says so (the search takes nobody there and may be drawn into
+it), and the re-evaluation marks counts that reach such cells as lower bounds.
 """
 
 from __future__ import annotations
@@ -257,11 +258,12 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
 
     ``avoid`` are no-fly polygons in WGS84 (shapely).  The result's ``summary`` states the
     corridor width, turn radius, lengths, detour and the re-evaluated people above the ranking
-    level of the direct and the returned route; ``kept_direct`` is true (with a one-line ``note``) when
+    level of the direct and the returned route (``lower_bound_<level>_direct``, ``..._optimized``: whether each is a
+    lower bound, as the comparison flags it); ``kept_direct`` is true (with a one-line ``note``) when
     the searched route was not better than the direct one, which is then returned
     (``searched_length_m``, ``people_above_<level>_searched`` state the searched route); ``warnings``
-    (also appended to the comparison's) name a search area partly outside the population raster.
-    A pad outside the population raster is refused (field ``from`` or ``to``).  ``progress`` is called with the
+    (also appended to the comparison's) name a search area partly outside the population raster or on its nodata
+    cells.  A pad outside the population raster, or on a nodata cell, is refused (field ``from`` or ``to``).  ``progress`` is called with the
     fraction done (the search up to 0.5, the re-evaluation of both routes after it); ``cancel`` is polled between
     the search's graph solutions and while the routes are evaluated (true raises
     :class:`~gisnoise.errors.Cancelled`).
@@ -276,8 +278,8 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
         for fld, pt in (("from", start), ("to", goal)):
             if pad_outside(population, pt):
                 raise InputError(f"{fld}: the pad {pt[0]:g},{pt[1]:g} (lon,lat) lies outside the population raster "
-                                 f"({population.source}): there the search would count nobody (lon and lat "
-                                 "swapped?)", field=fld)
+                                 f"({population.source}) or on its cells without data: there the search would "
+                                 "count nobody (lon and lat swapped?)", field=fld)
     veh = VehicleModel.from_dict(vehicle)
     radius = veh.cruise_speed_m_s ** 2 / (GRAVITY * math.tan(math.radians(veh.max_bank_deg)))
     if turn_radius_m is not None:
@@ -307,7 +309,7 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
     avoid_grown = shapely.union_all(avoid_m) if avoid_m else None
     people = _people_field(grid, population, buildings)
     warnings: list[str] = []
-    share = 0.0  # of the search area's cells whose centre the population raster does not cover
+    share = 0.0  # of the search area's cells whose centre the population raster does not cover (or holds nodata)
     if population is not None:
         rows_in, cols_in = np.nonzero(inside)
         share = float(np.mean(~population_coverage(population, grid, rows_in, cols_in))) if rows_in.size else 0.0
@@ -389,6 +391,9 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
         x = rows[n]
         return float((x.get("people_above") or x.get("residents_above") or {}).get(key, 0.0))
 
+    def low(n: str) -> bool:  # the count is a lower bound: its zone is cut by the grid or lies partly off the raster
+        return bool((rows[n].get("lower_bound") or {}).get(key, False))
+
     searched = length(best)
     kept = rows["optimized"]["rank"] >= rows["direct"]["rank"]  # a tie is not better: the direct route is simpler
     note = None
@@ -406,6 +411,7 @@ def optimize_route(start: tuple[float, float], goal: tuple[float, float], cards:
         "detour_pct": 100.0 * (length(best) / direct - 1.0), "altitude_m": altitude_m,
         "rank_level_db": rank_level_db, "waypoints": int(len(best)),
         f"people_above_{key}_direct": above("direct"), f"people_above_{key}_optimized": above(returned),
+        f"lower_bound_{key}_direct": low("direct"), f"lower_bound_{key}_optimized": low(returned),
         "reduction_people": above("direct") - above(returned),
         "reduction_pct": 100.0 * (1 - above(returned) / above("direct")) if above("direct") > 0 else 0.0,
         "kept_direct": kept, "note": note, "searched_length_m": searched,

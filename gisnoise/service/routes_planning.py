@@ -129,7 +129,7 @@ def _check_layer(kind: str, folder: Path, name: str) -> tuple[str, dict[str, Any
         if kind == "population":
             pop = read_population(path)
             return path.name, {"total_people": pop.total, "shape": list(pop.counts.shape),
-                               "crs": pop.crs.to_string()}
+                               "crs": pop.crs.to_string(), "warnings": pop.warnings}
         b = read_buildings(path)
         return path.name, {"buildings": b.n, "fields": b.fields, "crs": b.crs.to_string()}
     except InputError as exc:  # the upload is named by its file name, never by the server's folder

@@ -160,3 +160,37 @@ def test_optimize_goes_around_the_block(make_client, tmp_path):
     # pads closer than 4 turn radii: the request's fields start and goal, not the command line's --from/--to
     near = assert_names_field(client.post("/routes/optimize", json={**body, "goal": body["start"]}), 422, "goal")
     assert near["detail"].startswith("start and goal are 0 m apart;") and "--" not in near["detail"], near
+
+
+def test_nodata_and_density_rasters_are_said_in_the_answers(make_client, tmp_path):
+    """A population layer holding nodata east of x = 200 m (a raster ending at a border): a route 400 m east runs
+    over no data, so its counts are lower bounds and the answer's warnings say so, as for a raster ending there.  A
+    raster of 20 000 people in one 10 m cell (a density taken as people per cell) is refused on ``file``; one of 4 000
+    (over a hectare: 400 000 per km^2) is stored with a warning in the upload's answer."""
+    client = make_client()
+    x = -1000.0 + 10.0 * (np.arange(200) + 0.5)
+    strip = np.where(x[None, :] > 200.0, -99999.0, np.ones((200, 200)))
+
+    def tif(name, values, nodata=-99999.0):
+        with rasterio.open(tmp_path / name, "w", driver="GTiff", width=values.shape[1], height=values.shape[0],
+                           count=1, dtype="float32", crs=CRS.from_user_input(TMERC).to_wkt(), nodata=nodata,
+                           transform=Affine(10.0, 0, -1000, 0, -10.0, 1000)) as d:
+            d.write(values.astype(np.float32), 1)
+        return (tmp_path / name).read_bytes()
+
+    assert upload(client, "population", "border", "strip.tif", tif("strip.tif", strip)).status_code == 201
+    body = {"routes": [route_csv(0.0), route_csv(400.0)], "names": ["over", "beside"], "cards": [OMNI],
+            "population": "border", "ground_h_m": 0.0, "grid": {"resolution_m": 10.0, "margin_m": 150.0}}
+    r = client.post("/routes/compare", json=body)
+    assert r.status_code == 200, r.text
+    doc = r.json()
+    beside = next(x for x in doc["ranking"] if x["route"] == "beside")
+    assert beside["population_uncovered_share"] > 0.4 and beside["lower_bound"]["55"]  # the grid: 150 m about both
+    assert any(w.startswith("beside: the population raster (strip.tif) does not cover") for w in doc["warnings"])
+    dense = np.zeros((200, 200))
+    dense[100, 100] = 20000.0
+    said = assert_names_field(upload(client, "population", "d", "dense.tif", tif("dense.tif", dense)), 422, "file")
+    assert "dense.tif" in said["detail"] and "looks like a density" in said["detail"]
+    dense[100, 100] = 4000.0
+    ok = upload(client, "population", "d", "thin.tif", tif("thin.tif", dense))
+    assert ok.status_code == 201 and len(ok.json()["warnings"]) == 1 and "density" in ok.json()["warnings"][0]
