@@ -158,6 +158,20 @@ def test_absorption_pressure_and_broadcast():
         assert err.value.field == field
 
 
+@pytest.mark.parametrize("kwargs, field, said", [
+    ({"temperature_c": 293.15}, "temperature_c", "293.15 K is 20 deg C"),          # kelvin
+    ({"pressure_kpa": 101325.0}, "pressure_kpa", "101325 Pa is 101.325 kPa"),     # pascal
+    ({"pressure_kpa": 1013.25}, "pressure_kpa", "1013.25 hPa is 101.325 kPa"),    # hectopascal
+])
+def test_absorption_refuses_air_in_other_units_naming_the_unit(kwargs, field, said):
+    # the same air in other units gave 0.0031 dB/m (pascal read as kPa) for the 0.0050 of ISO 9613-1 at 1 kHz,
+    # 20 C, 70 %: no air near the ground is 293 deg C or 101325 kPa
+    args = {"f_hz": 1000.0, "temperature_c": 20.0, "humidity_pct": 70.0, **kwargs}
+    with pytest.raises(InputError, match=said) as err:
+        acoustics.atmospheric_absorption(**args)
+    assert err.value.field == field
+
+
 def test_absorption_correction_only_where_band_clears_background():
     f = np.array([500.0, 1000.0, 4000.0])
     alpha = acoustics.atmospheric_absorption(f, 15.0, 60.0, 100.0)

@@ -50,12 +50,40 @@ def _positive_scalar(value: Any, name: str) -> float:
     return v
 
 
+AIR_TEMPERATURE_C = (-90.0, 60.0)
+"""Air temperatures met near the ground, deg C (the records: -89.2 and 56.7 deg C): outside, a temperature is
+in another unit (293.15: kelvin)."""
+
+AIR_PRESSURE_KPA = (25.0, 120.0)
+"""Atmospheric pressures from the highest summits (about 33 kPa) to the lowest valleys (about 108 kPa), kPa:
+outside, a pressure is in another unit (101325: pascal; 1013.25: hectopascal)."""
+
+
 def _temperature(value: Any, name: str = "temperature_c") -> np.ndarray:
-    """Finite air temperatures, deg C, above absolute zero."""
+    """Finite air temperatures, deg C, within :data:`AIR_TEMPERATURE_C`."""
     t = _finite(value, name)
-    if np.any(t <= -273.15):
-        raise InputError(f"{name} must be > -273.15, got {t[t <= -273.15].flat[0]}", field=name)
+    lo, hi = AIR_TEMPERATURE_C
+    bad = (t < lo) | (t > hi)
+    if np.any(bad):
+        v = float(t[bad].flat[0])
+        hint = f" ({v:g} K is {v - 273.15:g} deg C)" if 180.0 <= v <= 340.0 else ""
+        raise InputError(f"{name} must be an air temperature in deg C within [{lo:g}, {hi:g}], got {v:g}{hint}",
+                         field=name)
     return t
+
+
+def _air_pressure(value: Any, name: str = "pressure_kpa") -> np.ndarray:
+    """Finite atmospheric pressures, kPa, within :data:`AIR_PRESSURE_KPA`."""
+    p = _finite(value, name)
+    lo, hi = AIR_PRESSURE_KPA
+    bad = (p < lo) | (p > hi)
+    if np.any(bad):
+        v = float(p[bad].flat[0])
+        hint = (f" ({v:g} Pa is {v / 1000:g} kPa)" if 2.5e4 <= v <= 1.2e5 else
+                f" ({v:g} hPa is {v / 10:g} kPa)" if 250.0 <= v <= 1200.0 else "")
+        raise InputError(f"{name} must be an atmospheric pressure in kPa within [{lo:g}, {hi:g}], got {v:g}{hint}",
+                         field=name)
+    return p
 
 
 def _bands_of(L_bands: Any, f_hz: Any) -> tuple[np.ndarray, np.ndarray]:

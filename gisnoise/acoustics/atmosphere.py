@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from gisnoise.acoustics._checks import _array, _bands_of, _finite, _positive, _scalar, _temperature
+from gisnoise.acoustics._checks import _air_pressure, _array, _bands_of, _finite, _positive, _scalar, _temperature
 from gisnoise.acoustics.weighting import a_weighting
 from gisnoise.errors import InputError
 
@@ -47,18 +47,20 @@ def atmospheric_absorption(f_hz: Any, temperature_c: Any, humidity_pct: Any, pre
     oxygen and nitrogen from the molar concentration of water vapour.  The
     standard states +-10 % accuracy for -20 to 50 deg C, 10 to 100 % relative
     humidity, 50 Hz to 10 kHz and pressures below 200 kPa; outside, the formula
-    is evaluated as is.  Bands use their exact mid-band frequency.
+    is evaluated as is.  Temperatures and pressures no air near the ground has (a
+    temperature in kelvin, a pressure in pascal or hectopascal) are refused.  Bands
+    use their exact mid-band frequency.
 
     Parameters
     ----------
     f_hz : float or array_like
         Frequency, Hz (>= 0).
     temperature_c : float or array_like
-        Air temperature, deg C.
+        Air temperature, deg C (-90 to 60).
     humidity_pct : float or array_like
         Relative humidity, % (0-100).
     pressure_kpa : float or array_like
-        Atmospheric pressure, kPa (> 0).
+        Atmospheric pressure, kPa (25 to 120).
 
     Returns
     -------
@@ -76,7 +78,7 @@ def atmospheric_absorption(f_hz: Any, temperature_c: Any, humidity_pct: Any, pre
     if np.any((hr < 0) | (hr > 100)):
         raise InputError(f"humidity_pct must be within [0, 100], got {hr[(hr < 0) | (hr > 100)].flat[0]}",
                          field="humidity_pct")
-    pa = _positive(pressure_kpa, "pressure_kpa")
+    pa = _air_pressure(pressure_kpa)
     pr, t0, t01 = 101.325, 293.15, 273.16
     tk = t + 273.15
     psat_rel = 10.0 ** (-6.8346 * (t01 / tk) ** 1.261 + 4.6151)  # p_sat / p_r

@@ -29,7 +29,7 @@ from gisnoise.design.snr import snr_distance
 from gisnoise.errors import DesignError, ScenarioError
 from gisnoise.geo import LocalFrame
 from gisnoise.jsonio import JsonObject, read_json_file
-from gisnoise.model import PHASES, ModelCard, load_card
+from gisnoise.model import PHASES, ModelCard, card_of_field
 
 __all__ = ["SCHEMA", "OBJECTIVES", "Design", "Plan", "load_plan", "resolve_plan"]
 
@@ -188,7 +188,7 @@ def load_plan(path: str | os.PathLike[str]) -> Plan:
 def _load_card(ref: Any, base_dir: Path | None) -> ModelCard:
     if isinstance(ref, ModelCard):
         return ref
-    return load_card(ref, "card", base_dir, _Doc)
+    return card_of_field(ref, "card", base_dir, _Doc)
 
 
 def _polygons(obj: Any, fld: str) -> list[list[list[list[float]]]]:

@@ -35,7 +35,7 @@ from gisnoise.model.ansatz import REFERENCE_DISTANCE_M, Ansatz
 from gisnoise.model.effects import get_ansatz
 from gisnoise.model.plausibility import check_card
 
-__all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "save", "load_card", "from_dict",
+__all__ = ["ModelCard", "SCHEMA", "PHASES", "load", "loads", "dump", "dumps", "save", "card_of_field", "from_dict",
            "with_parameters", "register_card_schema"]
 
 SCHEMA = "gisnoise/model-card/1"
@@ -304,7 +304,7 @@ def with_parameters(card: ModelCard, p: Any, **changes: Any) -> ModelCard:
     return replace(card, parameters=params, **changes)
 
 
-def load_card(ref: Any, fld: str, base_dir: Path | None, reader: type[JsonObject]) -> ModelCard:
+def card_of_field(ref: Any, fld: str, base_dir: Path | None, reader: type[JsonObject]) -> ModelCard:
     """The model card a document's field ``fld`` names.
 
     ``ref`` is a card object (mapping), a card file (``.json`` or a path; relative to

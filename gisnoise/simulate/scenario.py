@@ -62,7 +62,7 @@ from gisnoise.errors import ScenarioError
 from gisnoise.flight import G
 from gisnoise.geo import LocalFrame
 from gisnoise.jsonio import JsonObject, read_json_file
-from gisnoise.model import PHASES, ModelCard, load_card
+from gisnoise.model import PHASES, ModelCard, card_of_field
 from gisnoise.simulate.effects import _EFFECT_KEYS, EFFECTS
 
 __all__ = ["SCHEMA", "Scenario", "load_scenario", "resolve_scenario", "scenario_copy"]
@@ -161,7 +161,7 @@ def resolve_scenario(scenario: Mapping[str, Any], *, base_dir: str | os.PathLike
             raise ScenarioError(f"scenario: field 'vehicle.cards.{ph}': unknown phase; known: "
                                 f"{', '.join(PHASES)}", field=f"vehicle.cards.{ph}")
     card_refs.update(given)
-    cards = {ph: load_card(ref, f"vehicle.cards.{ph}", bdir, _Obj) for ph, ref in card_refs.items()}
+    cards = {ph: card_of_field(ref, f"vehicle.cards.{ph}", bdir, _Obj) for ph, ref in card_refs.items()}
     ref_p = v.num("reference_power_w", cards["horizontal"].reference_power_w, lo=0.0, lo_open=True)
     for ph, cd in cards.items():
         if abs(cd.reference_power_w - ref_p) > 1e-9 * ref_p:
