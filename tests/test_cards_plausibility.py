@@ -164,3 +164,17 @@ def test_a_card_as_loud_or_louder_farther_away_is_refused_naming_p6(p6, rise):
     assert e.value.field == "parameters"
     # the least spreading that falls at all passes (a line source's 3 dB per doubling: p6 = 0.5)
     assert card_problems(cards.from_dict({**DEMO, "parameters": {**DEMO["parameters"], "p6": 0.5}})) == []
+
+
+@pytest.mark.parametrize("name", ["p3", "p5"])
+def test_a_phase_angle_given_in_degrees_is_refused_naming_it(name):
+    # Table 1's horizontal card in degrees (p3 -0.28 rad = -16 deg, p5 1.049 rad = 60.1 deg): sin() takes any
+    # number, so the card's levels stay plausible while its loudest direction moves; no fit gives beyond +-pi/2
+    from dataclasses import replace
+
+    card = cards.load("published-horizontal")
+    deg = replace(card, parameters={**card.parameters, name: float(np.degrees(card.parameters[name]))})
+    problems = card_problems(deg)
+    assert len(problems) == 1 and problems[0].startswith(f"{name} = ") and "given in degrees?" in problems[0]
+    assert f"is {card.parameters[name]:.4g} rad" in problems[0]
+    assert card_problems(card) == []

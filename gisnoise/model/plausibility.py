@@ -150,6 +150,23 @@ def _reference_distance_problem(card: Any) -> str | None:
             f"level is measured nearer than {lo:g} m, none farther than {hi:g} m is the source's alone")
 
 
+PHASE_ANGLES = ("p3", "p5")
+"""The directivity's phase angles (rad, Eq. 9): ``sin(phi - p3)``, ``sin(theta - p5)``.  A fit puts them within
++-pi/2 (flipping the sign of ``p2``, ``p4``); beyond +-pi they are given in degrees (Table 1's -0.28 and 1.049 rad
+are -16 and 60.1 deg), which ``sin`` would take silently for other directions."""
+
+
+def _phase_angle_problem(card: Any, names: list[str]) -> str | None:
+    """The message for a phase angle beyond +-pi (given in degrees), or None."""
+    for k in PHASE_ANGLES:
+        if k in names:
+            v = float(card.parameters[k])
+            if np.isfinite(v) and abs(v) > np.pi:
+                return (f"{k} = {v:.4g} is no angle in radians (within +-pi; a fit gives +-pi/2): given in degrees? "
+                        f"{v:.4g} deg is {np.radians(v):.4g} rad")
+    return None
+
+
 def _problems(card: Any) -> list[tuple[str, str]]:
     """``(field, message)`` of every problem :func:`card_problems` finds."""
     bad_ref = _reference_distance_problem(card)
@@ -223,7 +240,8 @@ def _problems(card: Any) -> list[tuple[str, str]]:
                             f"{MAX_LEVEL_STD_DB:g} dB); uncertain: " + ", ".join(
                                 f"{k} = {float(card.parameters[k]):.4g} +- "
                                 f"{np.sqrt(max(var[names.index(k)], 0)):.3g}" for k in culprits)))
-    return out
+    phase = None if out else _phase_angle_problem(card, names)  # levels out of range say enough
+    return out + ([("parameters", phase)] if phase is not None else [])
 
 
 def card_problems(card: Any) -> list[str]:
