@@ -225,7 +225,7 @@ def schedule_findings(schedule: Schedule, grid: GridSpec) -> tuple[list[str], di
                 raise InputError(f"{schedule.source}: flight {f.id!r}: {exc}", field="ground_h_m") from None
     ground = flights_ground(schedule)
     dem = None
-    if schedule.dem is not None:
+    if schedule.dem is not None and not isinstance(schedule.dem, np.ndarray):  # an array: heights per cell
         from gisnoise.geo import Dem, read_dem
 
         dem = schedule.dem if isinstance(schedule.dem, Dem) else read_dem(schedule.dem)
