@@ -27,7 +27,7 @@ def test_default_tiling_feeds_every_thread_and_moves_the_progress():
                      reference_power_w=3000.0)
     grid = GridSpec(TMERC, Affine(10.0, 0.0, -1000.0, 0.0, -10.0, 500.0), 200, 100)  # 20 000 cells < one tile
     sched = Schedule(flights=(Flight("a", traj, {"day": 10, "night": 1}),), cards=[card], grid=grid,
-                     thresholds_db=(55.0,))
+                     ground_h_m=0.0, thresholds_db=(55.0,))  # a flyover 100 m up: the ground is given
     seen: list[float] = []
     auto = evaluate_operations(sched, threads=2, single_process=True, progress=seen.append)
     whole = evaluate_operations(sched, threads=2, single_process=True, tile_cells=10**6)  # one tile

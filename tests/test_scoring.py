@@ -141,7 +141,8 @@ def test_cells_without_value_keep_their_people_out_of_every_class(case):
 
 def test_score_route_equals_the_class_counts_of_its_full_map(case):
     grid, pop, traj, band = case
-    row, got_band = score_route(traj, CardSet([card()]), grid, population=pop, levels=EDGES, engine="numpy")
+    row, got_band = score_route(traj, CardSet([card()]), grid, population=pop, levels=EDGES, ground_h=0.0,
+                                engine="numpy")
     np.testing.assert_array_equal(got_band, band)
     pts = population_points(pop, grid)
     above, dose, _ = plain_people(band, grid, pts, EDGES, EDGES[0])

@@ -51,6 +51,10 @@ from gisnoise.maps.grids import (
     grid_for_trajectory,
     level_table,
 )
+from gisnoise.maps.ground import (
+    ChosenGround,
+    checked_ground,
+)
 from gisnoise.maps.hemisource import (
     prepare_flight,
 )
@@ -107,4 +111,4 @@ from gisnoise.maps.threads import (
     map_threads,
 )
 
-__all__ = ['audible_distance', 'auto_margin', 'band_unit', 'CardSet', 'check_power_ranges', 'class_colours', 'class_labels', 'clip_warnings', 'clipped_levels', 'colour_for', 'contour_features', 'contours_geojson', 'contours_text', 'DEFAULT_ENGINE', 'default_threads', 'directivity_grid', 'ENGINES', 'evaluate_flying', 'evaluate_grid', 'evaluate_grid_fast', 'fast_engine_serves', 'FlightFindings', 'flight_findings', 'crs_scale_warning', 'FlightInstants', 'geojson_text', 'grid_for_map', 'grid_for_trajectory', 'isobands', 'ISOLINE_COLOUR', 'isolines', 'level_table', 'make_map', 'map_threads', 'MapResult', 'MAX_DISTANCE_M', 'metric_levels', 'METRICS', 'NODATA', 'NOISE_CLASSES', 'palette_doc', 'PALETTE_NAME', 'parse_levels', 'PHASE_COLOURS', 'plot_directivity', 'plot_map', 'prepare_flight', 'Receivers', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'sel_edge_bound', 'sel_margin', 'SEL_OFFSET_DB', 'SIZED_METRICS', 'snapshot_name', 'threshold_name', 'TIE_DB', 'tie_std', 'warm_up', 'window_lattice', 'WindowResult', 'write_geojson', 'write_geotiff', 'Z95']
+__all__ = ['audible_distance', 'auto_margin', 'band_unit', 'CardSet', 'check_power_ranges', 'checked_ground', 'ChosenGround', 'class_colours', 'class_labels', 'clip_warnings', 'clipped_levels', 'colour_for', 'contour_features', 'contours_geojson', 'contours_text', 'DEFAULT_ENGINE', 'default_threads', 'directivity_grid', 'ENGINES', 'evaluate_flying', 'evaluate_grid', 'evaluate_grid_fast', 'fast_engine_serves', 'FlightFindings', 'flight_findings', 'crs_scale_warning', 'FlightInstants', 'geojson_text', 'grid_for_map', 'grid_for_trajectory', 'isobands', 'ISOLINE_COLOUR', 'isolines', 'level_table', 'make_map', 'map_threads', 'MapResult', 'MAX_DISTANCE_M', 'metric_levels', 'METRICS', 'NODATA', 'NOISE_CLASSES', 'palette_doc', 'PALETTE_NAME', 'parse_levels', 'PHASE_COLOURS', 'plot_directivity', 'plot_map', 'prepare_flight', 'Receivers', 'receivers_for', 'require_numba', 'run_grid', 'run_window', 'segment_cells', 'sel_edge_bound', 'sel_margin', 'SEL_OFFSET_DB', 'SIZED_METRICS', 'snapshot_name', 'threshold_name', 'TIE_DB', 'tie_std', 'warm_up', 'window_lattice', 'WindowResult', 'write_geojson', 'write_geotiff', 'Z95']

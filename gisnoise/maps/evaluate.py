@@ -1,7 +1,8 @@
 """The evaluator: noise metrics of a trajectory on a grid of receivers, on the NumPy or the numba engine.
 
 For every receiver (cell centre of a :class:`~gisnoise.geo.grid.GridSpec`, at
-``receiver_height`` above flat ground or a DEM) and every evaluation instant of the
+``receiver_height`` above flat ground or a DEM, the ground taken and checked by the
+ground rule of every map, :mod:`gisnoise.maps.ground`) and every evaluation instant of the
 trajectory (each sample, or finer with ``substeps``), the UAV level ``L_UAV`` is
 computed by the card's ansatz (:mod:`gisnoise.model.ansatz`, one model definition for
 evaluation, fitting and diagnosis).  The card of each instant is chosen by the
@@ -150,14 +151,18 @@ def evaluate_grid(
     metrics : sequence of str
         Any of ``LAmax``, ``LAeq``, ``SEL``.
     receiver_height : float
-        Receiver height above the ground, m.
+        Receiver height above the ground, m: 0 (on the ground) or more.
     dem : path, Dem or ndarray, optional
         Ground heights: a DEM file or :class:`~gisnoise.geo.raster.Dem` (resampled to the
         grid, bilinear) or an array of shape ``grid.shape`` (m).  Heights are taken in the
         trajectory's vertical datum (ellipsoidal) after adding ``dem_offset_m``.
     ground_h : float, optional
-        Flat ground's ellipsoidal height when there is no DEM, m.  Default: the
-        trajectory's lowest height (a route that takes off or lands).
+        Flat ground's ellipsoidal height when there is no DEM, m, at or below the trajectory's lowest flying
+        point.  Default, by the ground rule of every map (:mod:`gisnoise.maps.ground`): the ground the
+        trajectory's source states (a waypoints route), else the trajectory's own take-off or landing point
+        (:func:`gisnoise.flight.ground_from_track`); a trajectory that starts and ends in the air (a flyover, a
+        slice of a log) is refused (:class:`~gisnoise.errors.InputError` on ``ground_h``).
+        ``metadata["ground_h_source"]`` says which.
     dem_offset_m : float
         Added to DEM heights (e.g. the geoid undulation for an orthometric DEM), m.
     period_s : float, optional
@@ -217,6 +222,12 @@ def evaluate_grid(
     MapResult
         With ``engine="fast"`` also ``metadata["engine"] == "fast"`` and
         ``metadata["cells_below_floor"]``.
+
+    Raises
+    ------
+    InputError
+        On the first wrong input, naming its field; as :func:`gisnoise.maps.make_map` refuses them: no ground known,
+        a ``ground_h`` above the trajectory's lowest flying point, a ``receiver_height`` below 0.
     """
     opts = MapOptions(
         metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground_h, dem_offset_m=dem_offset_m,

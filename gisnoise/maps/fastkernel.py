@@ -301,7 +301,7 @@ def evaluate_fast(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapResu
     chunk = chunk_cells_of(opts.chunk_cells, DEFAULT_CHUNK_CELLS)
     temp = as_float(opts.temperature_c, "temperature_c", minimum=-273.15, strict=True)
 
-    rc = receivers_for(grid, [traj], receiver_height=opts.receiver_height, dem=opts.dem, ground_h=opts.ground_h,
+    rc = receivers_for(grid, [traj], receiver_height=opts.receiver_height, dem=opts.dem, ground_h=req.ground,
                        dem_offset_m=opts.dem_offset_m)
     frame = rc.frame
     fl = prepare_flight(traj, req.cardset, frame, substeps=req.substeps, background=background,

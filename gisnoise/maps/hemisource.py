@@ -388,7 +388,7 @@ def evaluate_hemisphere_fast(req: MapRequest, opts: MapOptions) -> MapResult:
     traj, grid, metrics, thresholds, period, snap = req.traj, req.grid, req.metrics, req.thresholds, req.period, req.snap
     floor = None if opts.floor_db is None else as_float(opts.floor_db, "floor_db")
     chunk = chunk_cells_of(opts.chunk_cells, 1 << 17)
-    rc = receivers_for(grid, [traj], receiver_height=opts.receiver_height, dem=opts.dem, ground_h=opts.ground_h,
+    rc = receivers_for(grid, [traj], receiver_height=opts.receiver_height, dem=opts.dem, ground_h=req.ground,
                        dem_offset_m=opts.dem_offset_m)
     frame = rc.frame
     s_enu = np.stack(frame.to_enu(traj.lat, traj.lon, traj.h), axis=-1)

@@ -15,7 +15,8 @@ or waypoints: :func:`gisnoise.flight.routes.read_trajectory`), chooses the recei
 
 Two rules hold for every face:
 
-* the ground: without a DEM or a stated ground height, flat ground is taken from the
+* the ground (:mod:`gisnoise.maps.ground`, the same rule for :func:`~gisnoise.maps.evaluate.evaluate_grid`):
+  without a DEM or a stated ground height, flat ground is taken from the
   track only when the track starts or ends on the ground
   (:func:`gisnoise.flight.ground_from_track`); otherwise the map is refused
   (:class:`~gisnoise.errors.InputError` on ``ground_h``, naming ``--ground-height`` and
@@ -59,9 +60,9 @@ from typing import Any
 import numpy as np
 
 from gisnoise.errors import InputError
-from gisnoise.flight import GROUND_HINT_CLI, Trajectory, flying_parts, ground_from_track, read_route
+from gisnoise.flight import GROUND_HINT_CLI, Trajectory, flying_parts, read_route
 from gisnoise.geo import GridSpec
-from gisnoise.limits import check_receivers, check_work
+from gisnoise.limits import check_work
 from gisnoise.maps.cardset import CardSet, as_cardset
 from gisnoise.maps.clipping import clip_warnings, parse_levels
 from gisnoise.maps.contours import contours_text, write_geojson
@@ -69,6 +70,7 @@ from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.flightchecks import crs_scale_warning, flight_findings
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map, resolution_warning
+from gisnoise.maps.ground import GROUND_FROM_TRACK, checked_ground, map_ground
 from gisnoise.maps.hemifill import filled_share_warning
 from gisnoise.maps.prepare import dem_nodata_warning
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
@@ -210,11 +212,11 @@ def make_map(
     cardset = as_cardset(cards)
     for card in cardset.cards:
         check_card(card)   # the plausibility guard: an implausible card never makes a map
-    # the shared rule set (gisnoise.limits): a ground the user gives lies below the flight; a ground taken from the
-    # track's own take-off or landing point is within the log's height noise of it by construction
-    check_receivers(receiver_height, ground_h, traj.flying_heights())
-    from_track = ground_h is None and dem is None and route.ground_h_m is None and "ground_h_m" not in traj.metadata
-    ground_h = map_ground(traj, ground_h, dem, route.ground_h_m)
+    # the ground rule of every map (gisnoise.maps.ground): a ground the user gives lies below the flight; a ground
+    # taken from the track's own take-off or landing point is within the log's height noise of it by construction
+    ground = checked_ground([traj], receiver_height, ground_h, dem, stated_h=route.ground_h_m, hint=GROUND_HINT_CLI)
+    from_track = ground is not None and ground.source == GROUND_FROM_TRACK
+    ground_h = None if ground is None else float(ground)
     found = flight_findings(traj, cardset, ground_h=ground_h if from_track else None,
                             dem=dem if dem is not None and not isinstance(dem, np.ndarray) else None,
                             dem_offset_m=dem_offset_m)
@@ -242,7 +244,7 @@ def make_map(
         if progress is not None:
             progress(0.9 * f)
 
-    kw: dict[str, Any] = dict(metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground_h,
+    kw: dict[str, Any] = dict(metrics=metrics, receiver_height=receiver_height, dem=dem, ground_h=ground,
                               dem_offset_m=dem_offset_m, threshold_db=threshold_db, background=background,
                               substeps=substeps, uncertainty=uncertainty, engine=engine, cancel=cancel)
     _check_times(traj, snapshot_t, period_s, metrics)  # refused before the grid is announced
@@ -253,8 +255,6 @@ def make_map(
                              **kw)
     t_eval = time.perf_counter() - t_eval
     _check_cells(result, traj.source)
-    if from_track:
-        result.metadata["ground_h_source"] = GROUND_FROM_TRACK
     # the vertical datum of the track (flight logs: MSL + geoid undulation, and which; the estimator's height)
     result.metadata.setdefault("trajectory", {}).update(
         {k: traj.metadata[k] for k in TRACK_HEIGHT_KEYS if k in traj.metadata})
@@ -357,32 +357,6 @@ TRACK_HEIGHT_KEYS = ("height_datum", "height_note", "height_anchor_m", "height_a
                      "geoid_model", "geoid_undulation_m")
 """The trajectory metadata on its heights that the map metadata repeats (see :mod:`gisnoise.flight.logs`)."""
 
-GROUND_FROM_TRACK = "take-off or landing point of the track"
-"""The map metadata's ``ground_h_source`` when the ground is the track's own take-off or landing height."""
-
-
-def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: float | None = None) -> float | None:
-    """The flat ground's height for a map (m), by the ground rule of the module docstring.
-
-    ``ground_h`` (given) wins, then a DEM (None: the DEM is the ground), then the height the
-    source states (waypoints), then the take-off or landing point of the track; a track
-    that starts and ends in the air raises :class:`~gisnoise.errors.InputError`.
-    """
-    if ground_h is not None or dem is not None:
-        return ground_h
-    if stated_h is None:
-        stated_h = traj.metadata.get("ground_h_m")
-    if stated_h is not None:
-        return float(stated_h)
-    g = ground_from_track(traj)
-    if g is None:
-        lo = float(np.min(traj.h))
-        raise InputError(f"{traj.source}: ground unknown: the track neither starts nor ends on the ground (lowest "
-                         f"point {lo:.1f} m); give {GROUND_HINT_CLI}",
-                         field="ground_h")
-    return g
-
-
 def flight_height(traj: Trajectory, ground_h: float | None, dem: Any, dem_offset_m: float = 0.0,
                   receiver_height: float = 1.5) -> float | None:
     """The flight's median height above the receivers while flying, m (None when unknown).
@@ -433,10 +407,14 @@ def evaluate_flying(traj: Trajectory, cards: Any, grid: Any, *, period_s: float 
 
     A track flying throughout is evaluated as it is; otherwise over its flying stretches, summed
     in energy (see the module docstring).  ``kw`` are :func:`evaluate_grid`'s further arguments.
+    The ground is the whole track's, by the ground rule of every map (:mod:`gisnoise.maps.ground`: given, else
+    stated, else the track's take-off or landing point, else refused), not each stretch's.
     """
     cardset = as_cardset(cards)
     if bool(np.all(traj.flying)):
         return evaluate_grid(traj, cardset, grid, period_s=period_s, snapshot_t=snapshot_t, progress=progress, **kw)
+    # the stretches share the track's ground: a stretch in the air does not start on it
+    kw = {**kw, "ground_h": checked_ground([traj], kw.get("receiver_height"), kw.get("ground_h"), kw.get("dem"))}
     return _evaluate_flying(traj, cardset, grid, period_s, snapshot_t, progress or (lambda f: None), kw)
 
 

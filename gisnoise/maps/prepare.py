@@ -18,7 +18,6 @@ array([0.5, 1.5, 1. ])
 
 from __future__ import annotations
 
-import logging
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from gisnoise.geo import Dem, GridSpec, LocalFrame, read_dem, resample_dem
 from gisnoise.limits import check_map_level
 from gisnoise.maps._checks import as_float
 from gisnoise.maps.cardset import CardSet, as_cardset
+from gisnoise.maps.ground import GROUND_GIVEN, ChosenGround, checked_ground
 from gisnoise.maps.result import METRICS, band_unit, snapshot_name, threshold_name
 from gisnoise.model import ModelCard
 
@@ -55,8 +55,6 @@ __all__ = [
     "UNCERTAINTY_NOTE",
     "Z95",
 ]
-
-log = logging.getLogger(__name__)
 
 
 # --------------------------------------------------------------------------- the request
@@ -114,6 +112,9 @@ class MapRequest:
         LAeq period, s (with LAeq).
     snap : float or None
         Snapshot time, s.
+    ground : ChosenGround or None
+        The flat ground under the receivers by the map's ground rule (:func:`gisnoise.maps.ground.checked_ground`);
+        None: the DEM is the ground.
     """
 
     traj: Trajectory
@@ -126,6 +127,7 @@ class MapRequest:
     integral: bool
     period: float | None
     snap: float | None
+    ground: ChosenGround | None = None
 
 
 def check_request(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRequest:
@@ -134,7 +136,8 @@ def check_request(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRequ
     cardset, metrics, thresholds = requested(cards, opts.metrics, opts.threshold_db, opts.snapshot_t)
     substeps, min_d = substeps_and_min_distance(opts.substeps, opts.min_distance_m)
     integral, period, snap = period_and_snapshot(traj, metrics, thresholds, opts.period_s, opts.snapshot_t)
-    return MapRequest(traj, grid, cardset, metrics, thresholds, substeps, min_d, integral, period, snap)
+    ground = checked_ground([traj], opts.receiver_height, opts.ground_h, opts.dem)  # the ground rule of every map
+    return MapRequest(traj, grid, cardset, metrics, thresholds, substeps, min_d, integral, period, snap, ground)
 
 
 def check_flight_and_grid(traj: Any, grid: Any) -> None:
@@ -287,14 +290,13 @@ class Ground:
     description: dict[str, Any]
 
 
-def ground_on_grid(grid: GridSpec, trajectories: Iterable[Trajectory] = (), *, dem: Any = None,
-                   ground_h: Any = None, dem_offset_m: Any = 0.0) -> Ground:
+def ground_on_grid(grid: GridSpec, *, dem: Any = None, ground_h: Any = None, dem_offset_m: Any = 0.0) -> Ground:
     """The ground of a map: from the DEM when given, else flat at ``ground_h``.
 
-    Without ``ground_h`` flat ground lies at the lowest height of the trajectories (a
-    warning when that point is in horizontal flight: the ground is then a guess).  With a
-    DEM the description counts the receivers outside it or on its nodata
-    (``dem_nodata_receivers``; they get nodata, and :func:`dem_nodata_warning` says so).
+    ``ground_h`` is the ground chosen by the map's ground rule (:func:`gisnoise.maps.ground.checked_ground`; a
+    :class:`~gisnoise.maps.ground.ChosenGround` names its source in the description, a plain number is given).
+    With a DEM the description counts the receivers outside it or on its nodata (``dem_nodata_receivers``; they
+    get nodata, and :func:`dem_nodata_warning` says so).
     """
     if dem is not None:
         heights = dem_on_grid(dem, grid) + as_float(dem_offset_m, "dem_offset_m")
@@ -303,17 +305,11 @@ def ground_on_grid(grid: GridSpec, trajectories: Iterable[Trajectory] = (), *, d
             raise InputError("dem: the DEM does not cover the grid", field="dem")
         return Ground(heights, float(np.nanmean(heights)), {"ground": "dem", "dem_offset_m": float(dem_offset_m),
                                                             "dem_nodata_receivers": int((~finite).sum())})
-    if ground_h is not None:
-        g = as_float(ground_h, "ground_h")
-        return Ground(None, g, {"ground": "flat", "ground_h_m": g, "ground_h_source": "given"})
-    trajs = list(trajectories)
-    if not trajs:
-        raise InputError("ground_h: give the ground height (no DEM and no trajectory)", field="ground_h")
-    g, tr = min(((float(np.min(tr.h)), tr) for tr in trajs), key=lambda v: v[0])
-    if tr.phase[int(np.argmin(tr.h))] == "horizontal":
-        log.warning("ground height taken as the trajectory's lowest point (%.1f m) although it is in "
-                    "horizontal flight there; state the ground height", g)
-    return Ground(None, g, {"ground": "flat", "ground_h_m": g, "ground_h_source": "lowest trajectory point"})
+    if ground_h is None:
+        raise InputError("ground_h: give the ground height or a DEM", field="ground_h")
+    g = as_float(ground_h, "ground_h")
+    source = ground_h.source if isinstance(ground_h, ChosenGround) else GROUND_GIVEN
+    return Ground(None, g, {"ground": "flat", "ground_h_m": g, "ground_h_source": source})
 
 
 def dem_nodata_warning(metadata: Mapping[str, Any]) -> str | None:

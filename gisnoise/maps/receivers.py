@@ -3,9 +3,9 @@
 Receivers of a grid row are taken in segments of at most :data:`SEGMENT_M` metres
 (:func:`segment_cells` cells); their local-ENU positions are exact (pyproj) at each
 segment's ends and middle (:meth:`Receivers.lattice`) and the kernel interpolates them
-quadratically in between.  :func:`receivers_for` applies the NumPy engine's ground rules
-(:func:`~gisnoise.maps.prepare.ground_on_grid`): a DEM gives each receiver its height
-above the lattice's reference height.
+quadratically in between.  :func:`receivers_for` applies the ground rule of every map
+(:func:`gisnoise.maps.ground.checked_ground`, then :func:`~gisnoise.maps.prepare.ground_on_grid`): a DEM
+gives each receiver its height above the lattice's reference height.
 
 >>> segment_cells(10.0), segment_cells(0.25)
 (102, 2048)
@@ -24,6 +24,7 @@ from gisnoise.errors import InputError
 from gisnoise.flight import Trajectory
 from gisnoise.geo import WGS84, GridSpec, LocalFrame, transformer
 from gisnoise.maps._checks import as_float
+from gisnoise.maps.ground import checked_ground
 from gisnoise.maps.prepare import ground_on_grid, local_frame
 
 __all__ = ["SEGMENT_M", "Receivers", "receivers_for", "segment_cells"]
@@ -134,15 +135,18 @@ def segment_cells(resolution_m: float) -> int:
 
 def receivers_for(grid: GridSpec, trajectories: Iterable[Trajectory] = (), *, receiver_height: float = 1.5,
                   dem: Any = None, ground_h: float | None = None, dem_offset_m: float = 0.0) -> Receivers:
-    """Receivers of ``grid`` with the NumPy evaluator's ground rules.
+    """Receivers of ``grid``, ``receiver_height`` (m) above the ground of the map's ground rule.
 
-    With a DEM the ground comes from it (frame height: the mean ground); else flat at
-    ``ground_h``, by default the lowest height of the trajectories.
+    With a DEM the ground comes from it (frame height: the mean ground); else flat at ``ground_h`` (m, checked at
+    or below every trajectory's lowest flying point), by default the ground the trajectories give themselves (a
+    route's stated ground, else a take-off or landing point; the lowest of them); trajectories all in the air
+    throughout are refused (:func:`gisnoise.maps.ground.checked_ground`).
     """
+    chosen = checked_ground(trajectories, receiver_height, ground_h, dem)
     hr = as_float(receiver_height, "receiver_height")
     lon_c, lat_c = grid.centre_wgs84()
     seg = segment_cells(min(grid.resolution))
-    ground = ground_on_grid(grid, trajectories, dem=dem, ground_h=ground_h, dem_offset_m=dem_offset_m)
+    ground = ground_on_grid(grid, dem=dem, ground_h=chosen, dem_offset_m=dem_offset_m)
     h0 = ground.h0
     if ground.heights is not None:
         valid = np.isfinite(ground.heights)

@@ -322,7 +322,7 @@ def evaluate_numpy(traj: Any, cards: Any, grid: Any, opts: MapOptions) -> MapRes
             cov[o:o + c.model.n_params, o:o + c.model.n_params] = c.cov
 
     # ground and frame
-    ground = ground_on_grid(grid, [traj], dem=opts.dem, ground_h=opts.ground_h, dem_offset_m=opts.dem_offset_m)
+    ground = ground_on_grid(grid, dem=opts.dem, ground_h=req.ground, dem_offset_m=opts.dem_offset_m)
     h0 = ground.h0
     lon_c, lat_c = grid.centre_wgs84()
     frame = local_frame(lat_c, lon_c, h0)

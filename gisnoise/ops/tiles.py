@@ -24,6 +24,7 @@ from gisnoise.flight import Trajectory, flying_parts
 from gisnoise.geo import GridSpec
 from gisnoise.maps import (
     CardSet,
+    ChosenGround,
     FlightInstants,
     Receivers,
     WindowResult,
@@ -37,7 +38,7 @@ from gisnoise.maps import (
 from gisnoise.ops.accumulate import accumulate, new_accumulators
 from gisnoise.ops.schedule import Schedule
 
-__all__ = ["DEFAULT_TILE_CELLS", "FlightParts", "Plan", "flights_ground", "make_plan", "run_local", "tile_windows"]
+__all__ = ["DEFAULT_TILE_CELLS", "FlightParts", "DAY_GROUND_SOURCE", "Plan", "flights_ground", "make_plan", "run_local", "tile_windows"]
 
 log = logging.getLogger(__name__)
 
@@ -113,18 +114,25 @@ def flights_ground(schedule: Schedule) -> float | None:
     return min(stated) if stated else None
 
 
+DAY_GROUND_SOURCE = "take-off or landing point of a flight, or a route's stated ground"
+"""The metadata's ``ground_h_source`` when a day's ground came from its flights (the schedule gives neither
+``ground_h_m`` nor ``dem``)."""
+
+
 def make_plan(schedule: Schedule, grid: GridSpec) -> Plan:
     """The receivers of ``grid`` and every flight with a count in their frame, in schedule order.
 
-    Without a DEM or a ground height, flat ground lies at the lowest ground height the
-    routes state, else at the lowest point of the flights.
+    Without a DEM or a ground height, flat ground lies at the lowest of the flights' own grounds (stated by
+    their routes, or their take-off or landing points: :func:`flights_ground`); flights all in the air
+    throughout are refused (:func:`gisnoise.maps.checked_ground`).  The schedule's ground is checked against
+    each flight by :func:`gisnoise.ops.schedule_findings`, which names the flight.
     """
     require_numba()
-    ground_h = schedule.ground_h_m if schedule.ground_h_m is not None else flights_ground(schedule)
+    day = flights_ground(schedule)
+    ground = (ChosenGround(schedule.ground_h_m) if schedule.ground_h_m is not None
+              else None if day is None else ChosenGround(day, DAY_GROUND_SOURCE))
     rc = receivers_for(grid, [f.trajectory for f in schedule.flights], receiver_height=schedule.receiver_height_m,
-                       dem=schedule.dem, ground_h=ground_h, dem_offset_m=schedule.dem_offset_m)
-    if schedule.ground_h_m is None and schedule.dem is None and ground_h is not None and rc.ground is not None:
-        rc.ground["ground_h_source"] = "take-off or landing point of a flight, or a route's stated ground"
+                       dem=schedule.dem, ground_h=ground, dem_offset_m=schedule.dem_offset_m)
     frame = rc.frame
     flights, counts, ids = [], [], []
     for f in schedule.flights:

@@ -55,6 +55,7 @@ from gisnoise.limits import check_map_level
 from gisnoise.maps import (
     SEL_OFFSET_DB,
     CardSet,
+    ChosenGround,
     MapResult,
     auto_margin,
     crs_scale_warning,
@@ -117,7 +118,7 @@ def _names(routes: Sequence[Any], names: Sequence[str] | None) -> list[str]:
 def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population: Population | None = None,
                 buildings: Buildings | None = None, metric: str = "LAmax",
                 levels: Sequence[float] = (45.0, 50.0, 55.0, 60.0, 65.0), receiver_height: float = 1.5,
-                ground_h: float = 0.0, engine: str = "numpy",
+                ground_h: float | None = None, engine: str = "numpy",
                 points: tuple[np.ndarray, np.ndarray, np.ndarray, float] | None = None,
                 period_s: float | None = None, progress: Callable[[float], Any] | None = None,
                 cancel: Callable[[], bool] | None = None) -> tuple[dict[str, Any], np.ndarray]:
@@ -132,13 +133,17 @@ def score_route(traj: Trajectory, cards: CardSet, grid: GridSpec, *, population:
     (:func:`gisnoise.exposure.population_points`), computed once when several routes share the grid.
     ``period_s``: the averaging period of ``LAeq``, s (default the route's own duration; routes compared on
     ``LAeq`` share one, :func:`compare_routes`).  ``progress`` (fraction 0-1) and ``cancel`` (true raises
-    :class:`~gisnoise.errors.Cancelled`) go to the evaluator.
+    :class:`~gisnoise.errors.Cancelled`) go to the evaluator.  ``ground_h``: the flat ground's ellipsoidal height,
+    m, by the ground rule of every map (:mod:`gisnoise.maps.ground`: checked at or below the route's lowest flying
+    point; default the route's stated ground, else its take-off or landing point; a route in the air throughout
+    is refused).
     """
     lv = [float(v) for v in levels]
     res = evaluate_flying(traj, cards, grid, metrics=(metric,), receiver_height=receiver_height,
                           ground_h=ground_h, engine=engine, period_s=period_s, progress=progress,
                           cancel=cancel)  # samples on the ground make no noise
     band = res.bands[metric]
+    ground_h = res.metadata.get("ground_h_m")  # the ground the rule took
     lr = LevelsRaster({metric: band}, grid, {metric: "dB(A)"}, {"ground_h_m": ground_h,
                                                                "period_s": res.metadata.get("period_s")})
     pts = points if points is not None or population is None else population_points(population, grid)
@@ -245,6 +250,8 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
     # one flat ground for all: given (checked against every route), else stated by the routes, else a take-off
     # or landing point; ``taken`` is the ground when the routes gave it: each track is checked against it
     ground_h, taken, warnings = common_ground(nm, trajs, stated, ground_h, receiver_height)
+    # chosen once for all routes (a given one checked against each): each route is evaluated over it as it is
+    chosen = ChosenGround(ground_h, "given" if taken is None else GROUND_FROM_ROUTES)
     outside: dict[str, Any] = {}
     found_said: list[str] = []
     for n, traj in trajs.items():  # each route as a map of it is checked, before any evaluation
@@ -275,7 +282,7 @@ def compare_routes(routes: Sequence[Any], cards: Any, *, population: Population 
                 progress((k + min(max(f, 0.0), 1.0)) / len(trajs))
 
         row, band = score_route(traj, cardset, grid, population=population, buildings=buildings, metric=metric,
-                                levels=lv, receiver_height=receiver_height, ground_h=ground_h, engine=engine,
+                                levels=lv, receiver_height=receiver_height, ground_h=chosen, engine=engine,
                                 points=pts, period_s=period, progress=part, cancel=cancel)
         row["route"] = n
         bands[n] = band
