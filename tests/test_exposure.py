@@ -112,8 +112,8 @@ def test_uniform_density_under_flyover_equals_strip_areas(flyover_map, tmp_path,
 
 def test_area_above_each_level_is_strip_width_times_map_length(flyover_map):
     traj, res = flyover_map
-    doc = map_exposure(as_levels(res), population=Population(np.zeros((1, 1)), Affine.identity(),
-                                                              CRS.from_user_input(TMERC)), edges=EDGES)
+    nobody = Population(np.zeros((1, 1)), Affine(1.0, 0.0, 0.0, 0.0, -1.0, 0.0), CRS.from_user_input(TMERC))
+    doc = map_exposure(as_levels(res), population=nobody, edges=EDGES)
     # the map is 700 m along track; the ends of the 3 km track are far outside it
     for a in doc["area_above"]["LAmax"]:
         expect = 2 * radius_at(a["level_db"], HEIGHT - HR) * 700.0

@@ -83,10 +83,10 @@ def test_areas_above_each_level_are_ground_areas_in_utm_and_in_web_mercator():
 
 
 def read_population_none(levels):
-    """A population raster of one empty cell (the document needs a layer)."""
+    """A population raster of one empty cell (the document needs a layer), north-up as every population raster."""
     from gisnoise.exposure import Population
 
-    return Population(np.zeros((1, 1)), Affine.identity(), levels.grid.crs)
+    return Population(np.zeros((1, 1)), Affine(1.0, 0.0, 0.0, 0.0, -1.0, 0.0), levels.grid.crs)
 
 
 @pytest.mark.parametrize(("crs", "lon"), [("EPSG:32632", 12.6), ("EPSG:32632", 10.52), ("EPSG:3857", 10.52)])

@@ -33,6 +33,7 @@ from gisnoise.exposure.layers import (
     Buildings,
     LevelsRaster,
     Population,
+    population_cells,
     read_buildings,
     read_levels,
     read_population,
@@ -71,7 +72,7 @@ __all__ = ['area_above', 'ASSESSMENT_HEIGHT_M', 'BLOCK_M2', 'Buildings', 'cell_v
            'facade_levels', 'facade_points', 'FacadePoints', 'fraction_above', 'ground_cell_areas', 'HEIGHT_FIELDS',
            'level_field', 'LEVEL_FIELDS', 'LevelsRaster', 'map_exposure', 'most_exposed', 'most_exposed_storeys',
            'operations_exposure', 'operations_facade_levels', 'OPERATIONS_LEVELS', 'parse_height', 'parse_levels',
-           'person_db_above', 'point_levels', 'Population', 'population_coverage', 'population_event_exposure',
+           'person_db_above', 'point_levels', 'Population', 'population_cells', 'population_coverage', 'population_event_exposure',
            'population_exposure', 'population_points', 'population_scores', 'read_buildings', 'read_levels',
            'read_population', 'RESIDENT_FIELDS', 'SCALE_TOLERANCE', 'SCHEMA', 'STOREY_HEIGHT_M', 'storey_points',
            'StoreyPoints', 'UNCOVERED_SHARE', 'uncovered_shares', 'write_exposure']

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +33,7 @@ from gisnoise.errors import InputError
 from gisnoise.exposure.storeys import is_blank, parse_height, parse_levels
 from gisnoise.geo import GridSpec
 
-__all__ = ["Population", "Buildings", "LevelsRaster", "read_population", "read_buildings", "read_levels",
+__all__ = ["Population", "population_cells", "Buildings", "LevelsRaster", "read_population", "read_buildings", "read_levels",
            "RESIDENT_FIELDS", "DWELLING_FIELDS", "HEIGHT_FIELDS", "LEVEL_FIELDS", "DENSEST_BLOCK_PER_KM2",
            "DENSEST_DISTRICTS_PER_KM2", "BLOCK_M2"]
 
@@ -63,21 +63,39 @@ BLOCK_M2 = 10_000.0
 
 @dataclass(frozen=True, eq=False)
 class Population:
-    """People per cell of a north-up raster.
+    """People per cell of a north-up raster, checked as :func:`read_population` checks a file.
+
+    Made from an array (``Population(counts, transform, crs)``) or by :func:`read_population`, the same rules hold
+    (:func:`population_cells`): cells without data are those masked (a :class:`numpy.ma.MaskedArray`, as a
+    raster's nodata value reads) or marked ``covered=False``; they count no people and are not covered (people
+    there are unknown, not none).  Every other cell must be a finite count >= 0: a NaN, infinite or negative
+    one is refused, not counted as 0 (mask NaN cells that hold no data: ``numpy.ma.masked_invalid(counts)``).
+    A cell denser than any city block (:data:`DENSEST_BLOCK_PER_KM2`: a density, people per km² or per hectare,
+    given as people per cell) is refused, one denser than the densest districts named in ``warnings``.  The
+    raster is north-up without rotation, with a CRS.
 
     Attributes
     ----------
-    counts : ndarray, shape (height, width)
+    counts : ndarray of float64, shape (height, width)
         People per cell (0 where the raster has nodata).
     transform : affine.Affine
         Pixel-corner transform in the raster's CRS.
     crs : pyproj.CRS
     source : str
+        The file, or what the caller names the array (the refusals and warnings name its last path part).
     covered : ndarray of bool, shape (height, width), or None
         The cells that hold data; False where the raster has nodata: people there are unknown, not none, as
         outside the raster's extent.  None: every cell.
     warnings : list of str
-        What the reader found that the counts depend on (cells denser than the densest districts on record).
+        What the checks found that the counts depend on (cells denser than the densest districts on record).
+    window : tuple of int
+        Given when made: row and column of ``counts[0, 0]`` in the source raster (a window of it), so that the
+        refusals name the cell as the file holds it.  Not kept.
+
+    Raises
+    ------
+    InputError
+        On field ``population``, in one line naming the source and the first bad cell.
     """
 
     counts: np.ndarray
@@ -86,10 +104,71 @@ class Population:
     source: str = "population"
     covered: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)
+    window: InitVar[tuple[int, int]] = (0, 0)
+
+    def __post_init__(self, window: tuple[int, int]) -> None:
+        counts, covered, crs, said = population_cells(self.counts, self.transform, self.crs, self.source,
+                                                      covered=self.covered, window=window)
+        object.__setattr__(self, "counts", counts)
+        object.__setattr__(self, "covered", covered)
+        object.__setattr__(self, "crs", crs)
+        warnings = list(self.warnings)
+        if said is not None and said not in warnings:
+            warnings.append(said)
+        object.__setattr__(self, "warnings", warnings)
 
     @property
     def total(self) -> float:
         return float(self.counts.sum())
+
+
+def population_cells(counts: Any, transform: Any, crs: Any, source: str, *, covered: Any = None,
+                     window: tuple[int, int] = (0, 0)) -> tuple[np.ndarray, np.ndarray | None, CRS, str | None]:
+    """The rules of a population raster (:class:`Population`): ``(counts, covered, crs, warning)`` checked.
+
+    ``counts``: people per cell, an array or a masked array (masked: no data); ``covered``: optional, False where
+    there is no data.  Returns the counts as float64 with 0 where there is no data, the covered cells (None when
+    every cell is), the CRS as :class:`pyproj.CRS` and the warning of a raster denser than the densest districts
+    (None when none is).  ``window``: row and column of ``counts[0, 0]`` in the source, for the messages.
+
+    Raises :class:`~gisnoise.errors.InputError` (field ``population``) as the class documents.
+    """
+    name = Path(str(source)).name or str(source)
+    if crs is None:
+        raise InputError(f"population: {name} has no CRS", field="population")
+    try:
+        crs = CRS.from_user_input(crs)
+    except Exception as exc:  # pyproj's CRSError and the TypeError of an unreadable object alike
+        raise InputError(f"population: {name}: not a CRS: {crs!r} ({exc})", field="population") from None
+    if not isinstance(transform, Affine):
+        raise InputError(f"population: {name}: the transform must be an affine.Affine, got {type(transform).__name__}",
+                         field="population")
+    _north_up(transform, "population")
+    try:
+        data = np.asarray(np.ma.getdata(counts), dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"population: {name}: people per cell must be numbers", field="population") from None
+    if data.ndim != 2:
+        raise InputError(f"population: {name}: people per cell must be a 2-D array (rows, columns), got shape "
+                         f"{data.shape}", field="population")
+    nodata = np.ma.getmaskarray(counts) if np.ma.isMaskedArray(counts) else np.zeros(data.shape, dtype=bool)
+    if covered is not None:
+        cov = np.asarray(covered)
+        if cov.shape != data.shape or cov.dtype != bool:
+            raise InputError(f"population: {name}: covered must be a boolean array of the counts' shape {data.shape}",
+                             field="population")
+        nodata = nodata | ~cov
+    with np.errstate(invalid="ignore"):
+        bad = ~nodata & ~(np.isfinite(data) & (data >= 0))
+    if bad.any():
+        r, c = (int(i) for i in np.argwhere(bad)[0])
+        raise InputError(f"population: {name} has {int(bad.sum())} cell(s) that are not a number of people >= 0 "
+                         f"(first {data[r, c]:g} at row {r + window[0]}, column {c + window[1]}); people per cell "
+                         "must be finite and >= 0, cells without data must be marked as such (the raster's nodata "
+                         "value; in an array, masked or covered=False)", field="population")
+    out = np.where(nodata, 0.0, data)
+    said = _density_said(out, transform, crs, name, window)
+    return out, (~nodata if nodata.any() else None), crs, said
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,7 +242,9 @@ def read_population(path: str | os.PathLike[str], *, band: int = 1, within: Grid
     count would otherwise vanish from every total, a NaN one hide a hole in the data).  A cell holding more
     people per km² of ground than :data:`DENSEST_BLOCK_PER_KM2` is refused (a density, people per km² or per
     hectare, read as people per cell); one above :data:`DENSEST_DISTRICTS_PER_KM2` is named in a warning
-    (``Population.warnings``).  Cells smaller than :data:`BLOCK_M2` are judged over that area.
+    (``Population.warnings``).  Cells smaller than :data:`BLOCK_M2` are judged over that area.  These are the
+    rules of :class:`Population` itself (:func:`population_cells`): a population made from an array is checked
+    alike, its masked cells read as the file's nodata.
 
     Parameters
     ----------
@@ -205,18 +286,7 @@ def read_population(path: str | os.PathLike[str], *, band: int = 1, within: Grid
     except RasterioIOError as exc:  # the file's name only: its folder may be a server's
         raise InputError(f"population: cannot read {p.name}: {str(exc).replace(str(p), p.name)}",
                          field="population") from None
-    data, nodata = np.ma.getdata(a), np.ma.getmaskarray(a)
-    with np.errstate(invalid="ignore"):
-        bad = ~nodata & ~(np.isfinite(data) & (data >= 0))
-    if bad.any():
-        r, c = (int(i) for i in np.argwhere(bad)[0])
-        raise InputError(f"population: {p.name} has {int(bad.sum())} cell(s) that are not a number of people >= 0 "
-                         f"(first {data[r, c]:g} at row {r + r0}, column {c + c0}); people per cell must be finite "
-                         "and >= 0, cells without data must hold the raster's nodata value", field="population")
-    counts = np.where(nodata, 0.0, data)
-    said = _density_said(counts, t, crs, p.name, (r0, c0))
-    return Population(counts, t, crs, source=str(p), covered=None if not nodata.any() else ~nodata,
-                      warnings=[said] if said is not None else [])
+    return Population(a, t, crs, source=str(p), window=(r0, c0))  # the class's checks (population_cells)
 
 
 def _density_said(counts: np.ndarray, t: Affine, crs: Any, name: str, offset: tuple[int, int]) -> str | None:
