@@ -14,11 +14,22 @@ else hold it up (:func:`gisnoise.flight.rest.lying_inverted`; a crashed vehicle 
 still draw power and whose land detector never fired).  Not-flying samples make no noise on a map
 and are masked in fits; :attr:`Trajectory.flying` is the one definition of the rule.  :class:`Trajectory` keeps angles in degrees as in the file; use
 :meth:`Trajectory.enu` and :meth:`Trajectory.attitude_rad` for the model.
+
+A :class:`Trajectory` owns its arrays: it copies what it is given (numpy arrays, lists, pandas columns) and
+makes the copies read-only, so the checks made when it is built hold for its life; editing the caller's
+arrays afterwards changes nothing in it, and writing into its own raises ``ValueError``.  Derive a changed
+trajectory with :meth:`Trajectory.with_` or :meth:`Trajectory.select`.
+
+Times ``t`` are seconds since the flight's start.  A ``timedelta64`` column (numpy or pandas, or
+``datetime.timedelta`` values) is a duration with its unit in the data, so it is converted to seconds
+exactly; a ``datetime64`` column (dates and times of day) is refused naming ``t``, since only the caller
+knows the instant the flight starts: pass ``(t - t[0]) / np.timedelta64(1, "s")``.
 """
 
 from __future__ import annotations
 
 import csv
+import datetime
 import io
 import os
 from collections.abc import Mapping
@@ -37,7 +48,7 @@ from gisnoise.flight.rest import lying_inverted
 from gisnoise.geo import LocalFrame, wrap_angle, wrap_deg
 from gisnoise.limits import check_track
 
-__all__ = ["Trajectory", "read_flight_csv", "from_columns", "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
+__all__ = ["Trajectory", "read_flight_csv", "from_columns", "column", "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
 
 REQUIRED_COLUMNS = ("t", "lat", "lon", "h", "roll", "pitch", "yaw", "power_w")
 OPTIONAL_COLUMNS = ("rpm", "airspeed_m_s", "phase", "on_ground")
@@ -94,22 +105,17 @@ class Trajectory:
             if v is None:
                 continue
             if f.name == "phase":
-                arr = np.asarray(v, dtype=object).astype(str)
+                arr = np.array(v, dtype=object).astype(str)
+                if arr.ndim != 1:
+                    raise TrajectoryError(f"{src}: field 'phase' must be one-dimensional, got shape {arr.shape}",
+                                          field=f.name)
             elif f.name == "on_ground":
-                arr = np.asarray(v).astype(float)
-                if arr.ndim != 1 or not np.all((arr == 0) | (arr == 1)):
+                arr = column(f.name, v, source=src, finite=False)
+                if not np.all((arr == 0) | (arr == 1)):
                     raise TrajectoryError(f"{src}: field 'on_ground' must hold 0 or 1 per sample", field=f.name)
                 arr = arr.astype(bool)
             else:
-                arr = np.asarray(v, dtype=float)
-                if arr.ndim != 1:
-                    raise TrajectoryError(f"{src}: field '{f.name}' must be one-dimensional", field=f.name)
-                bad = ~np.isfinite(arr)
-                if bad.any():
-                    i = int(np.flatnonzero(bad)[0])
-                    raise TrajectoryError(
-                        f"{src}: field '{f.name}' has NaN or infinite value at sample {i}", field=f.name
-                    )
+                arr = column(f.name, v, source=src)
             if n is None:
                 n = arr.shape[0]
             elif arr.shape[0] != n:
@@ -117,6 +123,7 @@ class Trajectory:
                                       field=f.name)
             if f.name == "yaw":
                 arr = wrap_deg(arr)
+            arr.flags.writeable = False   # its own copy, never changed: the checks below hold for its life
             object.__setattr__(self, f.name, arr)
         if not n:
             raise TrajectoryError(f"{src}: the trajectory is empty", field="t")
@@ -158,8 +165,8 @@ class Trajectory:
     @cached_property
     def lying(self) -> np.ndarray:
         """True on samples where the vehicle lies upside down: inverted and at rest for 1 s or longer
-        (:func:`gisnoise.flight.rest.lying_inverted`).  Found once per trajectory (its arrays are not changed
-        after it is made; :meth:`select` and :meth:`with_` make new ones); read-only."""
+        (:func:`gisnoise.flight.rest.lying_inverted`).  Found once per trajectory (its arrays are read-only copies,
+        never changed after it is made; :meth:`select` and :meth:`with_` make new ones); read-only."""
         out = lying_inverted(self.t, self.lat, self.lon, self.h, self.roll, self.pitch)
         out.flags.writeable = False
         return out
@@ -241,23 +248,111 @@ class Trajectory:
 
 
 def from_columns(cols: Mapping[str, Any], *, source: str = "trajectory") -> Trajectory:
-    """Build a trajectory from named columns (the flight-CSV names); errors name the column."""
+    """Build a trajectory from named columns (the flight-CSV names; a dict of arrays or a pandas DataFrame).
+
+    Errors name the column.  The trajectory copies the columns (see the module docstring): editing them
+    afterwards leaves it unchanged.  ``t`` is seconds since the flight's start; a ``timedelta64`` ``t`` is
+    converted to seconds, a ``datetime64`` one refused (:func:`column`).
+    """
     missing = [c for c in REQUIRED_COLUMNS if c not in cols]
     if missing:
         raise MissingColumnError(f"{source}: missing column(s) {', '.join(missing)}", field=missing[0])
     kw: dict[str, Any] = {}
-    n = len(cols["t"])
     for c in REQUIRED_COLUMNS + ("rpm", "airspeed_m_s", "on_ground"):
         if c not in cols:
             continue
-        try:
-            kw[c] = np.asarray(cols[c], dtype=float)
-        except (TypeError, ValueError):
-            raise TrajectoryError(f"{source}: column '{c}' has a non-numeric value", field=c) from None
+        kw[c] = column(c, cols[c], source=source, finite=c != "on_ground")
+        if kw[c].shape[0] != kw["t"].shape[0]:
+            raise TrajectoryError(f"{source}: column '{c}' has {kw[c].shape[0]} samples, column 't' has "
+                                  f"{kw['t'].shape[0]}", field=c)
+    n = kw["t"].shape[0]
     kw["phase"] = np.asarray(cols["phase"], dtype=str) if "phase" in cols else np.full(n, "horizontal")
     glitches = mend_glitches(kw["t"], kw["lat"], kw["lon"], kw["h"])  # unchanged without glitches
     kw.update(lat=glitches.lat, lon=glitches.lon, h=glitches.h)
     return Trajectory(**kw, source=source, metadata={**glitches.metadata(kw["t"]), **gap_metadata(kw["t"])})
+
+
+def column(name: str, values: Any, *, source: str = "trajectory", finite: bool = True) -> np.ndarray:
+    """One numeric column of a trajectory as a new one-dimensional float64 array (a copy, never a view).
+
+    Parameters
+    ----------
+    name : str
+        The field, named in errors.
+    values : array_like
+        Numbers; for ``t`` also durations (``timedelta64``, numpy or pandas, or ``datetime.timedelta``),
+        converted to seconds exactly.
+    source : str
+        The file or caller, named in errors.
+    finite : bool
+        Refuse NaN and infinite values.
+
+    Raises
+    ------
+    TrajectoryError
+        Naming ``name``: dates and times (``datetime64``; for ``t`` with the way to seconds), durations in a
+        field other than ``t``, a non-numeric value, a shape other than one-dimensional, a NaN.
+
+    Examples
+    --------
+    >>> column("t", np.array([0, 90, 150], dtype="timedelta64[s]"))
+    array([  0.,  90., 150.])
+    >>> column("t", np.array(["2024-05-04T10:00", "2024-05-04T10:01"], dtype="datetime64[m]"))
+    Traceback (most recent call last):
+    ...
+    gisnoise.errors.TrajectoryError: trajectory: field 't' holds dates and times (datetime64), not seconds since the flight's start; pass (t - t[0]) / np.timedelta64(1, "s")
+    """
+    kind = _time_kind(values)
+    if kind == "M":
+        what = "seconds since the flight's start; pass (t - t[0]) / np.timedelta64(1, \"s\")" if name == "t" \
+            else "numbers"
+        raise TrajectoryError(f"{source}: field '{name}' holds dates and times (datetime64), not {what}", field=name)
+    if kind == "m":
+        if name != "t":
+            raise TrajectoryError(f"{source}: field '{name}' holds durations (timedelta64), not numbers", field=name)
+        arr = _seconds(values)
+    else:
+        try:
+            arr = np.array(values, dtype=float)
+        except (TypeError, ValueError):
+            raise TrajectoryError(f"{source}: field '{name}' has a non-numeric value", field=name) from None
+    if arr.ndim != 1:
+        raise TrajectoryError(f"{source}: field '{name}' must be one-dimensional, got shape {arr.shape}", field=name)
+    if finite:
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise TrajectoryError(f"{source}: field '{name}' has NaN or infinite value at sample {i}", field=name)
+    return arr
+
+
+def _time_kind(values: Any) -> str | None:
+    """``"M"`` for dates and times, ``"m"`` for durations, else None (numbers, strings)."""
+    kind = getattr(getattr(values, "dtype", None), "kind", None)   # numpy and pandas dtypes (tz-aware ones too)
+    if kind in ("M", "m"):
+        return str(kind)
+    if kind == "O":
+        items: Any = np.asarray(values).ravel()
+    elif kind is None and isinstance(values, (list, tuple)):
+        items = values
+    else:
+        return None
+    first = next((x for x in items if x is not None), None)
+    if isinstance(first, (datetime.date, np.datetime64)):   # datetime.datetime and pandas Timestamp too
+        return "M"
+    if isinstance(first, (datetime.timedelta, np.timedelta64)):
+        return "m"
+    return None
+
+
+def _seconds(values: Any) -> np.ndarray:
+    """Durations (``timedelta64`` or ``datetime.timedelta``) in seconds; NaT becomes NaN."""
+    if getattr(getattr(values, "dtype", None), "kind", None) == "m":
+        return np.asarray(np.asarray(values) / np.timedelta64(1, "s"), dtype=float)
+    flat = np.asarray(values, dtype=object)
+    secs = [np.nan if x is None else float(x / np.timedelta64(1, "s")) if isinstance(x, np.timedelta64)
+            else float(x.total_seconds()) for x in flat.ravel()]
+    return np.array(secs, dtype=float).reshape(flat.shape)
 
 
 def read_flight_csv(path: str | os.PathLike[str] | io.TextIOBase, *, source: str | None = None) -> Trajectory:

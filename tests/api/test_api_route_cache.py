@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from service_helpers import REPO
 
 from gisnoise.flight import routes
@@ -64,8 +65,9 @@ def test_a_hit_is_a_copy_equal_to_the_route_built_anew():
 
     key = route_key(ROUTE, "waypoints")
     first = cache.get(key, build)
-    first.h[:] = -1.0  # a caller changing its trajectory changes nobody else's
-    first.metadata["ground_h_m"] = 1e6
+    with pytest.raises(ValueError):
+        first.h[:] = -1.0  # a trajectory's arrays are read-only: no caller changes what another one gets
+    first.metadata["ground_h_m"] = 1e6  # its metadata is its own
     second = cache.get(key, build)
     assert len(built) == 1
     _assert_same(second, routes.read_trajectory(ROUTE))
