@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from gisnoise.errors import TrajectoryError
-from gisnoise.flight import dataflash_cut, read_flight, track_warning, ulog_cut
+from gisnoise.flight import dataflash_cut, left_out_warning, read_flight, track_warning, ulog_cut
 
 pyulog = pytest.importorskip("pyulog")
 DFReader = pytest.importorskip("pymavlink.DFReader")
@@ -43,7 +43,9 @@ def _read(path):
 def test_uncut_logs_end_at_a_message_end_and_give_no_warning(path):
     assert _cut_of(path)(path.read_bytes()) is None
     tr = _read(path)
-    assert "log_cut" not in tr.metadata and track_warning(tr) is None
+    # the one warning a whole log may carry: the quad's first hop, before its attitude is logged (test_log_left_out)
+    assert "log_cut" not in tr.metadata and track_warning(tr) == left_out_warning(tr)
+    assert (left_out_warning(tr) is None) == (path != QUAD)
 
 
 # ----------------------------------------------------------------------------- cut in the data
@@ -94,8 +96,12 @@ def test_cut_log_warns_and_reads_the_uncut_samples_up_to_the_cut(tmp_path, path,
     for col in ("t", "lat", "lon", "roll", "pitch", "yaw"):
         np.testing.assert_array_equal(getattr(tr, col), getattr(tr_full, col)[:n], err_msg=col)
     assert tr.metadata["log_cut"]["file_bytes"] == k
-    assert track_warning(tr) == (f"{cut_path}: the log ends mid-message at byte {k} of {cut.message_end} "
-                                   f"({CUT}: the flight may go on beyond t = {tr.t[-1]:.1f} s)")
+    said = f"{cut_path}: the log ends mid-message at byte {k} of {cut.message_end} " \
+           f"({CUT}: the flight may go on beyond t = {tr.t[-1]:.1f} s)"
+    left = left_out_warning(tr)       # the quad's first hop, before its attitude is logged, as in the uncut file
+    assert left == (None if left_out_warning(tr_full) is None else left_out_warning(tr_full).replace(str(path),
+                                                                                                   str(cut_path)))
+    assert track_warning(tr) == (said if left is None else f"{said}; {left}")
 
 
 @pytest.mark.parametrize("path,fraction", [(QUAD, 0.5), (COPTER, 0.1)], ids=["quad", "copter"])

@@ -33,6 +33,10 @@ from gisnoise.flight.logs import (
     FLIGHT_SUFFIXES,
     read_flight,
 )
+from gisnoise.flight.logspan import (
+    LEFT_OUT_MIN_S,
+    left_out_warning,
+)
 from gisnoise.flight.paths import (
     derive_states,
     trajectory_from_path,
@@ -85,4 +89,4 @@ from gisnoise.flight.waypoints import (
     route_from_waypoints,
 )
 
-__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'GROUND_HINT_CLI', 'GROUND_RULE', 'GROUND_TOLERANCE_M', 'flying_parts', 'flying_segments', 'ground_from_track', 'HOVER_MAX_SPEED_M_S', 'LOG_MAP_RATE_HZ', 'LYING_MIN_S', 'LogCut', 'LogDamage', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'dataflash_cut', 'dataflash_damage', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'track_warning', 'log_damage_warning', 'lying_inverted', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'smoothed_speed', 'trajectory_from_path', 'trajectory_to_geojson', 'ulog_cut', 'ulog_damage']
+__all__ = ['FLIGHT_SUFFIXES', 'G', 'GRAVITY', 'GROUND_HINT_CLI', 'GROUND_RULE', 'GROUND_TOLERANCE_M', 'flying_parts', 'flying_segments', 'ground_from_track', 'HOVER_MAX_SPEED_M_S', 'LEFT_OUT_MIN_S', 'LOG_MAP_RATE_HZ', 'LYING_MIN_S', 'LogCut', 'LogDamage', 'MULTICOPTER_PHASES', 'OPTIONAL_COLUMNS', 'PHASES', 'PathBuilder', 'REQUIRED_COLUMNS', 'Route', 'Trajectory', 'VERTICAL_MIN_SPEED_M_S', 'VehicleModel', 'WAYPOINTS_SCHEMA', 'as_unix_time', 'dataflash_cut', 'dataflash_damage', 'derive_states', 'from_columns', 'fwd', 'gps_to_unix', 'track_warning', 'left_out_warning', 'log_damage_warning', 'lying_inverted', 'phase_by_speed', 'quaternion_to_euler', 'read_dataflash', 'read_flight', 'read_flight_csv', 'read_route', 'read_trajectory', 'read_ulog', 'right', 'route_from_waypoints', 'smoothed_speed', 'trajectory_from_path', 'trajectory_to_geojson', 'ulog_cut', 'ulog_damage']

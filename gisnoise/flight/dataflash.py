@@ -39,6 +39,7 @@ from gisnoise.flight.gaps import gap_metadata
 from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.logcut import dataflash_cut, framing, read_cut, refuse_cut_definitions
 from gisnoise.flight.logdamage import dataflash_damage, record_damage
+from gisnoise.flight.logspan import left_out
 from gisnoise.flight.parserout import captured_stdout
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_angle
@@ -167,9 +168,11 @@ def _dataflash_trajectory(src: str, reader: Any, start_utc: Any, geoid_undulatio
         raise MissingColumnError(f"{src}: message 'ATT' missing (no attitude)", field="ATT")
     t_att = _ardupilot_boot_time("ATT", att)
 
-    batteries = _ardupilot_batteries(src, table, fmts) if power_w is None else []
-    spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
-    t = _time_base(src, tb, spans, rate_hz)
+    named = _ardupilot_batteries(src, table, fmts) if power_w is None else []
+    batteries = [(tt, pw) for _, tt, pw in named]
+    spans = {"GPS 3D fix" if pos_name == "GPS" else pos_name: (tb[0], tb[-1]), "ATT": (t_att[0], t_att[-1])}
+    spans.update({n: (tt[0], tt[-1]) for n, tt, _ in named})
+    t = _time_base(src, tb, list(spans.values()), rate_hz)
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
     glitches = mend_glitches(t, lat_i, lon_i, h_i)  # before the phase and the ground are derived
     lat_i, lon_i, h_i = glitches.lat, glitches.lon, glitches.h
@@ -192,6 +195,10 @@ def _dataflash_trajectory(src: str, reader: Any, start_utc: Any, geoid_undulatio
             "power": "BAT/CURR" if power_w is None else f"constant {power_w:g} W"}
     traj = _finish(src, t, cols, start_utc, utc_offset, "GPS.Week", meta)
     traj.metadata.update({**glitches.metadata(traj.t), **gap_metadata(traj.t)})
+    stretches = left_out((t[0], t[-1]), spans, step_s=float(np.median(np.diff(tb))), power=batteries,
+                         flag=_airborne_steps(events), offset_s=float(traj.t[0] - t[0]))
+    if stretches:
+        traj.metadata["log_left_out"] = stretches
     return traj
 
 
@@ -221,6 +228,17 @@ def _landed_from_events(t: np.ndarray, events: list[tuple[float, int]]) -> np.nd
     return out
 
 
+def _airborne_steps(events: list[tuple[float, int]]) -> tuple[np.ndarray, np.ndarray] | None:
+    """In the air as a step series (times s, bool) from ArduPilot's arming and landing events, or None without
+    them (:func:`_landed_from_events`)."""
+    te = np.array(sorted({t for t, i in events if i in (_EV_ARMED, _EV_DISARMED, _EV_LAND_COMPLETE, _EV_NOT_LANDED)}))
+    if te.size == 0:
+        return None
+    te = np.concatenate([[-np.inf], te])
+    landed = _landed_from_events(te, events)
+    return None if landed is None else (te, ~landed)
+
+
 def _ardupilot_boot_time(name: str, tab: Mapping[str, np.ndarray]) -> np.ndarray:
     """Boot time, s: ``TimeUS``; old logs: ``TimeMS`` (``T`` for GPS, whose TimeMS is GPS time)."""
     if "TimeUS" in tab:
@@ -243,7 +261,8 @@ def _ardupilot_utc_offset(gps: Mapping[str, np.ndarray]) -> float | None:
 
 
 def _ardupilot_batteries(src: str, table: Callable[[str], dict[str, np.ndarray] | None],
-                         fmts: Mapping[str, tuple[str, list[str]]]) -> list[tuple[np.ndarray, np.ndarray]]:
+                         fmts: Mapping[str, tuple[str, list[str]]]) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """Per battery: (message name, times s, power W)."""
     out = []
     bat = table("BAT")
     if bat is not None:
@@ -252,7 +271,7 @@ def _ardupilot_batteries(src: str, table: Callable[[str], dict[str, np.ndarray] 
         for i in np.unique(inst):
             m = inst == i
             v, c = _scaled(fmts["BAT"], "Volt", bat), _scaled(fmts["BAT"], "Curr", bat)
-            out.append((t[m], v[m] * c[m]))
+            out.append(("BAT" if len(np.unique(inst)) == 1 else f"BAT[{int(i)}]", t[m], v[m] * c[m]))
         return out
     for name in ("CURR", "CUR2"):
         cur = table(name)
@@ -261,7 +280,7 @@ def _ardupilot_batteries(src: str, table: Callable[[str], dict[str, np.ndarray] 
         if "Volt" not in cur or "Curr" not in cur:
             raise MissingColumnError(f"{src}: message '{name}' lacks field 'Volt' or 'Curr'", field=name)
         t = _ardupilot_boot_time(name, cur)
-        out.append((t, _scaled(fmts[name], "Volt", cur) * _scaled(fmts[name], "Curr", cur)))
+        out.append((name, t, _scaled(fmts[name], "Volt", cur) * _scaled(fmts[name], "Curr", cur)))
     if not out:
         raise MissingColumnError(f"{src}: message 'BAT' or 'CURR' missing (no electric power); {POWER_WAY_OUT}",
                                  field="BAT")

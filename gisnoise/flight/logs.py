@@ -24,6 +24,19 @@ Time base
     ``time_utc_usec``; ArduPilot GPS week and milliseconds minus the leap seconds);
     without it, seconds since the first kept sample.
 
+Stretches left out at the start or end
+    Where the log holds some but not all of position, attitude and power (an estimator
+    that publishes attitude only once aligned, a GNSS receiver without a 3D fix yet, a
+    battery monitor that starts late), nothing is filled in: attitude sets the direction
+    of the sound and position its distance, and holding or guessing either would put
+    invented levels on a map.  A stretch longer than 1 s and two position steps is
+    recorded in the trajectory's metadata (``log_left_out``: its span on the log's clock
+    and the trajectory's, the topics that start late or end early, the most battery power
+    drawn in it, the seconds in the air by the log's landed flag or None without one) and,
+    when the vehicle may have made noise in it (in the air, or no landed flag and power
+    drawn), said in the one-line warning every face shows (:mod:`gisnoise.flight.logspan`).
+    A stretch spent landed is silent on any map and stays in the metadata.
+
 On the ground
     Samples while landed (PX4 ``vehicle_land_detected.landed``) are marked
     ``on_ground``; without a landed flag (ArduPilot), samples at rest (below 0.3 m/s,

@@ -42,6 +42,7 @@ from gisnoise.flight.gaps import gap_metadata
 from gisnoise.flight.glitches import mend_glitches
 from gisnoise.flight.logcut import framing, read_cut, refuse_cut_definitions, ulog_cut
 from gisnoise.flight.logdamage import record_damage, ulog_damage
+from gisnoise.flight.logspan import left_out
 from gisnoise.flight.parserout import captured_stdout
 from gisnoise.flight.trajectory import Trajectory
 from gisnoise.geo import wrap_deg
@@ -170,24 +171,28 @@ def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: fl
 
     # power: sum over battery instances of V * I
     batteries = []
+    battery_names: list[str] = []
     if power_w is None:
         if "battery_status" not in topics:
             raise MissingColumnError(f"{src}: topic 'battery_status' missing (no electric power); {POWER_WAY_OUT}",
                                      field="battery_status")
-        for b in topics["battery_status"]:
+        for i, b in enumerate(topics["battery_status"]):
             if "connected" in b and not np.any(b["connected"]):
                 continue
             if "current_a" not in b or "voltage_v" not in b:
                 continue
             batteries.append(battery_power(b))
+            battery_names.append("battery_status" if len(topics["battery_status"]) == 1 else f"battery_status[{i}]")
         if not batteries:
             raise MissingColumnError(f"{src}: topic 'battery_status' has no connected battery with voltage and "
                                      f"current; {POWER_WAY_OUT}", field="battery_status")
 
-    spans = [(tb[0], tb[-1]), (t_att[0], t_att[-1])] + [(tt[0], tt[-1]) for tt, _ in batteries]
+    spans = {pos_name if glob is not None else f"{pos_name} 3D fix": (tb[0], tb[-1]),
+             "vehicle_attitude": (t_att[0], t_att[-1])}
+    spans.update({n: (tt[0], tt[-1]) for n, (tt, _) in zip(battery_names, batteries, strict=True)})
     if h_series is not None:
-        spans.append((h_series[0][0], h_series[0][-1]))
-    t = _time_base(src, tb, spans, rate_hz)
+        spans["vehicle_local_position"] = (h_series[0][0], h_series[0][-1])
+    t = _time_base(src, tb, list(spans.values()), rate_hz)
     lat_i, lon_i, h_i = (np.interp(t, tb, v) for v in (lat, lon, h))
     if h_series is not None:
         h_i = np.interp(t, *h_series)
@@ -212,8 +217,10 @@ def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: fl
 
     vtol = _px4_vtol_state(topics, t)
     cols["phase"] = _phase(t, lat_i, lon_i, h_i, vtol)
+    flag = None
     if "vehicle_land_detected" in topics and "landed" in topics["vehicle_land_detected"][0]:
         ld = topics["vehicle_land_detected"][0]
+        flag = (ld["timestamp"] / 1e6, ~ld["landed"].astype(bool))
         cols["on_ground"] = _step(t, ld["timestamp"] / 1e6, ld["landed"].astype(bool)).astype(bool)
     else:
         cols["on_ground"] = _at_rest_low(t, lat_i, lon_i, h_i)
@@ -224,6 +231,10 @@ def _ulog_trajectory(src: str, ulog: Any, start_utc: Any, geoid_undulation_m: fl
     meta = {"height_datum": datum, **height_meta, **geoid_meta, "power": "battery_status" if power_w is None else f"constant {power_w:g} W"}
     traj = _finish(src, t, cols, start_utc, utc_offset, "vehicle_gps_position.time_utc_usec", meta)
     traj.metadata.update({**glitches.metadata(traj.t), **gap_metadata(traj.t)})
+    stretches = left_out((t[0], t[-1]), spans, step_s=float(np.median(np.diff(tb))), power=batteries, flag=flag,
+                         log_start=ulog.start_timestamp / 1e6, offset_s=float(traj.t[0] - t[0]))
+    if stretches:
+        traj.metadata["log_left_out"] = stretches
     return traj
 
 
