@@ -15,10 +15,7 @@ import json
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
-from dataclasses import fields
 from typing import Any
-
-import numpy as np
 
 from gisnoise.flight import Trajectory
 
@@ -31,18 +28,13 @@ def route_key(data: Any, *options: Any) -> str:
 
 
 def _copy(traj: Trajectory) -> Trajectory:
-    """A copy with its own arrays and metadata.
+    """A copy sharing the kept trajectory's arrays (a trajectory's arrays are read-only) with its own metadata.
 
     Not re-checked: the trajectory was checked when it was built and a kept one is never changed
     (``dataclasses.replace`` would run every check of the trajectory again on each hit).
     """
     out = copy.copy(traj)
-    for f in fields(traj):
-        v = getattr(traj, f.name)
-        if f.name == "metadata":
-            object.__setattr__(out, f.name, copy.deepcopy(v))
-        elif f.name != "source" and v is not None:
-            object.__setattr__(out, f.name, np.array(v, copy=True))
+    object.__setattr__(out, "metadata", copy.deepcopy(traj.metadata))
     return out
 
 

@@ -71,7 +71,8 @@ def test_a_hit_is_a_copy_equal_to_the_route_built_anew():
     second = cache.get(key, build)
     assert len(built) == 1
     _assert_same(second, routes.read_trajectory(ROUTE))
-    assert second.h is not first.h
+    assert second.metadata is not first.metadata and second.metadata["ground_h_m"] != 1e6
+    assert not second.h.flags.writeable  # shared safely: nobody can write into it
 
 
 def test_the_key_is_the_canonical_json_and_the_cache_is_bounded():
