@@ -110,6 +110,13 @@ def test_ground_from_track_takes_a_take_off_or_landing_only():
     assert ground_from_track(up) == pytest.approx(float(h[0]))
     parked = tr.with_(on_ground=np.arange(len(h)) >= len(h) - 3)   # landed at the end (flag)
     assert ground_from_track(parked) == pytest.approx(float(tr.h[-1]))
+    # a stretch cut from a log with a land detector that ends in a low hover, airborne by the detector, at its own
+    # lowest point: no landing (the hover's height is no ground; a slice of a real log took it, 4.8 m too high)
+    low = h.copy()
+    low[-10:] = float(h.min())
+    hover_end = tr.with_(h=low, phase=np.where(np.arange(len(h)) >= len(h) - 10, "hover", "horizontal"))
+    assert ground_from_track(hover_end) == pytest.approx(float(h.min()))     # without a detector: at rest, lowest
+    assert ground_from_track(hover_end.with_(on_ground=np.zeros(len(h), bool))) is None
 
 
 def _hop(tmp_path, end_h):

@@ -38,6 +38,11 @@ field); the service names its own field instead (:data:`gisnoise.service.errors.
 def ground_from_track(traj: Trajectory) -> float | None:
     """Ellipsoidal ground height (m) of a track that starts or ends on the ground, else None.
 
+    An end is on the ground when it does not fly (:attr:`~gisnoise.flight.Trajectory.flying`: on the ground or
+    without power); a track with a land detector (``on_ground``) is taken at its word, and one without is also on
+    the ground at an end lying at its lowest point (within :data:`~gisnoise.limits.GROUND_TOLERANCE_M`) at rest or
+    in a vertical phase (a route's pad, a log without a land detector).
+
     Examples
     --------
     >>> import numpy as np
@@ -62,6 +67,8 @@ def ground_from_track(traj: Trajectory) -> float | None:
     for i, vertical in ((0, ("climb", "hover")), (n - 1, ("sink", "hover"))):
         if not fly[i]:
             return float(traj.h[i])
+        if traj.on_ground is not None:  # the log's land detector says airborne: a low end is no take-off or landing
+            continue                    # (a stretch cut from a log that ends in a low hover)
         low = traj.h[i] - h_min <= GROUND_TOLERANCE_M
         if low and (speed[i] < REST_SPEED_M_S or str(traj.phase[i]) in vertical):
             return float(traj.h[i])
