@@ -147,3 +147,20 @@ def test_an_array_that_is_no_north_up_population_raster_is_refused(kw, said):
     with pytest.raises(InputError) as err:
         Population(**args)
     assert err.value.field == "population" and said in str(err.value)
+
+
+def test_a_density_on_small_cells_is_refused_as_a_block_a_tower_is_not(tmp_path):
+    # 10 m cells (100 m², a hundred to the hectare).  3 000 people per km² given as people per cell puts 3 000 in
+    # each: one cell judged over a hectare is 300 000 per km² (only a warning), but any hectare of them holds
+    # 300 000 people, 30 million per km².  The same town as counts is 0.3 per cell; a 2 000-resident tower in one
+    # cell of it makes a hectare of 2 030 people, 203 000 per km²: a dense block, no density
+    t10 = Affine(10.0, 0, X0, 0, -10.0, Y0)
+    density = np.full((40, 40), 3000.0)
+    with pytest.raises(InputError, match=r"people in 10 x 10 cells .* looks like a density") as e:
+        Population(density, t10, UTM)
+    assert e.value.field == "population"
+    with pytest.raises(InputError, match=r"people in 10 x 10 cells .* looks like a density"):
+        read_population(tif(tmp_path / "density.tif", density, transform=t10))
+    town = np.full((40, 40), 0.3)
+    town[20, 20] = 2000.0
+    assert Population(town, t10, UTM).counts.sum() == pytest.approx(0.3 * 1599 + 2000.0)

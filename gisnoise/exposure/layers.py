@@ -296,6 +296,7 @@ def _density_said(counts: np.ndarray, t: Affine, crs: Any, name: str, offset: tu
     cells in the file, for the message."""
     from gisnoise.geo import cell_areas
 
+    _refuse_dense_blocks(counts, t, crs, name, offset)
     rows, cols = np.nonzero(counts > DENSEST_DISTRICTS_PER_KM2 * BLOCK_M2 / 1e6)  # fewer cannot be denser
     if rows.size == 0:
         return None
@@ -319,6 +320,31 @@ def _density_said(counts: np.ndarray, t: Affine, crs: Any, name: str, offset: tu
             f"{where}; {n} cell(s) above {DENSEST_DISTRICTS_PER_KM2:.0f} per km², about the densest districts on "
             "record): if it holds a density (people per km² or per hectare) and not people per cell, every count "
             "is too large; give people per cell")
+
+
+def _refuse_dense_blocks(counts: np.ndarray, t: Affine, crs: Any, name: str, offset: tuple[int, int]) -> None:
+    """Refuse a raster of cells smaller than :data:`BLOCK_M2` whose densest block of about that area (k x k cells)
+    holds more than :data:`DENSEST_BLOCK_PER_KM2`: each cell is judged over a hectare, so a density on small cells
+    (3 000 per km² given as people per 10 m cell: 3 000 people in each) passes cell by cell but not as a block."""
+    from gisnoise.geo import cell_areas
+
+    if counts.ndim != 2 or min(counts.shape) < 2:
+        return
+    area = float(cell_areas(crs, t, counts.shape[0] // 2, counts.shape[1] // 2))
+    if not np.isfinite(area) or area <= 0.0 or area >= 0.5 * BLOCK_M2:
+        return
+    k = min(int(round(np.sqrt(BLOCK_M2 / area))), *counts.shape)
+    c = np.zeros((counts.shape[0] + 1, counts.shape[1] + 1))
+    np.cumsum(np.cumsum(np.nan_to_num(counts, nan=0.0), axis=0), axis=1, out=c[1:, 1:])
+    sums = c[k:, k:] - c[:-k, k:] - c[k:, :-k] + c[:-k, :-k]  # every k x k block
+    r, q = np.unravel_index(int(np.argmax(sums)), sums.shape)
+    top = float(sums[r, q]) / (k * k * area) * 1e6
+    if top > DENSEST_BLOCK_PER_KM2:
+        raise InputError(f"population: {name} holds {float(sums[r, q]):.0f} people in {k} x {k} cells from row "
+                         f"{int(r) + offset[0]}, column {int(q) + offset[1]} ({k * k * area / 1e4:.2f} ha of ground): "
+                         f"{top:.0f} per km², more than any city block has held ({DENSEST_BLOCK_PER_KM2:.0f} per "
+                         "km²): it looks like a density (people per km² or per hectare); give people per cell",
+                         field="population")
 
 
 def _pick(columns: list[str], wanted: str | None, names: tuple[str, ...], what: str) -> str | None:
