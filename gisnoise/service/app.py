@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import re
+import sqlite3
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -25,6 +26,7 @@ from gisnoise.service.limits import BodySizeLimit, KeyBeforeBody
 from gisnoise.service.models import ErrorBody, MediaType
 from gisnoise.service.responses import AsciiJSONResponse
 from gisnoise.service.settings import Settings, get_settings
+from gisnoise.service.storage import DataDirError, check_data_dir, install_storage_handlers
 from gisnoise.service.timing import ServerTiming
 
 __all__ = ["create_app", "ERROR_RESPONSES"]
@@ -37,7 +39,9 @@ ERROR_RESPONSES: dict[int | str, dict] = {
     s: {"model": ErrorBody, "description": d}
     for s, d in [(400, "Bad request"), (401, "API key missing"), (403, "API key not valid"), (404, "Not found"),
                  (409, "Conflict"), (413, "Too large (body, upload or grid)"),
-                 (415, "Body not sent as application/json"), (422, "Invalid input")]
+                 (415, "Body not sent as application/json"), (422, "Invalid input"),
+                 (503, "The service's storage cannot be read or written now (field storage)"),
+                 (507, "No space left on the device of the service's data (field storage)")]
 }
 
 
@@ -124,12 +128,17 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
         docs_url=None,  # served below from the installed swagger-ui-bundle: no network needed
         redoc_url=None,
     )
-    settings.data_dir.mkdir(parents=True, exist_ok=True)
-    jobs = JobStore(settings.db_path, settings.jobs_dir)
+    check_data_dir(settings.data_dir)  # one line naming the folder when it cannot be written
+    try:
+        jobs = JobStore(settings.db_path, settings.jobs_dir)
+    except (OSError, sqlite3.Error) as exc:
+        raise DataDirError(f"the job database {settings.db_path} cannot be opened or written "
+                           f"({type(exc).__name__}: {exc})", field="GISNOISE_DATA_DIR") from None
     basemap = open_basemap(settings.basemap) if settings.basemap is not None else None
     app.state.gisnoise = State(settings=settings, cards=CardStore(settings.cards_dir), jobs=jobs,
                                pool=WorkerPool(jobs, _handlers(), settings.workers), basemap=basemap)
     install_handlers(app)
+    install_storage_handlers(app)
     for r in (routes_cards.router, routes_contours.router, routes_jobs.router, routes_campaign.router,
               routes_planning.router, routes_web.router, basemap_router):
         app.include_router(r)

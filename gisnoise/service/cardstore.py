@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import stat
 import threading
 import time
@@ -29,6 +30,7 @@ from gisnoise.limits import SAFE_ID_PATTERN
 from gisnoise.model import ModelCard
 from gisnoise.model import cards as gcards
 from gisnoise.service.errors import ApiError
+from gisnoise.service.storage import storage_error, storage_failure
 
 __all__ = ["CardStore", "StoredCard", "ID_PATTERN"]
 
@@ -203,11 +205,23 @@ class CardStore:
                                         f"upload with new_version=true to add version {v}, "
                                         f"or choose another id", field="id")
             d = self.root / card.id
-            self._record_highest(card.id, v)  # before the card: a crash in between skips v, never reuses it
             path = d / f"v{v}.json"
             tmp = d / f".v{v}.json.tmp"
-            tmp.write_text(gcards.dumps(card), encoding="utf-8")
-            os.link(tmp, path)  # fails if the version appeared meanwhile: never overwrite
+            new_folder = not d.exists()
+            try:
+                d.mkdir(parents=True, exist_ok=True)
+                tmp.write_text(gcards.dumps(card), encoding="utf-8")
+                self._record_highest(card.id, v)  # before the card: a crash in between skips v, never reuses it
+                os.link(tmp, path)  # fails if the version appeared meanwhile: never overwrite
+            except OSError as exc:  # a full disk, say: nothing of the upload is left
+                tmp.unlink(missing_ok=True)
+                (d / f".{HIGHEST_FILE}.tmp").unlink(missing_ok=True)
+                if new_folder:
+                    shutil.rmtree(d, ignore_errors=True)
+                failure = storage_failure(exc, near=self.root)
+                if failure is not None:
+                    raise storage_error(failure, f"card {card.id!r} was not stored") from None
+                raise
             tmp.unlink()
             return StoredCard(card, v, path), True
 

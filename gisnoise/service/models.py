@@ -218,13 +218,17 @@ class JobInfo(BaseModel):
     kind: Literal["contours", "fit", "diagnose"]
     status: Literal["queued", "running", "succeeded", "failed", "cancelled"]
     progress: float = Field(ge=0, le=1, description="Fraction done, 0..1.")
-    message: str
+    message: str = Field(description="The last progress while the job runs, then done, failed or cancelled; a "
+                                     "succeeded job whose result was removed from the server says so.")
     created: float = Field(description="Unix time, s.")
-    started: float | None
+    started: float | None = Field(description="Unix time of the current start, s; null while queued (a re-queued "
+                                              "job too).")
     finished: float | None
     attempts: int = Field(description="Starts of the job; more than 1 after a restart re-ran it.")
     cancel_requested: bool
-    error: JobError | None
+    error: JobError | None = Field(description="Why the job failed: the detail, field and status a synchronous "
+                                               "request would answer; field storage (status 507 or 503) when the "
+                                               "service's storage failed under it.")
     summary: dict[str, Any] | None = Field(
         description="The result of a succeeded job: the numbers its kind reports.  Fit and diagnose jobs carry "
                     "`warnings` (list of str, empty when none): what the command line says about the campaign's "
@@ -232,7 +236,8 @@ class JobInfo(BaseModel):
                     "reading the campaign has the summary {\"warnings\": [...]} (empty or not); null otherwise.")
     files: list[str] = Field(description="Result files, downloadable at /jobs/{id}/files/{name}.")
     url: str
-    result_url: str | None
+    result_url: str | None = Field(description="The main result of a succeeded job; null otherwise, and when its "
+                                               "result was removed from the server.")
 
 
 class JobList(BaseModel):
@@ -240,11 +245,21 @@ class JobList(BaseModel):
     total: int
 
 
+class WorkerHealth(BaseModel):
+    started: int = Field(description="Job worker threads started.")
+    alive: int = Field(description="Of them, alive (fewer than started: jobs are not run; restart the service).")
+
+
 class Health(BaseModel):
-    status: Literal["ok"]
+    status: Literal["ok", "failing"] = Field(
+        description="ok, or failing (answered with 503) when a job worker died or the job database cannot be read "
+                    "or written; `problems` says which.")
     version: str
-    queued: int
-    running: int
+    queued: int | None = Field(description="Queued jobs (null when the job database cannot be read).")
+    running: int | None = Field(description="Running jobs (null when the job database cannot be read).")
+    workers: WorkerHealth
+    free_bytes: int | None = Field(None, description="Space left on the device of the data folder, bytes.")
+    problems: list[str] = Field(default_factory=list, description="One line per problem, naming what fails.")
 
 
 # ---------------------------------------------------------------- contours

@@ -13,7 +13,7 @@ from fastapi.responses import FileResponse
 from gisnoise.service.deps import WRITE, State, StateDep
 from gisnoise.service.errors import ApiError
 from gisnoise.service.jobs import Job
-from gisnoise.service.models import FileName, JobError, JobInfo, JobList, MediaType, SafeId
+from gisnoise.service.models import ErrorBody, FileName, JobError, JobInfo, JobList, MediaType, SafeId
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
@@ -35,12 +35,18 @@ def job_info(request: Request, job: Job) -> JobInfo:
     err = None
     if job.error is not None:
         err = JobError(detail=job.error, field=job.error_field, status=job.error_status)
+    message = RESULT_MISSING if job.result_missing else job.message
     return JobInfo(
-        id=job.id, kind=job.kind, status=job.status, progress=job.progress, message=job.message,  # type: ignore[arg-type]
+        id=job.id, kind=job.kind, status=job.status, progress=job.progress, message=message,  # type: ignore[arg-type]
         created=job.created, started=job.started, finished=job.finished, attempts=job.attempts,
         cancel_requested=job.cancel_requested, error=err, summary=dict(job.summary) if job.summary else None,
-        files=list(job.files), url=url, result_url=url + "/result" if job.status == "succeeded" else None,
+        files=list(job.files), url=url,
+        result_url=url + "/result" if job.status == "succeeded" and not job.result_missing else None,
     )
+
+
+RESULT_MISSING = "done, but its result is missing on the server (its folder was removed)"
+"""The message of a succeeded job whose result folder is gone."""
 
 
 JobId = Annotated[SafeId, PathParam(description="Job id.")]
@@ -72,27 +78,40 @@ def _file_response(path: Path) -> FileResponse:
     return FileResponse(path, media_type=media, filename=path.name)
 
 
-def _result_path(state: State, job: Job, name: str) -> Path:
+def _result_path(state: State, job: Job, name: str, field: str = "name") -> Path:
+    """The result file ``name`` of ``job``; errors about the name say ``field`` (``job_id`` for the main result,
+    which the client does not name)."""
     if job.status != "succeeded":
         if job.status == "failed":
             raise ApiError(409, f"job_id: job {job.id} failed, it has no result: {job.error}", field="job_id")
         if job.status == "cancelled":
             raise ApiError(409, f"job_id: job {job.id} was cancelled; it has no result", field="job_id")
         raise ApiError(409, f"job_id: job {job.id} is {job.status}; no result yet", field="job_id")
+    if job.result_missing:
+        raise ApiError(410, f"job_id: the result of job {job.id} is missing on the server (its folder was removed "
+                            "after the job succeeded); submit the job again", field="job_id")
     # the name is looked up in the job's listing, never joined to a path as given
     listed = {f: f for f in job.files}
     if name not in listed:
+        if field == "job_id":  # the job's main result, named by its kind: it was there when the job succeeded
+            raise ApiError(410, f"job_id: the result file {name!r} of job {job.id} is missing on the server (it "
+                                f"was removed after the job succeeded; files: {', '.join(job.files) or 'none'})",
+                           field="job_id")
         raise ApiError(404, f"name: job {job.id} has no result file {name!r} (files: {', '.join(job.files)})",
                        field="name")
     path = state.jobs.result_dir(job.id) / listed[name]
     if not path.is_file():
-        raise ApiError(404, f"name: job {job.id} has no result file {name!r}", field="name")
+        raise ApiError(410, f"{field}: the result file {name!r} of job {job.id} is missing on the server (it was "
+                            "removed after the job succeeded)", field=field)
     return path
 
 
-_RESULT_RESPONSES: dict[int | str, dict[str, Any]] = {200: {"content": {m.value: {} for m in (MediaType.geojson, MediaType.geotiff, MediaType.json,
-                                                               MediaType.zip, MediaType.html, MediaType.png)},
-                           "description": "The result file."}}
+_RESULT_RESPONSES: dict[int | str, dict[str, Any]] = {
+    200: {"content": {m.value: {} for m in (MediaType.geojson, MediaType.geotiff, MediaType.json, MediaType.zip,
+                                            MediaType.html, MediaType.png)},
+          "description": "The result file."},
+    410: {"model": ErrorBody, "description": "The result was removed from the server after the job succeeded."},
+}
 
 
 @router.get("/{job_id}/result", summary="Download a job's main result", responses=_RESULT_RESPONSES,
@@ -106,7 +125,7 @@ def job_result(job_id: JobId, request: Request, state: StateDep,
     accept = request.headers.get("accept", "")
     want_tif = format == "geotiff" or (format is None and "image/tiff" in accept)
     name = names[1] if (job.kind == "contours" and want_tif) else (names[0] if names else "")
-    return _file_response(_result_path(state, job, name))
+    return _file_response(_result_path(state, job, name, "job_id"))
 
 
 @router.get("/{job_id}/files/{name:path}", summary="Download one result file", responses=_RESULT_RESPONSES,

@@ -93,11 +93,17 @@ class LayerStore:
             d = self.root / layer_id / str(ver)
             tmp = self.root / layer_id / f".{ver}.tmp"
             shutil.rmtree(tmp, ignore_errors=True)
-            tmp.mkdir(parents=True)
-            shutil.copytree(src.parent, tmp, dirs_exist_ok=True)
-            info = {"id": layer_id, "version": ver, "kind": kind, "file": name}
-            (tmp / "layer.json").write_text(json.dumps(info))
-            tmp.rename(d)
+            try:
+                tmp.mkdir(parents=True)
+                shutil.copytree(src.parent, tmp, dirs_exist_ok=True)
+                info = {"id": layer_id, "version": ver, "kind": kind, "file": name}
+                (tmp / "layer.json").write_text(json.dumps(info))
+                tmp.rename(d)
+            except BaseException:  # a full disk, say: nothing of the upload is left
+                shutil.rmtree(tmp, ignore_errors=True)
+                if ver == 1:
+                    shutil.rmtree(self.root / layer_id, ignore_errors=True)
+                raise
             return info
 
 

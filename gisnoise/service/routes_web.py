@@ -15,7 +15,8 @@ from gisnoise.errors import InputError
 from gisnoise.service.basemap import TILE_URL
 from gisnoise.service.deps import StateDep
 from gisnoise.service.errors import ApiError
-from gisnoise.service.models import Health, MediaType
+from gisnoise.service.models import Health, MediaType, WorkerHealth
+from gisnoise.service.storage import LOW_SPACE_BYTES, NO_SPACE, free_bytes
 
 router = APIRouter()
 
@@ -38,10 +39,39 @@ def docs() -> HTMLResponse:
                                swagger_favicon_url="/static/vendor/swagger-ui/favicon-32x32.png")
 
 
-@router.get("/health", response_model=Health, tags=["service"], summary="Liveness and queue length")
-def health(state: StateDep) -> Health:
-    return Health(status="ok", version=__version__, queued=state.jobs.count(status="queued"),
-                  running=state.jobs.count(status="running"))
+@router.get("/health", response_model=Health, tags=["service"], summary="Liveness, job workers, storage and queue",
+            responses={503: {"model": Health, "description": "Failing: a job worker died or the storage fails "
+                                                             "(`problems` says which)."}})
+def health(state: StateDep) -> Response:
+    """``ok`` (200), or ``failing`` (503) with one line per problem: a dead job worker, a job database that
+    cannot be read or written (after a failed write, a small write tells whether it works again), job ends
+    not written yet, less than 1 MiB free on the data folder's device."""
+    problems: list[str] = []
+    queued = running = None
+    try:
+        counts = state.jobs.counts()
+        queued, running = counts["queued"], counts["running"]
+    except Exception as exc:  # noqa: BLE001 - reported, whatever it is
+        failure = state.jobs.failure(exc)
+        problems.append(f"storage: {failure.reason}" if failure is not None else
+                        f"storage: cannot read the job database ({type(exc).__name__}: {exc})")
+    failure = state.jobs.check_writable()
+    if failure is not None and f"storage: {failure.reason}" not in problems:
+        problems.append(f"storage: {failure.reason}")
+    started, alive = state.pool.workers()
+    if alive < started:
+        problems.append(f"workers: {started - alive} of {started} job worker(s) stopped; queued jobs are not run "
+                        "until the service is restarted")
+    unwritten = state.pool.unwritten
+    if unwritten:
+        problems.append(f"jobs: the end of {len(unwritten)} job(s) is not written yet (written as soon as the "
+                        "storage takes it)")
+    free = free_bytes(state.settings.data_dir)
+    if free is not None and free < LOW_SPACE_BYTES:
+        problems.append(f"storage: {NO_SPACE} of the data folder ({free} bytes free)")
+    body = Health(status="failing" if problems else "ok", version=__version__, queued=queued, running=running,
+                  workers=WorkerHealth(started=started, alive=alive), free_bytes=free, problems=problems)
+    return Response(body.model_dump_json(), status_code=503 if problems else 200, media_type=MediaType.json.value)
 
 
 @router.get("/config.json", tags=["service"], summary="Settings the web page needs",

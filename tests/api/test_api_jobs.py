@@ -269,3 +269,83 @@ def test_job_writes_need_a_key(make_client):
     assert_names_field(c.delete(f"/jobs/{jid}", headers={"X-API-Key": "bad"}), 403, "X-API-Key")
     assert c.post(f"/jobs/{jid}/cancel", headers={"X-API-Key": KEY}).status_code == 200
     assert c.get(f"/jobs/{jid}").status_code == 200
+
+
+# ---------------------------------------------------------------- restarts
+def test_a_graceful_stop_requeues_as_never_run_and_does_not_count_toward_the_limit(tmp_path):
+    """Three graceful stops of a job limited to 2 unclean ends: each re-queues it with progress 0 and no start
+    time (it kept 0.5 and its start), none counts; then 2 unclean ends (found running at start-up) fail it."""
+    s = _store(tmp_path, max_attempts=2)
+    jid = s.submit("contours", {}).id
+    for n in range(1, 4):
+        started = threading.Event()
+
+        def handler(ctx, started=started):
+            ctx.progress(0.5, "half way")
+            started.set()
+            while not ctx.cancel():
+                time.sleep(0.01)
+            raise Cancelled("stop", field="job")
+
+        pool = _pool(s, handler)
+        assert started.wait(5)
+        pool.stop()
+        j = s.get(jid)
+        assert (j.status, j.progress, j.started, j.attempts) == ("queued", 0.0, None, n), j
+        assert j.message == "server stopped; re-queued"
+        assert s.requeue_interrupted() == 0 and s.get(jid).status == "queued"
+    s.claim_next()
+    s.set_progress(jid, 0.7)
+    assert _store(tmp_path, max_attempts=2).requeue_interrupted() == 1  # the first unclean end
+    j = s.get(jid)
+    assert (j.status, j.progress, j.started) == ("queued", 0.0, None), j
+    s.claim_next()
+    assert _store(tmp_path, max_attempts=2).requeue_interrupted() == 0  # the second: not retried
+    j = s.get(jid)
+    assert j.status == "failed" and j.error == "job: interrupted 2 times; not retried" and j.attempts == 5, j
+
+
+# ---------------------------------------------------------------- inputs and results removed from the server
+def test_a_job_whose_stored_input_was_removed_fails_saying_so(tmp_path):
+    s = _store(tmp_path)
+    gone = s.submit("contours", {}, {"request.json": b"{}"}).id
+    import shutil
+
+    shutil.rmtree(s.input_dir(gone))  # the whole input folder
+    part = s.submit("contours", {}, {"request.json": b"{}"}).id
+    (s.input_dir(part) / "request.json").unlink()  # one input file
+
+    def handler(ctx):
+        return {"text": (ctx.input_dir / "request.json").read_text()}
+
+    pool = _pool(s, handler)
+    try:
+        jg, jp = _wait(s, gone), _wait(s, part)
+    finally:
+        pool.stop()
+    for j in (jg, jp):
+        assert (j.status, j.error_field) == ("failed", "job"), j
+        assert f"the stored input of job {j.id} is missing on the server" in j.error, j.error
+        assert "internal error" not in j.error and "FileNotFoundError" not in j.error
+    assert "'request.json' was removed" in jp.error and str(tmp_path) not in jp.error
+
+
+def test_a_result_removed_from_the_server_is_named_missing(fake_client):
+    import shutil
+
+    c = fake_client
+    jid = _submit(c)
+    c.gate.set()
+    assert wait_job(c, jid)["status"] == "succeeded"
+    rdir = c.app.state.gisnoise.jobs.result_dir(jid)
+    (rdir / "contours.geojson").unlink()  # the main result file alone
+    body = assert_names_field(c.get(f"/jobs/{jid}/result"), 410, "job_id")
+    assert "'contours.geojson'" in body["detail"] and "missing on the server" in body["detail"], body
+    assert c.get(f"/jobs/{jid}/result", params={"format": "geotiff"}).content == b"II*\x00"
+    shutil.rmtree(rdir)  # the whole result folder
+    info = c.get(f"/jobs/{jid}").json()
+    assert info["status"] == "succeeded" and info["files"] == [] and info["result_url"] is None, info
+    assert "result is missing on the server" in info["message"], info
+    for url in (f"/jobs/{jid}/result", f"/jobs/{jid}/files/levels.tif"):  # was 404 on 'name' for /result
+        body = assert_names_field(c.get(url), 410, "job_id")
+        assert body["detail"].startswith(f"job_id: the result of job {jid} is missing on the server"), body
