@@ -79,11 +79,14 @@ class ApiError(Exception):
     """An error of the service itself (not found, conflict, auth, size), with the field it is about."""
 
     def __init__(self, status: int, message: str, *, field: str | None = None,
-                 headers: dict[str, str] | None = None) -> None:
+                 headers: dict[str, str] | None = None, scrub: bool = True) -> None:
         super().__init__(message)
         self.status = status
         self.field = field
         self.headers = headers
+        self.scrub = scrub
+        """False: the message quotes the client's own input (a zip member's name, an absolute one in the temporary folder say), answered as
+        it is, not cut as a server path."""
 
 
 def status_for(exc: BaseException) -> int:
@@ -280,8 +283,9 @@ def install_handlers(app: FastAPI) -> None:
         for param, said in _STORE_NAMES.items():
             if fld == said and param in request.path_params:
                 fld, msg = param, (param + msg[len(said):] if msg.startswith(f"{said}:") else msg)
-        return JSONResponse(error_body(scrub_paths(msg, roots(), any_path=False), fld), status_code=exc.status,
-                            headers=exc.headers)
+        if exc.scrub:
+            msg = scrub_paths(msg, roots(), any_path=False)
+        return JSONResponse(error_body(msg, fld), status_code=exc.status, headers=exc.headers)
 
     @app.exception_handler(GisnoiseError)
     async def _core_error(request: Request, exc: GisnoiseError) -> JSONResponse:

@@ -21,22 +21,91 @@ from gisnoise.service.jobs import JobContext
 from gisnoise.service.models import CardRef, JobInfo, PhaseName, SafeId
 from gisnoise.service.responses import AsciiJSONResponse as JSONResponse
 from gisnoise.service.routes_jobs import JOB_LINKS, job_info
+from gisnoise.service.storage import storage_error, storage_failure
 
 if TYPE_CHECKING:
     from gisnoise.measure import Campaign
 
-__all__ = ["router", "unpack_campaign", "run_fit_job", "run_diagnose_job"]
+__all__ = ["router", "unpack_campaign", "run_fit_job", "run_diagnose_job", "MAX_RATIO", "RATIO_FLOOR"]
 
 router = APIRouter(prefix="/jobs", tags=["jobs"])
 
 _MAX_MEMBERS = 100_000
+MAX_RATIO = 100
+"""Largest compression ratio (unzipped : zipped) of a campaign member and of the whole archive.  Measurement
+files compress little: WAV recordings about 1.1:1, ULog and DataFlash logs 2-3:1, level and flight CSV 3-6:1;
+a member past 100:1 is padding (a zip bomb), not a campaign."""
+RATIO_FLOOR = 1 << 20
+"""Members (and archives) up to this size unzipped (1 MiB) are not held to :data:`MAX_RATIO`: a small file of
+repeated text may compress far, and costs nothing."""
+CAMPAIGN_PARTS = ("flights", "mics")
+"""The folders of a campaign (SPEC section 3) unzipped beside its ``campaign.json``; nothing else is."""
+
+
+def _refuse(status: int, field: str, what: str) -> ApiError:
+    return ApiError(status, f"{field}: {what}", field=field, scrub=False)  # member names are the client's own
+
+
+def _campaign_root(infos: list[zipfile.ZipInfo], field: str) -> PurePosixPath:
+    """The folder of the archive's shallowest ``campaign.json`` (macOS resource folders left out)."""
+    roots = [PurePosixPath(i.filename).parent for i in infos
+             if not i.is_dir() and PurePosixPath(i.filename).name == "campaign.json"
+             and "__MACOSX" not in PurePosixPath(i.filename).parts]
+    if not roots:
+        raise ApiError(422, f"{field}: the archive has no campaign.json", field=field)
+    return min(roots, key=lambda r: (len(r.parts), str(r)))
+
+
+def _used(info: zipfile.ZipInfo, root: PurePosixPath) -> bool:
+    """Whether a member is a file the campaign reads: its ``campaign.json`` or a file of ``flights/``,
+    ``mics/``."""
+    if info.is_dir():
+        return False
+    p = PurePosixPath(info.filename)
+    if root.parts and p.parts[:len(root.parts)] != root.parts:
+        return False
+    rel = p.parts[len(root.parts):]
+    return rel == ("campaign.json",) or (len(rel) > 1 and rel[0] in CAMPAIGN_PARTS)
+
+
+def _check_members(infos: list[zipfile.ZipInfo], max_bytes: int, field: str) -> None:
+    """Refuse what no campaign holds: too many members, too many bytes, names leaving the folder, links,
+    a name given twice, members (or an archive) compressed past :data:`MAX_RATIO`."""
+    if len(infos) > _MAX_MEMBERS:
+        raise ApiError(413, f"{field}: {len(infos)} files exceed the limit of {_MAX_MEMBERS}", field=field)
+    total = sum(i.file_size for i in infos)
+    if total > max_bytes:
+        raise ApiError(413, f"{field}: {total} bytes unzipped exceed the limit of {max_bytes}", field=field)
+    seen: set[str] = set()
+    for i in infos:
+        p = PurePosixPath(i.filename)
+        if p.is_absolute() or ".." in p.parts or "\\" in i.filename:
+            raise _refuse(422, field, f"member {i.filename!r} leaves the archive folder")
+        if stat.S_ISLNK(i.external_attr >> 16):
+            raise _refuse(422, field, f"member {i.filename!r} is a link")
+        key = str(p) + ("/" if i.is_dir() else "")
+        if key in seen:
+            raise _refuse(422, field, f"member {i.filename!r} is in the archive more than once (which copy is the "
+                                      "campaign's cannot be told); zip each file once")
+        seen.add(key)
+        if i.file_size > RATIO_FLOOR and i.file_size > MAX_RATIO * max(i.compress_size, 1):
+            raise _refuse(413, field, f"member {i.filename!r} unzips to {i.file_size} bytes from "
+                                      f"{i.compress_size}, more than {MAX_RATIO}:1 (measurement files compress "
+                                      "less than 10:1): refused as padding")
+    packed = sum(i.compress_size for i in infos)
+    if total > RATIO_FLOOR and total > MAX_RATIO * max(packed, 1):
+        raise ApiError(413, f"{field}: the archive unzips to {total} bytes from {packed}, more than {MAX_RATIO}:1 "
+                            "(measurement files compress less than 10:1): refused as padding", field=field)
 
 
 def unpack_campaign(upload: Path, dest: Path, *, max_bytes: int, field: str = "campaign") -> Path:
     """Unzip a campaign safely into ``dest``; returns the folder holding ``campaign.json``.
 
-    Refuses what is not a zip, paths leaving the folder, links, more than
-    ``max_bytes`` unzipped (413) and archives without ``campaign.json``.
+    Refuses what is not a zip, paths leaving the folder, links, a member name given twice, more than
+    ``max_bytes`` unzipped (413), members or archives compressed past :data:`MAX_RATIO` (413) and archives
+    without ``campaign.json``.  Only the files the campaign reads are unzipped: the shallowest ``campaign.json``
+    and the files of the ``flights/`` and ``mics/`` folders beside it; a member unzipping to more bytes than
+    its header states is refused.  A full disk is answered 507 naming the storage.
     """
     try:
         zf = zipfile.ZipFile(upload)
@@ -44,32 +113,49 @@ def unpack_campaign(upload: Path, dest: Path, *, max_bytes: int, field: str = "c
         raise ApiError(422, f"{field}: not a zip archive", field=field) from None
     with zf:
         infos = zf.infolist()
-        if len(infos) > _MAX_MEMBERS:
-            raise ApiError(413, f"{field}: {len(infos)} files exceed the limit of {_MAX_MEMBERS}", field=field)
-        total = sum(i.file_size for i in infos)
-        if total > max_bytes:
-            raise ApiError(413, f"{field}: {total} bytes unzipped exceed the limit of {max_bytes}", field=field)
-        for i in infos:
-            p = PurePosixPath(i.filename)
-            if p.is_absolute() or ".." in p.parts or "\\" in i.filename:
-                raise ApiError(422, f"{field}: member {i.filename!r} leaves the archive folder", field=field)
-            if stat.S_ISLNK(i.external_attr >> 16):
-                raise ApiError(422, f"{field}: member {i.filename!r} is a link", field=field)
+        _check_members(infos, max_bytes, field)
+        root = _campaign_root(infos, field)
+        written = 0
         try:
-            zf.extractall(dest)
-        except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError, zlib.error, EOFError) as exc:
+            for i in infos:
+                if not _used(i, root):
+                    continue
+                target = dest.joinpath(*PurePosixPath(i.filename).parts)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                n = 0
+                with zf.open(i) as src, target.open("wb") as out:
+                    while chunk := src.read(1 << 20):
+                        n += len(chunk)
+                        written += len(chunk)
+                        if n > i.file_size:
+                            raise _refuse(422, field, f"member {i.filename!r} unzips to more than the "
+                                                      f"{i.file_size} bytes its header states")
+                        if written > max_bytes:
+                            raise ApiError(413, f"{field}: more than {max_bytes} bytes unzipped exceed the limit",
+                                           field=field)
+                        out.write(chunk)
+        except ApiError:
+            raise
+        except OSError as exc:
+            failure = storage_failure(exc, near=dest.parent)
+            if failure is not None:
+                raise storage_error(failure, "the campaign was not stored") from None
             raise ApiError(422, f"{field}: cannot unzip ({type(exc).__name__}: {exc})", field=field) from None
-    found = sorted(dest.rglob("campaign.json"), key=lambda p: len(p.parts))
-    found = [p for p in found if "__MACOSX" not in p.parts]
-    if not found:
-        raise ApiError(422, f"{field}: the archive has no campaign.json", field=field)
-    return found[0].parent
+        except (zipfile.BadZipFile, ValueError, NotImplementedError, zlib.error, EOFError) as exc:
+            raise ApiError(422, f"{field}: cannot unzip ({type(exc).__name__}: {exc})", field=field) from None
+    return dest.joinpath(*root.parts)
 
 
 async def _receive_campaign(state: State, campaign: UploadFile) -> Path:
     """The upload unzipped into a fresh folder (moved into the job's input by ``submit``)."""
     s = state.settings
-    tmp = Path(tempfile.mkdtemp(prefix="upload-", dir=s.jobs_dir))
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix="upload-", dir=s.jobs_dir))
+    except OSError as exc:
+        failure = storage_failure(exc, near=s.jobs_dir)
+        if failure is not None:
+            raise storage_error(failure, "the campaign was not stored") from None
+        raise
     try:
         zpath = tmp / "campaign.zip"
         n = 0
@@ -87,6 +173,12 @@ async def _receive_campaign(state: State, campaign: UploadFile) -> Path:
         shutil.move(str(folder), str(final))
         shutil.rmtree(tmp / "unzipped", ignore_errors=True)
         return final
+    except OSError as exc:  # a full disk, say: nothing of the upload is left
+        shutil.rmtree(tmp, ignore_errors=True)
+        failure = storage_failure(exc, near=s.jobs_dir)
+        if failure is not None:
+            raise storage_error(failure, "the campaign was not stored") from None
+        raise
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -166,11 +258,17 @@ async def diagnose_job(request: Request, state: StateDep,
 
 
 # ------------------------------------------------------------------ handlers
+CAMPAIGN_FIELDS = {"phase": "phase", "ansatz": "ansatz"}
+"""A core error met while reading the uploaded campaign names a field of its files (a WAV header's ``length``,
+a CSV's ``t``): the request's field is ``campaign`` (the message names the file and what is wrong in it)."""
+
+
 def _read_campaign(ctx: JobContext) -> Campaign:
     """The job's stored campaign, read as the command line reads it; a cancel is seen between its files."""
     from gisnoise.measure import read_campaign
 
-    return read_campaign(ctx.input_dir / "campaign", progress=lambda done, total: ctx.check_cancel())
+    with request_fields(CAMPAIGN_FIELDS, default="campaign"):
+        return read_campaign(ctx.input_dir / "campaign", progress=lambda done, total: ctx.check_cancel())
 
 
 def _log_warnings(ctx: JobContext, camp: Campaign) -> list[str]:
@@ -179,7 +277,8 @@ def _log_warnings(ctx: JobContext, camp: Campaign) -> list[str]:
     server's folder."""
     from gisnoise.measure import campaign_log_warnings
 
-    warnings = campaign_log_warnings(camp)
+    with request_fields(CAMPAIGN_FIELDS, default="campaign"):
+        warnings = campaign_log_warnings(camp)
     for folder in (ctx.input_dir.resolve(), ctx.input_dir):
         _strip_server_paths(warnings, str(folder))
     return warnings
@@ -258,7 +357,8 @@ def run_diagnose_job(ctx: JobContext) -> dict[str, Any]:
     def progress(done: int, total: int, what: str = "") -> None:
         ctx.progress(0.9 * done / max(total, 1), what or "diagnosing")
 
-    samples = with_mic_heights(camp.samples(), ctx.input_dir / "campaign")
+    with request_fields(CAMPAIGN_FIELDS, default="campaign"):
+        samples = with_mic_heights(camp.samples(), ctx.input_dir / "campaign")
     diag = run_diagnosis(samples, card, progress=progress, cancel=ctx.cancel)
     ctx.check_cancel()
     _strip_server_paths(diag.result, str(ctx.input_dir))  # the server's folder means nothing to the client
