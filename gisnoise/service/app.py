@@ -99,13 +99,33 @@ def create_app(settings: Settings | None = None, *, start_workers: bool = True) 
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         st: State = app.state.gisnoise
         settings.data_dir.mkdir(parents=True, exist_ok=True)
-        n = st.cards.seed(settings.seed_cards_dir)
+        try:
+            n = st.cards.seed(settings.seed_cards_dir)
+        except (ApiError, OSError) as exc:  # the storage refused the seed cards (a full disk): seeded next start
+            log.error("the card store was not seeded: %s", exc)
+            n = 0
         if n:
             log.info("card store seeded with %d cards", n)
-        orphans = st.jobs.remove_orphans()
+        try:
+            orphans = st.jobs.remove_orphans()
+        except Exception as exc:
+            if st.jobs.failure(exc) is None:
+                raise
+            log.error("cannot look for job folders without a job now: %s", exc)  # done at the next start
+            orphans = 0
         if orphans:
             log.warning("removed %d job folder(s) without a job (left by a stop during a submission)", orphans)
-        requeued = st.jobs.requeue_interrupted()
+        try:
+            requeued = st.jobs.requeue_interrupted()
+        except Exception as exc:
+            failure = st.jobs.failure(exc)
+            if failure is None:
+                raise
+            # the service starts and says it is failing; the workers re-queue before their first claim
+            log.error("cannot re-queue the jobs interrupted by the last stop now (%s); the job workers will",
+                      failure.reason)
+            st.pool.requeue_first()
+            requeued = 0
         if requeued:
             log.warning("%d job(s) interrupted by the last stop were re-queued", requeued)
         if start_workers:

@@ -74,14 +74,18 @@ class CardStore:
         n = 0
         if folder is None:
             return 0
-        for p in sorted(Path(folder).glob("*.json")):
-            try:
-                card = gcards.load(p)
-            except gcards.CardError:
-                continue
-            if _ID_RE.match(card.id):
-                self.put(card)
-                n += 1
+        try:
+            for p in sorted(Path(folder).glob("*.json")):
+                try:
+                    card = gcards.load(p)
+                except gcards.CardError:
+                    continue
+                if _ID_RE.match(card.id):
+                    self.put(card)
+                    n += 1
+        except BaseException:  # a full disk, say: the store does not exist yet, so the next start seeds it
+            shutil.rmtree(self.root, ignore_errors=True)
+            raise
         return n
 
     def _versions(self, card_id: str) -> list[int]:

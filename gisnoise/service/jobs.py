@@ -145,6 +145,13 @@ class WorkerPool:
         self._threads: list[threading.Thread] = []
         self._pending: dict[str, Outcome] = {}
         self._pending_lock = threading.Lock()
+        self._requeue = False
+        self._requeue_lock = threading.Lock()
+
+    def requeue_first(self) -> None:
+        """Have the workers re-queue the jobs found running (:meth:`JobStore.requeue_interrupted`) before they
+        claim any job: the start-up could not (the storage refused it)."""
+        self._requeue = True
 
     def start(self) -> None:
         self._stop.clear()
@@ -185,6 +192,8 @@ class WorkerPool:
             failing = 0  # consecutive rounds the job database refused
             while not self._stop.is_set():
                 try:
+                    if self._requeue:
+                        self._requeue_interrupted()
                     job = self.store.claim_next() if self._flush() else None
                     if job is None and self._pending:
                         raise RuntimeError("the end of a job is not written yet")
@@ -205,6 +214,13 @@ class WorkerPool:
                     self.run(job)
                 except Exception:  # noqa: BLE001 - run() records every end; this keeps the worker whatever
                     log.error("job %s: the worker failed around it:\n%s", job.id, traceback.format_exc())
+
+    def _requeue_interrupted(self) -> None:
+        with self._requeue_lock:  # one worker re-queues; the others wait for it, then claim
+            if self._requeue:
+                n = self.store.requeue_interrupted()
+                self._requeue = False
+                log.warning("%d job(s) interrupted by the last stop were re-queued", n)
 
     def _cancel_fn(self, job_id: str, run: _Run) -> Callable[[], bool]:
         last = [0.0, False]
@@ -323,11 +339,13 @@ class WorkerPool:
         if not self._pending:
             return True
         with self._pending_lock:
-            for job_id, (status, kw) in list(self._pending.items()):
-                try:
-                    self.store.finish(job_id, status, **kw)
-                except Exception:  # noqa: BLE001 - still refused: kept
-                    return False
-                del self._pending[job_id]
-                log.warning("job %s: its end (%s) is written now", job_id, status)
+            items = list(self._pending.items())
+        for job_id, (status, kw) in items:  # written without the lock: /health reads the list meanwhile
+            try:
+                self.store.finish(job_id, status, **kw)
+            except Exception:  # noqa: BLE001 - still refused: kept
+                return False
+            with self._pending_lock:
+                self._pending.pop(job_id, None)
+            log.warning("job %s: its end (%s) is written now", job_id, status)
         return True

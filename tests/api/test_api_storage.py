@@ -287,3 +287,32 @@ def test_serve_on_a_read_only_data_folder_with_a_database_says_it_cannot_be_writ
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and "Traceback" not in r.output, r.output
     assert lines[0].startswith(f"Error: the data folder {data} cannot be written (Read-only file system)"), lines
+
+
+def test_a_start_on_a_failing_database_serves_and_requeues_once_it_works(tmp_path, monkeypatch):
+    """The last stop left a job running (a crash); the database refuses writes at the next start: the service
+    starts anyway and says it is failing, and once the database works its worker re-queues the job before
+    claiming any, then runs it (before, the start-up's re-queue raised and the service did not start)."""
+    from conftest import make_settings
+    from fastapi.testclient import TestClient
+
+    from gisnoise.service import create_app
+
+    settings = make_settings(tmp_path)
+    store = JobStore(settings.db_path, settings.jobs_dir)
+    crashed = store.submit("contours", {}, {"request.json": b"{}"}).id
+    store.claim_next()  # running when the process died
+    app = create_app(settings)
+    st = app.state.gisnoise
+    full, started, release = threading.Event(), threading.Event(), threading.Event()
+    st.pool.handlers["contours"] = _slow_handler(started, release)
+    st.pool.poll_s = 0.02
+    _fail_database_while(st.jobs, full, monkeypatch)
+    full.set()
+    with TestClient(app) as c:
+        h = c.get("/health")
+        assert h.status_code == 503 and h.json()["workers"] == {"started": 1, "alive": 1}, h.text
+        full.clear()
+        info = wait_job(c, crashed)
+        assert info["status"] == "succeeded" and info["attempts"] == 2, info
+        assert c.get("/health").json()["status"] == "ok"
