@@ -59,31 +59,29 @@ AIR_PRESSURE_KPA = (25.0, 120.0)
 outside, a pressure is in another unit (101325: pascal; 1013.25: hectopascal)."""
 
 
+def _air(value: Any, name: str, what: str, unit: str, bounds: tuple[float, float],
+         hint: Any) -> np.ndarray:
+    """Finite values of ``name`` within ``bounds``; the first outside is refused with ``hint(v)`` (its other unit)."""
+    a = _finite(value, name)
+    lo, hi = bounds
+    bad = (a < lo) | (a > hi)
+    if np.any(bad):
+        v = float(a[bad].flat[0])
+        raise InputError(f"{name} must be {what} in {unit} within [{lo:g}, {hi:g}], got {v:g}{hint(v)}", field=name)
+    return a
+
+
 def _temperature(value: Any, name: str = "temperature_c") -> np.ndarray:
     """Finite air temperatures, deg C, within :data:`AIR_TEMPERATURE_C`."""
-    t = _finite(value, name)
-    lo, hi = AIR_TEMPERATURE_C
-    bad = (t < lo) | (t > hi)
-    if np.any(bad):
-        v = float(t[bad].flat[0])
-        hint = f" ({v:g} K is {v - 273.15:g} deg C)" if 180.0 <= v <= 340.0 else ""
-        raise InputError(f"{name} must be an air temperature in deg C within [{lo:g}, {hi:g}], got {v:g}{hint}",
-                         field=name)
-    return t
+    return _air(value, name, "an air temperature", "deg C", AIR_TEMPERATURE_C,
+                lambda v: f" ({v:g} K is {v - 273.15:g} deg C)" if 180.0 <= v <= 340.0 else "")
 
 
 def _air_pressure(value: Any, name: str = "pressure_kpa") -> np.ndarray:
     """Finite atmospheric pressures, kPa, within :data:`AIR_PRESSURE_KPA`."""
-    p = _finite(value, name)
-    lo, hi = AIR_PRESSURE_KPA
-    bad = (p < lo) | (p > hi)
-    if np.any(bad):
-        v = float(p[bad].flat[0])
-        hint = (f" ({v:g} Pa is {v / 1000:g} kPa)" if 2.5e4 <= v <= 1.2e5 else
+    return _air(value, name, "an atmospheric pressure", "kPa", AIR_PRESSURE_KPA,
+                lambda v: f" ({v:g} Pa is {v / 1000:g} kPa)" if 2.5e4 <= v <= 1.2e5 else
                 f" ({v:g} hPa is {v / 10:g} kPa)" if 250.0 <= v <= 1200.0 else "")
-        raise InputError(f"{name} must be an atmospheric pressure in kPa within [{lo:g}, {hi:g}], got {v:g}{hint}",
-                         field=name)
-    return p
 
 
 def _bands_of(L_bands: Any, f_hz: Any) -> tuple[np.ndarray, np.ndarray]:

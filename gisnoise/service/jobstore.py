@@ -220,32 +220,16 @@ class JobStore:
     def list(self, *, status: str | None = None, kind: str | None = None, limit: int = 100,
              offset: int = 0) -> list[Job]:
         """Jobs, newest first."""
-        q, args = "SELECT * FROM jobs", list[Any]()
-        conds = []
-        if status:
-            conds.append("status = ?")
-            args.append(status)
-        if kind:
-            conds.append("kind = ?")
-            args.append(kind)
-        if conds:
-            q += " WHERE " + " AND ".join(conds)
-        q += " ORDER BY seq DESC LIMIT ? OFFSET ?"
+        where, args = _where(status, kind)
+        q = "SELECT * FROM jobs" + where + " ORDER BY seq DESC LIMIT ? OFFSET ?"
         args += [limit, offset]
         with self._connect() as con:
             rows = con.execute(q, args).fetchall()
         return [self._row(r) for r in rows]
 
     def count(self, *, status: str | None = None, kind: str | None = None) -> int:
-        conds: list[str] = []
-        args: list[Any] = []
-        if status:
-            conds.append("status = ?")
-            args.append(status)
-        if kind:
-            conds.append("kind = ?")
-            args.append(kind)
-        q = "SELECT COUNT(*) FROM jobs" + (" WHERE " + " AND ".join(conds) if conds else "")
+        where, args = _where(status, kind)
+        q = "SELECT COUNT(*) FROM jobs" + where
         with self._connect() as con:
             return int(con.execute(q, args).fetchone()[0])
 
@@ -383,3 +367,9 @@ class JobStore:
     def wake_all(self) -> None:
         with self._wakeup:
             self._wakeup.notify_all()
+
+
+def _where(status: str | None, kind: str | None) -> tuple[str, list[Any]]:
+    """The ``WHERE`` clause (with its leading blank; empty without a condition) and arguments of a jobs query."""
+    conds = [c for c, v in (("status = ?", status), ("kind = ?", kind)) if v]
+    return (" WHERE " + " AND ".join(conds) if conds else ""), [v for v in (status, kind) if v]
