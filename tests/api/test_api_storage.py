@@ -293,12 +293,12 @@ def test_a_start_on_a_failing_database_serves_and_requeues_once_it_works(tmp_pat
     """The last stop left a job running (a crash); the database refuses writes at the next start: the service
     starts anyway and says it is failing, and once the database works its worker re-queues the job before
     claiming any, then runs it (before, the start-up's re-queue raised and the service did not start)."""
-    from conftest import make_settings
     from fastapi.testclient import TestClient
+    from service_helpers import CARDS
 
     from gisnoise.service import create_app
-
-    settings = make_settings(tmp_path)
+    from gisnoise.service.settings import Settings
+    settings = Settings(data_dir=tmp_path / "data", seed_cards_dir=CARDS, tile_url="")  # as conftest's
     store = JobStore(settings.db_path, settings.jobs_dir)
     crashed = store.submit("contours", {}, {"request.json": b"{}"}).id
     store.claim_next()  # running when the process died
