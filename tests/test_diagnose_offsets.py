@@ -2,9 +2,11 @@
 bounds of the height search, effects the card holds already, and an ansatz without the offset the data need.
 
 Every campaign is the diagnosis base scenario (``sample_data/scenarios/diagnosis_base.json``) made by the
-simulator with the demonstration card and no effect; the faults are put into the levels afterwards, so their
+simulator with the demonstration card and no effect, or with the bank-angle effect its scenario switch injects
+(louder turns, at the simulator's default magnitude); the faults are put into the levels afterwards, so their
 size is known exactly: a microphone's levels (overall and bands) raised by 3.00 dB, every microphone of one
-flight raised by 2.00 dB.
+flight raised by 2.00 dB.  A constant added to some rows is exactly what one offset parameter describes, so
+the candidates judged with the offsets the diagnosis names must score as on the same campaign without the fault.
 """
 
 from __future__ import annotations
@@ -33,9 +35,12 @@ CARD = CARDS / "demo_horizontal.json"
 
 
 @functools.cache
-def control(seed: int = 1) -> Samples:
+def control(seed: int = 1, effect: str | None = None) -> Samples:
+    """The base scenario, with one effect of the simulator at its default magnitude when ``effect`` is given."""
     doc = json.loads(SCENARIO.read_text())
     doc["seed"] = seed
+    if effect:
+        doc["effects"] = {effect: {}}
     return simulate.simulate_samples(simulate.run(doc, base_dir=SCENARIO.parent))
 
 
@@ -50,8 +55,8 @@ def raised(s: Samples, rows: np.ndarray, db: float) -> Samples:
 
 
 @functools.cache
-def diagnosed(case: str):
-    s = control()
+def diagnosed(case: str, effect: str | None = None):
+    s = control(1, effect)
     if case == "m2+3":
         s = raised(s, s.mic.astype(str) == "m2", 3.0)
     elif case == "f2+2":
@@ -76,6 +81,11 @@ def test_a_microphone_3_db_off_is_named_with_its_offset():
     (sentence,) = r["verdict"]["level_offsets"]
     assert sentence.startswith("microphone 'm2':") and "level offset" in sentence
     assert f"{m2['offset_db']:.2f} dB (+/- {m2['std_db']:.2f} dB) above" in sentence
+    # the candidates were judged with m2's offset, and none qualifies: an offset alone names no effect
+    (judged,) = r["verdict"]["candidates_judged_with"]["level_offsets"]
+    assert (judged["group"], judged["id"], judged["held_in_folds"]) == ("microphone", "m2", False)
+    assert abs(judged["offset_db"] - 3.0) <= 3.0 * judged["std_db"], judged
+    assert r["verdict"]["effects"] == []
 
 
 def test_a_flight_2_db_louder_is_named_with_its_offset():
@@ -91,15 +101,65 @@ def test_a_flight_2_db_louder_is_named_with_its_offset():
     (sentence,) = r["verdict"]["level_offsets"]
     assert sentence.startswith("flight 'f2':") and "louder than flight 'f1'" in sentence
     assert "calibration" in sentence and "vehicle" in sentence
+    # the candidates were judged with f2's offset (held in the folds, which are the flights), and none qualifies
+    (judged,) = r["verdict"]["candidates_judged_with"]["level_offsets"]
+    assert (judged["group"], judged["id"], judged["held_in_folds"]) == ("flight", "f2", True)
+    assert abs(judged["offset_db"] - 2.0) <= 3.0 * judged["std_db"], judged
+    assert r["verdict"]["effects"] == []
+    # with the offset, the held-out baseline is the clean campaign's: the flight's 2 dB no longer weighs on it
+    clean = diagnosed("clean")["baseline"]["rms_db_holdout"]
+    assert r["baseline"]["rms_db_holdout"] > clean + 0.5
+    assert r["baseline"]["with_level_offsets"]["rms_db_holdout"] == pytest.approx(clean, abs=0.02)
+    assert r["verdict"]["rms_db_holdout_baseline"] == pytest.approx(clean, abs=0.02)
 
 
 def test_the_clean_campaign_names_no_offset():
     r = diagnosed("clean")
     assert r["verdict"]["level_offsets"] == []
+    assert r["verdict"]["candidates_judged_with"] == {"level_offsets": [], "sentence": None}
+    assert "with_level_offsets" not in r["baseline"]
     lo = r["metadata"]["level_offsets"]
     assert not any(e["named"] for e in lo["microphones"].values())
     assert not any(e["named"] for e in lo["flights"].values())
     assert abs(lo["flights"]["f2"]["offset_db"]) < 0.1
+
+
+# --------------------------------------------------------------------------- an effect and an offset together
+
+
+@pytest.mark.parametrize("case, group, name, truth", [("f2+2", "flights", "f2", 2.0), ("m2+3", "microphones", "m2", 3.0)])
+def test_an_effect_and_an_offset_are_both_named_and_the_effect_judged_as_without_the_offset(case, group, name, truth):
+    """Louder turns (the simulator's bank-angle effect) and one flight 2.00 dB louder, or one microphone 3.00 dB off:
+    the verdict names bank_angle, the offset is named within 3 of its standard deviations of the truth, and the
+    candidates were judged with it.  The offset is a constant the offset parameter describes exactly, so the
+    effect's held-out scores are those of the same campaign without the fault: the held-out RMS before and after
+    the effect within 0.02 dB, the shrinkage within 1 percentage point (the offset's estimate is the only
+    difference; judged without the offset, the shrinkage was about half)."""
+    ref = diagnosed("clean", "bank_angle")
+    r = diagnosed(case, "bank_angle")
+    assert ref["verdict"]["effect"] == "bank_angle" and ref["verdict"]["candidates_judged_with"]["level_offsets"] == []
+    v = r["verdict"]
+    assert v["effect"] == "bank_angle"
+    assert [e["effect"] for e in v["effects"]] == [e["effect"] for e in ref["verdict"]["effects"]]
+    # the offset: named in the findings, and the one the candidates carried
+    e = r["metadata"]["level_offsets"][group][name]
+    assert e["named"] and abs(e["offset_db"] - truth) <= 3.0 * e["std_db"], e
+    (sentence,) = v["level_offsets"]
+    assert sentence.startswith(f"{'flight' if group == 'flights' else 'microphone'} '{name}':")
+    (judged,) = v["candidates_judged_with"]["level_offsets"]
+    assert judged["id"] == name and abs(judged["offset_db"] - truth) <= 3.0 * judged["std_db"], judged
+    assert f"'{name}' ({judged['offset_db']:+.2f} dB" in v["candidates_judged_with"]["sentence"]
+    # the effect judged as on the campaign without the offset
+    assert v["rms_db_holdout_baseline"] == pytest.approx(ref["verdict"]["rms_db_holdout_baseline"], abs=0.02)
+    assert v["rms_db_holdout_extended"] == pytest.approx(ref["verdict"]["rms_db_holdout_extended"], abs=0.02)
+    assert v["holdout_shrinkage_pct"] == pytest.approx(ref["verdict"]["holdout_shrinkage_pct"], abs=1.0)
+    bank = next(x for x in r["effects"] if x["name"] == "bank_angle")
+    bank_ref = next(x for x in ref["effects"] if x["name"] == "bank_angle")
+    assert bank["rank"] == 1 and bank["significant"]
+    k, k_ref = bank["parameters"]["k_bank"], bank_ref["parameters"]["k_bank"]
+    assert abs(k["value"] - k_ref["value"]) <= 2.0 * k_ref["std"], (k, k_ref)
+    # the card's ansatz alone (no offset) misses the campaign by more than the offset-free campaign
+    assert r["baseline"]["rms_db_holdout"] > ref["baseline"]["rms_db_holdout"] + 0.3
 
 
 def test_the_command_line_and_the_report_name_the_microphone(tmp_path):
@@ -123,7 +183,13 @@ def test_the_command_line_and_the_report_name_the_microphone(tmp_path):
     lines = run.output.splitlines()
     i = next(k for k, t in enumerate(lines) if t.startswith("verdict: "))
     assert lines[i + 1] == f"unexplained: {sentence}"
-    assert f"Not explained by any effect: {sentence}" in (out / "report.html").read_text().replace("&#x27;", "'")
+    judged = doc["verdict"]["candidates_judged_with"]["sentence"]
+    assert judged.startswith("the candidates were fitted and judged on held-out data with the level offset of "
+                             "microphone 'm2' (+")
+    assert lines[i + 2] == f"judged with offsets: {judged}"
+    page = (out / "report.html").read_text().replace("&#x27;", "'")
+    assert f"Not explained by any effect: {sentence}" in page
+    assert f"Judged with level offsets: {judged}" in page
 
 
 # --------------------------------------------------------------------------- segments covering several regimes

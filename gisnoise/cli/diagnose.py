@@ -68,6 +68,9 @@ def command(ctx: click.Context, campaign: str, card_path: str, out: str, effects
             click.echo(f"verdict: no effect ({v['reason']})")
         for sentence in v.get("level_offsets") or []:
             click.echo(f"unexplained: {sentence}")
+        judged = (v.get("candidates_judged_with") or {}).get("sentence")
+        if judged:
+            click.echo(f"judged with offsets: {judged}")
         click.echo(f"{len(diag.result['segments'])} segment(s) where the card misses; wrote {path}"
                    + ("" if no_report else f" and {folder / 'report.html'}"))
 

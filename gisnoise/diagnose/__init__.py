@@ -38,7 +38,9 @@ from gisnoise.diagnose.metadata import (
 )
 from gisnoise.diagnose.offsets import (
     OFFSET_Z,
+    judged_with,
     level_offsets,
+    offset_groups,
     with_offsets,
 )
 from gisnoise.diagnose.report import (
@@ -65,6 +67,6 @@ from gisnoise.diagnose.verdict import (
 __all__ = ['CLOCK_RANGE_S', 'DIAGNOSIS_FILE', 'Diagnosis', 'EFFECT_INPUT', 'HEIGHT_RANGE_M', 'MAX_EFFECTS',
            'MIN_IMPROVEMENT_DB2', 'OFFSET_Z', 'REGIME_SHARE', 'SCHEMA', 'before_after_data', 'candidate_inputs', 'check_diagnosable', 'clocks_disagree', 'diagnose',
            'estimate_clock_offsets', 'estimate_mic_heights', 'fold_labels', 'forward_selection', 'inputs_data',
-           'level_offsets', 'load_samples', 'localize', 'measurement_noise', 'metadata_overrides', 'mic_clock_effect',
-           'register_evidence', 'residual_events', 'run_diagnosis', 'sample_regimes', 'shift_inputs',
+           'judged_with', 'level_offsets', 'load_samples', 'localize', 'measurement_noise', 'metadata_overrides', 'mic_clock_effect',
+           'offset_groups', 'register_evidence', 'residual_events', 'run_diagnosis', 'sample_regimes', 'shift_inputs',
            'timeline_data', 'with_mic_heights', 'with_offsets', 'write_diagnosis', 'write_report']

@@ -7,6 +7,12 @@ flights, or alternating time blocks when there is one flight), so that every
 sample gets a prediction from a model not fitted to it.  The fit on all data gives
 the Wald statistic of the extension parameters (covariance corrected for residual
 autocorrelation) and the base parameters the effect had biased.
+
+When the diagnosis has named level offsets of flights or microphones (:mod:`gisnoise.diagnose.offsets`),
+the baseline and every candidate carry them (:func:`~gisnoise.diagnose.offsets.with_offsets` of the
+extended ansatz: one parameter per offset, fitted with the rest), so that an offset's residual does not
+weigh on every candidate's held-out score; the offsets the folds cannot tell (a flight's, when the folds
+are flights) are held at their values on all data there.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from gisnoise.diagnose._offset_model import with_offsets
 from gisnoise.diagnose._rows import _rows_of
 from gisnoise.errors import Cancelled, FitError, GisnoiseError, NotIdentifiableError
 from gisnoise.identify import FitResult, fit_arrays
@@ -70,7 +77,13 @@ def fold_labels(s: Samples, *, block_s: float = 30.0) -> tuple[np.ndarray, np.nd
 
 @dataclass
 class _Context:
-    """What every candidate and evidence check sees: samples, model inputs, regimes, baseline refit, events."""
+    """What every candidate and evidence check sees: samples, model inputs, regimes, baseline refit, events.
+
+    ``base_model`` is the model the candidates extend and ``p_base`` its parameters; ``offsets`` are the
+    groups of the level offsets every fit carries on top (:func:`~gisnoise.diagnose.offsets.with_offsets`,
+    none by default), and ``hold_in_folds`` the offset parameters the fold fits hold at their values on all
+    data.
+    """
 
     s: Samples
     x: dict[str, Any]
@@ -80,15 +93,22 @@ class _Context:
     p_base: np.ndarray
     background_db: float | None
     event_windows: list[dict[str, Any]]
+    offsets: tuple[tuple[str, str], ...] = ()
+    hold_in_folds: tuple[str, ...] = ()
 
 
 @dataclass
 class _Candidate:
-    """One candidate effect: whether it is testable, its fits, out-of-fold predictions and summary."""
+    """One candidate effect: whether it is testable, its fits, out-of-fold predictions and summary.
+
+    ``model`` is the model fitted (with the context's level offsets, if any); ``inner`` the same without them
+    (the base extended by the effect, which forward selection extends further).
+    """
 
     name: str
     effect: _effects.Effect | None = None
     model: Ansatz | None = None
+    inner: Ansatz | None = None
     testable: bool = True
     reason: str = ""
     fit: FitResult | None = None
@@ -205,10 +225,13 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
     n = len(s)
     assert cand.effect is not None
     eff = _effects.bind(cand.effect, x)
-    model = _effects.extend(ctx.base_model, eff)
-    cand.model = model
+    inner = _effects.extend(ctx.base_model, eff)
+    model = with_offsets(inner, ctx.offsets) if ctx.offsets else inner
+    cand.model, cand.inner = model, inner
     nb = ctx.base_model.n_params
-    start = dict(zip(model.params, np.r_[base_fit.p, np.asarray(eff.start, dtype=float)], strict=True))
+    # the baseline's parameters (the level offsets' too) by name, the extension's at their start values
+    start = dict(zip(base_fit.param_names, np.asarray(base_fit.p, dtype=float), strict=True))
+    start.update(zip(eff.params, np.asarray(eff.start, dtype=float), strict=True))
     fixed = {**dict(base_fixed or {}), **(dict(eff.fixed(x)) if eff.fixed is not None else {})}
     trials = 1
     if eff.initial is not None:
@@ -254,6 +277,7 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
     for f in (0, 1):
         tr, te = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
         fx = dict(fixed)
+        fx.update({k: float(full.params[k]) for k in ctx.hold_in_folds})
         if cand.name == "background_event":
             win = np.asarray(x["event_window"], dtype=int)
             present = set(np.unique(win[tr]).tolist())

@@ -37,7 +37,11 @@ Level offsets (:mod:`gisnoise.diagnose.offsets`)
     A microphone or a flight heard louder or quieter throughout (a calibration error, a
     recalibration between flights) is a constant no effect has the shape of: it is named
     with its offset, measured by refitting the final model with one offset per flight and
-    per microphone that ``gisnoise fit``'s rule names.
+    per microphone that ``gisnoise fit``'s rule names.  When offsets are named, the baseline
+    and the candidates are fitted and judged once more, each carrying those offsets (one
+    parameter each, :func:`~gisnoise.diagnose.offsets.with_offsets` of the same ansatz), so that
+    an offset's residual does not stay in every candidate's held-out score; the verdict says so
+    (``verdict.candidates_judged_with``).
 
 Shrinkage
     Baseline and extended RMS residual on the fitted data and on held-out data
@@ -52,6 +56,7 @@ section 6 (``baseline``, ``segments``, ``effects``, ``verdict``) with more detai
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -64,7 +69,7 @@ import numpy as np
 from gisnoise.diagnose.candidates import CancelFn, _Context, _fit, _fit_candidates, _predict, fold_labels
 from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.localization import _statistics, localize, measurement_noise, sample_regimes
-from gisnoise.diagnose.offsets import level_offsets
+from gisnoise.diagnose.offsets import judged_with, level_offsets, offset_groups, with_offsets
 from gisnoise.diagnose.positions import (
     POSITION_RADIUS_M,
     correct_positions,
@@ -104,7 +109,10 @@ class Diagnosis:
     arrays : dict
         Per-sample arrays: ``resid_card``, ``resid_baseline`` (in-sample refit),
         ``oof_baseline`` and ``oof/<effect>`` (held-out residuals), ``flagged``,
-        ``regime``, ``fold``, ``event_window``.
+        ``regime``, ``fold``, ``event_window``.  The baseline arrays are the one the
+        candidates were judged against: with the level offsets named, when there are any
+        (then ``resid_baseline_without_offsets`` and ``oof_baseline_without_offsets`` are
+        the card's ansatz alone).
     """
 
     result: dict[str, Any]
@@ -141,7 +149,10 @@ def diagnose(campaign_or_samples: Any, card: ModelCard, *, progress: ProgressFn 
         "segments": [...], "statistics": {...}, "event_windows": [...],
         "effects": [{"name", "rank", "testable", "significant", "rms_db_fit",
         "rms_db_holdout", "shrinkage_pct", ...}], "metadata": {..., "level_offsets"},
-        "verdict": {"effect", "holdout_shrinkage_pct", "level_offsets", ...}}``
+        "verdict": {"effect", "holdout_shrinkage_pct", "level_offsets", "candidates_judged_with", ...}}``.
+        ``baseline`` is the card's ansatz refitted; with level offsets named, ``baseline.with_level_offsets``
+        is the baseline the candidates were judged against, and ``verdict.candidates_judged_with`` lists the
+        offsets with a sentence (``{"level_offsets": [], "sentence": None}`` when none is named).
     """
     return run_diagnosis(campaign_or_samples, card, progress=progress, cancel=cancel, **kw).result
 
@@ -300,8 +311,6 @@ def run_diagnosis(
     x_ev = dict(x, event_window=ev_win)
 
     bg = card.background_db
-    ctx = _Context(s=s, x=x, regimes=reg, resid_base=resid_base, base_model=base, p_base=base_fit.p,
-                   background_db=bg, event_windows=ev_list)
 
     # ---------------------------------------------------------------- the metadata as a prior, candidates
     overrides, metadata = metadata_overrides(s, x, base, base_fit.p, names, fold, block,
@@ -311,27 +320,82 @@ def run_diagnosis(
         metadata["microphone_positions"] = positions
         metadata["contradictions"] = position_notes + metadata["contradictions"]
     metadata["contradictions"] = ([exclusion_sentence(far)] if far else []) + far_notes + metadata["contradictions"]
-    cands = _fit_candidates(names, ctx, level, x, x_ev, base_fit, oof_base, fold, cancel=cancel, bias_z=bias_z,
-                            tick=tick, overrides=overrides)
+    segments_found = copy.deepcopy(segments)
 
-    # ---------------------------------------------------------------- ranking, verdict, shrinkage per segment
-    verdict, effects_out, level_alpha = _judge(cands, ctx, segments, oof_base, block, noise, base_fit, alpha=alpha,
-                                               min_improvement_db2=min_improvement_db2)
-    first = next((c for c in cands if c.name == verdict["effect"]), None)
-    steps: list[dict[str, Any]] = []
-    last: list[Any] = []
-    verdict["effects"] = [] if first is None else forward_selection(
-        first, cands, ctx, level, ev_win, oof_base, fold, block, noise, level_alpha=level_alpha,
-        min_improvement_db2=min_improvement_db2, overrides=overrides, cancel=cancel, bias_z=bias_z, steps=steps,
-        final=last)
-    verdict["selection_steps"] = steps
-    # level offsets of one microphone or one flight, in what the model the diagnosis ends with leaves
-    if last and last[0].fit is not None and last[0].model is not None and last[0].x is not None:
-        offsets = level_offsets(s, level, last[0].x, last[0].model, last[0].fit, cancel=cancel)
-    else:
-        offsets = level_offsets(s, level, x, base, base_fit, cancel=cancel)
+    def attribution(groups: tuple[tuple[str, str], ...], segs: list[dict[str, Any]],
+                    tick_fn: Callable[[str], None]) -> _Round:
+        """Candidates, verdict and forward selection against the baseline with the level offsets ``groups``."""
+        fit_b, oof_b = base_fit, oof_base
+        hold: tuple[str, ...] = ()
+        if groups:
+            model_b = with_offsets(base, groups)
+            offs = model_b.params[base.n_params:]
+            fit_b = _fit(level, x, model_b, s, rows_all, p0={**base_fit.params, **dict.fromkeys(offs, 0.0)},
+                         fixed=dict(base_fit.fixed) or None, cancel=cancel)
+            # the folds are whole flights: the fold that holds a flight out cannot tell that flight's offset
+            hold = tuple(k for (key, _), k in zip(groups, offs, strict=True) if key == "flight" and how == "flights")
+            oof_b = np.empty(n)
+            for f in (0, 1):
+                tr, te = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+                fx = {k: float(fit_b.params[k]) for k in hold}
+                r = _fit(level, x, model_b, s, tr, p0={**fit_b.params, **fx}, fixed=fx or None, cancel=cancel)
+                oof_b[te] = level[te] - _predict(model_b, r.p, x, te, n)
+        ctx = _Context(s=s, x=x, regimes=reg, resid_base=fit_b.residuals, base_model=base,
+                       p_base=fit_b.p[:base.n_params], background_db=bg, event_windows=ev_list, offsets=groups,
+                       hold_in_folds=hold)
+        cands = _fit_candidates(names, ctx, level, x, x_ev, fit_b, oof_b, fold, cancel=cancel, bias_z=bias_z,
+                                tick=tick_fn, overrides=overrides)
+        verdict, effects_out, level_alpha = _judge(cands, ctx, segs, oof_b, block, noise, fit_b, alpha=alpha,
+                                                   min_improvement_db2=min_improvement_db2)
+        first = next((c for c in cands if c.name == verdict["effect"]), None)
+        steps: list[dict[str, Any]] = []
+        last: list[Any] = []
+        verdict["effects"] = [] if first is None else forward_selection(
+            first, cands, ctx, level, ev_win, oof_b, fold, block, noise, level_alpha=level_alpha,
+            min_improvement_db2=min_improvement_db2, overrides=overrides, cancel=cancel, bias_z=bias_z, steps=steps,
+            final=last)
+        verdict["selection_steps"] = steps
+        return _Round(fit_b, oof_b, hold, cands, verdict, effects_out, level_alpha, last[0] if last else None)
+
+    def offsets_of(final: Any) -> dict[str, Any]:
+        """Level offsets of one microphone or one flight, in what the model the diagnosis ends with leaves."""
+        if final is None or final.fit is None or final.inner is None or final.x is None:
+            return level_offsets(s, level, x, base, base_fit, cancel=cancel)
+        fit = final.fit
+        if final.inner is not final.model:  # the final model without the offsets it was judged with, refitted
+            keep = final.inner.params
+            fit = _fit(level, final.x, final.inner, s, rows_all, p0={k: fit.params[k] for k in keep},
+                       fixed={k: v for k, v in fit.fixed.items() if k in keep} or None, cancel=cancel)
+        return level_offsets(s, level, final.x, final.inner, fit, cancel=cancel)
+
+    rnd = attribution((), segments, tick)
+    offsets = offsets_of(rnd.final)
+    groups = tuple(offset_groups(offsets))
+    without = rnd
+    judged: dict[str, Any] = {"level_offsets": [], "sentence": None}
+    if groups:
+        # the candidates once more, each with the offsets named: an offset's residual would otherwise stay in every
+        # candidate's held-out score and weaken or hide the effect
+        segs = copy.deepcopy(segments_found)
+        try:
+            rnd = attribution(groups, segs, lambda _name: check_cancel())
+        except FitError as exc:
+            groups = ()
+            judged["error"] = f"the baseline with the level offsets could not be fitted ({exc}): judged without them"
+        else:
+            segments = segs
+            judged = judged_with(rnd.final.fit if rnd.final is not None else rnd.fit, groups, rnd.hold)
+            if _chosen(rnd) != _chosen(without):  # the offsets again, on the model the diagnosis now ends with
+                offsets = offsets_of(rnd.final)
+    verdict = rnd.verdict
     metadata["level_offsets"] = {k: offsets[k] for k in ("microphones", "flights")}
     verdict["level_offsets"] = offsets["findings"]
+    verdict["candidates_judged_with"] = judged
+    base_fit_doc: dict[str, Any] = {}
+    if groups:
+        base_fit_doc["with_level_offsets"] = {"rms_db_fit": rnd.fit.rms_db, "rms_db_holdout": _rms(rnd.oof),
+                                              "parameters": rnd.fit.params, "std_corrected": rnd.fit.std_corrected}
+    effects_out, level_alpha, cands = rnd.effects, rnd.level_alpha, rnd.cands
 
     result = {
         "schema": SCHEMA,
@@ -345,7 +409,8 @@ def run_diagnosis(
         "baseline": {"rms_db": base_fit.rms_db, "rms_db_card": _rms(resid_card),
                      "rms_db_fit": base_fit.rms_db, "rms_db_holdout": _rms(oof_base),
                      "noise_std_db_fit": dict(base_fit.noise_std), "parameters": base_fit.params,
-                     "std_corrected": base_fit.std_corrected, "aic": base_fit.aic, "bic": base_fit.bic},
+                     "std_corrected": base_fit.std_corrected, "aic": base_fit.aic, "bic": base_fit.bic,
+                     **base_fit_doc},
         "segments": segments,
         "statistics": statistics,
         "event_windows": ev_list,
@@ -355,14 +420,37 @@ def run_diagnosis(
         "metadata": metadata,
         "verdict": verdict,
     }
-    arrays = {"resid_card": resid_card, "resid_baseline": resid_base, "oof_baseline": oof_base,
+    arrays = {"resid_card": resid_card, "resid_baseline": rnd.fit.residuals, "oof_baseline": rnd.oof,
               "flagged": flagged, "regime": reg, "fold": fold, "event_window": ev_win, "fitted_card": pred_card}
+    if groups:
+        arrays["resid_baseline_without_offsets"] = resid_base
+        arrays["oof_baseline_without_offsets"] = oof_base
     for c in cands:
         if c.oof is not None and c.fit is not None:
             arrays[f"oof/{c.name}"] = c.oof
             arrays[f"fit/{c.name}"] = c.fit.residuals
     tick("verdict")
     return Diagnosis(result=to_jsonable(result), samples=s, arrays=arrays)
+
+
+@dataclass
+class _Round:
+    """One pass of attribution: the baseline it judged against (fit, out-of-fold residual, offsets held in the
+    folds), the candidates, the verdict with forward selection, the effects table and the last effect chosen."""
+
+    fit: Any
+    oof: np.ndarray
+    hold: tuple[str, ...]
+    cands: list[Any]
+    verdict: dict[str, Any]
+    effects: list[dict[str, Any]]
+    level_alpha: float
+    final: Any
+
+
+def _chosen(rnd: _Round) -> list[str]:
+    """The effects a pass of attribution chose, in order."""
+    return [e["effect"] for e in rnd.verdict["effects"]]
 
 
 def _not_identifiable(exc: NotIdentifiableError, base: Ansatz, level: np.ndarray, x: dict[str, Any], s: Samples,

@@ -22,6 +22,10 @@ How large
     residual the microphone rule names).  A named microphone's offset is called a level
     offset under the same two conditions; otherwise the model misses it in another way
     (its position, its height).
+The candidates with them
+    The offsets so named (:func:`offset_groups`) go into the baseline and every candidate
+    effect, which the diagnosis then fits and judges again (:mod:`gisnoise.diagnose.candidates`);
+    :func:`judged_with` says so in the verdict.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from gisnoise.diagnose._offset_model import offset_parameter, with_offsets
 from gisnoise.diagnose.candidates import CancelFn, _fit
 from gisnoise.errors import Cancelled, GisnoiseError
 from gisnoise.identify import FitResult
@@ -39,49 +44,11 @@ from gisnoise.identify.fit import SYSTEMATIC_MIN_DB, SYSTEMATIC_WINDOW_S, misfit
 from gisnoise.measure import Samples
 from gisnoise.model import Ansatz
 
-__all__ = ["OFFSET_Z", "level_offsets", "with_offsets"]
+__all__ = ["OFFSET_Z", "judged_with", "level_offsets", "offset_groups", "with_offsets"]
 
 OFFSET_Z = 3.0
 """Standard deviations a flight's or a microphone's level offset must exceed to be called one."""
 _BOUND_DB = 30.0  # a level offset beyond this is no calibration error
-
-
-def with_offsets(model: Ansatz, groups: Sequence[tuple[str, str]]) -> Ansatz:
-    """``model``'s level at the observer (background included) plus a level offset for each group.
-
-    A group ``(key, value)`` is the rows whose input ``key`` (``"flight"``, ``"mic"``) is ``value``;
-    its parameter ``<key>_offset_<value>`` (dB) follows the model's own.  The offset is added to
-    the total level, as a calibration error is: it raises the background a microphone hears as
-    much as the UAV.  Level and Jacobian are ``model``'s own (one definition); the result has no
-    background parameter of its own (the model's is inside the kernel).
-
-    >>> from gisnoise.model import get_ansatz
-    >>> m = with_offsets(get_ansatz("paper-offset"), [("flight", "f2")])
-    >>> x = {"d": np.array([40.0, 40.0]), "phi": 0.0, "theta": -1.0, "p_el": 1.0, "flight": np.array(["f1", "f2"])}
-    >>> p = [60.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 2.0]  # background p7 0 dB, far below the UAV
-    >>> np.round(m.level(p, x), 2).tolist(), m.params[-1]
-    ([60.0, 62.0], 'flight_offset_f2')
-    """
-    groups = list(groups)
-    nb = model.n_params
-
-    def indicator(x: Mapping[str, Any]) -> np.ndarray:
-        return np.stack([np.asarray(x[k]).astype(str) == v for k, v in groups], axis=-1).astype(float)
-
-    def kernel(p: np.ndarray, x: Mapping[str, Any], d_ref: float, want_jac: bool) -> tuple[np.ndarray, Any]:
-        ind = indicator(x)
-        if not want_jac:
-            return model.level(p[:nb], x, d_ref=d_ref) + ind @ p[nb:], None
-        total, jac = model.level_and_jacobian(p[:nb], x, d_ref=d_ref)
-        n = np.broadcast_shapes(np.shape(total), ind.shape[:1])
-        return (np.broadcast_to(total, n) + ind @ p[nb:],
-                np.concatenate([np.broadcast_to(jac, n + (nb,)), ind], axis=-1))
-
-    units = model.units + ("dB",) * len(groups) if len(model.units) == nb else ()
-    return Ansatz(name=f"{model.name}+level_offsets", params=model.params + tuple(f"{k}_offset_{v}" for k, v in groups),
-                  inputs=model.inputs, kernel=kernel, background=None,
-                  description=f"{model.description or model.name}; + a level offset per flight or microphone",
-                  units=units)
 
 
 def level_offsets(s: Samples, level: np.ndarray, x: Mapping[str, Any], model: Ansatz, fit: FitResult, *,
@@ -115,7 +82,7 @@ def level_offsets(s: Samples, level: np.ndarray, x: Mapping[str, Any], model: An
     mics: dict[str, Any] = {m: {"rms_db": v[0], "systematic_db": v[1], "named": m in named, "offset_db": None,
                                 "std_db": None} for m, v in parts.items()}
     flights = sorted(set(s.flight.astype(str).tolist()))
-    groups = [("flight", f) for f in flights[1:]] + [("mic", m) for m in named]
+    groups: list[tuple[str, str]] = [("flight", f) for f in flights[1:]] + [("mic", m) for m in named]
     out: dict[str, Any] = {"microphones": mics, "flights": {}, "findings": []}
     if not groups:
         return out
@@ -174,3 +141,59 @@ def level_offsets(s: Samples, level: np.ndarray, x: Mapping[str, Any], model: An
 def _is_offset(off: float, sd: float) -> bool:
     """Whether an estimated offset (dB) with its standard deviation counts as a level offset."""
     return bool(math.isfinite(off) and abs(off) > OFFSET_Z * sd and abs(off) >= SYSTEMATIC_MIN_DB)
+
+
+def offset_groups(offsets: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """The level offsets :func:`level_offsets` named, as groups of :func:`with_offsets`.
+
+    Every flight named, then every microphone named whose offset counts as a level offset (a microphone the
+    model misses in another way, its position or height, gets none: a constant would not describe it).
+
+    >>> offset_groups({"flights": {"f1": {"named": False}, "f2": {"named": True}},
+    ...                "microphones": {"m2": {"named": True, "offset_db": 3.0, "std_db": 0.02},
+    ...                                "m3": {"named": True, "offset_db": 0.1, "std_db": 0.02}}})
+    [('flight', 'f2'), ('mic', 'm2')]
+    """
+    flights = [("flight", f) for f, e in (offsets.get("flights") or {}).items() if e.get("named")]
+    mics = [("mic", m) for m, e in (offsets.get("microphones") or {}).items()
+            if e.get("named") and e.get("offset_db") is not None and e.get("std_db") is not None
+            and _is_offset(float(e["offset_db"]), float(e["std_db"]))]
+    return flights + mics
+
+
+def judged_with(fit: FitResult, groups: Sequence[tuple[str, str]], held: Sequence[str]) -> dict[str, Any]:
+    """What the verdict says of the level offsets the candidates were fitted and judged with.
+
+    Parameters
+    ----------
+    fit : FitResult
+        The model the candidates' verdict ends with, carrying the offsets (:func:`with_offsets` of the card's
+        ansatz, extended by the verdict's effects if any), fitted to all samples.
+    groups : sequence of (str, str)
+        The offsets' groups (:func:`offset_groups`).
+    held : sequence of str
+        The offset parameters held at their values on all data in the cross-validation folds.
+
+    Returns
+    -------
+    dict
+        ``{"level_offsets": [{"group", "id", "parameter", "offset_db", "std_db", "held_in_folds"}], "sentence"}``
+        (offsets against the rows of no group: with two flights, the second against the first).
+    """
+    entries = []
+    for key, value in groups:
+        k = offset_parameter(key, value)
+        entries.append({"group": "microphone" if key == "mic" else key, "id": value, "parameter": k,
+                        "offset_db": float(fit.params[k]), "std_db": float(fit.std_corrected[k]),
+                        "held_in_folds": k in held})
+    if not entries:
+        return {"level_offsets": [], "sentence": None}
+    parts = [f"{e['group']} '{e['id']}' ({e['offset_db']:+.2f} dB, +/- {e['std_db']:.2f} dB)" for e in entries]
+    what = parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+    sentence = (f"the candidates were fitted and judged on held-out data with the level offset"
+                f"{'s' if len(entries) > 1 else ''} of {what} that the diagnosis names, one parameter each in the "
+                "baseline and in every candidate")
+    if any(e["held_in_folds"] for e in entries):
+        sentence += ("; a flight's offset is held at its value on all data in the cross-validation folds, which are "
+                     "whole flights (the fold that holds a flight out cannot tell its offset)")
+    return {"level_offsets": entries, "sentence": sentence}

@@ -318,6 +318,9 @@ def _html(r: dict[str, Any], pngs: list[tuple[str, str]], title: str | None) -> 
         head += f"<p>The data contradict the campaign's metadata: {e(sentence)}.</p>"
     for sentence in v.get("level_offsets") or []:
         head += f"<p>Not explained by any effect: {e(sentence)}.</p>"
+    judged = (v.get("candidates_judged_with") or {}).get("sentence")
+    if judged:
+        head += f"<p>Judged with level offsets: {e(judged)}.</p>"
     eff_rows = []
     for x in r["effects"]:
         ev = x.get("evidence") or {}

@@ -164,19 +164,26 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
     held: dict[str, float] = {}
 
     def hold_events(c: _Candidate, base_params: Sequence[str]) -> None:
-        if c.name == "background_event" and c.fit is not None:
-            held.update({k: float(c.fit.params[k]) for k in c.fit.param_names if k not in base_params})
+        if c.name == "background_event" and c.fit is not None and c.inner is not None:
+            held.update({k: float(c.fit.params[k]) for k in c.inner.params if k not in base_params})
 
     hold_events(first, ctx.base_model.params)
     while names and len(chosen) < max_effects:
         assert cur.model is not None and cur.fit is not None and cur.oof is not None and cur.x is not None
+        assert cur.inner is not None
         xcur = dict(cur.x)  # with the event windows when the model so far has added sound
-        ctx2 = replace(ctx, x=xcur, base_model=cur.model, p_base=cur.fit.p, resid_base=cur.fit.residuals)
+        # the model so far without the level offsets (if any) is what the next candidates extend; they carry the
+        # offsets on top again (its parameters come first in the fit's, the offsets' last)
+        p_inner = cur.fit.p[:cur.inner.n_params]
+        ctx2 = replace(ctx, x=xcur, base_model=cur.inner, p_base=p_inner, resid_base=cur.fit.residuals)
         x_ev = dict(xcur, event_window=ev_win)
         if "background_event" in names:
             # windows of added sound are looked for again in what the effects chosen so far leave unexplained
-            l_uav = np.broadcast_to(cur.model.level_uav(cur.fit.p, xcur), level.shape)
+            l_uav = np.broadcast_to(cur.inner.level_uav(p_inner, xcur), level.shape)
             bg = np.full(len(level), ctx.background_db if ctx.background_db is not None else -np.inf)
+            if ctx.offsets:  # a level offset raises the UAV and the background a microphone hears alike
+                shift = cur.model.level(cur.fit.p, xcur) - cur.inner.level(p_inner, xcur)
+                l_uav, bg = l_uav + shift, bg + shift
             win, wins = residual_events(ctx.s, cur.fit.residuals, noise, l_uav, bg)
             ctx2 = replace(ctx2, event_windows=wins)
             x_ev = dict(xcur, event_window=win)
@@ -201,7 +208,7 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
         if nxt is None or gated is not None:
             break
         chosen.append(_entry(nxt, cur.oof, oof_base))
-        hold_events(nxt, cur.model.params)
+        hold_events(nxt, cur.inner.params)
         names = [c.name for c in ranked if c.name != nxt.name and _worth_trying(c)]
         cur = nxt
     if final is not None:

@@ -133,6 +133,9 @@ class DiagnoseAlgorithm(GisnoiseAlgorithm):
         base = (result.get("baseline") or {}).get("rms_db")
         feedback.pushInfo(f"baseline rms {base} dB; verdict: {effect or 'no significant effect'}"
                           + (f", held-out shrinkage {shrink:.1f} %" if isinstance(shrink, (int, float)) else ""))
+        judged = (verdict.get("candidates_judged_with") or {}).get("sentence")
+        if judged:
+            feedback.pushInfo(f"judged with offsets: {judged}")
         out = {self.OUTPUT_JSON: dest, self.VERDICT: effect or "",
                self.BASELINE_RMS_DB: base if base is not None else float("nan"),
                self.HOLDOUT_SHRINKAGE_PCT: shrink if isinstance(shrink, (int, float)) else float("nan")}
