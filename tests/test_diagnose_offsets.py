@@ -23,10 +23,13 @@ from click.testing import CliRunner
 
 from gisnoise import simulate
 from gisnoise.cli.main import cli
-from gisnoise.diagnose import localize, run_diagnosis
+from gisnoise.diagnose import fold_labels, judged_with, localize, run_diagnosis, with_offsets
+from gisnoise.diagnose._offset_model import offset_parameter
+from gisnoise.diagnose.diagnosis import _held_in_folds
 from gisnoise.errors import FitError
-from gisnoise.measure import Samples
-from gisnoise.model import cards
+from gisnoise.identify import fit_arrays
+from gisnoise.measure import Samples, series_key
+from gisnoise.model import cards, get_ansatz
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "sample_data" / "scenarios" / "diagnosis_base.json"
@@ -160,6 +163,32 @@ def test_an_effect_and_an_offset_are_both_named_and_the_effect_judged_as_without
     assert abs(k["value"] - k_ref["value"]) <= 2.0 * k_ref["std"], (k, k_ref)
     # the card's ansatz alone (no offset) misses the campaign by more than the offset-free campaign
     assert r["baseline"]["rms_db_holdout"] > ref["baseline"]["rms_db_holdout"] + 0.3
+
+
+def test_the_folds_hold_the_offsets_they_cannot_tell_and_the_sentence_names_them():
+    """Folds are the flights: f2's offset is held in them (one fold leaves f2 out, the other has f2 alone), and so is
+    m4's when m4 was heard in f1 only; m2, heard in both flights, is refitted in each fold."""
+    s = control()
+    s = s.select(~((s.mic.astype(str) == "m4") & (s.flight.astype(str) == "f2")))
+    fold, _, how = fold_labels(s)
+    assert how == "flights"
+    groups = [("flight", "f2"), ("mic", "m2"), ("mic", "m4")]
+    names = [offset_parameter(k, v) for k, v in groups]
+    assert _held_in_folds(groups, names, s, fold) == ("flight_offset_f2", "mic_offset_m4")
+    # the sentence from a fit that carries the offsets
+    level = np.array(s.level, dtype=float) + np.where(s.flight.astype(str) == "f2", 2.0, 0.0)
+    model = with_offsets(get_ansatz("paper-offset"), groups)
+    x = {**s.inputs(3000.0), "mic": s.mic.astype(str), "flight": s.flight.astype(str)}
+    fit = fit_arrays(level, x, model, mic=s.mic.astype(str), series=series_key(s.mic.astype(str), s.flight),
+                     time=s.t_e, reference_power_w=1.0)
+    got = judged_with(fit, groups, ("flight_offset_f2", "mic_offset_m4"))
+    f2, m2, m4 = got["level_offsets"]
+    assert (f2["group"], m2["group"], m4["id"]) == ("flight", "microphone", "m4")
+    assert [e["held_in_folds"] for e in got["level_offsets"]] == [True, False, True]
+    assert abs(f2["offset_db"] - 2.0) <= 3.0 * f2["std_db"] and abs(m2["offset_db"]) <= 3.0 * m2["std_db"], got
+    assert "of flight 'f2' (+" in got["sentence"] and "and microphone 'm4' (" in got["sentence"]
+    assert "the offsets of flight 'f2', microphone 'm4' are held at their values on all data" in got["sentence"]
+    assert judged_with(fit, [], ()) == {"level_offsets": [], "sentence": None}
 
 
 def test_the_command_line_and_the_report_name_the_microphone(tmp_path):

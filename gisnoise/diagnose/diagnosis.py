@@ -332,8 +332,7 @@ def run_diagnosis(
             offs = model_b.params[base.n_params:]
             fit_b = _fit(level, x, model_b, s, rows_all, p0={**base_fit.params, **dict.fromkeys(offs, 0.0)},
                          fixed=dict(base_fit.fixed) or None, cancel=cancel)
-            # the folds are whole flights: the fold that holds a flight out cannot tell that flight's offset
-            hold = tuple(k for (key, _), k in zip(groups, offs, strict=True) if key == "flight" and how == "flights")
+            hold = _held_in_folds(groups, offs, s, fold)
             oof_b = np.empty(n)
             for f in (0, 1):
                 tr, te = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
@@ -386,7 +385,11 @@ def run_diagnosis(
             segments = segs
             judged = judged_with(rnd.final.fit if rnd.final is not None else rnd.fit, groups, rnd.hold)
             if _chosen(rnd) != _chosen(without):  # the offsets again, on the model the diagnosis now ends with
-                offsets = offsets_of(rnd.final)
+                try:
+                    offsets = offsets_of(rnd.final)
+                except FitError as exc:
+                    judged["error"] = (f"the final model could not be refitted without the offsets ({exc}): the "
+                                       "offsets are those measured before the candidates were judged with them")
     verdict = rnd.verdict
     metadata["level_offsets"] = {k: offsets[k] for k in ("microphones", "flights")}
     verdict["level_offsets"] = offsets["findings"]
@@ -446,6 +449,21 @@ class _Round:
     effects: list[dict[str, Any]]
     level_alpha: float
     final: Any
+
+
+def _held_in_folds(groups: Sequence[tuple[str, str]], names: Sequence[str], s: Samples,
+                   fold: np.ndarray) -> tuple[str, ...]:
+    """The offset parameters ``names`` (of ``groups``) a fold's fit holds at their values on all data.
+
+    A flight's, when the folds are flights (the fold that holds a flight out cannot tell its offset, and the one
+    with that flight alone cannot tell it from the level), and a microphone's heard in one fold only.
+    """
+    held = []
+    for (key, value), k in zip(groups, names, strict=True):
+        rows = np.asarray(s.flight if key == "flight" else s.mic).astype(str) == value
+        if key == "flight" or len(np.unique(fold[rows])) < 2:
+            held.append(k)
+    return tuple(held)
 
 
 def _chosen(rnd: _Round) -> list[str]:

@@ -193,7 +193,10 @@ def judged_with(fit: FitResult, groups: Sequence[tuple[str, str]], held: Sequenc
     sentence = (f"the candidates were fitted and judged on held-out data with the level offset"
                 f"{'s' if len(entries) > 1 else ''} of {what} that the diagnosis names, one parameter each in the "
                 "baseline and in every candidate")
-    if any(e["held_in_folds"] for e in entries):
-        sentence += ("; a flight's offset is held at its value on all data in the cross-validation folds, which are "
-                     "whole flights (the fold that holds a flight out cannot tell its offset)")
+    held_out = [f"{e['group']} '{e['id']}'" for e in entries if e["held_in_folds"]]
+    if held_out:
+        one = len(held_out) == 1
+        sentence += (f"; the offset{'' if one else 's'} of {', '.join(held_out)} {'is' if one else 'are'} held at "
+                     f"{'its value' if one else 'their values'} on all data in the cross-validation folds, since a "
+                     "fold that leaves out a flight (or a microphone heard in one fold only) cannot tell its offset")
     return {"level_offsets": entries, "sentence": sentence}
