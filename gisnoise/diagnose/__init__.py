@@ -38,6 +38,7 @@ from gisnoise.diagnose.metadata import (
 )
 from gisnoise.diagnose.offsets import (
     OFFSET_Z,
+    competing_effects,
     judged_with,
     level_offsets,
     offset_groups,
@@ -65,7 +66,7 @@ from gisnoise.diagnose.verdict import (
 )
 
 __all__ = ['CLOCK_RANGE_S', 'DIAGNOSIS_FILE', 'Diagnosis', 'EFFECT_INPUT', 'HEIGHT_RANGE_M', 'MAX_EFFECTS',
-           'MIN_IMPROVEMENT_DB2', 'OFFSET_Z', 'REGIME_SHARE', 'SCHEMA', 'before_after_data', 'candidate_inputs', 'check_diagnosable', 'clocks_disagree', 'diagnose',
+           'MIN_IMPROVEMENT_DB2', 'OFFSET_Z', 'REGIME_SHARE', 'SCHEMA', 'before_after_data', 'candidate_inputs', 'check_diagnosable', 'clocks_disagree', 'competing_effects', 'diagnose',
            'estimate_clock_offsets', 'estimate_mic_heights', 'fold_labels', 'forward_selection', 'inputs_data',
            'judged_with', 'level_offsets', 'load_samples', 'localize', 'measurement_noise', 'metadata_overrides', 'mic_clock_effect',
            'offset_groups', 'register_evidence', 'residual_events', 'run_diagnosis', 'sample_regimes', 'shift_inputs',

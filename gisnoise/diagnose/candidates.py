@@ -102,7 +102,8 @@ class _Candidate:
     """One candidate effect: whether it is testable, its fits, out-of-fold predictions and summary.
 
     ``model`` is the model fitted (with the context's level offsets, if any); ``inner`` the same without them
-    (the base extended by the effect, which forward selection extends further).
+    (the base extended by the effect, which forward selection extends further); ``tested`` the parameters
+    of its significance test.
     """
 
     name: str
@@ -116,6 +117,7 @@ class _Candidate:
     error: str = ""
     summary: dict[str, Any] = field(default_factory=dict)
     x: dict[str, Any] | None = None
+    tested: tuple[str, ...] = ()
 
 
 def _fit(level: np.ndarray, x: Mapping[str, Any], model: Ansatz, s: Samples, rows: np.ndarray, *,
@@ -248,6 +250,7 @@ def _attribute(cand: _Candidate, ctx: _Context, level: np.ndarray, x: dict[str, 
     start.update(fixed)
     rows_all = np.arange(n)
     tested = eff.tested if eff.tested is not None else tuple(k for k in eff.params if k not in fixed)
+    cand.tested = tuple(tested)
     def fit_ext(rows: np.ndarray, p0: dict[str, float], fx: dict[str, float]) -> FitResult:
         try:
             return _fit(level, x, model, s, rows, p0=p0, fixed=fx or None, bounds=bounds, cancel=cancel)

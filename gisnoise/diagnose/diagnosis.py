@@ -69,7 +69,7 @@ import numpy as np
 from gisnoise.diagnose.candidates import CancelFn, _Context, _fit, _fit_candidates, _predict, fold_labels
 from gisnoise.diagnose.events import residual_events
 from gisnoise.diagnose.localization import _statistics, localize, measurement_noise, sample_regimes
-from gisnoise.diagnose.offsets import judged_with, level_offsets, offset_groups, with_offsets
+from gisnoise.diagnose.offsets import competing_effects, judged_with, level_offsets, offset_groups, with_offsets
 from gisnoise.diagnose.positions import (
     POSITION_RADIUS_M,
     correct_positions,
@@ -354,7 +354,7 @@ def run_diagnosis(
             min_improvement_db2=min_improvement_db2, overrides=overrides, cancel=cancel, bias_z=bias_z, steps=steps,
             final=last)
         verdict["selection_steps"] = steps
-        return _Round(fit_b, oof_b, hold, cands, verdict, effects_out, level_alpha, last[0] if last else None)
+        return _Round(fit_b, oof_b, hold, cands, verdict, effects_out, level_alpha, last[-1] if last else None, last)
 
     def offsets_of(final: Any) -> dict[str, Any]:
         """Level offsets of one microphone or one flight, in what the model the diagnosis ends with leaves."""
@@ -369,9 +369,9 @@ def run_diagnosis(
 
     rnd = attribution((), segments, tick)
     offsets = offsets_of(rnd.final)
-    groups = tuple(offset_groups(offsets))
+    groups, not_carried = _separable(offset_groups(offsets), rnd, s, level, cancel)
     without = rnd
-    judged: dict[str, Any] = {"level_offsets": [], "sentence": None}
+    judged = judged_with(None, (), (), not_carried)
     if groups:
         # the candidates once more, each with the offsets named: an offset's residual would otherwise stay in every
         # candidate's held-out score and weaken or hide the effect
@@ -383,7 +383,7 @@ def run_diagnosis(
             judged["error"] = f"the baseline with the level offsets could not be fitted ({exc}): judged without them"
         else:
             segments = segs
-            judged = judged_with(rnd.final.fit if rnd.final is not None else rnd.fit, groups, rnd.hold)
+            judged = judged_with(rnd.final.fit if rnd.final is not None else rnd.fit, groups, rnd.hold, not_carried)
             if _chosen(rnd) != _chosen(without):  # the offsets again, on the model the diagnosis now ends with
                 try:
                     offsets = offsets_of(rnd.final)
@@ -449,6 +449,36 @@ class _Round:
     effects: list[dict[str, Any]]
     level_alpha: float
     final: Any
+    chain: list[Any]
+
+
+def _separable(groups: Sequence[tuple[str, str]], rnd: _Round, s: Samples, level: np.ndarray,
+               cancel: CancelFn | None) -> tuple[tuple[tuple[str, str], ...], list[dict[str, Any]]]:
+    """The offsets the candidates can carry, and those they cannot with the reason.
+
+    An offset that takes up an effect the first pass chose (:func:`~gisnoise.diagnose.offsets.competing_effects`)
+    is not carried; nor is one whose test could not be refitted.  Windows of added sound are not tested: a
+    constant does not take up a transient.
+    """
+    final = rnd.final
+    tests = {c.name: (c.tested, int(c.summary.get("look_elsewhere_trials", 1))) for c in rnd.chain
+             if c.name != "background_event" and c.tested}
+    if not groups or final is None or not tests:
+        return tuple(groups), []
+    carried, dropped = [], []
+    for g in groups:
+        entry: dict[str, Any] = {"group": "microphone" if g[0] == "mic" else g[0], "id": g[1]}
+        try:
+            lost = competing_effects(s, level, final.x, final.inner, final.fit, g, tests, rnd.level_alpha,
+                                     cancel=cancel)
+        except FitError as exc:
+            dropped.append({**entry, "reason": f"the refit that tests it against the effects failed ({exc})"})
+            continue
+        if lost:
+            dropped.append({**entry, "competes_with": lost})
+        else:
+            carried.append(g)
+    return tuple(carried), dropped
 
 
 def _held_in_folds(groups: Sequence[tuple[str, str]], names: Sequence[str], s: Samples,

@@ -25,7 +25,10 @@ How large
 The candidates with them
     The offsets so named (:func:`offset_groups`) go into the baseline and every candidate
     effect, which the diagnosis then fits and judges again (:mod:`gisnoise.diagnose.candidates`);
-    :func:`judged_with` says so in the verdict.
+    :func:`judged_with` says so in the verdict.  An offset that takes up an effect the diagnosis
+    chose (:func:`competing_effects`: with it, the effect's test no longer rejects "no effect";
+    a constant at the one microphone above a reflecting ground and the reflection there, say) is
+    not carried: the data cannot tell the two apart, and the candidates are judged without it.
 """
 
 from __future__ import annotations
@@ -35,16 +38,17 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from gisnoise.diagnose._offset_model import offset_parameter, with_offsets
-from gisnoise.diagnose.candidates import CancelFn, _fit
+from gisnoise.diagnose.candidates import CancelFn, _fit, _wald
 from gisnoise.errors import Cancelled, GisnoiseError
 from gisnoise.identify import FitResult
 from gisnoise.identify.fit import SYSTEMATIC_MIN_DB, SYSTEMATIC_WINDOW_S, misfit_microphones, systematic_residuals
 from gisnoise.measure import Samples
 from gisnoise.model import Ansatz
 
-__all__ = ["OFFSET_Z", "judged_with", "level_offsets", "offset_groups", "with_offsets"]
+__all__ = ["OFFSET_Z", "competing_effects", "judged_with", "level_offsets", "offset_groups", "with_offsets"]
 
 OFFSET_Z = 3.0
 """Standard deviations a flight's or a microphone's level offset must exceed to be called one."""
@@ -143,6 +147,54 @@ def _is_offset(off: float, sd: float) -> bool:
     return bool(math.isfinite(off) and abs(off) > OFFSET_Z * sd and abs(off) >= SYSTEMATIC_MIN_DB)
 
 
+def competing_effects(s: Samples, level: np.ndarray, x: Mapping[str, Any], model: Ansatz, fit: FitResult,
+                      group: tuple[str, str], tests: Mapping[str, tuple[Sequence[str], int]], alpha: float, *,
+                      cancel: CancelFn | None = None) -> list[dict[str, Any]]:
+    """The effects the level offset of ``group`` takes up: no longer significant once the offset is added.
+
+    ``model`` is fitted with the one offset added (:func:`with_offsets`), every parameter free but those
+    ``fit`` held, and each effect's Wald test (autocorrelation-corrected covariance, p-value times its
+    look-elsewhere trials) is repeated at ``alpha``.
+
+    Parameters
+    ----------
+    s, level, x
+        The samples, their levels (dB) and the model inputs (with ``mic`` and ``flight``).
+    model : Ansatz
+        The model the diagnosis ended with, without offsets.
+    fit : FitResult
+        Its fit to all samples.
+    group : (str, str)
+        The offset's group (``("mic", "m4")``, ``("flight", "f2")``).
+    tests : mapping
+        Effect name -> (the parameters of its test, look-elsewhere trials).
+    alpha : float
+        The level of each test.
+    cancel : callable, optional
+        Polled inside the refit.
+
+    Returns
+    -------
+    list of dict
+        ``[{"effect", "p_value", "p_value_without"}]`` for each effect whose test no longer rejects "no
+        effect" with the offset; empty when the offset and the effects are told apart.  A failed refit
+        raises its :class:`~gisnoise.errors.FitError`.
+    """
+    if not tests:
+        return []
+    ext = with_offsets(model, [group])
+    start = {**dict(zip(model.params, np.asarray(fit.p, dtype=float), strict=True)),
+             **dict.fromkeys(ext.params[model.n_params:], 0.0)}
+    res = _fit(np.asarray(level, dtype=float), {**x, "mic": s.mic.astype(str), "flight": s.flight.astype(str)},
+               ext, s, np.arange(len(s)), p0=start, fixed=dict(fit.fixed) or None, cancel=cancel)
+    lost = []
+    for name, (tested, trials) in tests.items():
+        p_with, p_without = (min(1.0, trials * float(stats.chi2.sf(*_wald(r, tested)))) for r in (res, fit))
+        if p_with >= alpha:
+            lost.append({"effect": name, "p_value": p_with, "p_value_without": p_without})
+    return lost
+
+
 def offset_groups(offsets: Mapping[str, Any]) -> list[tuple[str, str]]:
     """The level offsets :func:`level_offsets` named, as groups of :func:`with_offsets`.
 
@@ -161,42 +213,61 @@ def offset_groups(offsets: Mapping[str, Any]) -> list[tuple[str, str]]:
     return flights + mics
 
 
-def judged_with(fit: FitResult, groups: Sequence[tuple[str, str]], held: Sequence[str]) -> dict[str, Any]:
+def judged_with(fit: FitResult | None, groups: Sequence[tuple[str, str]], held: Sequence[str],
+                not_carried: Sequence[dict[str, Any]] = ()) -> dict[str, Any]:
     """What the verdict says of the level offsets the candidates were fitted and judged with.
 
     Parameters
     ----------
-    fit : FitResult
+    fit : FitResult or None
         The model the candidates' verdict ends with, carrying the offsets (:func:`with_offsets` of the card's
-        ansatz, extended by the verdict's effects if any), fitted to all samples.
+        ansatz, extended by the verdict's effects if any), fitted to all samples; None when ``groups`` is empty.
     groups : sequence of (str, str)
-        The offsets' groups (:func:`offset_groups`).
+        The offsets' groups (:func:`offset_groups`) the candidates carried.
     held : sequence of str
         The offset parameters held at their values on all data in the cross-validation folds.
+    not_carried : sequence of dict
+        The offsets named but not carried: ``{"group", "id", "competes_with": [...]}`` (the effects
+        :func:`competing_effects` found), or with ``"reason"`` instead.
 
     Returns
     -------
     dict
-        ``{"level_offsets": [{"group", "id", "parameter", "offset_db", "std_db", "held_in_folds"}], "sentence"}``
-        (offsets against the rows of no group: with two flights, the second against the first).
+        ``{"level_offsets": [{"group", "id", "parameter", "offset_db", "std_db", "held_in_folds"}],
+        "not_carried": [...], "sentence"}`` (offsets against the rows of no group: with two flights, the second
+        against the first; the sentence None when no offset was named).
     """
     entries = []
     for key, value in groups:
+        assert fit is not None
         k = offset_parameter(key, value)
         entries.append({"group": "microphone" if key == "mic" else key, "id": value, "parameter": k,
                         "offset_db": float(fit.params[k]), "std_db": float(fit.std_corrected[k]),
                         "held_in_folds": k in held})
-    if not entries:
-        return {"level_offsets": [], "sentence": None}
-    parts = [f"{e['group']} '{e['id']}' ({e['offset_db']:+.2f} dB, +/- {e['std_db']:.2f} dB)" for e in entries]
-    what = parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
-    sentence = (f"the candidates were fitted and judged on held-out data with the level offset"
-                f"{'s' if len(entries) > 1 else ''} of {what} that the diagnosis names, one parameter each in the "
-                "baseline and in every candidate")
-    held_out = [f"{e['group']} '{e['id']}'" for e in entries if e["held_in_folds"]]
-    if held_out:
-        one = len(held_out) == 1
-        sentence += (f"; the offset{'' if one else 's'} of {', '.join(held_out)} {'is' if one else 'are'} held at "
-                     f"{'its value' if one else 'their values'} on all data in the cross-validation folds, since a "
-                     "fold that leaves out a flight (or a microphone heard in one fold only) cannot tell its offset")
-    return {"level_offsets": entries, "sentence": sentence}
+    sentences = []
+    if entries:
+        parts = [f"{e['group']} '{e['id']}' ({e['offset_db']:+.2f} dB, +/- {e['std_db']:.2f} dB)" for e in entries]
+        what = parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+        sentence = (f"the candidates were fitted and judged on held-out data with the level offset"
+                    f"{'s' if len(entries) > 1 else ''} of {what} that the diagnosis names, one parameter each in "
+                    "the baseline and in every candidate")
+        held_out = [f"{e['group']} '{e['id']}'" for e in entries if e["held_in_folds"]]
+        if held_out:
+            one = len(held_out) == 1
+            sentence += (f"; the offset{'' if one else 's'} of {', '.join(held_out)} {'is' if one else 'are'} held at "
+                         f"{'its value' if one else 'their values'} on all data in the cross-validation folds, since a "
+                         "fold that leaves out a flight (or a microphone heard in one fold only) cannot tell its offset")
+        sentences.append(sentence)
+    for n in not_carried:
+        head = f"the level offset of {n['group']} '{n['id']}' is not carried into the candidates"
+        lost = n.get("competes_with") or []
+        if lost:
+            effs = "; ".join(f"{c['effect']} is no longer significant (p {c['p_value']:.1e}, against "
+                             f"{c['p_value_without']:.1e} without it)" for c in lost)
+            sentences.append(f"{head}: with it, {effs}; the data cannot tell the offset from "
+                             f"{'that effect' if len(lost) == 1 else 'those effects'}, so the candidates were judged "
+                             "without it")
+        else:
+            sentences.append(f"{head}: {n.get('reason', 'no reason given')}")
+    return {"level_offsets": entries, "not_carried": [dict(n) for n in not_carried],
+            "sentence": "; ".join(sentences) if sentences else None}

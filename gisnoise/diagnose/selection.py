@@ -154,9 +154,10 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
     improvement) are not tried again (an effect too weak to show alone is not looked for under
     another).  ``steps``, when given, receives one entry per step after the first: the candidates
     tried on top of the model so far with their scores, and the one added (or None); ``final``, when
-    given, receives the last candidate added (its fit is the model the selection ends with).
+    given, receives the candidates added, in order (the last one's fit is the model the selection ends with).
     """
     chosen = [_entry(first, oof_base, oof_base)]
+    chain = [first]
     names = [c.name for c in cands if c.name != first.name and c.fit is not None and _worth_trying(c)]
     cur = first
     noop: Callable[[str], None] = lambda _name: None  # noqa: E731
@@ -211,6 +212,7 @@ def forward_selection(first: _Candidate, cands: Sequence[_Candidate], ctx: _Cont
         hold_events(nxt, cur.inner.params)
         names = [c.name for c in ranked if c.name != nxt.name and _worth_trying(c)]
         cur = nxt
+        chain.append(nxt)
     if final is not None:
-        final.append(cur)
+        final.extend(chain)
     return chosen
