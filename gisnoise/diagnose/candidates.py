@@ -11,8 +11,8 @@ autocorrelation) and the base parameters the effect had biased.
 When the diagnosis has named level offsets of flights or microphones (:mod:`gisnoise.diagnose.offsets`),
 the baseline and every candidate carry them (:func:`~gisnoise.diagnose.offsets.with_offsets` of the
 extended ansatz: one parameter per offset, fitted with the rest), so that an offset's residual does not
-weigh on every candidate's held-out score; the offsets the folds cannot tell (a flight's, when the folds
-are flights) are held at their values on all data there.
+weigh on every candidate's held-out score; the offsets the folds cannot tell (a flight's, the folds being
+flights, and a microphone's heard in one fold only) are held at their values on all data there.
 """
 
 from __future__ import annotations
