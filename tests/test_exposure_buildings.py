@@ -298,3 +298,31 @@ def test_the_command_reads_osm_heights_names_the_unreadable_and_takes_the_storey
     d4, dtop = (math.hypot(math.hypot(10.1, 2.5) / K_UTM, up - z) for z in (4.0, 58.0))
     assert s["per_building_db"][0] == pytest.approx(level(dtop), abs=2e-3)
     assert doc["buildings"]["metrics"]["LAmax"]["per_building_db"][0] == pytest.approx(level(d4), abs=2e-3)
+
+
+def test_contour_with_buildings_takes_the_same_height_options(tmp_path):
+    """`gisnoise contour --buildings` reads the layer as `exposure` does: --height-field names the attribute and
+    --storey-height 4 makes the 60 m tower 15 storeys, its top receiver at 58 m, its level the closed form there."""
+    import json
+
+    from click.testing import CliRunner
+
+    from gisnoise.cli.main import cli
+    from gisnoise.model import save
+
+    up = 100.0
+    hover(up).to_csv(tmp_path / "hover.csv")
+    card = str(save(omni_card("hover"), tmp_path / "omni.json"))
+    layer(tmp_path / "osm.gpkg", [square(0.0, 0.0, 20.0), square(40.0, 0.0, 20.0)], residents=[80, 6],
+          roof_h=["60 m", "tall"])
+    r = CliRunner().invoke(cli, ["-q", "contour", str(tmp_path / "hover.csv"), "--card", card, "--out",
+                                 str(tmp_path / "map"), "--ground-height", "0", "--resolution", "20", "--metrics",
+                                 "LAmax", "--buildings", str(tmp_path / "osm.gpkg"), "--height-field", "roof_h",
+                                 "--storey-height", "4"], catch_exceptions=False)
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / "map" / "exposure.json").read_text())
+    assert doc["buildings"]["facade"]["storeys"]["per_building_storeys"] == [15, 0]
+    s = doc["buildings"]["metrics"]["LAmax"]["storeys"]
+    assert s["per_building_receiver_m"][0] == pytest.approx(58.0, abs=1e-9)
+    dtop = math.hypot(math.hypot(10.1, 2.5) / K_UTM, up - 58.0)
+    assert s["per_building_db"][0] == pytest.approx(level(dtop), abs=2e-3)

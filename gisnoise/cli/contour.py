@@ -7,7 +7,7 @@ from typing import Any
 
 import click
 
-from gisnoise.cli.options import card_option, out_dir_option, progress
+from gisnoise.cli.options import building_field_options, card_option, out_dir_option, progress
 from gisnoise.errors import InputError
 
 
@@ -130,6 +130,7 @@ def _echo_bands_and_files(res: Any, paths: Mapping[str, Any], keys: Sequence[str
               help="Population raster (GeoTIFF, people per cell): also write DIR/exposure.json and exposure.md.")
 @click.option("--buildings", "buildings", type=click.Path(dir_okay=False), default=None,
               help="Buildings with residents/dwellings: façade levels in DIR/exposure.json and exposure.md.")
+@building_field_options
 @click.pass_context
 def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: str, resolution: float, margin: float | None,
             levels: list[float], dem: str | None, dem_offset: float, receiver_height: float, ground_h: float | None,
@@ -137,7 +138,9 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
             snapshot: float | None, substeps: int, background: bool, uncertainty: bool, plot: bool,
             engine: str, population: str | None = None, buildings: str | None = None,
             power_w: float | None = None, geoid_undulation: float | None = None,
-            atmosphere: tuple[float, ...] | None = None) -> None:
+            atmosphere: tuple[float, ...] | None = None, layer: str | None = None,
+            residents_field: str | None = None, dwellings_field: str | None = None, height_field: str | None = None,
+            levels_field: str | None = None, storey_height: float = 3.0) -> None:
     """Noise map of TRAJECTORY: DIR/levels.tif, DIR/contours.geojson (and DIR/map.png).
 
     TRAJECTORY is a flight CSV (t, lat, lon, h, roll, pitch, yaw, power_w, phase), a PX4 .ulg or
@@ -174,8 +177,10 @@ def command(ctx: click.Context, trajectory: str, cards: tuple[str, ...], out: st
             raise InputError("buildings: façade levels need flat ground; without --dem", field="buildings")
         written = read_levels(paths["levels"])
         pop = read_population(population, within=written.grid) if population else None  # the part under the map
-        doc = map_exposure(written, population=pop, buildings=read_buildings(buildings) if buildings else None,
-                           trajectory=paths["trajectory"], cards=list(cards))
+        bld = read_buildings(buildings, layer=layer, residents=residents_field, dwellings=dwellings_field,
+                             height=height_field, levels=levels_field) if buildings else None
+        doc = map_exposure(written, population=pop, buildings=bld, trajectory=paths["trajectory"], cards=list(cards),
+                           storey_height_m=storey_height)
         paths.update(write_exposure(doc, out))
         paths["warnings"] = list(paths.get("warnings", [])) + [f"exposure: {w}" for w in doc.get("warnings", [])]
     _echo_bands_and_files(res, paths, ("levels", "contours", "map", "exposure", "table"))
