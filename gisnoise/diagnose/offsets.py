@@ -107,7 +107,7 @@ def level_offsets(s: Samples, level: np.ndarray, x: Mapping[str, Any], model: An
     if len(flights) >= 2:
         vec = np.zeros((len(flights), len(ext.params)))  # o_flight as a combination of the parameters
         for i, f in enumerate(flights[1:], start=1):
-            vec[i, idx[f"flight_offset_{f}"]] = 1.0
+            vec[i, idx[offset_parameter("flight", f)]] = 1.0
         for i, f in enumerate(flights):
             a = vec[i] - np.mean(np.delete(vec, i, axis=0), axis=0)
             off, sd = float(a @ res.p), float(math.sqrt(max(float(a @ cov @ a), 0.0)))
@@ -124,7 +124,7 @@ def level_offsets(s: Samples, level: np.ndarray, x: Mapping[str, Any], model: An
                     "that no effect of the library explains; a calibration changed between them, or the conditions "
                     "(temperature, wind, background) or the vehicle (mass, battery, propellers) differed")
     for m, ref in named.items():
-        k = f"mic_offset_{m}"
+        k = offset_parameter("mic", m)
         off, sd = float(res.params[k]), float(res.std_corrected[k])
         e = mics[m]
         e.update(offset_db=off, std_db=sd)

@@ -54,7 +54,7 @@ from gisnoise.flight import GROUND_HINT_CLI, Trajectory, ground_from_track
 from gisnoise.limits import check_ground_below, check_receiver_height
 
 __all__ = ["GROUND_FROM_TRACK", "GROUND_GIVEN", "GROUND_HINT_API", "GROUND_HINT_CLI", "GROUND_STATED",
-           "ChosenGround", "checked_ground", "map_ground", "own_ground"]
+           "ChosenGround", "checked_ground", "own_ground"]
 
 GROUND_GIVEN = "given"
 """The map metadata's ``ground_h_source`` when the caller gave the ground height."""
@@ -156,10 +156,3 @@ def checked_ground(trajectories: Iterable[Trajectory], receiver_height: Any, gro
     raise InputError(f"{lowest.source}: ground unknown: {what} on the ground (lowest point {lo:.1f} m); give {hint}",
                      field="ground_h")
 
-
-def map_ground(traj: Trajectory, ground_h: float | None, dem: Any, stated_h: float | None = None, *,
-               hint: str = GROUND_HINT_CLI) -> float | None:
-    """The flat ground's height for a map of ``traj`` (m) by the rule of the module docstring (None: the DEM is the
-    ground): :func:`checked_ground` without the receiver-height check, as a plain number."""
-    g = checked_ground([traj], None, ground_h, dem, stated_h=stated_h, hint=hint)
-    return None if g is None else float(g)

@@ -70,13 +70,13 @@ from gisnoise.maps.evaluate import evaluate_grid
 from gisnoise.maps.flightchecks import crs_scale_warning, flight_findings
 from gisnoise.maps.geotiff import write_geotiff
 from gisnoise.maps.grids import grid_for_map, resolution_warning
-from gisnoise.maps.ground import GROUND_FROM_TRACK, checked_ground, map_ground
+from gisnoise.maps.ground import GROUND_FROM_TRACK, checked_ground
 from gisnoise.maps.hemifill import filled_share_warning
 from gisnoise.maps.prepare import dem_nodata_warning
 from gisnoise.maps.result import METRICS, MapResult, band_unit, snapshot_name
 from gisnoise.model import ModelCard, check_card
 
-__all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "map_ground", "flight_height", "PRODUCT_FILES",
+__all__ = ["make_map", "evaluate_flying", "DEFAULT_LEVELS", "flight_height", "PRODUCT_FILES",
            "stale_products", "output_folder",
            "grid_line", "planned_instants"]
 

@@ -56,6 +56,7 @@ from gisnoise.flight import ground_from_track
 from gisnoise.geo import GridSpec
 from gisnoise.limits import check_ground_below, check_receiver_height
 from gisnoise.maps import CardSet, MapResult, band_unit, crs_scale_warning, default_threads, flight_findings
+from gisnoise.maps.clipping import edge_max
 from gisnoise.maps.grids import resolution_warning_of
 from gisnoise.maps.pipeline import flight_height
 from gisnoise.ops.accumulate import new_accumulators, period_bands
@@ -191,10 +192,9 @@ def reach_warnings(bands: dict[str, np.ndarray], thresholds: Any) -> list[str]:
         na = bands.get(f"NA{k:g}")
         if na is None or na.ndim != 2 or not na.size:
             continue
-        edge = np.concatenate([na[0], na[-1], na[:, 0], na[:, -1]])
-        edge = edge[np.isfinite(edge)]
-        if edge.size and float(edge.max()) > 0.0:
-            out.append(f"NA{k:g}: up to {float(edge.max()):g} flights a day exceed {k:g} dB(A) at the grid's edge: "
+        top = edge_max(na)  # the outer cells and those next to cells without a value
+        if np.isfinite(top) and top > 0.0:
+            out.append(f"NA{k:g}: up to {top:g} flights a day exceed {k:g} dB(A) at the grid's edge: "
                        f"the area where they do reaches beyond the map (a wider margin shows it whole)")
     return out
 
@@ -244,7 +244,8 @@ def schedule_findings(schedule: Schedule, grid: GridSpec) -> tuple[list[str], di
     warnings = [f"flight{'s' if len(ids) > 1 else ''} {', '.join(ids)}: {w}" for w, ids in said.items()]
     warnings += ground_warnings(schedule)
     flat = schedule.ground_h_m if schedule.ground_h_m is not None else ground
-    heights = {f.id: flight_height(f.trajectory, flat, schedule.dem, schedule.dem_offset_m, schedule.receiver_height_m)
+    heights = {f.id: flight_height(f.trajectory, flat, schedule.dem if dem is None else dem, schedule.dem_offset_m,
+                                   schedule.receiver_height_m)
                for f in flown}
     coarse = resolution_warning_of(float(grid.resolution[0]), heights)  # the day's LAmax, N-above need the footprint
     warnings += [coarse] if coarse is not None else []

@@ -220,7 +220,8 @@ class WorkerPool:
             if self._requeue:
                 n = self.store.requeue_interrupted()
                 self._requeue = False
-                log.warning("%d job(s) interrupted by the last stop were re-queued", n)
+                if n:
+                    log.warning("%d job(s) interrupted by the last stop were re-queued", n)
 
     def _cancel_fn(self, job_id: str, run: _Run) -> Callable[[], bool]:
         last = [0.0, False]
